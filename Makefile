@@ -1,0 +1,47 @@
+# vp-suite: EGP-VP view planning for camera drones over a noisy corn field (ROS 2 Jazzy).
+# `make run` and `make test` set everything up on a fresh Debian 12 / Python 3.11 machine.
+SHELL := /bin/bash
+.DEFAULT_GOAL := help
+
+# DDS stays on this machine; every run gets its own domain unless one is given.
+export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
+export ROS_DOMAIN_ID ?= $(shell echo $$(( $$$$ % 200 + 10 )))
+export PYOPENGL_PLATFORM ?= egl
+
+SCENARIO ?= one_plant
+METHOD   ?= egp
+CAMERAS  ?= 4
+EVALS    ?= 100
+SEED     ?= 0
+OUT      ?= out/$(SCENARIO)-$(METHOD)-$(CAMERAS)cams-seed$(SEED)
+MODELS   ?=
+PLAN     ?= $(OUT)/plan.json
+
+ENV := . .venv/bin/activate && . install/setup.bash &&
+
+.PHONY: help setup test run plan recon bench clean
+help:
+	@echo "make setup | test | run | plan | recon | bench | clean   (see README.md)"
+
+setup:
+	@tools/setup.sh
+
+test: setup
+	@$(ENV) python -m pytest -q -p no:cacheprovider tests src/vp_scene/test src/vp_planner/test src/vp_recon/test
+
+run: setup
+	@$(ENV) python tools/run_suite.py --scenario $(SCENARIO) --method $(METHOD) --cameras $(CAMERAS) \
+	  --evals $(EVALS) --seed $(SEED) --out $(OUT) $(if $(MODELS),--models $(MODELS))
+
+plan: setup
+	@$(ENV) python -m vp_planner.cli --scenario $(SCENARIO) --method $(METHOD) --cameras $(CAMERAS) \
+	  --evals $(EVALS) --seed $(SEED) --out $(OUT) $(if $(MODELS),--models $(MODELS))
+
+recon: setup
+	@$(ENV) python -m vp_recon.cli --plan $(PLAN) --out $(OUT)
+
+bench: setup
+	@$(ENV) python bench/table1.py $(if $(MODELS),--models $(MODELS))
+
+clean:
+	rm -rf build install log

@@ -1,0 +1,25 @@
+from setuptools import find_packages, setup
+
+package_name = 'vp_recon'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=True,
+    maintainer='vp-suite maintainers',
+    maintainer_email='maintainers@vp-suite.invalid',
+    description='Render planned views, reconstruct with COLMAP (CPU) and score with the Chamfer distance; the recon node.',
+    license='Apache-2.0',
+    entry_points={
+        'console_scripts': [
+            'recon = vp_recon.recon_node:main',
+            'reconstruct = vp_recon.cli:main',
+        ],
+    },
+)

@@ -1,0 +1,24 @@
+from setuptools import find_packages, setup
+
+package_name = 'vp_scene'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=True,
+    maintainer='vp-suite maintainers',
+    maintainer_email='maintainers@vp-suite.invalid',
+    description='Noisy corn-field scenes: plant models (Corn50 PLY or procedural), scenarios, wind noise, and the scene node.',
+    license='Apache-2.0',
+    entry_points={
+        'console_scripts': [
+            'scene = vp_scene.scene_node:main',
+        ],
+    },
+)

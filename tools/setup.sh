@@ -1,0 +1,72 @@
+#!/usr/bin/env bash
+# Idempotent set-up: .venv/ with the locked requirements, the ROS wheel workarounds, and a
+# colcon build of src/ into install/. Quick when nothing changed (stamp files).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+ROOT=$PWD
+PY=${PYTHON:-python3.11}
+command -v "$PY" >/dev/null || PY=python3
+export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
+export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-42}
+
+# System libraries: headless EGL rendering needs Mesa's libEGL (Debian: libegl1 libgl1-mesa-dri).
+if ! ldconfig -p 2>/dev/null | grep -q 'libEGL.so.1'; then
+  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+    echo "[setup] installing Mesa EGL (libegl1 libgl1-mesa-dri libgles2)"
+    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libegl1 libgl1-mesa-dri libgles2 >/dev/null
+  else
+    echo "[setup] warning: libEGL.so.1 not found; rendering needs: sudo apt-get install libegl1 libgl1-mesa-dri" >&2
+  fi
+fi
+
+# 1. Virtual environment with the locked requirements.
+if [ ! -x .venv/bin/python ]; then
+  echo "[setup] creating .venv with $($PY --version)"
+  "$PY" -m venv .venv
+fi
+if [ ! -f .venv/.requirements.stamp ] || [ requirements.txt -nt .venv/.requirements.stamp ]; then
+  echo "[setup] installing requirements.txt into .venv (first time: a few minutes)"
+  # (pip's "Location ... is ignored" lines come from this machine's local index mirrors: noise)
+  .venv/bin/python -m pip install --quiet -r requirements.txt 2> >(grep -v '^WARNING: Location' >&2)
+  rm -f .venv/.cmake-patched.stamp
+  touch .venv/.requirements.stamp
+fi
+
+# 2. ROS wheel workaround: exported CMake files name the wheel builder's Python and numpy
+#    include dirs (/opt/python/cp311-cp311/...); point them at this interpreter's.
+if [ ! -f .venv/.cmake-patched.stamp ]; then
+  echo "[setup] rewriting the ROS wheels' exported CMake include paths"
+  .venv/bin/python - <<'PYEOF'
+import pathlib, sys, sysconfig
+import numpy
+share = pathlib.Path(sys.prefix) / 'share'
+py_inc = sysconfig.get_paths()['include']
+np_inc = numpy.get_include()
+n = 0
+for f in share.rglob('*.cmake'):
+    text = f.read_text(errors='surrogateescape')
+    if 'cp311-cp311' not in text:
+        continue
+    new = text.replace('/opt/python/cp311-cp311/lib/python3.11/site-packages/numpy/_core/include', np_inc)
+    new = new.replace('/opt/python/cp311-cp311/include/python3.11', py_inc)
+    if new != text:
+        f.write_text(new, errors='surrogateescape')
+        n += 1
+print(f'[setup] rewrote {n} CMake files')
+PYEOF
+  touch .venv/.cmake-patched.stamp
+fi
+
+# 3. Build the workspace when a source file is newer than the last build.
+stamp=install/.build.stamp
+if [ ! -f "$stamp" ] || [ -n "$(find src colcon.meta -newer "$stamp" -type f -print -quit)" ]; then
+  echo "[setup] colcon build"
+  # shellcheck disable=SC1091
+  . .venv/bin/activate
+  export AMENT_PREFIX_PATH=$VIRTUAL_ENV CMAKE_PREFIX_PATH=$VIRTUAL_ENV
+  colcon --log-base log build --base-paths src --build-base build --install-base install \
+    --event-handlers console_cohesion- status- summary+ \
+    --cmake-args -DBUILD_TESTING=OFF -DPython3_EXECUTABLE="$VIRTUAL_ENV/bin/python" >/dev/null
+  touch "$stamp"
+fi
+echo "[setup] ready: . .venv/bin/activate && . install/setup.bash"
