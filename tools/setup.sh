@@ -9,13 +9,17 @@ command -v "$PY" >/dev/null || PY=python3
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-42}
 
-# System libraries: headless EGL rendering needs Mesa's libEGL (Debian: libegl1 libgl1-mesa-dri).
-if ! ldconfig -p 2>/dev/null | grep -q 'libEGL.so.1'; then
+# System libraries: headless EGL rendering needs Mesa's libEGL (Debian: libegl1 libgl1-mesa-dri);
+# open3d (Poisson meshing of real plant clouds) needs libusb-1.0.
+missing=()
+ldconfig -p 2>/dev/null | grep -q 'libEGL.so.1' || missing+=(libegl1 libgl1-mesa-dri libgles2)
+ldconfig -p 2>/dev/null | grep -q 'libusb-1.0.so.0' || missing+=(libusb-1.0-0)
+if [ ${#missing[@]} -gt 0 ]; then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
-    echo "[setup] installing Mesa EGL (libegl1 libgl1-mesa-dri libgles2)"
-    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libegl1 libgl1-mesa-dri libgles2 >/dev/null
+    echo "[setup] installing system libraries: ${missing[*]}"
+    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}" >/dev/null
   else
-    echo "[setup] warning: libEGL.so.1 not found; rendering needs: sudo apt-get install libegl1 libgl1-mesa-dri" >&2
+    echo "[setup] warning: missing system libraries; run: sudo apt-get install ${missing[*]}" >&2
   fi
 fi
 

@@ -1,0 +1,115 @@
+#!/usr/bin/env python3
+"""Benchmark of the paper's noisy reward (eq. 7): JSON on stdout.
+
+Times one plan (raw points, and points laid out once with ``prepare_points`` as the optimizers
+do) and a batch of plans (default 1000) of 4 cameras on 10k points x 5 realizations,
+in float64 and float32. Points: a Corn50 plant from ../shared/data/corn50 when present (wind
+displacement as the paper's L-level model), else a synthetic cylinder-ish plant.
+
+    python bench/bench_reward.py [--points 10000] [--realizations 5] [--cameras 4] [--batch 1000]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "src" / "vp_planner"))
+
+from vp_planner.reward import noisy_reward, prepare_points  # noqa: E402
+from vp_planner.space import ViewSpace  # noqa: E402
+
+
+def load_ply_xyz(path: Path) -> np.ndarray:
+    data = path.read_bytes()
+    end = data.index(b"end_header\n") + len(b"end_header\n")
+    header = data[:end].decode("latin1")
+    n = int(header.split("element vertex ")[1].split()[0])
+    rec = np.dtype([("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("r", "u1"), ("g", "u1"), ("b", "u1")])
+    a = np.frombuffer(data[end:end + n * rec.itemsize], dtype=rec)
+    return np.stack([a["x"], a["y"], a["z"]], axis=1)
+
+
+def synthetic_plant(n: int, rng: np.random.Generator) -> np.ndarray:
+    z = rng.uniform(0, 2.0, n)
+    r = 0.05 + 0.4 * rng.random(n) * np.sin(np.pi * z / 2.0)
+    a = rng.uniform(0, 2 * np.pi, n)
+    return np.stack([r * np.cos(a), r * np.sin(a), z], axis=1)
+
+
+def scene(points: int, K: int, seed: int = 0) -> tuple[np.ndarray, str]:
+    rng = np.random.default_rng(seed)
+    ply = ROOT.parent / "shared" / "data" / "corn50" / "10.ply"
+    if ply.exists():
+        P = load_ply_xyz(ply)
+        P = P[rng.choice(len(P), points, replace=len(P) < points)]
+        P[:, 2] -= P[:, 2].min()
+        source = str(ply.name)
+    else:
+        P = synthetic_plant(points, rng)
+        source = "synthetic"
+    L = 10
+    lev = np.clip(np.ceil(P[:, 2] / P[:, 2].max() * L), 1, L)
+    out = []
+    for _ in range(K):
+        Q = P.copy()
+        Q[:, 0] += lev * rng.normal(0, np.sqrt(0.002))
+        out.append(Q)
+    return np.stack(out), source
+
+
+def best_of(fn, repeats: int) -> float:
+    best = float("inf")
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--points", type=int, default=10000)
+    ap.add_argument("--realizations", type=int, default=5)
+    ap.add_argument("--cameras", type=int, default=4)
+    ap.add_argument("--batch", type=int, default=1000)
+    ap.add_argument("--repeats", type=int, default=3)
+    args = ap.parse_args()
+    R, source = scene(args.points, args.realizations)
+    space = ViewSpace(R, args.cameras)
+    plans = space.decode(space.sample(args.batch, np.random.default_rng(1)))
+    result = {
+        "points": args.points, "realizations": args.realizations, "cameras": args.cameras,
+        "batch": args.batch, "source": source, "torch": torch.__version__,
+        "threads": torch.get_num_threads(), "machine": platform.processor() or platform.machine(),
+        "results": {},
+    }
+    for name, dt in (("float64", torch.float64), ("float32", torch.float32)):
+        noisy_reward(plans[:2], R, dtype=dt)  # warm-up
+        prep = prepare_points(R, dt)
+        one = best_of(lambda: noisy_reward(plans[0], R, dtype=dt), args.repeats * 3)
+        one_prep = best_of(lambda: noisy_reward(plans[0], prep, dtype=dt), args.repeats * 3)
+        many = best_of(lambda: noisy_reward(plans, prep, dtype=dt), args.repeats)
+        result["results"][name] = {
+            "one_plan_ms": round(one * 1e3, 3),
+            "one_plan_prepared_points_ms": round(one_prep * 1e3, 3),
+            "batch_s": round(many, 4),
+            "batch_ms_per_plan": round(many / args.batch * 1e3, 3),
+        }
+    r64 = noisy_reward(plans[:50], R)
+    r32 = noisy_reward(plans[:50], R, dtype=torch.float32)
+    result["max_abs_diff_float32"] = float(np.max(np.abs(r64 - r32)))
+    json.dump(result, sys.stdout, indent=1)
+    print()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

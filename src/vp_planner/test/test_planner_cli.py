@@ -1,0 +1,78 @@
+"""python -m vp_planner.cli: plan.json and noisy_points.npy, errors with exit code 2."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("vp_scene.scenario", reason="vp_scene is not importable")
+pytest.importorskip("vp_scene.wind", reason="vp_scene is not importable")
+
+from vp_planner.cli import main  # noqa: E402
+from vp_planner.poses import pose_to_camera  # noqa: E402
+from vp_planner.reward import noisy_reward  # noqa: E402
+
+
+def test_cli_writes_plan(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    rc = main(["--scenario", "one_plant", "--method", "random", "--cameras", "3", "--evals", "12",
+               "--seed", "3", "--out", str(out), "--points-per-plant", "600", "--realizations", "2",
+               "--no-progress"])
+    assert rc == 0
+    plan = json.loads((out / "plan.json").read_text())
+    for key in ("scenario", "method", "cameras", "poses", "reward", "trace", "evaluations", "seed", "seconds",
+                "scene", "fov", "theta_match", "simple_regret"):
+        assert key in plan, key
+    assert plan["method"] == "random" and plan["seed"] == 3 and plan["evaluations"] == 12
+    assert len(plan["trace"]) == 12 and len(plan["simple_regret"]) == 12
+    cams = np.array(plan["cameras"])
+    assert cams.shape == (3, 6) and np.array(plan["poses"]).shape == (3, 7)
+    c, u = pose_to_camera(np.array(plan["poses"]))
+    np.testing.assert_allclose(c, cams[:, :3], atol=1e-12)
+    np.testing.assert_allclose(u, cams[:, 3:] / np.linalg.norm(cams[:, 3:], axis=1, keepdims=True), atol=1e-9)
+    scene = plan["scene"]
+    for key in ("scenario", "models", "seed", "points_per_plant", "plant_spacing", "row_spacing", "levels",
+                "realizations", "wind_variance", "wind_direction"):
+        assert key in scene, key
+    pts = np.load(out / "noisy_points.npy")
+    assert pts.ndim == 3 and pts.shape[0] == 2 and pts.shape[2] == 3
+    assert plan["reward"] == pytest.approx(float(noisy_reward(cams, pts, plan["fov"], plan["theta_match"])), abs=1e-9)
+    # the scene dict rebuilds the identical realizations
+    from vp_scene.scenario import make_scene
+    from vp_scene.wind import WindConfig, make_noisy_scene
+
+    s = make_scene(scene["scenario"], models=None, seed=scene["seed"], points_per_plant=scene["points_per_plant"],
+                   plant_spacing=scene["plant_spacing"], row_spacing=scene["row_spacing"])
+    cfg = WindConfig(levels=scene["levels"], realizations=scene["realizations"], variance=scene["wind_variance"],
+                     direction=scene["wind_direction"])
+    np.testing.assert_allclose(make_noisy_scene(s, cfg, scene["seed"]).points, pts)
+
+
+def test_cli_errors(tmp_path: Path) -> None:
+    env = dict(os.environ)
+    src = str(Path(__file__).resolve().parents[1])
+    env["PYTHONPATH"] = src + os.pathsep + env.get("PYTHONPATH", "")
+    base = [sys.executable, "-m", "vp_planner.cli", "--out", str(tmp_path / "x"), "--no-progress",
+            "--points-per-plant", "300", "--realizations", "1"]
+    p = subprocess.run(base + ["--cameras", "1", "--method", "random"], capture_output=True, text=True, env=env,
+                       timeout=120)
+    assert p.returncode == 2
+    lines = [ln for ln in p.stderr.strip().splitlines() if ln.strip()]
+    assert len(lines) == 1 and "num_cameras" in lines[0]
+    p = subprocess.run(base + ["--method", "egp", "--evals", "5", "--init", "10"], capture_output=True, text=True,
+                       env=env, timeout=120)
+    assert p.returncode == 2 and "initial design" in p.stderr
+    assert main(["--out", str(tmp_path / "y"), "--models", str(tmp_path / "missing"), "--no-progress"]) == 2
+
+
+def test_cli_argparse_error_is_one_line(capsys: pytest.CaptureFixture) -> None:
+    with pytest.raises(SystemExit) as info:
+        main(["--method", "nope", "--out", "x"])
+    assert info.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "invalid choice" in err[0]

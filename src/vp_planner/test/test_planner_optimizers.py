@@ -1,0 +1,121 @@
+"""plan_views: baselines, BO methods, cancel, and input errors."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from vp_planner.optimizers import (
+    METHODS,
+    InvalidBudgetError,
+    InvalidNumCamerasError,
+    InvalidSceneError,
+    NoFeasiblePlanError,
+    UnknownMethodError,
+    plan_views,
+)
+from vp_planner.reward import noisy_reward
+from vp_planner.space import ViewSpace
+
+
+def check_result(res, method: str, realizations: np.ndarray, n: int, evaluations: int) -> None:
+    assert res.method == method
+    assert res.cameras.shape == (n, 6)
+    assert res.evaluations == evaluations and not res.stopped
+    assert res.trace.shape == (evaluations,) and res.rewards.shape == (evaluations,)
+    assert np.all(np.diff(res.trace) >= 0)
+    assert res.reward == pytest.approx(res.trace[-1]) and res.reward > 0
+    assert res.reward == pytest.approx(float(noisy_reward(res.cameras, realizations)), abs=1e-12)
+    assert ViewSpace(realizations, n).feasible(res.cameras)
+    np.testing.assert_allclose(res.simple_regret(), 1.0 - res.trace)
+    assert res.seconds > 0
+
+
+@pytest.mark.parametrize("method", ["circle", "sa", "random"])
+def test_baselines(method: str, realizations: np.ndarray) -> None:
+    progress = []
+
+    def cb(done, total, best, weights):
+        progress.append((done, total, best, weights))
+        return True
+
+    res = plan_views(method, realizations, 3, evaluations=30, seed=1, callback=cb)
+    check_result(res, method, realizations, 3, 30)
+    assert [p[0] for p in progress] == list(range(1, 31))
+    assert all(p[1] == 30 and p[3] is None for p in progress)
+    np.testing.assert_allclose([p[2] for p in progress], res.trace)
+    assert res.ensemble_weights is None
+    again = plan_views(method, realizations, 3, evaluations=30, seed=1)
+    np.testing.assert_allclose(again.trace, res.trace)
+
+
+def test_circle_geometry(realizations: np.ndarray) -> None:
+    res = plan_views("circle", realizations, 4, evaluations=20)
+    c, v = res.cameras[:, :3], res.cameras[:, 3:]
+    np.testing.assert_allclose(c[:, 2], c[0, 2])  # one height
+    centre = ViewSpace(realizations, 4).extent.centre
+    rad = np.hypot(c[:, 0] - centre[0], c[:, 1] - centre[1])
+    np.testing.assert_allclose(rad, rad[0])  # one radius
+    az = np.sort(np.arctan2(c[:, 1] - centre[1], c[:, 0] - centre[0]) % (2 * math.pi))
+    np.testing.assert_allclose(np.diff(az), math.pi / 2, atol=1e-9)  # evenly spaced
+    np.testing.assert_allclose(c + v, np.broadcast_to(centre, c.shape), atol=1e-9)  # facing the centre
+
+
+@pytest.mark.parametrize("method", ["circle", "sa", "random"])
+def test_cancel_within_one_evaluation(method: str, realizations: np.ndarray) -> None:
+    res = plan_views(method, realizations, 3, evaluations=40, callback=lambda d, t, b, w: d < 7)
+    assert res.stopped and res.evaluations == 7 and res.trace.shape == (7,)
+    assert res.cameras.shape == (3, 6)
+    first = plan_views(method, realizations, 3, evaluations=40, callback=lambda d, t, b, w: False)
+    assert first.stopped and first.evaluations == 1
+
+
+@pytest.mark.parametrize("method", ["egp", "gp"])
+def test_bo_methods(method: str, realizations: np.ndarray) -> None:
+    seen = []
+
+    def cb(done, total, best, weights):
+        seen.append((done, weights))
+        return True
+
+    res = plan_views(method, realizations, 2, evaluations=12, initial_evaluations=8, seed=0, callback=cb)
+    check_result(res, method, realizations, 2, 12)
+    assert [s[0] for s in seen] == list(range(1, 13))
+    if method == "egp":
+        assert res.ensemble_weights is not None and len(res.ensemble_weights) == len(res.model_names)
+        assert sum(res.ensemble_weights) == pytest.approx(1.0, abs=1e-6)
+        assert any(w is not None for _, w in seen)
+    else:
+        assert res.ensemble_weights is None
+    stopped = plan_views(method, realizations, 2, evaluations=12, initial_evaluations=8,
+                         callback=lambda d, t, b, w: d < 10)
+    assert stopped.stopped and stopped.evaluations == 10 and stopped.trace.shape == (10,)
+
+
+def test_bad_inputs(realizations: np.ndarray) -> None:
+    assert set(METHODS) == {"egp", "gp", "circle", "sa", "random"}
+    with pytest.raises(InvalidNumCamerasError):
+        plan_views("random", realizations, 1)
+    with pytest.raises(UnknownMethodError, match="unknown method"):
+        plan_views("cmaes", realizations, 3)
+    with pytest.raises(InvalidBudgetError):
+        plan_views("random", realizations, 3, evaluations=0)
+    with pytest.raises(InvalidBudgetError):
+        plan_views("egp", realizations, 3, evaluations=20, initial_evaluations=30)
+    with pytest.raises(InvalidSceneError):
+        plan_views("random", np.zeros((3, 0, 3)), 3)
+    bad = realizations.copy()
+    bad[1, 5, 2] = np.inf
+    with pytest.raises(InvalidSceneError):
+        plan_views("circle", bad, 3)
+    for err in (InvalidNumCamerasError, UnknownMethodError, InvalidBudgetError, InvalidSceneError):
+        assert issubclass(err, ValueError)
+    for method in ("random", "sa"):
+        with pytest.raises(NoFeasiblePlanError, match="feasible"):
+            plan_views(method, realizations, 4, evaluations=5, min_separation=100.0)
+    # a ring can always widen: its plan keeps the separation (at a poor reward)
+    wide = plan_views("circle", realizations, 4, evaluations=4, min_separation=5.0)
+    c = wide.cameras[:, :3]
+    d = np.linalg.norm(c[:, None] - c[None], axis=-1)[np.triu_indices(4, 1)]
+    assert d.min() >= 5.0 - 1e-9

@@ -1,0 +1,435 @@
+"""View-planning methods behind one entry point, :func:`plan_views`.
+
+Methods (all maximize the noisy reward r~ of eq. 7 with the same evaluation budget E, report
+the best-so-far reward after every evaluation, and return the best *feasible* plan):
+
+* ``egp``: the paper's EGP-VP, Bayesian optimization with an ensemble of 4 GPs and adaptive EI
+  (Sec. IV-B), in the :class:`~vp_planner.space.ViewSpace` parameterization, via
+  :func:`vp_planner.bo.optimize` (``ensemble=True``).
+* ``gp``: single-GP EI BO (Sec. IV-A), same space and budget (``ensemble=False``).
+* ``circle``: N cameras evenly spaced on a horizontal circle about the scene's centre, all
+  facing the centre at mid-height; radius and altitude tuned by a grid search with the budget.
+* ``sa``: the discrete formulation of Bacharis et al. 2022: a finite candidate set of
+  viewpoints around the scene (azimuths x elevations x distances), each facing the scene,
+  choose N of them by simulated annealing (swap one viewpoint for a nearby candidate,
+  Metropolis acceptance, geometric cooling).
+* ``random``: uniformly random feasible plans of the same space.
+
+The initial design of egp/gp is ``initial_evaluations`` plans: a few structured plans
+(:meth:`ViewSpace.structured`, clusters of cameras looking at the scene) followed by random
+feasible plans (``structured_init`` sets how many structured ones; 0 gives the paper's purely
+random initial design).
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Any, Callable, Optional
+
+import numpy as np
+import torch
+from numpy.typing import NDArray
+
+from .reward import DEFAULT_FOV, DEFAULT_THETA_MATCH
+from .space import (
+    NoFeasiblePlanError,
+    Objective,
+    PlanningCancelled,
+    ViewSpace,
+    check_realizations,
+)
+
+__all__ = [
+    "METHODS",
+    "PlanResult",
+    "plan_views",
+    "validate_request",
+    "InvalidNumCamerasError",
+    "UnknownMethodError",
+    "InvalidBudgetError",
+    "InvalidSceneError",
+    "NoFeasiblePlanError",
+]
+
+METHODS: tuple[str, ...] = ("egp", "gp", "circle", "sa", "random")
+
+Callback = Callable[[int, int, float, Optional[list]], bool]
+
+#: Plans evaluated per reward call by the non-BO methods (bounds how late a cancel is seen).
+_BATCH = 16
+
+
+class InvalidNumCamerasError(ValueError):
+    """num_cameras < 2 or not an integer."""
+
+
+class UnknownMethodError(ValueError):
+    """method is not one of METHODS."""
+
+
+class InvalidBudgetError(ValueError):
+    """evaluations < 1, or smaller than initial_evaluations for egp/gp."""
+
+
+class InvalidSceneError(ValueError):
+    """Empty or non-finite point cloud, or a wrong shape."""
+
+
+@dataclass
+class PlanResult:
+    """Outcome of :func:`plan_views`.
+
+    Attributes:
+        method: the method name.
+        cameras: (N, 6) best feasible plan [cx, cy, cz, vx, vy, vz] ((0, 6) when cancelled
+            before any feasible evaluation).
+        reward: its noisy reward (eq. 7).
+        trace: (evaluations,) best-so-far noisy reward after each evaluation.
+        evaluations: evaluations made (< the budget when stopped).
+        seconds: wall-clock planning time.
+        ensemble_weights: the last ensemble weights w_t^m (egp only, else None).
+        model_names: names of the ensemble's models (egp only, else None).
+        stopped: True when the callback cancelled the run.
+        rewards: (evaluations,) reward of every evaluated plan (0 for infeasible ones).
+    """
+
+    method: str
+    cameras: NDArray[np.float64]
+    reward: float
+    trace: NDArray[np.float64]
+    evaluations: int
+    seconds: float
+    ensemble_weights: Optional[list] = None
+    model_names: Optional[list] = None
+    stopped: bool = False
+    rewards: Optional[NDArray[np.float64]] = None
+
+    def simple_regret(self, optimum: float = 1.0) -> NDArray[np.float64]:
+        """SR(t) = r~(z*) - max_{tau <= t} r~(z_tau) (paper Sec. V-B), with r~(z*) = ``optimum``."""
+        return float(optimum) - np.asarray(self.trace, dtype=np.float64)
+
+
+# ---------------------------------------------------------------------- validation
+def validate_request(method: str, num_cameras: Any, evaluations: Any, initial_evaluations: Any) -> None:
+    """Raise the ValueError subclass for a bad method, camera count or budget (cheap; no scene)."""
+    if not isinstance(method, str) or method not in METHODS:
+        raise UnknownMethodError(f"unknown method {method!r}; one of {', '.join(METHODS)}")
+    if isinstance(num_cameras, bool) or int(num_cameras) != num_cameras or num_cameras < 2:
+        raise InvalidNumCamerasError(f"num_cameras must be an integer >= 2, got {num_cameras}")
+    if isinstance(evaluations, bool) or int(evaluations) != evaluations or evaluations < 1:
+        raise InvalidBudgetError(f"evaluations must be an integer >= 1, got {evaluations}")
+    if method in ("egp", "gp"):
+        if int(initial_evaluations) != initial_evaluations or initial_evaluations < 1:
+            raise InvalidBudgetError(f"initial_evaluations must be an integer >= 1, got {initial_evaluations}")
+        if evaluations < initial_evaluations:
+            raise InvalidBudgetError(
+                f"evaluation budget {evaluations} is smaller than the initial design ({initial_evaluations})")
+
+
+# ---------------------------------------------------------------------- baselines
+def _circle_cameras(centre: NDArray, target_z: float, radius: NDArray, height: NDArray, n: int,
+                    phase: float = 0.0) -> NDArray[np.float64]:
+    """Plans (B, n, 6): n cameras evenly spaced on circles (radius, height) facing (centre, target_z)."""
+    radius = np.asarray(radius, float)[:, None]
+    height = np.asarray(height, float)[:, None]
+    a = phase + 2.0 * math.pi * np.arange(n) / n
+    c = np.stack([centre[0] + radius * np.cos(a), centre[1] + radius * np.sin(a),
+                  np.broadcast_to(height, radius.shape[:1] + (n,))], axis=-1)
+    tgt = np.array([centre[0], centre[1], target_z])
+    return np.concatenate([c, tgt - c], axis=-1)
+
+
+def _circle(space: ViewSpace, obj: Objective, evaluations: int, rng: np.random.Generator) -> None:
+    """Grid search over (radius, height) of a horizontal ring facing the scene centre.
+
+    Heights h are spread over [min_altitude, z_max + s + depth]; for each h the radius runs from
+    the smallest feasible one, rho_lo(h) = max(min_sep / (2 sin(pi/N)), max_p r_p + sqrt(s^2 -
+    (z_p - h)^2) over points within s of the height h) (so every camera is >= s from every point
+    whatever the azimuth), to rho_hi = max_p r_p + s + depth. The grid has n_h = floor(sqrt(E))
+    heights x floor(E / n_h) radii, evaluated in order (trace = best so far); the remaining
+    evaluations (fewer than n_h) jitter around the best cell.
+    """
+    R = space.realizations.reshape(-1, 3)
+    ext = space.extent
+    centre = ext.centre[:2]
+    target_z = float(ext.centre[2])
+    s = space.min_standoff
+    N = space.num_cameras
+    r_p = np.hypot(R[:, 0] - centre[0], R[:, 1] - centre[1])
+    z_p = R[:, 2]
+    rho_sep = space.min_separation / (2.0 * math.sin(math.pi / N))
+    depth = space.shell_depth
+    rho_hi = float(r_p.max()) + s + depth
+    h_lo = space.min_altitude
+    h_hi = float(ext.hi[2]) + s + depth
+
+    def rho_lo(h: float) -> float:
+        dz = np.abs(z_p - h)
+        near = dz < s
+        need = float((r_p[near] + np.sqrt(s * s - dz[near] ** 2)).max()) * (1 + 1e-9) if near.any() else 0.0
+        return max(rho_sep, need)
+
+    def plan(a: float, h: float) -> NDArray[np.float64]:
+        lo = rho_lo(h)
+        rho = lo + a * max(0.0, rho_hi - lo)
+        return _circle_cameras(centre, target_z, np.array([rho]), np.array([h]), N)[0]
+
+    n_h = max(1, int(math.isqrt(evaluations)))
+    n_r = max(1, evaluations // n_h)
+    hs = np.linspace(h_lo, h_hi, n_h) if n_h > 1 else np.array([0.5 * (h_lo + h_hi)])
+    As = np.linspace(0.0, 1.0, n_r) if n_r > 1 else np.array([0.5])
+    grid = [(a, h) for h in hs for a in As]
+    extra = evaluations - len(grid)
+    _evaluate_plans(obj, np.array([plan(a, h) for a, h in grid]))
+    if extra > 0:
+        k = int(np.argmax(obj.values[: len(grid)]))
+        a0, h0 = grid[k]
+        da = 0.5 / max(1, n_r - 1)
+        dh = 0.5 * (h_hi - h_lo) / max(1, n_h - 1)
+        pts = [(float(np.clip(a0 + rng.uniform(-da, da), 0, 1)), float(np.clip(h0 + rng.uniform(-dh, dh), h_lo, h_hi)))
+               for _ in range(extra)]
+        _evaluate_plans(obj, np.array([plan(a, h) for a, h in pts]))
+
+
+def _evaluate_plans(obj: Objective, cams: NDArray[np.float64]) -> None:
+    """Evaluate camera plans in small batches (one recorded evaluation each)."""
+    nanU = np.full((1, obj.space.dim), np.nan)
+    for b0 in range(0, len(cams), _BATCH):
+        chunk = cams[b0 : b0 + _BATCH]
+        obj.record(np.repeat(nanU, len(chunk), axis=0), chunk)
+
+
+def _random(space: ViewSpace, obj: Objective, evaluations: int, rng: np.random.Generator) -> None:
+    done = 0
+    while done < evaluations:
+        n = min(_BATCH, evaluations - done)
+        U = space.sample(n, rng)
+        obj(U)
+        done += n
+
+
+def sa_candidates(space: ViewSpace, n_azimuth: int = 16, elevations_deg: tuple[float, ...] = (10.0, 30.0, 50.0, 70.0),
+                  distances: tuple[float, ...] = (0.0, 0.5, 1.0)) -> NDArray[np.float64]:
+    """The discrete viewpoint set of the ``sa`` baseline: cameras (M, 6).
+
+    Positions: ``n_azimuth`` azimuths x elevations x shell distances (u_dist fractions) on the
+    same shell as :class:`ViewSpace`; each looks at the nearest point of the scene's core: the
+    scene box at mid-height, shrunk in x and y by its smaller horizontal half extent (the centre
+    for one plant, the row's axis for a row). Candidates violating altitude or stand-off are
+    dropped.
+    """
+    lo, hi = space.elevation_lo, space.elevation_hi
+    u_el = [(math.radians(e) - lo) / (hi - lo) for e in elevations_deg]
+    u_el = [min(1.0, max(0.0, u)) for u in u_el]
+    grid = np.array([(k / n_azimuth, ue, ud) for ud in distances for ue in u_el for k in range(n_azimuth)])
+    c = space.positions(grid)
+    ext = space.extent
+    m = float(min(ext.half[0], ext.half[1]))
+    core_lo = np.array([ext.lo[0] + m, ext.lo[1] + m])
+    core_hi = np.array([ext.hi[0] - m, ext.hi[1] - m])
+    tgt_xy = np.clip(c[:, :2], np.minimum(core_lo, core_hi), np.maximum(core_lo, core_hi))
+    tgt = np.concatenate([tgt_xy, np.full((len(c), 1), ext.centre[2])], axis=1)
+    cams = np.concatenate([c, tgt - c], axis=1)
+    # per-camera feasibility (altitude, stand-off, v != 0)
+    ok = np.isfinite(cams).all(1) & (np.linalg.norm(cams[:, 3:], axis=1) > 0)
+    ok &= c[:, 2] >= space.min_altitude - 1e-9
+    if space.min_standoff > 0:
+        d, _ = space.tree.query(c, k=1, distance_upper_bound=space.min_standoff)
+        ok &= d >= space.min_standoff - 1e-9
+    return cams[ok]
+
+
+def _sa(space: ViewSpace, obj: Objective, evaluations: int, rng: np.random.Generator,
+        t0: float = 0.02, t_end: float = 2e-5, neighbours: int = 8, p_local: float = 0.8) -> None:
+    """Simulated annealing over N-subsets of :func:`sa_candidates`.
+
+    Move: replace one chosen viewpoint by one of its ``neighbours`` nearest candidates (by
+    position) with probability ``p_local``, else by a random candidate; moves that break the
+    separation rule are redrawn. Metropolis acceptance exp((r_new - r_cur) / T), geometric
+    cooling T_k = t0 (t_end / t0)^(k / E). Every proposal costs one evaluation.
+    """
+    cand = sa_candidates(space)
+    N = space.num_cameras
+    M = len(cand)
+    if M < N:
+        raise NoFeasiblePlanError(f"no feasible plan: only {M} feasible candidate viewpoints for {N} cameras")
+    pos = cand[:, :3]
+    D = np.linalg.norm(pos[:, None] - pos[None], axis=-1)
+    sep_ok = D >= space.min_separation - 1e-9
+    np.fill_diagonal(sep_ok, False)
+    order = np.argsort(D, axis=1)[:, 1 : neighbours + 1]
+
+    def valid(sel: NDArray[np.int64]) -> bool:
+        sub = sep_ok[np.ix_(sel, sel)]
+        return bool(sub[np.triu_indices(N, 1)].all())
+
+    cur = None
+    for _ in range(10000):
+        sel = rng.choice(M, size=N, replace=False)
+        if valid(sel):
+            cur = sel
+            break
+    if cur is None:
+        raise NoFeasiblePlanError(f"no feasible plan: no {N} candidate viewpoints at least "
+                                  f"{space.min_separation} m apart")
+    nanU = np.full((1, space.dim), np.nan)
+    r_cur = float(obj.record(nanU, cand[cur][None])[0])
+    alpha = (t_end / t0) ** (1.0 / max(1, evaluations - 1))
+    T = t0
+    for _k in range(1, evaluations):
+        T *= alpha
+        prop = None
+        for _try in range(200):
+            slot = int(rng.integers(N))
+            if rng.random() < p_local:
+                new = int(order[cur[slot], rng.integers(order.shape[1])])
+            else:
+                new = int(rng.integers(M))
+            if new in cur:
+                continue
+            sel = cur.copy()
+            sel[slot] = new
+            if valid(sel):
+                prop = sel
+                break
+        if prop is None:
+            prop = cur.copy()
+        r_new = float(obj.record(nanU, cand[prop][None])[0])
+        if r_new >= r_cur or rng.random() < math.exp((r_new - r_cur) / max(T, 1e-300)):
+            cur, r_cur = prop, r_new
+
+
+# ---------------------------------------------------------------------- BO
+def initial_design(space: ViewSpace, n: int, rng: np.random.Generator, structured: int = 4) -> NDArray[np.float64]:
+    """n initial plans U (n, 6N): up to ``structured`` structured plans, then random feasible ones."""
+    S = space.structured(max_plans=max(0, min(structured, n))) if structured > 0 else np.zeros((0, space.dim))
+    S = S[:n]
+    rest = space.sample(n - len(S), rng) if n > len(S) else np.zeros((0, space.dim))
+    return np.concatenate([S, rest], axis=0)
+
+
+def _bo(space: ViewSpace, obj: Objective, evaluations: int, initial_evaluations: int, seed: int,
+        rng: np.random.Generator, ensemble: bool, structured_init: int) -> dict:
+    from . import bo  # imported lazily: botorch is heavy
+
+    X0 = initial_design(space, initial_evaluations, rng, structured_init)
+    info: dict = {"weights": None, "model_names": None}
+
+    def objective(U: torch.Tensor) -> torch.Tensor:
+        return obj(U).to(U.dtype) if isinstance(U, torch.Tensor) else torch.as_tensor(obj(U))
+
+    def feasible(U: torch.Tensor) -> torch.Tensor:
+        return space.feasible(U)
+
+    def bo_callback(done: int, total: int, best: float, weights: Optional[list]) -> bool:
+        if weights is not None:
+            w = [float(x) for x in weights]
+            obj.weights = w
+            info["weights"] = w
+        return not obj.cancelled
+
+    res = bo.optimize(objective, space.dim, evaluations, initial_evaluations, seed, ensemble=ensemble,
+                      feasible=feasible, initial_design=torch.as_tensor(X0, dtype=torch.float64),
+                      callback=bo_callback)
+    weights = getattr(res, "weights", None)
+    if ensemble and weights:
+        info["weights"] = [float(x) for x in weights[-1]]
+    info["model_names"] = list(getattr(res, "model_names", None) or []) or None
+    return info
+
+
+# ---------------------------------------------------------------------- entry point
+def plan_views(
+    method: str,
+    realizations: Any,
+    num_cameras: int,
+    evaluations: int = 100,
+    initial_evaluations: int = 50,
+    seed: int = 0,
+    min_standoff: float = 0.5,
+    min_altitude: float = 0.3,
+    min_separation: float = 0.5,
+    fov: float = DEFAULT_FOV,
+    theta_match: float = DEFAULT_THETA_MATCH,
+    callback: Optional[Callback] = None,
+    *,
+    shell_depth: Optional[float] = None,
+    structured_init: int = 4,
+    dtype: torch.dtype = torch.float64,
+) -> PlanResult:
+    """Plan ``num_cameras`` views of the noisy scene with ``method`` (one of :data:`METHODS`).
+
+    Args:
+        method: egp | gp | circle | sa | random.
+        realizations: (K, P, 3) noisy scene realizations (the reward is their mean, eq. 7).
+        num_cameras: N >= 2.
+        evaluations: total reward evaluations E (initial design included), >= 1.
+        initial_evaluations: initial design size of egp/gp (<= evaluations).
+        seed: random seed (numpy and torch).
+        min_standoff, min_altitude, min_separation: feasibility rules (see ViewSpace).
+        fov, theta_match: reward parameters (eq. 6).
+        callback: ``callback(done, total, best, weights) -> bool`` after every evaluation
+            (``weights``: latest ensemble weights for egp, else None); returning False stops
+            the run within one evaluation and returns the best plan so far (``stopped=True``).
+        shell_depth: outer bound of camera distances (see ViewSpace).
+        structured_init: number of structured plans in the egp/gp initial design.
+        dtype: reward precision (torch.float64 or torch.float32).
+
+    Raises:
+        UnknownMethodError, InvalidNumCamerasError, InvalidBudgetError, InvalidSceneError (all
+        ValueError) for bad arguments; NoFeasiblePlanError (ValueError) when no feasible plan
+        was found.
+    """
+    validate_request(method, num_cameras, evaluations, initial_evaluations)
+    evaluations = int(evaluations)
+    num_cameras = int(num_cameras)
+    try:
+        R = check_realizations(realizations)
+    except ValueError as exc:
+        raise InvalidSceneError(str(exc)) from None
+    start = time.perf_counter()
+    space = ViewSpace(R, num_cameras, min_standoff=min_standoff, min_altitude=min_altitude,
+                      min_separation=min_separation, fov=fov, theta_match=theta_match, shell_depth=shell_depth)
+    obj = Objective(space, evaluations, callback=callback, dtype=dtype)
+    rng = np.random.default_rng(seed)
+    torch.manual_seed(seed)
+    info: dict = {}
+    try:
+        if method == "circle":
+            _circle(space, obj, evaluations, rng)
+        elif method == "sa":
+            _sa(space, obj, evaluations, rng)
+        elif method == "random":
+            _random(space, obj, evaluations, rng)
+        else:
+            info = _bo(space, obj, evaluations, int(initial_evaluations), seed, rng, method == "egp",
+                       int(structured_init))
+    except PlanningCancelled:
+        pass
+    stopped = obj.cancelled or obj.count < evaluations
+    best = obj.best_cameras()
+    if best is None:
+        if not stopped:
+            raise NoFeasiblePlanError(f"no feasible plan among the {obj.count} evaluated plans")
+        best = np.zeros((0, 6))
+    weights = info.get("weights") if method == "egp" else None
+    names = info.get("model_names") if method == "egp" else None
+    if method == "egp" and names is None:
+        try:
+            from .bo import MODEL_NAMES
+            names = list(MODEL_NAMES)
+        except Exception:  # pragma: no cover - bo without MODEL_NAMES
+            names = None
+    return PlanResult(
+        method=method,
+        cameras=np.asarray(best, dtype=np.float64),
+        reward=float(obj.best_value),
+        trace=obj.trace(),
+        evaluations=obj.count,
+        seconds=time.perf_counter() - start,
+        ensemble_weights=weights,
+        model_names=names,
+        stopped=bool(stopped),
+        rewards=np.asarray(obj.values, dtype=np.float64),
+    )

@@ -1,0 +1,445 @@
+"""The continuous search space of camera plans, its feasibility rules, and the objective wrapper.
+
+Why a shell-and-target parameterization
+---------------------------------------
+The paper optimizes z = [c_1, v_1, ..., c_N, v_N] in R^{6N}. With a plain box for positions and
+v in [-1, 1]^3, 91% of random plans score exactly 0 (a camera too close, looking away from the
+plant, or every pair over theta_match; docs: stack notes), so a 100-evaluation optimizer learns
+almost nothing. Here every camera is still 6 numbers (dim = 6N, as in the paper), but each
+number in [0, 1] has a geometric meaning that makes almost every plan look at the scene:
+
+    u = (u_az, u_el, u_dist, u_tx, u_ty, u_tz) in [0, 1]^6
+
+* azimuth    phi = 2 pi u_az
+* elevation  eps = eps_lo + (eps_hi - eps_lo) u_el       (angle above the horizontal)
+* direction  d = (cos eps cos phi, cos eps sin phi, sin eps) from the scene's centre o
+* distance   t = t_exit(d) + depth u_dist, where t_exit(d) is where the ray o + t d leaves the
+             scene's bounding box grown by the stand-off distance s on every side:
+             t_exit = min_a (h_a + s) / |d_a| (h = half extents of the box)
+* position   c = o + t d, then c_z = max(c_z, min_altitude)
+* target     T = lo_T + (hi_T - lo_T) * (u_tx, u_ty, u_tz), a look-at point inside the scene's
+             bounding box (optionally shrunk towards its centre by ``target_scale``)
+* view       v = T - c
+
+The bounding box, its centre o (x, y and mid-height) and the extents come from all K
+realizations. By construction:
+
+* stand-off: c lies on or outside the box grown by s (per axis), so its L-infinity distance, and
+  hence its Euclidean distance, to every scene point is >= s;
+* altitude: c_z >= min_altitude (the clamp only moves a camera up; eps_lo is bounded so that a
+  descending ray leaves the grown box through a side face, where moving up keeps it outside);
+* v != 0 (c is outside the box, T inside).
+
+Only the minimum separation between cameras is not guaranteed by the decode.
+
+Handling infeasible candidates: :meth:`ViewSpace.feasible` checks all rules (altitude,
+stand-off against every point of every realization with a KD-tree, separation, finiteness).
+:class:`Objective` returns 0 for an infeasible plan (still counted as an evaluation), BO
+restricts its acquisition to feasible candidates through ``feasible``, and the plan a method
+returns is always the best *feasible* plan evaluated (an error if none was).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Callable, Optional
+
+import numpy as np
+import torch
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+from .reward import DEFAULT_FOV, DEFAULT_THETA_MATCH, PreparedPoints, noisy_reward, prepare_points
+
+__all__ = [
+    "SceneExtent",
+    "ViewSpace",
+    "Objective",
+    "PlanningCancelled",
+    "NoFeasiblePlanError",
+    "check_realizations",
+]
+
+Callback = Callable[[int, int, float, Optional[list]], bool]
+
+
+class NoFeasiblePlanError(ValueError):
+    """No feasible plan could be found or was evaluated."""
+
+
+class PlanningCancelled(Exception):
+    """Raised inside an objective when the progress callback asks to stop."""
+
+
+def check_realizations(realizations: Any) -> NDArray[np.float64]:
+    """Validate noisy scene realizations and return them as a (K, P, 3) float64 array.
+
+    A (P, 3) cloud counts as K = 1. Raises ValueError for a wrong shape, an empty cloud or
+    non-finite coordinates.
+    """
+    if isinstance(realizations, torch.Tensor):
+        realizations = realizations.detach().cpu().numpy()
+    R = np.asarray(realizations, dtype=np.float64)
+    if R.ndim == 2:
+        R = R[None]
+    if R.ndim != 3 or R.shape[-1] != 3:
+        raise ValueError(f"realizations must have shape (K, P, 3), got {R.shape}")
+    if R.shape[0] == 0 or R.shape[1] == 0:
+        raise ValueError("the point cloud is empty")
+    if not np.all(np.isfinite(R)):
+        raise ValueError("the point cloud contains non-finite coordinates")
+    return R
+
+
+@dataclass(frozen=True)
+class SceneExtent:
+    """Axis-aligned bounds of all realizations."""
+
+    lo: NDArray[np.float64]  # (3,)
+    hi: NDArray[np.float64]  # (3,)
+
+    @property
+    def centre(self) -> NDArray[np.float64]:
+        return 0.5 * (self.lo + self.hi)
+
+    @property
+    def half(self) -> NDArray[np.float64]:
+        return 0.5 * (self.hi - self.lo)
+
+    @property
+    def size(self) -> float:
+        """Largest side of the box (at least 1e-3)."""
+        return float(max(1e-3, np.max(self.hi - self.lo)))
+
+    @classmethod
+    def of(cls, realizations: NDArray[np.float64]) -> "SceneExtent":
+        flat = realizations.reshape(-1, 3)
+        return cls(flat.min(axis=0), flat.max(axis=0))
+
+
+def _to_numpy(x: Any) -> tuple[NDArray[np.float64], bool]:
+    if isinstance(x, torch.Tensor):
+        return x.detach().cpu().to(torch.float64).numpy(), True
+    return np.asarray(x, dtype=np.float64), False
+
+
+class ViewSpace:
+    """Unit-cube parameterization of N-camera plans (dim = 6N) with feasibility rules.
+
+    Args:
+        realizations: (K, P, 3) noisy scene realizations (the bounds use all of them).
+        num_cameras: N >= 2.
+        min_standoff: minimum distance (m) from every camera to every scene point.
+        min_altitude: minimum camera height above the ground z = 0.
+        min_separation: minimum distance between any two cameras.
+        fov, theta_match: reward parameters (kept here so that the objective uses the same).
+        shell_depth: radial thickness of the shell of positions beyond the grown box
+            (default: max(1.0, the scene's largest side)). The reward grows with distance (far
+            cameras see the whole scene and keep pair angles uniform), so this outer bound is a
+            real design choice: it caps how far (and how small in the image) the scene may be.
+        elevation_range: (eps_lo, eps_hi) in radians; eps_lo is raised if needed so that
+            descending rays leave the grown box through a side face (see module docstring).
+        target_scale: look-at targets lie in the scene box scaled by this factor about its centre.
+    """
+
+    def __init__(
+        self,
+        realizations: Any,
+        num_cameras: int,
+        min_standoff: float = 0.5,
+        min_altitude: float = 0.3,
+        min_separation: float = 0.5,
+        fov: float = DEFAULT_FOV,
+        theta_match: float = DEFAULT_THETA_MATCH,
+        shell_depth: Optional[float] = None,
+        elevation_range: tuple[float, float] = (math.radians(-20.0), math.radians(89.0)),
+        target_scale: float = 1.0,
+    ) -> None:
+        if int(num_cameras) != num_cameras or num_cameras < 2:
+            raise ValueError(f"num_cameras must be an integer >= 2, got {num_cameras}")
+        for name, val in (("min_standoff", min_standoff), ("min_altitude", min_altitude),
+                          ("min_separation", min_separation)):
+            if not math.isfinite(val) or val < 0:
+                raise ValueError(f"{name} must be finite and >= 0, got {val}")
+        self.realizations = check_realizations(realizations)
+        self.num_cameras = int(num_cameras)
+        self.dim = 6 * self.num_cameras
+        self.min_standoff = float(min_standoff)
+        self.min_altitude = float(min_altitude)
+        self.min_separation = float(min_separation)
+        self.fov = float(fov)
+        self.theta_match = float(theta_match)
+        self.extent = SceneExtent.of(self.realizations)
+        self.origin = self.extent.centre.copy()
+        # Half extents of the box grown by the stand-off distance (tiny margin for round-off).
+        self.grown_half = self.extent.half + self.min_standoff * (1.0 + 1e-9) + 1e-9
+        self.shell_depth = float(shell_depth) if shell_depth is not None else max(1.0, self.extent.size)
+        lo_el, hi_el = float(elevation_range[0]), float(elevation_range[1])
+        # A descending ray must leave the grown box through a side face: tan|eps| * r_xy < h_z.
+        r_xy = float(np.hypot(self.grown_half[0], self.grown_half[1]))
+        floor = -0.95 * math.atan2(float(self.grown_half[2]), r_xy)
+        self.elevation_lo = max(lo_el, floor)
+        self.elevation_hi = min(hi_el, math.radians(90.0))
+        if not self.elevation_lo < self.elevation_hi:
+            raise ValueError(f"empty elevation range {elevation_range}")
+        ts = float(target_scale)
+        if not 0.0 <= ts <= 1.0:
+            raise ValueError(f"target_scale must be in [0, 1], got {target_scale}")
+        self.target_lo = self.extent.centre - ts * self.extent.half
+        self.target_hi = self.extent.centre + ts * self.extent.half
+        self._tree: Optional[cKDTree] = None
+        self._prepared: dict = {}
+
+    # ------------------------------------------------------------------ geometry
+    @property
+    def tree(self) -> cKDTree:
+        """KD-tree over the points of all realizations (built on first use)."""
+        if self._tree is None:
+            self._tree = cKDTree(self.realizations.reshape(-1, 3))
+        return self._tree
+
+    def directions(self, u_az: NDArray, u_el: NDArray) -> NDArray[np.float64]:
+        phi = 2.0 * math.pi * u_az
+        eps = self.elevation_lo + (self.elevation_hi - self.elevation_lo) * u_el
+        ce = np.cos(eps)
+        return np.stack([ce * np.cos(phi), ce * np.sin(phi), np.sin(eps)], axis=-1)
+
+    def exit_distance(self, d: NDArray[np.float64]) -> NDArray[np.float64]:
+        """t_exit(d) = min_a (h_a + s) / |d_a|: where the ray o + t d leaves the grown box."""
+        ad = np.abs(d)
+        with np.errstate(divide="ignore"):
+            t = np.where(ad > 1e-12, self.grown_half / np.maximum(ad, 1e-300), np.inf)
+        return t.min(axis=-1)
+
+    def positions(self, u_pos: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Camera positions (..., 3) from (..., 3) = (u_az, u_el, u_dist)."""
+        d = self.directions(u_pos[..., 0], u_pos[..., 1])
+        t = self.exit_distance(d) + self.shell_depth * u_pos[..., 2]
+        c = self.origin + t[..., None] * d
+        c[..., 2] = np.maximum(c[..., 2], self.min_altitude)
+        return c
+
+    def targets(self, u_tgt: NDArray[np.float64]) -> NDArray[np.float64]:
+        return self.target_lo + (self.target_hi - self.target_lo) * u_tgt
+
+    def decode(self, U: Any) -> Any:
+        """Plans (B, N, 6) = [c, v] from U (B, 6N) in [0, 1] (values are clipped to [0, 1]).
+
+        Returns the same kind (numpy or torch, float64) as the input; a (6N,) vector gives (N, 6).
+        """
+        X, is_torch = _to_numpy(U)
+        single = X.ndim == 1
+        X = np.atleast_2d(X)
+        if X.shape[-1] != self.dim:
+            raise ValueError(f"U must have {self.dim} columns, got shape {X.shape}")
+        X = np.clip(np.nan_to_num(X, nan=0.5), 0.0, 1.0).reshape(X.shape[0], self.num_cameras, 6)
+        c = self.positions(X[..., :3])
+        v = self.targets(X[..., 3:]) - c
+        cams = np.concatenate([c, v], axis=-1)
+        if single:
+            cams = cams[0]
+        return torch.from_numpy(cams) if is_torch else cams
+
+    def encode(self, u_pos: NDArray[np.float64], u_tgt: NDArray[np.float64]) -> NDArray[np.float64]:
+        """U (B, 6N) from per-camera position parameters (B, N, 3) and target parameters (B, N, 3)."""
+        u = np.concatenate([np.asarray(u_pos, float), np.asarray(u_tgt, float)], axis=-1)
+        return np.clip(u, 0.0, 1.0).reshape(u.shape[0], -1)
+
+    def prepared(self, dtype: torch.dtype = torch.float64) -> PreparedPoints:
+        """The realizations laid out once for the reward (cached per dtype)."""
+        if dtype not in self._prepared:
+            self._prepared[dtype] = prepare_points(self.realizations, dtype)
+        return self._prepared[dtype]
+
+    def reward(self, cams: Any, dtype: torch.dtype = torch.float64) -> Any:
+        """Noisy reward (eq. 7) of camera plans (..., N, 6) with this space's fov/theta_match."""
+        return noisy_reward(cams, self.prepared(dtype), self.fov, self.theta_match, dtype=dtype)
+
+    # ------------------------------------------------------------------ feasibility
+    def feasible(self, x: Any) -> Any:
+        """Feasibility of plans: U (B, 6N) or cameras (B, N, 6) (or a single (6N,) / (N, 6)).
+
+        A plan is feasible when all cameras are finite with a non-zero v, at least
+        ``min_altitude`` above the ground, at least ``min_standoff`` from every point of every
+        realization, and pairwise at least ``min_separation`` apart. Returns a bool array (B,)
+        (a torch BoolTensor for torch input; a Python bool for a single plan).
+        """
+        X, is_torch = _to_numpy(x)
+        if X.ndim in (1, 2) and X.shape[-1] == self.dim and not (X.ndim == 2 and X.shape == (self.num_cameras, 6)):
+            single = X.ndim == 1
+            cams = self.decode(np.atleast_2d(X))
+        elif X.ndim in (2, 3) and X.shape[-2:] == (self.num_cameras, 6):
+            single = X.ndim == 2
+            cams = X.reshape(-1, self.num_cameras, 6)
+        else:
+            raise ValueError(f"expected U (B, {self.dim}) or cameras (B, {self.num_cameras}, 6), got {X.shape}")
+        ok = self._feasible_cameras(cams)
+        if single:
+            return bool(ok[0])
+        return torch.from_numpy(ok) if is_torch else ok
+
+    def _feasible_cameras(self, cams: NDArray[np.float64]) -> NDArray[np.bool_]:
+        B = cams.shape[0]
+        c, v = cams[..., :3], cams[..., 3:]
+        ok = np.isfinite(cams).all(axis=(1, 2))
+        ok &= (np.linalg.norm(v, axis=-1) > 0).all(axis=1)
+        ok &= (c[..., 2] >= self.min_altitude - 1e-9).all(axis=1)
+        if self.min_separation > 0 and B:
+            diff = c[:, :, None, :] - c[:, None, :, :]
+            dist = np.linalg.norm(diff, axis=-1)
+            iu = np.triu_indices(self.num_cameras, 1)
+            ok &= (dist[:, iu[0], iu[1]] >= self.min_separation - 1e-9).all(axis=1)
+        if self.min_standoff > 0 and B:
+            flat = np.where(np.isfinite(c), c, 0.0).reshape(-1, 3)
+            dist, _ = self.tree.query(flat, k=1, distance_upper_bound=self.min_standoff)
+            ok &= (dist.reshape(B, self.num_cameras) >= self.min_standoff - 1e-9).all(axis=1)
+        return ok
+
+    # ------------------------------------------------------------------ sampling
+    def sample(self, n: int, rng: Any = None, max_tries: int = 1000) -> NDArray[np.float64]:
+        """n feasible plans U (n, 6N) drawn uniformly from the cube, by rejection.
+
+        Raises NoFeasiblePlanError when fewer than n were found in ``max_tries`` rounds.
+        """
+        rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
+        out: list[NDArray[np.float64]] = []
+        have = 0
+        batch = max(16, 2 * n)
+        for _ in range(max_tries):
+            if have >= n:
+                break
+            U = rng.random((batch, self.dim))
+            U = U[self.feasible(U)]
+            out.append(U)
+            have += len(U)
+        if have < n:
+            raise NoFeasiblePlanError(
+                f"no feasible plan: found {have} of {n} feasible plans in {max_tries * batch} random draws "
+                f"(min_separation {self.min_separation}, min_standoff {self.min_standoff}, "
+                f"min_altitude {self.min_altitude})")
+        return np.concatenate(out)[:n] if n > 0 else np.zeros((0, self.dim))
+
+    def structured(self, max_plans: int = 8) -> NDArray[np.float64]:
+        """A few structured plans U (M, 6N): clusters of cameras on the shell looking at the centre.
+
+        The reward counts a pair only where its rays meet at <= theta_match, and grows with the
+        sine of that angle, so good plans keep every pair's angle near but below theta_match.
+        Each plan puts the N cameras on a small circle (a spherical cap) of angular radius rho
+        about a central direction, plus one camera at the centre for N >= 5, with rho chosen so
+        that the widest pair is about theta_match (as seen from the scene's centre); variants
+        differ in central elevation/azimuth and radial distance. Plans that are infeasible are
+        dropped.
+        """
+        N = self.num_cameras
+        tm = self.theta_match
+        plans = []
+        # (central elevation (deg), azimuth (deg), u_dist, spread factor) variants.
+        variants = [(35, 0, 1.0, 1.0), (50, 90, 0.75, 1.0), (20, 180, 1.0, 0.9), (65, 270, 0.5, 1.0),
+                    (35, 45, 0.5, 0.8), (80, 135, 1.0, 1.0), (50, 225, 0.25, 1.1), (20, 315, 0.75, 1.0)]
+        for el_deg, az_deg, u_dist, spread in variants[: max(0, max_plans)]:
+            centre_dir = np.array(self._dir_from_angles(math.radians(az_deg), math.radians(el_deg)))
+            ring = N if N <= 4 else N - 1
+            # widest pair on a ring of angular radius rho: 2 rho for an even ring, ~2 rho otherwise
+            rho = spread * tm / 2.0
+            dirs = []
+            if N > 4:
+                dirs.append(centre_dir)
+            e1 = np.cross([0.0, 0.0, 1.0], centre_dir)
+            e1 /= np.linalg.norm(e1)
+            e2 = np.cross(centre_dir, e1)
+            for k in range(ring):
+                a = 2 * math.pi * k / ring
+                d = math.cos(rho) * centre_dir + math.sin(rho) * (math.cos(a) * e1 + math.sin(a) * e2)
+                dirs.append(d / np.linalg.norm(d))
+            u_pos = np.array([self._u_from_dir(d) + (u_dist,) for d in dirs])
+            u_tgt = np.full((N, 3), 0.5)
+            plans.append(self.encode(u_pos[None], u_tgt[None])[0])
+        if not plans:
+            return np.zeros((0, self.dim))
+        U = np.array(plans)
+        return U[self.feasible(U)]
+
+    @staticmethod
+    def _dir_from_angles(phi: float, eps: float) -> tuple[float, float, float]:
+        return (math.cos(eps) * math.cos(phi), math.cos(eps) * math.sin(phi), math.sin(eps))
+
+    def _u_from_dir(self, d: NDArray[np.float64]) -> tuple[float, float]:
+        phi = math.atan2(d[1], d[0]) % (2 * math.pi)
+        eps = math.asin(max(-1.0, min(1.0, d[2] / np.linalg.norm(d))))
+        u_el = (eps - self.elevation_lo) / (self.elevation_hi - self.elevation_lo)
+        return (phi / (2 * math.pi), float(min(1.0, max(0.0, u_el))))
+
+
+@dataclass
+class Objective:
+    """Noisy reward (eq. 7) on U for optimizers: 0 for infeasible plans; counts and records.
+
+    Calling it on U (B, 6N) (numpy or torch) decodes, checks feasibility, evaluates
+    :func:`noisy_reward` for the feasible rows and returns rewards (B,) of the input's kind.
+    Every row counts as one evaluation; after each one ``callback(done, total, best, weights)``
+    is called (``weights`` = :attr:`weights`, the latest ensemble weights an optimizer stored);
+    when it returns False the objective records that row and raises :class:`PlanningCancelled`.
+    Evaluations beyond ``total`` raise RuntimeError.
+    """
+
+    space: ViewSpace
+    total: int
+    callback: Optional[Callback] = None
+    dtype: torch.dtype = torch.float64
+    weights: Optional[list] = None
+    U: list = field(default_factory=list)
+    cameras: list = field(default_factory=list)
+    values: list = field(default_factory=list)
+    feasible_flags: list = field(default_factory=list)
+    best_value: float = 0.0
+    best_index: int = -1
+    cancelled: bool = False
+
+    @property
+    def count(self) -> int:
+        return len(self.values)
+
+    def trace(self) -> NDArray[np.float64]:
+        """Best-so-far feasible reward after each evaluation (0 before the first feasible plan)."""
+        v = np.where(np.asarray(self.feasible_flags, bool), np.asarray(self.values, float), 0.0)
+        return np.maximum.accumulate(np.maximum(v, 0.0)) if len(v) else np.zeros(0)
+
+    def evaluate_cameras(self, cams: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Noisy reward of camera plans (B, N, 6) without bookkeeping (no feasibility check)."""
+        if len(cams) == 0:
+            return np.zeros(0)
+        r = self.space.reward(np.asarray(cams, dtype=np.float64), self.dtype)
+        return np.asarray(r, dtype=np.float64).reshape(-1)
+
+    def __call__(self, U: Any) -> Any:
+        X, is_torch = _to_numpy(U)
+        X = np.atleast_2d(X)
+        cams = self.space.decode(X)
+        return self.record(X, cams, is_torch)
+
+    def record(self, X: NDArray[np.float64], cams: NDArray[np.float64], as_torch: bool = False,
+               feasible: Optional[NDArray[np.bool_]] = None) -> Any:
+        """Evaluate plans given by both U rows X (B, dim) (may be NaN when not applicable) and
+        cameras (B, N, 6); record them one at a time; return rewards (0 where infeasible)."""
+        if self.cancelled:
+            raise PlanningCancelled()
+        ok = self.space._feasible_cameras(cams) if feasible is None else np.asarray(feasible, bool)
+        vals = np.zeros(len(cams))
+        if ok.any():
+            vals[ok] = self.evaluate_cameras(cams[ok])
+        for k in range(len(cams)):
+            if self.count >= self.total:
+                raise RuntimeError(f"evaluation budget of {self.total} exceeded")
+            self.U.append(X[k].copy())
+            self.cameras.append(cams[k].copy())
+            self.values.append(float(vals[k]))
+            self.feasible_flags.append(bool(ok[k]))
+            if ok[k] and (self.best_index < 0 or vals[k] > self.best_value):
+                self.best_value, self.best_index = float(vals[k]), self.count - 1
+            if self.callback is not None and self.callback(self.count, self.total, self.best_value, self.weights) is False:
+                self.cancelled = True
+                raise PlanningCancelled()
+        return torch.from_numpy(vals) if as_torch else vals
+
+    def best_cameras(self) -> Optional[NDArray[np.float64]]:
+        return None if self.best_index < 0 else self.cameras[self.best_index]

@@ -1,0 +1,502 @@
+"""Plant models: Corn50 PLY point clouds and a built-in procedural corn plant.
+
+Paper Sec. V-A builds its scenes from "real-world corn-plant reconstructions" (the Corn50 data
+set, Nelson & Papanikolopoulos, IROS 2020). A model is a coloured point cloud in the Corn50
+model frame: the stalk runs through the origin along +z, the centroid is at z = 0, and a plant
+is about 2 units (= metres) tall, z roughly in [-1, 1]. :func:`procedural_corn` builds a plant in
+the same frame (with a coloured triangle mesh) so that the suite runs without any data.
+
+ROS-free: numpy and trimesh only.
+"""
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Optional, Union
+
+import numpy as np
+import trimesh
+
+__all__ = [
+    "PlantModelError",
+    "PlantModel",
+    "load_ply",
+    "load_models",
+    "procedural_corn",
+    "procedural_seed",
+    "sample_surface",
+]
+
+PathLike = Union[str, Path]
+
+
+class PlantModelError(ValueError):
+    """A plant model cannot be loaded or is unusable; the message names the file and the problem."""
+
+
+@dataclass
+class PlantModel:
+    """A coloured plant model in the Corn50 model frame (stalk along +z through the origin).
+
+    Attributes:
+        name: model name (PLY file stem, or ``procedural-<seed>``).
+        points: (P, 3) float64 surface points.
+        colors: (P, 3) uint8 RGB colours of the points.
+        mesh: optional coloured triangle mesh (vertex colours) of the same plant, same frame.
+    """
+
+    name: str
+    points: np.ndarray
+    colors: np.ndarray
+    mesh: Optional[trimesh.Trimesh] = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        self.points = np.ascontiguousarray(self.points, dtype=np.float64)
+        self.colors = np.ascontiguousarray(self.colors)
+        if self.points.ndim != 2 or self.points.shape[1] != 3:
+            raise PlantModelError(f"{self.name}: points must have shape (P, 3), got {self.points.shape}")
+        if self.points.shape[0] == 0:
+            raise PlantModelError(f"{self.name}: the point cloud is empty")
+        if self.colors.shape != self.points.shape:
+            raise PlantModelError(
+                f"{self.name}: colors must have shape {self.points.shape}, got {self.colors.shape}")
+        if self.colors.dtype != np.uint8:
+            raise PlantModelError(f"{self.name}: colors must be uint8, got {self.colors.dtype}")
+        if not np.all(np.isfinite(self.points)):
+            raise PlantModelError(f"{self.name}: the point cloud contains NaN or infinite coordinates")
+
+    @property
+    def z_min(self) -> float:
+        """Lowest model-frame height of the plant (points and mesh vertices)."""
+        z = float(self.points[:, 2].min())
+        if self.mesh is not None and len(self.mesh.vertices):
+            z = min(z, float(np.asarray(self.mesh.vertices)[:, 2].min()))
+        return z
+
+    @property
+    def z_max(self) -> float:
+        """Highest model-frame height of the plant (points and mesh vertices)."""
+        z = float(self.points[:, 2].max())
+        if self.mesh is not None and len(self.mesh.vertices):
+            z = max(z, float(np.asarray(self.mesh.vertices)[:, 2].max()))
+        return z
+
+
+# --------------------------------------------------------------------------------------------
+# PLY loading
+# --------------------------------------------------------------------------------------------
+
+_PLY_TYPES = {
+    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
+    "short": "i2", "int16": "i2", "ushort": "u2", "uint16": "u2",
+    "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
+    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
+}
+_COLOR_NAMES = (("red", "green", "blue"), ("r", "g", "b"), ("diffuse_red", "diffuse_green", "diffuse_blue"))
+
+
+@dataclass
+class _Element:
+    name: str
+    count: int
+    props: list  # [(name, type)] scalar, or (name, ("list", count_type, item_type))
+
+    @property
+    def has_list(self) -> bool:
+        return any(isinstance(t, tuple) for _n, t in self.props)
+
+
+def _parse_header(raw: bytes, path: Path) -> tuple[str, list[_Element], int]:
+    """Parse a PLY header: (format, elements, byte offset of the data)."""
+    if not raw.startswith(b"ply"):
+        raise PlantModelError(f"{path}: not a PLY file (it does not start with 'ply')")
+    m = re.search(rb"end_header[ \t]*\r?\n", raw[:1 << 20])
+    if m is None:
+        raise PlantModelError(f"{path}: corrupt or truncated PLY header (no 'end_header' line)")
+    try:
+        lines = raw[:m.start()].decode("ascii").splitlines()
+    except UnicodeDecodeError:
+        raise PlantModelError(f"{path}: corrupt PLY header (non-ASCII bytes)") from None
+    fmt = ""
+    elements: list[_Element] = []
+    for lineno, line in enumerate(lines[1:], start=2):
+        tok = line.split()
+        if not tok or tok[0] in ("comment", "obj_info"):
+            continue
+        try:
+            if tok[0] == "format":
+                fmt = tok[1]
+                if fmt not in ("ascii", "binary_little_endian", "binary_big_endian"):
+                    raise PlantModelError(f"{path}: unsupported PLY format {fmt!r}")
+            elif tok[0] == "element":
+                count = int(tok[2])
+                if count < 0:
+                    raise ValueError
+                elements.append(_Element(tok[1], count, []))
+            elif tok[0] == "property":
+                if not elements:
+                    raise ValueError
+                if tok[1] == "list":
+                    elements[-1].props.append((tok[4], ("list", _PLY_TYPES[tok[2]], _PLY_TYPES[tok[3]])))
+                else:
+                    elements[-1].props.append((tok[2], _PLY_TYPES[tok[1]]))
+            else:
+                raise ValueError
+        except (IndexError, KeyError, ValueError):
+            raise PlantModelError(f"{path}: corrupt PLY header, line {lineno}: {line.strip()!r}") from None
+    if not fmt:
+        raise PlantModelError(f"{path}: corrupt PLY header (no 'format' line)")
+    return fmt, elements, m.end()
+
+
+def _color_names(names: list[str], path: Path) -> tuple[str, str, str]:
+    for cand in _COLOR_NAMES:
+        if all(c in names for c in cand):
+            return cand
+    raise PlantModelError(
+        f"{path}: the PLY has no per-vertex colour (needs red, green, blue properties; has {', '.join(names)})")
+
+
+def _to_uint8(values: np.ndarray, kind: str, path: Path) -> np.ndarray:
+    """Colour channels to uint8: integers as they are (16-bit scaled down), floats in [0, 1] x 255."""
+    if values.dtype == np.uint8:
+        return values.astype(np.uint8)
+    v = values.astype(np.float64)
+    if not np.all(np.isfinite(v)):
+        raise PlantModelError(f"{path}: the colours contain NaN or infinite values")
+    if kind.startswith("f"):
+        if v.size and v.max() <= 1.0:
+            v = v * 255.0
+    elif kind in ("u2", "i2", "u4", "i4") and v.size and v.max() > 255:
+        v = v / 257.0
+    return np.clip(np.rint(v), 0, 255).astype(np.uint8)
+
+
+def load_ply(path: PathLike) -> PlantModel:
+    """Load a coloured PLY point cloud (binary little/big endian or ASCII) as a :class:`PlantModel`.
+
+    The vertex element needs ``x, y, z`` (float or double) and ``red, green, blue``
+    (uchar, or float in [0, 1]). Other elements (faces) are ignored. The model keeps the file's
+    frame (Corn50: stalk along +z through the origin, centroid z = 0).
+
+    Raises:
+        PlantModelError: missing file, not a PLY, corrupt or truncated data, no colour, no
+            vertices, or NaN / infinite coordinates; the message names the file and the problem.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise PlantModelError(f"{path}: PLY file not found")
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise PlantModelError(f"{path}: cannot read the PLY file ({exc.strerror or exc})") from None
+    fmt, elements, offset = _parse_header(raw, path)
+    index = next((i for i, e in enumerate(elements) if e.name == "vertex"), None)
+    if index is None:
+        raise PlantModelError(f"{path}: the PLY has no 'vertex' element")
+    vertex = elements[index]
+    names = [n for n, _t in vertex.props]
+    for axis in ("x", "y", "z"):
+        if axis not in names:
+            raise PlantModelError(f"{path}: the PLY vertex element has no '{axis}' property")
+    cnames = _color_names(names, path)
+    if vertex.count == 0:
+        raise PlantModelError(f"{path}: the point cloud is empty (0 vertices)")
+    if vertex.has_list:
+        raise PlantModelError(f"{path}: list properties in the vertex element are not supported")
+    types = dict(vertex.props)
+
+    if fmt == "ascii":
+        lines = raw[offset:].decode("ascii", errors="replace").splitlines()
+        skip = sum(e.count for e in elements[:index])
+        rows = lines[skip:skip + vertex.count]
+        if len(rows) < vertex.count:
+            raise PlantModelError(f"{path}: truncated PLY: the header declares {vertex.count} vertices, "
+                                  f"the file has {max(len(rows), 0)}")
+        n_props = len(vertex.props)
+        try:
+            table = np.array([r.split()[:n_props] for r in rows], dtype=np.float64)
+        except ValueError:
+            raise PlantModelError(f"{path}: corrupt PLY: a vertex line is not {n_props} numbers") from None
+        if table.ndim != 2 or table.shape[1] != n_props:
+            raise PlantModelError(f"{path}: corrupt PLY: a vertex line is not {n_props} numbers")
+        cols = {n: table[:, i] for i, n in enumerate(names)}
+    else:
+        endian = "<" if fmt == "binary_little_endian" else ">"
+        for e in elements[:index]:
+            if e.has_list:
+                raise PlantModelError(f"{path}: element '{e.name}' with list properties before 'vertex' "
+                                      "is not supported")
+            offset += e.count * np.dtype([(n, endian + t) for n, t in e.props]).itemsize
+        dtype = np.dtype([(n, endian + t) for n, t in vertex.props])
+        need = vertex.count * dtype.itemsize
+        have = len(raw) - offset
+        if have < need:
+            raise PlantModelError(f"{path}: truncated PLY: the header declares {vertex.count} vertices "
+                                  f"({need} bytes), only {max(have, 0)} bytes follow")
+        table = np.frombuffer(raw, dtype=dtype, count=vertex.count, offset=offset)
+        cols = {n: table[n] for n in names}
+
+    points = np.stack([cols["x"], cols["y"], cols["z"]], axis=1).astype(np.float64)
+    bad = int(np.count_nonzero(~np.isfinite(points).all(axis=1)))
+    if bad:
+        raise PlantModelError(f"{path}: {bad} of {len(points)} points have NaN or infinite coordinates")
+    colors = np.stack([_to_uint8(np.asarray(cols[c]), types[c], path) for c in cnames], axis=1)
+    return PlantModel(name=path.stem, points=points, colors=colors, mesh=None)
+
+
+def load_models(folder: PathLike) -> list[PlantModel]:
+    """Load every ``*.ply`` of a folder (sorted by file name) as plant models.
+
+    Raises:
+        PlantModelError: the folder is missing / not a folder, holds no ``.ply`` file, or a file
+            cannot be loaded (see :func:`load_ply`).
+    """
+    folder = Path(folder)
+    if not folder.exists():
+        raise PlantModelError(f"models folder not found: {folder}")
+    if not folder.is_dir():
+        raise PlantModelError(f"models folder is not a folder: {folder}")
+    files = sorted((p for p in folder.iterdir() if p.is_file() and p.suffix.lower() == ".ply"),
+                   key=lambda p: p.name)
+    if not files:
+        raise PlantModelError(f"models folder has no .ply files: {folder}")
+    return [load_ply(p) for p in files]
+
+
+# --------------------------------------------------------------------------------------------
+# Procedural corn
+# --------------------------------------------------------------------------------------------
+
+def procedural_seed(seed: int, index: int) -> int:
+    """Stable per-plant seed derived from a scene seed and a plant index ("hash of (seed, i)")."""
+    return int(np.random.SeedSequence([int(seed), int(index)]).generate_state(1)[0] & 0x7FFFFFFF)
+
+
+def _grid_faces(rows: int, cols: int, start: int, wrap: bool = False) -> np.ndarray:
+    """Triangles of a rows x cols vertex grid (row-major), optionally closed around the columns."""
+    c = cols if wrap else cols - 1
+    r, k = np.meshgrid(np.arange(rows - 1), np.arange(c), indexing="ij")
+    a = start + r * cols + k
+    b = start + r * cols + (k + 1) % cols
+    d = start + (r + 1) * cols + k
+    e = start + (r + 1) * cols + (k + 1) % cols
+    return np.concatenate([np.stack([a, b, e], -1).reshape(-1, 3), np.stack([a, e, d], -1).reshape(-1, 3)])
+
+
+def _frames(path: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Tangent and two normals along a polyline (a rotation-minimizing-ish frame)."""
+    t = np.gradient(path, axis=0)
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    ref = np.where(np.abs(t[:, 2:3]) < 0.9, np.array([[0.0, 0.0, 1.0]]), np.array([[1.0, 0.0, 0.0]]))
+    n1 = np.cross(t, ref)
+    n1 /= np.linalg.norm(n1, axis=1, keepdims=True)
+    n2 = np.cross(t, n1)
+    return t, n1, n2
+
+
+def _tube(path: np.ndarray, radius: np.ndarray, sides: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A tube around a polyline: vertices (n*sides, 3), faces, and the angle of each vertex."""
+    _t, n1, n2 = _frames(path)
+    ang = np.linspace(0.0, 2 * np.pi, sides, endpoint=False)
+    v = (path[:, None, :] + radius[:, None, None]
+         * (np.cos(ang)[None, :, None] * n1[:, None, :] + np.sin(ang)[None, :, None] * n2[:, None, :]))
+    return v.reshape(-1, 3), _grid_faces(len(path), sides, 0, wrap=True), np.tile(ang, len(path))
+
+
+def _smooth_noise(rng: np.random.Generator, x: np.ndarray, terms: int = 4, scale: float = 1.0) -> np.ndarray:
+    """Low-frequency pseudo-noise in [-1, 1]-ish: a few random sinusoids of x (x in [0, 1])."""
+    out = np.zeros_like(x, dtype=np.float64)
+    for j in range(terms):
+        f = rng.uniform(1.0, 4.0) * (j + 1) * scale
+        out += np.sin(2 * np.pi * f * x + rng.uniform(0, 2 * np.pi)) / (j + 1)
+    return out / 1.6
+
+
+def _stalk(rng: np.random.Generator, height: float, node_z: np.ndarray):
+    """Tapered stalk (cylinder) from z = 0 to ``height``: vertices, faces, colours (float RGB)."""
+    rows, sides = 64, 16
+    z = np.linspace(0.0, height, rows)
+    s = z / height
+    r0 = rng.uniform(0.024, 0.032)
+    radius = r0 * (1.0 - 0.6 * s) * (1.0 + 0.25 * np.exp(-s / 0.04))  # flared base (brace roots)
+    path = np.stack([np.zeros(rows), np.zeros(rows), z], 1)
+    v, f, ang = _tube(path, radius, sides)
+    srow = np.repeat(s, sides)
+    green = np.array([72.0, 118.0, 42.0]) * rng.uniform(0.9, 1.1, 3)
+    dark = np.array([70.0, 62.0, 38.0])      # darker, brownish base
+    col = green[None] * (0.8 + 0.2 * srow[:, None])
+    w_base = np.exp(-srow / 0.08)[:, None]
+    col = col * (1 - w_base) + dark[None] * w_base
+    # nodes: pale rings where leaves insert; vertical stripes (vascular bundles) around
+    zr = np.repeat(z, sides)
+    ring = np.exp(-((zr[:, None] - node_z[None]) / 0.012) ** 2).max(axis=1)
+    col = col * (1 - 0.45 * ring[:, None]) + np.array([175.0, 185.0, 110.0]) * 0.45 * ring[:, None]
+    col *= (1.0 + 0.07 * np.cos(ang * 8))[:, None]
+    return v, f, col
+
+
+def _leaf(rng: np.random.Generator, z0: float, stalk_r: float, phi: float, length: float, width: float,
+          theta0: float, droop: float, senescence: float):
+    """One strap leaf: curved drooping midrib, width tapering to a tip, V fold, wavy margins."""
+    rows, cols = 90, 11
+    sig = np.linspace(0.0, 1.0, rows)          # position along the leaf (0 base, 1 tip)
+    u = np.linspace(-1.0, 1.0, cols)           # across the leaf
+    ds = length / (rows - 1)
+    curl = rng.normal(0.0, 0.25)
+    phis = phi + curl * sig ** 2               # slight sideways curve
+    d = np.stack([np.cos(phis), np.sin(phis), np.zeros(rows)], 1)
+    for _ in range(40):                        # low leaves: droop less rather than reach the ground
+        theta = theta0 - droop * sig ** 1.4    # elevation of the midrib: rises, then droops
+        tang = np.cos(theta)[:, None] * d + np.sin(theta)[:, None] * np.array([0.0, 0.0, 1.0])
+        mid = np.cumsum(np.vstack([np.zeros((1, 3)), 0.5 * (tang[1:] + tang[:-1]) * ds]), axis=0)
+        mid += np.array([stalk_r * math.cos(phi), stalk_r * math.sin(phi), z0])
+        if mid[:, 2].min() >= 0.04:
+            break
+        droop *= 0.92
+    lat = np.stack([-np.sin(phis), np.cos(phis), np.zeros(rows)], 1)
+    nrm = np.cross(tang, lat)
+    psi = rng.normal(0.0, 0.5) * sig ** 1.5    # twist towards the tip
+    lat, nrm = (lat * np.cos(psi)[:, None] + nrm * np.sin(psi)[:, None],
+                -lat * np.sin(psi)[:, None] + nrm * np.cos(psi)[:, None])
+    half = 0.5 * width * np.sin(np.pi * (0.12 + 0.88 * sig)) ** 0.6
+    half[-1] = 0.0
+    fold = rng.uniform(0.15, 0.35)
+    wave = 0.003 * np.sin(2 * np.pi * sig * length / rng.uniform(0.04, 0.07) + rng.uniform(0, 6.3))
+    uu = u[None, :]
+    off_n = half[:, None] * fold * np.abs(uu) + wave[:, None] * np.abs(uu) ** 3
+    v = mid[:, None, :] + (half[:, None] * uu)[..., None] * lat[:, None, :] + off_n[..., None] * nrm[:, None, :]
+    v[..., 2] = np.maximum(v[..., 2], 0.01)    # never below the stalk base (the ground)
+
+    # colours: leaf green, veins/stripes across, pale midrib, darker base, yellowing tip, blotches
+    base = np.array([58.0, 122.0, 36.0]) * rng.uniform(0.85, 1.15, 3)
+    col = np.broadcast_to(base, (rows, cols, 3)).copy()
+    col *= (1.0 + 0.10 * np.cos(np.pi * np.arange(cols)))[None, :, None]          # parallel veins
+    col *= (1.0 + 0.12 * _smooth_noise(rng, sig, 5, 2.0))[:, None, None]         # blotches along
+    midrib = np.exp(-(uu / 0.12) ** 2)[..., None]
+    col = col * (1 - 0.5 * midrib) + np.array([165.0, 190.0, 115.0]) * 0.5 * midrib
+    col *= (0.72 + 0.28 * np.clip(sig / 0.2, 0, 1))[:, None, None]                 # darker base
+    tip = (senescence * np.clip((sig - 0.7) / 0.3, 0, 1) ** 1.5)[:, None, None]
+    tip = tip * (1.0 + 0.3 * np.abs(uu)[..., None])                               # margins dry first
+    tip = np.clip(tip, 0, 1)
+    col = col * (1 - tip) + np.array([196.0, 172.0, 88.0]) * tip                  # yellowing tip
+    col += rng.normal(0.0, 7.0, col.shape)                                       # fine texture
+    return v.reshape(-1, 3), _grid_faces(rows, cols, 0), col.reshape(-1, 3)
+
+
+def _tassel(rng: np.random.Generator, top: float, stalk_r: float):
+    """Tassel: a central spike and drooping side branches, straw coloured with spikelet bands."""
+    verts, faces, cols = [], [], []
+    n_branch = int(rng.integers(5, 9))
+    spec = [(0.0, math.radians(88), math.radians(5), rng.uniform(0.22, 0.3), 0.0)]
+    for _ in range(n_branch):
+        spec.append((rng.uniform(0.0, 2 * np.pi), math.radians(rng.uniform(40, 70)),
+                     math.radians(rng.uniform(60, 110)), rng.uniform(0.13, 0.24), rng.uniform(0.0, 0.08)))
+    for phi, th0, droop, length, dz in spec:
+        rows = 24
+        sig = np.linspace(0, 1, rows)
+        th = th0 - droop * sig ** 1.3
+        d = np.array([math.cos(phi), math.sin(phi), 0.0])
+        tang = np.cos(th)[:, None] * d + np.sin(th)[:, None] * np.array([0.0, 0.0, 1.0])
+        path = np.cumsum(tang * length / (rows - 1), axis=0) - tang[0] * length / (rows - 1)
+        path += np.array([0.0, 0.0, top + dz])
+        r = (stalk_r if dz == 0.0 else 0.0035) * (1.0 - 0.7 * sig) + 0.0015
+        v, f, _ang = _tube(path, r, 6)
+        band = np.repeat((np.arange(rows) % 2).astype(float), 6)
+        straw = np.array([188.0, 158.0, 78.0]) * rng.uniform(0.9, 1.1, 3)
+        c = straw[None] * (0.82 + 0.18 * band[:, None]) + rng.normal(0, 6.0, (len(v), 3))
+        faces.append(f + sum(len(x) for x in verts))
+        verts.append(v)
+        cols.append(c)
+    return np.concatenate(verts), np.concatenate(faces), np.concatenate(cols)
+
+
+def sample_surface(mesh: trimesh.Trimesh, n_points: int,
+                   rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Area-uniform samples of a vertex-coloured mesh: (n, 3) points and (n, 3) uint8 colours
+    (barycentric interpolation of the vertex colours)."""
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    f = np.asarray(mesh.faces)
+    vc = np.asarray(mesh.visual.vertex_colors)[:, :3].astype(np.float64)
+    area = np.asarray(mesh.area_faces, dtype=np.float64)
+    idx = rng.choice(len(f), size=n_points, p=area / area.sum())
+    r1 = np.sqrt(rng.random(n_points))
+    r2 = rng.random(n_points)
+    w = np.stack([1.0 - r1, r1 * (1.0 - r2), r1 * r2], 1)          # uniform barycentric weights
+    tri = f[idx]
+    pts = np.einsum("nk,nkj->nj", w, v[tri])
+    col = np.einsum("nk,nkj->nj", w, vc[tri])
+    return pts, np.clip(np.rint(col), 0, 255).astype(np.uint8)
+
+
+def procedural_corn(seed: int = 0, n_points: int = 20000) -> PlantModel:
+    """A built-in, realistic corn plant (triangle mesh with vertex colours + surface samples).
+
+    A tapered stalk about 1.6-1.9 m tall, 8-12 alternating leaves (phyllotaxy about 180 degrees
+    with jitter; long, curved, drooping strap leaves whose width tapers to a tip) and, for most
+    seeds, a tassel, giving a plant about 2 m tall. Colours are greens with veins/stripes, a pale
+    midrib, darker bases, yellowing tips and per-vertex texture so that SIFT finds keypoints in
+    renderings (render double-sided: ``mesh.metadata['double_sided']`` is True).
+
+    The frame is Corn50's: stalk along +z through the origin, area-weighted centroid at z = 0.
+    The geometry depends on ``seed`` only; ``points`` are ``n_points`` area-uniform samples
+    (a separate random stream, so the mesh does not depend on ``n_points``).
+
+    Args:
+        seed: non-negative integer; equal seeds give identical plants.
+        n_points: number of surface samples (>= 1).
+
+    Returns:
+        PlantModel named ``procedural-<seed>`` with ``mesh`` set.
+    """
+    if isinstance(seed, bool) or int(seed) != seed or seed < 0:
+        raise ValueError(f"procedural_corn: seed must be a non-negative integer, got {seed!r}")
+    if isinstance(n_points, bool) or int(n_points) != n_points or n_points < 1:
+        raise ValueError(f"procedural_corn: n_points must be an integer >= 1, got {n_points!r}")
+    seed, n_points = int(seed), int(n_points)
+    g = np.random.default_rng([seed, 0])        # geometry and colours
+
+    has_tassel = bool(g.random() < 0.7)
+    stalk_h = g.uniform(1.62, 1.78) if has_tassel else g.uniform(1.8, 1.95)
+    n_leaves = int(g.integers(8, 13))
+    t = np.linspace(0.08, 0.86, n_leaves) + g.uniform(-0.015, 0.015, n_leaves)
+    node_z = t * stalk_h
+    phi0 = g.uniform(0, 2 * np.pi)
+    lmax = g.uniform(0.8, 0.95)
+
+    verts, faces, cols = [], [], []
+
+    def add(v: np.ndarray, f: np.ndarray, c: np.ndarray) -> None:
+        faces.append(f + sum(len(x) for x in verts))
+        verts.append(v)
+        cols.append(c)
+
+    add(*_stalk(g, stalk_h, node_z))
+    for i in range(n_leaves):
+        u = i / max(n_leaves - 1, 1)                                       # 0 lowest, 1 highest leaf
+        phi = phi0 + i * np.pi + g.normal(0.0, 0.2)                      # alternating phyllotaxy
+        length = lmax * (0.45 + 0.55 * math.sin(math.pi * (0.15 + 0.75 * u))) * g.uniform(0.9, 1.1)
+        width = g.uniform(0.07, 0.1) * (0.75 + 0.25 * math.sin(math.pi * u))
+        theta0 = math.radians(30 + 35 * u + g.normal(0, 5))
+        droop = math.radians(g.uniform(95, 135) * (1.0 - 0.35 * u))
+        senescence = g.uniform(0.2, 0.5) + 0.5 * (1.0 - u)                # lower leaves yellower
+        r_here = 0.028 * (1.0 - 0.6 * t[i])
+        add(*_leaf(g, node_z[i], r_here, phi, length, width, theta0, droop, min(senescence, 1.0)))
+    if has_tassel:
+        add(*_tassel(g, stalk_h, 0.028 * 0.4))
+
+    v = np.concatenate(verts)
+    f = np.concatenate(faces).astype(np.int64)
+    c = np.clip(np.rint(np.concatenate(cols)), 0, 255).astype(np.uint8)
+    rgba = np.concatenate([c, np.full((len(c), 1), 255, np.uint8)], axis=1)
+    mesh = trimesh.Trimesh(vertices=v, faces=f, vertex_colors=rgba, process=False)
+    # Corn50 frame: centroid at z = 0 (area-weighted centroid of the surface, independent of n_points)
+    area = mesh.area_faces
+    zc = float((area * mesh.triangles_center[:, 2]).sum() / area.sum())
+    mesh.apply_translation([0.0, 0.0, -zc])
+    mesh.metadata["double_sided"] = True
+    mesh.metadata["name"] = f"procedural-{seed}"
+    pts, pcol = sample_surface(mesh, n_points, np.random.default_rng([seed, 1]))
+    return PlantModel(name=f"procedural-{seed}", points=pts, colors=pcol, mesh=mesh)

@@ -1,0 +1,274 @@
+"""Suite-level test helpers: isolated ROS 2 environments, node processes, a test-side rclpy node.
+
+Every ROS process of a test runs with ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` and a
+``ROS_DOMAIN_ID`` of its own, reserved through a lock file so that parallel test runs on the
+same machine (other checkouts, other engineers) do not share a domain.
+
+Fixtures:
+    ros_env       -> dict: os.environ + LOCALHOST discovery + a reserved ROS_DOMAIN_ID.
+    start_node    -> factory ``start_node(pkg, exe, params, env, args=()) -> NodeProcess``
+                     starting ``install/<pkg>/lib/<pkg>/<exe> --ros-args -p k:=v ...`` in its own
+                     process group (output to a log file); teardown sends SIGINT, then SIGKILL.
+    ros_node      -> factory ``ros_node(env_or_domain_id, name='test_client') -> RosTestNode``:
+                     an rclpy context + node + executor in the test process on the same domain;
+                     torn down after the test.
+"""
+from __future__ import annotations
+
+import fcntl
+import itertools
+import math
+import os
+import re
+import signal
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+from typing import Any, Callable, Iterable, Optional, Union
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED_DATA = REPO.parent / "shared" / "data"
+
+# The test process itself talks DDS (RosTestNode): keep discovery on this machine.
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+
+_LOCK_DIR = Path(tempfile.gettempdir()) / "vp_suite_ros_domains"
+_counter = itertools.count()
+DOMAIN_MIN, DOMAIN_MAX = 1, 200
+
+
+class DomainLease:
+    """A ROS domain id reserved by an exclusive lock file (released by :meth:`release`)."""
+
+    def __init__(self) -> None:
+        _LOCK_DIR.mkdir(parents=True, exist_ok=True)
+        avoid = {os.environ.get("ROS_DOMAIN_ID", ""), "0", "42", "77"}  # ids that other runs use unlocked
+        span = DOMAIN_MAX - DOMAIN_MIN + 1
+        start = (os.getpid() * 37 + next(_counter) * 11) % span
+        for k in range(span):
+            did = DOMAIN_MIN + (start + k) % span
+            if str(did) in avoid:
+                continue
+            fh = open(_LOCK_DIR / f"{did}.lock", "w")
+            try:
+                fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                fh.close()
+                continue
+            fh.write(f"{os.getpid()}\n")
+            fh.flush()
+            self.domain_id, self._fh = did, fh
+            return
+        raise RuntimeError(f"no free ROS domain id in {DOMAIN_MIN}..{DOMAIN_MAX}")
+
+    def release(self) -> None:
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+
+
+def make_ros_env(domain_id: int, base: Optional[dict] = None) -> dict:
+    """An environment for a ROS process: LOCALHOST discovery, this domain, unbuffered logs."""
+    env = dict(os.environ if base is None else base)
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    env["ROS_DOMAIN_ID"] = str(int(domain_id))
+    env["PYTHONUNBUFFERED"] = "1"
+    env["RCUTILS_COLORIZED_OUTPUT"] = "0"
+    env["RCUTILS_LOGGING_BUFFERED_STREAM"] = "0"
+    return env
+
+
+@pytest.fixture
+def ros_env():
+    """dict: os.environ with LOCALHOST discovery and a reserved, unique ROS_DOMAIN_ID."""
+    lease = DomainLease()
+    try:
+        yield make_ros_env(lease.domain_id)
+    finally:
+        lease.release()
+
+
+_YAML_LITERAL = re.compile(r"^(|~|null|Null|NULL|true|True|TRUE|false|False|FALSE|yes|no|on|off|"
+                           r"[-+]?(\d[\d_]*)?\.?\d*([eE][-+]?\d+)?|[-+]?\.(inf|Inf|INF)|\.(nan|NaN|NAN))$")
+
+
+def ros_arg_value(value: Any) -> str:
+    """A Python value as the YAML text of ``-p name:=value`` (strings quoted when YAML would
+    read them as another type)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        return repr(value) if math.isfinite(value) else (".nan" if math.isnan(value) else
+                                                         (".inf" if value > 0 else "-.inf"))
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(ros_arg_value(v) for v in value) + "]"
+    s = str(value)
+    if _YAML_LITERAL.match(s) or re.search(r"[:#\[\]{},'\"&*!|>%@`]|^[-?]", s) or s != s.strip():
+        return "'" + s.replace("'", "''") + "'"
+    return s
+
+
+def executable(pkg: str, exe: str) -> Path:
+    """``<repo>/install/<pkg>/lib/<pkg>/<exe>``, else the package prefix from the ament index."""
+    path = REPO / "install" / pkg / "lib" / pkg / exe
+    if path.exists():
+        return path
+    try:
+        from ament_index_python.packages import get_package_prefix
+
+        return Path(get_package_prefix(pkg)) / "lib" / pkg / exe
+    except Exception:  # noqa: BLE001 - report the expected path below
+        return path
+
+
+class NodeProcess:
+    """A ROS node started as its own process (own process group), output in ``log_path``."""
+
+    def __init__(self, cmd: list, env: dict, log_path: Path) -> None:
+        self.cmd, self.log_path = cmd, log_path
+        self._log = open(log_path, "wb")
+        self.proc = subprocess.Popen(cmd, env=env, stdout=self._log, stderr=subprocess.STDOUT,
+                                     stdin=subprocess.DEVNULL, start_new_session=True)
+
+    @property
+    def pid(self) -> int:
+        return self.proc.pid
+
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def output(self) -> str:
+        """Everything the process has written so far (stdout and stderr)."""
+        self._log.flush()
+        return self.log_path.read_text(errors="replace")
+
+    def wait(self, timeout: float) -> Optional[int]:
+        """Exit status, or None if still running after ``timeout`` seconds."""
+        try:
+            return self.proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            return None
+
+    def _signal_group(self, sig: int) -> None:
+        try:
+            os.killpg(self.proc.pid, sig)
+        except (ProcessLookupError, PermissionError):
+            pass
+
+    def stop(self, timeout: float = 10.0) -> Optional[int]:
+        """SIGINT the process group, wait, then SIGKILL; returns the exit status."""
+        if self.alive():
+            self._signal_group(signal.SIGINT)
+            if self.wait(timeout) is None:
+                self._signal_group(signal.SIGKILL)
+                self.wait(5.0)
+        else:
+            self._signal_group(signal.SIGKILL)  # stray children of an exited leader
+        self._log.close()
+        return self.proc.returncode
+
+
+@pytest.fixture
+def start_node(tmp_path: Path):
+    """Factory: ``start_node(pkg, exe, params, env, args=()) -> NodeProcess``; stopped at teardown."""
+    started: list[NodeProcess] = []
+
+    def _start(pkg: str, exe: str, params: Optional[dict] = None, env: Optional[dict] = None,
+               args: Iterable[str] = ()) -> NodeProcess:
+        path = executable(pkg, exe)
+        if not path.exists():
+            pytest.fail(f"{pkg}/{exe} is not installed at {path}: run tools/setup.sh")
+        if env is None or env.get("ROS_AUTOMATIC_DISCOVERY_RANGE") != "LOCALHOST" or "ROS_DOMAIN_ID" not in env:
+            raise ValueError("start_node needs an env from the ros_env fixture (LOCALHOST + ROS_DOMAIN_ID)")
+        cmd = [str(path), *args, "--ros-args"]
+        for k, v in (params or {}).items():
+            cmd += ["-p", f"{k}:={ros_arg_value(v)}"]
+        log = tmp_path / f"{pkg}-{exe}-{len(started)}.log"
+        node = NodeProcess(cmd, env, log)
+        started.append(node)
+        return node
+
+    yield _start
+    for node in reversed(started):
+        node.stop()
+
+
+class RosTestNode:
+    """An rclpy context, node and executor in the test process, on a given domain.
+
+    ``spin_until(predicate, timeout)`` spins until the predicate holds (True) or times out (False).
+    """
+
+    def __init__(self, domain_id: int, name: str = "test_client") -> None:
+        import rclpy
+        from rclpy.context import Context
+        from rclpy.executors import SingleThreadedExecutor
+
+        os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+        self.domain_id = int(domain_id)
+        self.context = Context()
+        rclpy.init(args=[], context=self.context, domain_id=self.domain_id)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.nodes: list = []
+        self.node = self.add_node(name)
+
+    def add_node(self, name: str):
+        """Another node in the same context (e.g. a late subscriber)."""
+        import rclpy
+
+        node = rclpy.create_node(name, context=self.context)
+        self.executor.add_node(node)
+        self.nodes.append(node)
+        return node
+
+    def subscribe(self, msg_type: type, topic: str, qos: Any = 10, node: Any = None) -> list:
+        """Subscribe and return the list that received messages are appended to."""
+        received: list = []
+        (node or self.node).create_subscription(msg_type, topic, received.append, qos)
+        return received
+
+    def spin_until(self, predicate: Callable[[], bool], timeout: float) -> bool:
+        deadline = time.monotonic() + timeout
+        while True:
+            if predicate():
+                return True
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                return bool(predicate())
+            self.executor.spin_once(timeout_sec=min(0.05, remaining))
+
+    def spin_future(self, future: Any, timeout: float) -> Any:
+        """Spin until a future is done; returns its result (pytest.fail on timeout)."""
+        if not self.spin_until(future.done, timeout):
+            pytest.fail(f"no answer within {timeout} s")
+        return future.result()
+
+    def wait_for_publishers(self, topic: str, count: int = 1, timeout: float = 10.0) -> bool:
+        return self.spin_until(lambda: self.node.count_publishers(topic) >= count, timeout)
+
+    def close(self) -> None:
+        self.executor.shutdown(timeout_sec=1.0)
+        for node in self.nodes:
+            node.destroy_node()
+        self.context.try_shutdown()
+
+
+@pytest.fixture
+def ros_node():
+    """Factory: ``ros_node(env_or_domain_id, name='test_client') -> RosTestNode`` (closed at teardown)."""
+    made: list[RosTestNode] = []
+
+    def _make(env_or_domain: Union[dict, int], name: str = "test_client") -> RosTestNode:
+        did = int(env_or_domain["ROS_DOMAIN_ID"]) if isinstance(env_or_domain, dict) else int(env_or_domain)
+        n = RosTestNode(did, name)
+        made.append(n)
+        return n
+
+    yield _make
+    for n in reversed(made):
+        n.close()

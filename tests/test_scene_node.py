@@ -1,0 +1,147 @@
+"""The real ``vp_scene scene`` node in its own process, talked to over DDS (loopback only)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("rclpy", reason="rclpy is not importable: source install/setup.bash in the venv")
+pytest.importorskip("vp_interfaces.msg", reason="vp_interfaces is not built: run tools/setup.sh")
+pytest.importorskip("vp_scene.cloud", reason="vp_scene is not built: run tools/setup.sh")
+
+from rclpy.parameter import Parameter  # noqa: E402
+from rclpy.parameter_client import AsyncParameterClient  # noqa: E402
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
+from sensor_msgs.msg import PointCloud2  # noqa: E402
+from vp_interfaces.msg import SceneDescription  # noqa: E402
+
+from vp_scene.build import build_noisy_scene  # noqa: E402
+from vp_scene.cloud import pointcloud2_to_numpy  # noqa: E402
+
+LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+TOPICS = (("/scene/points", PointCloud2), ("/scene/noisy_points", PointCloud2),
+          ("/scene/description", SceneDescription))
+TIMEOUT = 30.0
+
+
+def subscribe_all(client, node=None) -> dict:
+    return {topic: client.subscribe(t, topic, LATCHED, node=node) for topic, t in TOPICS}
+
+
+def all_arrived(got: dict, n: int = 1):
+    return lambda: all(len(v) >= n for v in got.values())
+
+
+def test_scene_published_and_latched(ros_env, start_node, ros_node) -> None:
+    client = ros_node(ros_env)
+    got = subscribe_all(client)
+    params = dict(scenario="three_row", points_per_plant=300, realizations=3, levels=4, seed=7,
+                  wind_direction=0.5, frame_id="field")
+    node = start_node("vp_scene", "scene", params, ros_env)
+    assert client.spin_until(all_arrived(got), TIMEOUT), f"no scene within {TIMEOUT} s:\n{node.output()}"
+
+    pts, cols, real = pointcloud2_to_numpy(got["/scene/points"][0])
+    assert pts.shape == (900, 3) and cols is not None and real is None
+    assert got["/scene/points"][0].header.frame_id == "field"
+    npts, ncols, nreal = pointcloud2_to_numpy(got["/scene/noisy_points"][0])
+    assert npts.shape == (2700, 3) and nreal is not None
+    assert sorted(np.unique(nreal).tolist()) == [0, 1, 2]
+    for k in range(3):  # every realization: same colours, same heights, same point order
+        np.testing.assert_array_equal(ncols[nreal == k], cols)
+        np.testing.assert_array_equal(npts[nreal == k][:, 2], pts[:, 2])
+    desc = got["/scene/description"][0]
+    assert desc.scenario == "three_row" and desc.seed == 7 and desc.realizations == 3 and desc.levels == 4
+    assert len(desc.n_wind) == 3 and len(desc.plants) == 3 and desc.models_folder == ""
+    assert all(0.0 <= p.yaw < 2 * np.pi and 0.9 <= p.scale <= 1.1 for p in desc.plants)
+
+    # the description rebuilds the identical scene
+    noisy, _ = build_noisy_scene(scenario=desc.scenario, models=desc.models_folder or None, seed=desc.seed,
+                                 points_per_plant=desc.points_per_plant, plant_spacing=desc.plant_spacing,
+                                 row_spacing=desc.row_spacing, levels=desc.levels, realizations=desc.realizations,
+                                 wind_variance=desc.wind_variance, wind_direction=desc.wind_direction)
+    np.testing.assert_allclose(noisy.n_wind, desc.n_wind)
+    np.testing.assert_allclose(pts, noisy.scene.points, atol=1e-6)
+    for k in range(3):
+        np.testing.assert_allclose(npts[nreal == k], noisy.points[k], atol=1e-6)
+
+    # a late subscriber (a new node, after the first got everything) still gets the latched data
+    late = subscribe_all(client, node=client.add_node("late_subscriber"))
+    assert client.spin_until(all_arrived(late), TIMEOUT), "late subscriber got nothing (not TRANSIENT_LOCAL?)"
+    assert late["/scene/description"][0].n_wind.tolist() == desc.n_wind.tolist()
+    assert len(late["/scene/noisy_points"][0].data) == len(got["/scene/noisy_points"][0].data)
+    assert node.alive()
+    assert node.stop() == 0, node.output()  # SIGINT: clean exit
+
+
+def _corrupt_folder(tmp_path: Path) -> str:
+    folder = tmp_path / "models"
+    folder.mkdir()
+    (folder / "broken_plant.ply").write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 100\n"
+                                             b"property double x\nproperty double y\nproperty double z\n"
+                                             b"property uchar red\nproperty uchar green\nproperty uchar blue\n"
+                                             b"end_header\n" + b"\x00" * 50)
+    return str(folder)
+
+
+@pytest.mark.parametrize("case", ["unknown_scenario", "zero_realizations", "missing_folder", "corrupt_ply"])
+def test_bad_start_parameter_exits_nonzero(case, tmp_path, ros_env, start_node, ros_node) -> None:
+    params, expected = {
+        "unknown_scenario": ({"scenario": "nine_square"}, ["unknown scenario", "nine_square"]),
+        "zero_realizations": ({"realizations": 0}, ["realizations", ">= 1"]),
+        "missing_folder": ({"models_folder": str(tmp_path / "no_such_folder")}, ["not found", "no_such_folder"]),
+        "corrupt_ply": ({"models_folder": _corrupt_folder(tmp_path)}, ["broken_plant.ply", "truncated"]),
+    }[case]
+    client = ros_node(ros_env)
+    got = subscribe_all(client)
+    node = start_node("vp_scene", "scene", params, ros_env)
+    seen_publishers = [0]
+
+    def exited() -> bool:
+        seen_publishers[0] = max([seen_publishers[0]] + [client.node.count_publishers(t) for t, _ in TOPICS])
+        return not node.alive()
+
+    assert client.spin_until(exited, TIMEOUT), f"node did not exit:\n{node.output()}"
+    out = node.output()
+    assert node.proc.returncode != 0, out
+    for text in expected:
+        assert text in out, f"{text!r} not in the node's output:\n{out}"
+    assert seen_publishers[0] == 0 and not any(got.values()), "the node published despite a bad configuration"
+
+
+def test_runtime_parameter_change(ros_env, start_node, ros_node, tmp_path) -> None:
+    client = ros_node(ros_env)
+    got = subscribe_all(client)
+    node = start_node("vp_scene", "scene", {"points_per_plant": 200, "realizations": 2, "levels": 3}, ros_env)
+    assert client.spin_until(all_arrived(got), TIMEOUT), node.output()
+    old_n_wind = got["/scene/description"][0].n_wind.tolist()
+
+    params = AsyncParameterClient(client.node, "scene")
+    assert params.wait_for_services(timeout_sec=TIMEOUT)
+    bad = [(Parameter("realizations", value=0), "realizations"),
+           (Parameter("scenario", value="bogus"), "unknown scenario"),
+           (Parameter("models_folder", value=str(tmp_path / "missing")), "not found"),
+           (Parameter("plant_spacing", value=-1.0), "plant_spacing")]
+    for prm, reason in bad:
+        res = client.spin_future(params.set_parameters([prm]), TIMEOUT).results[0]
+        assert not res.successful and reason in res.reason, (prm.name, res.reason)
+    assert node.alive(), node.output()
+    values = client.spin_future(params.get_parameters(["realizations", "scenario"]), TIMEOUT).values
+    assert values[0].integer_value == 2 and values[1].string_value == "one_plant"
+
+    # the old scene is still served (a new subscriber gets K = 2 and the same n_wind)
+    late = subscribe_all(client, node=client.add_node("after_refusal"))
+    assert client.spin_until(all_arrived(late), TIMEOUT)
+    assert late["/scene/description"][0].n_wind.tolist() == old_n_wind
+    _, _, real = pointcloud2_to_numpy(late["/scene/noisy_points"][0])
+    assert sorted(np.unique(real).tolist()) == [0, 1]
+
+    # a valid change is applied and republished
+    res = client.spin_future(params.set_parameters([Parameter("realizations", value=3)]), TIMEOUT).results[0]
+    assert res.successful, res.reason
+    assert client.spin_until(lambda: len(got["/scene/noisy_points"]) >= 2 and len(got["/scene/description"]) >= 2,
+                             TIMEOUT), node.output()
+    _, _, real = pointcloud2_to_numpy(got["/scene/noisy_points"][-1])
+    assert sorted(np.unique(real).tolist()) == [0, 1, 2]
+    assert got["/scene/description"][-1].realizations == 3 and len(got["/scene/description"][-1].n_wind) == 3
+    assert "refused" in node.output()
