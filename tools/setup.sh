@@ -68,9 +68,14 @@ if [ ! -f "$stamp" ] || [ -n "$(find src colcon.meta -newer "$stamp" -type f -pr
   # shellcheck disable=SC1091
   . .venv/bin/activate
   export AMENT_PREFIX_PATH=$VIRTUAL_ENV CMAKE_PREFIX_PATH=$VIRTUAL_ENV
-  colcon --log-base log build --base-paths src --build-base build --install-base install \
-    --event-handlers console_cohesion- status- summary+ \
-    --cmake-args -DBUILD_TESTING=OFF -DPython3_EXECUTABLE="$VIRTUAL_ENV/bin/python" >/dev/null
+  mkdir -p log
+  if ! colcon --log-base log build --base-paths src --build-base build --install-base install \
+      --event-handlers console_cohesion+ status- summary+ \
+      --cmake-args -DBUILD_TESTING=OFF -DPython3_EXECUTABLE="$VIRTUAL_ENV/bin/python" >log/setup-build.log 2>&1; then
+    cat log/setup-build.log >&2
+    echo "[setup] colcon build failed (log above, also in log/setup-build.log)" >&2
+    exit 1
+  fi
   touch "$stamp"
 fi
 echo "[setup] ready: . .venv/bin/activate && . install/setup.bash"

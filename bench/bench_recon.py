@@ -1,0 +1,127 @@
+#!/usr/bin/env python3
+"""Benchmark of the reconstruction pipeline (vp_recon): JSON on stdout and in results/bench_recon.json.
+
+* seconds per rendered frame at 2000 x 1500 (one procedural plant, context already created),
+* seconds per stage (mesh, render, sparse, dense, score) of a realization for ring plans of 4 and
+  6 views (30 degrees apart) on one_plant,
+* points and Chamfer x 100 (paper Table I units) of a ring plan on each scenario: one_plant with 4
+  cameras, three_row and six_rect with 6.
+
+    python bench/bench_recon.py [--quick] [--width 2000 --height 1500] [--realizations 1]
+        [--models FOLDER] [--out results/bench_recon.json]
+
+--quick: 1000 x 750 stages and scenarios, 5 timed frames, 2000 points per plant.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+for pkg in ("vp_scene", "vp_planner", "vp_recon"):
+    sys.path.insert(0, str(ROOT / "src" / pkg))
+os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+
+from vp_scene.build import build_noisy_scene  # noqa: E402
+
+from vp_recon.meshing import scene_meshes  # noqa: E402
+from vp_recon.pipeline import ReconConfig, ReconError, reconstruct_plan  # noqa: E402
+from vp_recon.render import Renderer  # noqa: E402
+
+SCENARIO_CAMERAS = {"one_plant": 4, "three_row": 6, "six_rect": 6}
+
+
+def ring_plan(points: np.ndarray, n: int, step_deg: float = 30.0, standoff: float = 1.2,
+              height: float = 1.2) -> np.ndarray:
+    """n cameras ``step_deg`` apart on a circle around the scene, ``standoff`` metres outside its
+    horizontal extent, looking at the scene centre at half height (a circle-like plan)."""
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    center = np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, (lo[2] + hi[2]) / 2])
+    radius = 0.5 * float(np.hypot(hi[0] - lo[0], hi[1] - lo[1])) + standoff
+    a = np.deg2rad(-90.0 + step_deg * (np.arange(n) - (n - 1) / 2))     # centred on the -y side
+    c = np.stack([center[0] + radius * np.cos(a), center[1] + radius * np.sin(a), np.full(n, height)], axis=1)
+    return np.concatenate([c, center - c], axis=1)
+
+
+def time_frames(width: int, height: int, frames: int, ns) -> float:
+    r = Renderer(width, height)
+    cams = ring_plan(ns.points[0], frames, step_deg=360.0 / frames)
+    meshes = scene_meshes(ns, 0)
+    r.render(meshes, cams[:1])                                  # warm-up (scene upload, shaders)
+    t = time.perf_counter()
+    r.render(meshes, cams)
+    return (time.perf_counter() - t) / frames
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--quick", action="store_true")
+    p.add_argument("--width", type=int, default=None)
+    p.add_argument("--height", type=int, default=None)
+    p.add_argument("--realizations", type=int, default=1)
+    p.add_argument("--models", default=None, help="folder of PLY plants (default: procedural corn)")
+    p.add_argument("--out", default=str(ROOT / "results" / "bench_recon.json"))
+    a = p.parse_args()
+    width = a.width or (1000 if a.quick else 2000)
+    height = a.height or (750 if a.quick else 1500)
+    ppp = 2000 if a.quick else 4000
+    frames = 5 if a.quick else 20
+    ks = list(range(a.realizations))
+    out: dict = {"machine": {"python": platform.python_version(), "cpus": os.cpu_count(),
+                             "platform": platform.platform(), "gl": os.environ.get("PYOPENGL_PLATFORM")},
+                 "quick": a.quick, "width": width, "height": height, "realizations": len(ks),
+                 "models": a.models, "points_per_plant": ppp}
+
+    ns, _ = build_noisy_scene("one_plant", models=a.models, seed=0, points_per_plant=ppp,
+                              realizations=max(1, len(ks)))
+    out["seconds_per_frame_2000x1500"] = time_frames(2000, 1500, frames, ns)
+    print(f"render 2000x1500: {out['seconds_per_frame_2000x1500']:.3f} s/frame", file=sys.stderr)
+
+    cfg = ReconConfig(width=width, height=height, keep_images=False)
+    stages = {}
+    for n in (4, 6):
+        res = reconstruct_plan(ns, ring_plan(ns.points[0], n), cfg, realizations=ks)
+        per = {k: v / len(ks) for k, v in res.seconds.items()}
+        stages[f"{n}_views"] = {"seconds": per, "chamfer_x100": res.chamfer_mean * 100,
+                                "points": int(np.mean([len(r.points) for r in res.realizations]))}
+        print(f"{n} views: " + ", ".join(f"{k} {v:.2f}" for k, v in per.items()), file=sys.stderr)
+    out["stages_one_plant"] = stages
+
+    scen = {}
+    for name, n in SCENARIO_CAMERAS.items():
+        sc, _ = build_noisy_scene(name, models=a.models, seed=0, points_per_plant=ppp,
+                                  realizations=max(1, len(ks)))
+        cams = ring_plan(sc.points[0], n)
+        try:
+            res = reconstruct_plan(sc, cams, cfg, realizations=ks)
+            r0 = res.realizations
+            scen[name] = {"cameras": n, "chamfer_x100": res.chamfer_mean * 100,
+                          "chamfer_std_x100": res.chamfer_std * 100,
+                          "accuracy_x100": float(np.mean([r.accuracy for r in r0])) * 100,
+                          "completeness_x100": float(np.mean([r.completeness for r in r0])) * 100,
+                          "fscore": float(np.mean([r.fscore for r in r0])),
+                          "points": int(np.mean([len(r.points) for r in r0])),
+                          "registered_images": int(np.min([r.images for r in r0])),
+                          "seconds": res.seconds["total"] / len(ks)}
+        except ReconError as exc:
+            scen[name] = {"cameras": n, "error": exc.name, "message": str(exc)}
+        print(f"{name}: {scen[name]}", file=sys.stderr)
+    out["scenarios"] = scen
+    text = json.dumps(out, indent=1)
+    print(text)
+    path = Path(a.out)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,73 @@
+"""Shared pieces of the benchmarks: scenarios, the resumable JSON cache, cached planning runs."""
+from __future__ import annotations
+
+import json
+import platform
+from pathlib import Path
+from typing import Any, Callable, Optional
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+#: The paper's scenarios and their camera counts (Sec. V).
+SCENARIOS = {'one_plant': 4, 'three_row': 6, 'six_rect': 6}
+CORN50 = ROOT.parent / 'shared' / 'data' / 'corn50'
+
+
+def default_models() -> str:
+    """``../shared/data/corn50`` when present (the paper's kind of plants), else '' (procedural)."""
+    return str(CORN50) if CORN50.is_dir() else ''
+
+
+def machine() -> str:
+    import os
+    return f'{platform.machine()}, {os.cpu_count()} CPU cores, Python {platform.python_version()}'
+
+
+def cached(path: Path, compute: Callable[[], Any]) -> Any:
+    """The JSON cached at ``path``, or compute, store (atomically) and return it."""
+    if path.exists():
+        try:
+            return json.loads(path.read_text())
+        except json.JSONDecodeError:
+            path.unlink()  # a torn write from an interrupted run: recompute
+    value = compute()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix('.tmp')
+    tmp.write_text(json.dumps(value))
+    tmp.replace(path)
+    return value
+
+
+_SCENES: dict = {}
+
+
+def scene(scenario: str, models: str = ''):
+    """(NoisyScene, plant models) of a scenario, scene seed 0 (built once per process)."""
+    from vp_scene.build import build_noisy_scene
+
+    key = (scenario, models)
+    if key not in _SCENES:
+        _SCENES[key] = build_noisy_scene(scenario=scenario, models=models or None, seed=0)
+    return _SCENES[key]
+
+
+def models_tag(models: str) -> str:
+    return Path(models).name if models else 'procedural'
+
+
+def plan_cell(cache: Path, scenario: str, method: str, seed: int, evals: int = 100, init: int = 50,
+              models: str = '', num_cameras: Optional[int] = None) -> dict:
+    """One planning run (cached): cameras, reward, best-so-far trace, seconds."""
+    from vp_planner.optimizers import plan_views
+
+    n = num_cameras or SCENARIOS[scenario]
+    path = cache / 'plans' / f'{models_tag(models)}-{scenario}-n{n}-{method}-seed{seed}-e{evals}-i{init}.json'
+
+    def compute() -> dict:
+        noisy, _ = scene(scenario, models)
+        res = plan_views(method, noisy.points, n, evaluations=evals, initial_evaluations=init, seed=seed)
+        return {'cameras': np.asarray(res.cameras).tolist(), 'reward': float(res.reward),
+                'trace': [float(x) for x in res.trace], 'seconds': float(res.seconds),
+                'ensemble_weights': res.ensemble_weights}
+    return cached(path, compute)

@@ -1,0 +1,47 @@
+"""EGP-EI internals: ensemble weights (eq. 16) and the model they favour on a synthetic function."""
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from vp_planner.bo import MODEL_NAMES, ensemble_weights, optimize
+
+
+def test_ensemble_weights_log_space_and_prior() -> None:
+    w = ensemble_weights([-1e5, -1e5 + math.log(3.0), -math.inf, float("nan")])
+    assert torch.allclose(w, torch.tensor([0.25, 0.75, 0.0, 0.0], dtype=torch.float64))  # no underflow
+    w = ensemble_weights([0.0, 0.0], log_prior=[math.log(1.0), math.log(3.0)])
+    assert torch.allclose(w, torch.tensor([0.25, 0.75], dtype=torch.float64))
+    assert torch.allclose(ensemble_weights([-math.inf, -math.inf]), torch.tensor([0.5, 0.5], dtype=torch.float64))
+    with pytest.raises(ValueError):
+        ensemble_weights([])
+    with pytest.raises(ValueError):
+        ensemble_weights([0.0, 0.0], log_prior=[0.0])
+
+
+def _rff_sample(seed: int, lengthscales: list[float], features: int = 200):
+    """A function drawn (random Fourier features) from a GP with an ARD RBF kernel."""
+    g = torch.Generator().manual_seed(seed)
+    dim = len(lengthscales)
+    W = torch.randn(features, dim, generator=g, dtype=torch.float64) / torch.tensor(lengthscales, dtype=torch.float64)
+    b = 2 * math.pi * torch.rand(features, generator=g, dtype=torch.float64)
+    a = torch.randn(features, generator=g, dtype=torch.float64)
+    return lambda U: math.sqrt(2.0 / features) * torch.cos(U @ W.T + b) @ a
+
+
+def test_weights_move_to_the_kernel_the_function_was_drawn_from() -> None:
+    # f varies along one of 6 axes only: an ARD kernel explains it, isotropic kernels cannot.
+    f = _rff_sample(0, [0.12, 50.0, 50.0, 50.0, 50.0, 50.0])
+    seen: list = []
+    res = optimize(f, 6, evaluations=33, initial_evaluations=30, seed=0,
+                   callback=lambda done, total, best, w: seen.append(w) or True)
+    assert len(res.weights) == 3 and res.model_names == list(MODEL_NAMES)
+    for w in res.weights:
+        assert sum(w) == pytest.approx(1.0, abs=1e-12) and min(w) >= 0.0
+    final = res.weights[-1]
+    assert max(range(4), key=final.__getitem__) == MODEL_NAMES.index("RBF-ARD")
+    assert final[MODEL_NAMES.index("RBF-ARD")] > 0.9  # from the uniform prior 0.25
+    assert seen[:30] == [None] * 30 and seen[-1] == final  # weights reported once GPs are fitted
+    assert torch.all(res.trace[1:] >= res.trace[:-1])

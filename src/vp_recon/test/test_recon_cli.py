@@ -1,0 +1,93 @@
+"""python -m vp_recon.cli: outputs of a small plan, exit code 2 and one-line errors for bad input."""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from vp_recon.cli import main
+from vp_recon.outputs import read_ply_points
+
+SCENE = {"scenario": "one_plant", "models": None, "seed": 0, "points_per_plant": 2000, "plant_spacing": 0.6,
+         "row_spacing": 0.76, "levels": 10, "realizations": 2, "wind_variance": 0.002, "wind_direction": 0.0}
+
+
+def _plan(tmp_path: Path, cameras=None, **extra) -> Path:
+    if cameras is None:
+        a = np.deg2rad(30.0 * np.arange(4))
+        c = np.stack([1.4 * np.cos(a), 1.4 * np.sin(a), np.full(4, 1.2)], axis=1)
+        cameras = np.concatenate([c, np.array([0.0, 0.0, 0.9]) - c], axis=1).tolist()
+    plan = {"scenario": "one_plant", "method": "ring", "cameras": cameras, "reward": 0.5, "fov": math.pi / 2,
+            "scene": SCENE, **extra}
+    p = tmp_path / "plan.json"
+    p.write_text(json.dumps(plan))
+    return p
+
+
+def test_cli_writes_outputs(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    rc = main(["--plan", str(_plan(tmp_path)), "--out", str(out), "--width", "640", "--height", "480",
+               "--realizations", "1", "--no-progress"])
+    assert rc == 0
+    data = json.loads((out / "recon.json").read_text())
+    for key in ("chamfer_mean", "chamfer_std", "per_realization", "seconds", "units", "method", "reward"):
+        assert key in data, key
+    assert "x 100" in data["units"]
+    (r,) = data["per_realization"]
+    assert r["realization"] == 1 and r["images"] >= 2 and r["points"] > 1000
+    assert data["chamfer_mean"] == pytest.approx(r["chamfer"]) and data["chamfer_std"] == 0.0
+    assert 0.1 < r["chamfer"] < 5.0                      # x 100: centimetres, a good plan scores ~1-2
+    assert r["chamfer"] == pytest.approx(r["accuracy"] + r["completeness"])
+    assert len(read_ply_points(out / "recon_1.ply")) == r["points"]
+    assert (out / "views.png").stat().st_size > 1000
+
+
+def _fails(tmp_path: Path, capsys, args: list, match: str) -> None:
+    rc = main(args + ["--no-progress"])
+    err = capsys.readouterr().err
+    assert rc == 2, err
+    assert err.startswith("recon: error:") and match in err and err.count("\n") == 1
+
+
+def test_cli_missing_and_corrupt_plan(tmp_path: Path, capsys) -> None:
+    _fails(tmp_path, capsys, ["--plan", str(tmp_path / "nope.json"), "--out", str(tmp_path)], "not found")
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"cameras": [[0, 0')
+    _fails(tmp_path, capsys, ["--plan", str(bad), "--out", str(tmp_path)], "not valid JSON")
+    bad.write_text("[1, 2]")
+    _fails(tmp_path, capsys, ["--plan", str(bad), "--out", str(tmp_path)], "JSON object")
+    bad.write_text(json.dumps({"cameras": []}))
+    _fails(tmp_path, capsys, ["--plan", str(bad), "--out", str(tmp_path)], "scene")
+
+
+def test_cli_bad_plan_contents(tmp_path: Path, capsys) -> None:
+    _fails(tmp_path, capsys, ["--plan", str(_plan(tmp_path, cameras=[])), "--out", str(tmp_path)], "no cameras")
+    _fails(tmp_path, capsys, ["--plan", str(_plan(tmp_path, cameras=[[1, 2, 3]])), "--out", str(tmp_path)],
+           "shape")
+    p = _plan(tmp_path)
+    d = json.loads(p.read_text())
+    d["scene"]["scenario"] = "moon"
+    p.write_text(json.dumps(d))
+    _fails(tmp_path, capsys, ["--plan", str(p), "--out", str(tmp_path)], "moon")
+
+
+def test_cli_unwritable_out_and_bad_args(tmp_path: Path, capsys) -> None:
+    f = tmp_path / "file"
+    f.write_text("x")
+    _fails(tmp_path, capsys, ["--plan", str(_plan(tmp_path)), "--out", str(f)], "not writable")
+    _fails(tmp_path, capsys, ["--plan", str(_plan(tmp_path)), "--out", str(tmp_path), "--realizations", "a"],
+           "comma-separated")
+    _fails(tmp_path, capsys, ["--plan", str(_plan(tmp_path)), "--out", str(tmp_path), "--width", "3"], "width")
+
+
+def test_cli_nothing_visible_records_error(tmp_path: Path, capsys) -> None:
+    cams = [[1.4, 0.0, 1.2, 1.0, 0.0, 0.0], [0.0, 1.4, 1.2, 0.0, 1.0, 0.0]]      # looking away
+    rc = main(["--plan", str(_plan(tmp_path, cameras=cams)), "--out", str(tmp_path / "o"), "--width", "320",
+               "--height", "240", "--no-progress"])
+    err = capsys.readouterr().err
+    assert rc == 1 and "[NOTHING_VISIBLE]" in err
+    data = json.loads((tmp_path / "o" / "recon.json").read_text())
+    assert data["error"]["code"] == 4 and data["error"]["name"] == "NOTHING_VISIBLE"

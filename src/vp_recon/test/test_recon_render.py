@@ -1,0 +1,112 @@
+"""Camera convention of vp_recon.render: projection matches what pyrender draws."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import trimesh
+
+from vp_planner.poses import rotation_matrix
+from vp_recon.render import (SKY_COLOR, Renderer, check_cameras, foreground_mask, intrinsics, project,
+                             world_to_camera)
+
+W, H = 320, 240
+
+
+def test_intrinsics_from_horizontal_fov() -> None:
+    K = intrinsics(640, 480, math.pi / 2)
+    assert K[0, 0] == pytest.approx(320.0) and K[1, 1] == pytest.approx(320.0)
+    assert K[0, 2] == pytest.approx(319.5) and K[1, 2] == pytest.approx(239.5)
+    K60 = intrinsics(1000, 750, math.radians(60))
+    assert 2 * math.degrees(math.atan(500 / K60[0, 0])) == pytest.approx(60.0)
+    with pytest.raises(ValueError):
+        intrinsics(640, 480, 0.0)
+
+
+def test_world_to_camera_axes() -> None:
+    cam = np.array([1.0, 2.0, 1.5, -1.0, 0.3, -0.4])
+    R, t = world_to_camera(cam)
+    assert np.allclose(R @ R.T, np.eye(3)) and np.linalg.det(R) == pytest.approx(1.0)
+    assert np.allclose(R @ cam[:3] + t, 0.0)                       # centre -> origin
+    Rb = rotation_matrix(cam[3:])
+    assert np.allclose(R @ Rb[:, 0], [0, 0, 1])                   # optical axis -> +z
+    assert np.allclose(R @ Rb[:, 1], [-1, 0, 0])                  # body left -> image -x
+    assert np.allclose(R @ Rb[:, 2], [0, -1, 0])                  # body up -> image -y
+    # vectorized
+    R2, t2 = world_to_camera(np.stack([cam, cam]))
+    assert np.allclose(R2[1], R) and np.allclose(t2[1], t)
+
+
+def test_project_directions() -> None:
+    cam = np.array([0.0, 0.0, 1.0, 1.0, 0.0, 0.0])                # at height 1 looking along +x
+    K = intrinsics(W, H)
+    uv, vis = project([[2.0, 0.0, 1.0], [2.0, 0.5, 1.0], [2.0, 0.0, 1.5], [-2.0, 0.0, 1.0]], cam, W, H)
+    assert np.allclose(uv[0], K[:2, 2])                            # optical axis -> principal point
+    assert uv[1, 0] < K[0, 2] and uv[1, 1] == pytest.approx(K[1, 2])   # +y (left) -> smaller u
+    assert uv[2, 1] < K[1, 2] and uv[2, 0] == pytest.approx(K[0, 2])   # +z (up) -> smaller v
+    assert vis[:3].all() and not vis[3] and np.isnan(uv[3]).all()  # behind the camera
+
+
+def _sphere(center, color, radius=0.04):
+    s = trimesh.creation.icosphere(subdivisions=3, radius=radius)
+    s.apply_translation(center)
+    s.visual.vertex_colors = np.tile([*color, 255], (len(s.vertices), 1)).astype(np.uint8)
+    return s
+
+
+CAMERAS = np.array([
+    [2.0, 0.0, 1.0, -1.0, 0.0, 0.0],            # level, looking along -x
+    [0.5, -1.5, 1.8, -0.2, 1.0, -0.5],          # oblique, looking down
+    [0.1, 0.2, 3.0, 0.0, 0.0, -1.0],            # straight down (vertical axis: y_b = world +y)
+    [-1.0, 1.2, 0.4, 1.0, -1.1, 0.45],          # looking up
+])
+POINTS = np.array([[0.0, 0.0, 1.0], [0.3, 0.25, 1.2], [-0.25, -0.2, 0.8], [0.2, -0.3, 1.4]])
+COLORS = [(255, 0, 0), (0, 255, 0), (255, 255, 0), (255, 0, 255)]
+
+
+@pytest.mark.parametrize("ci", range(len(CAMERAS)))
+def test_spheres_drawn_where_projected(ci: int) -> None:
+    """Each small sphere's pixel centroid lies within 2 px of project() of its centre."""
+    cam = CAMERAS[ci]
+    r = Renderer(W, H)
+    images, masks, depths = r.render([_sphere(p, c) for p, c in zip(POINTS, COLORS)], cam[None], keep_depth=True)
+    img, mask, depth = images[0], masks[0], depths[0]
+    uv, vis = project(POINTS, cam, W, H)
+    R, t = world_to_camera(cam)
+    checked = 0
+    for p, col, (u, v), ok in zip(POINTS, COLORS, uv, vis):
+        if not ok:
+            continue
+        hit = np.all(np.abs(img.astype(int) - col) < 60, axis=-1)
+        if hit.sum() < 5:                      # hidden behind another sphere
+            continue
+        ys, xs = np.nonzero(hit)
+        assert abs(xs.mean() - u) < 2.0 and abs(ys.mean() - v) < 2.0, (p, xs.mean(), ys.mean(), u, v)
+        z = (R @ p + t)[2]                     # the z-buffer (test only) agrees: depth along the axis
+        d = depth[int(round(v)), int(round(u))]      # front surface of the sphere: z - radius
+        assert z - 0.04 - 0.005 < d < z
+        assert mask[int(round(v)), int(round(u))]
+        checked += 1
+    assert checked >= 2
+    # background is exactly the sky colour and the mask is the colour key
+    assert np.all(img[~mask].astype(int) - SKY_COLOR < 61)
+    assert np.array_equal(mask, foreground_mask(img))
+    assert mask.sum() < 0.05 * W * H
+
+
+def test_optical_axis_hits_image_centre() -> None:
+    cam = CAMERAS[1]
+    target = cam[:3] + 1.5 * cam[3:] / np.linalg.norm(cam[3:])
+    images, masks, _ = Renderer(W + 1, H + 1).render([_sphere(target, (255, 0, 0), 0.01)], cam[None])
+    ys, xs = np.nonzero(masks[0])
+    assert abs(xs.mean() - W / 2) < 1.0 and abs(ys.mean() - H / 2) < 1.0
+
+
+def test_check_cameras_errors() -> None:
+    with pytest.raises(ValueError, match="shape"):
+        check_cameras(np.zeros((3, 5)))
+    with pytest.raises(ValueError, match="zero viewing"):
+        check_cameras([[0, 0, 1, 0, 0, 0]])
+    with pytest.raises(ValueError, match="NaN"):
+        check_cameras([[0, 0, np.nan, 1, 0, 0]])

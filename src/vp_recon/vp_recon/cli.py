@@ -1,0 +1,184 @@
+"""Command line reconstruction of a plan: render, reconstruct and score every wind realization.
+
+    python -m vp_recon.cli --plan out/run/plan.json --out out/run [--width 2000 --height 1500]
+        [--realizations 0,1] [--sparse-only] [--sparse-mode known_poses|incremental]
+        [--fscore-threshold 0.02] [--mesh-cache DIR] [--keep-workdir] [--no-progress]
+
+Rebuilds the scene from plan.json's ``scene`` dict (vp_scene.build.build_noisy_scene) and writes
+
+* ``OUT/recon.json``: chamfer_mean, chamfer_std (metres x 100, as paper Table I),
+  per_realization [{chamfer, accuracy, completeness (x 100), fscore, points, images, ...}],
+  seconds, units, plan, method, reward;
+* ``OUT/recon_<k>.ply``: the reconstructed coloured cloud of realization k (metres);
+* ``OUT/views.png``: contact sheet of the first realization's rendered views.
+
+Progress bars (one per stage) go to stderr. Exit codes: 0 ok, 2 bad input (``recon: error: ...``),
+1 reconstruction failure (``recon: error: [CODE] ...``), 130 interrupted.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Any, Optional, Sequence
+
+import numpy as np
+
+PROG = "recon"
+_SCENE_KEYS = ("scenario", "models", "seed", "points_per_plant", "plant_spacing", "row_spacing", "levels",
+               "realizations", "wind_variance", "wind_direction")
+
+
+class CliError(Exception):
+    """Bad user input: one line on stderr, exit code 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
+
+
+def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
+    p = _Parser(prog=PROG, description="Render, reconstruct (COLMAP on CPU + SGBM) and score a view plan.")
+    p.add_argument("--plan", required=True, help="plan.json written by the planner (make plan)")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--width", type=int, default=2000, help="image width, pixels (paper: 2000)")
+    p.add_argument("--height", type=int, default=1500, help="image height, pixels (paper: 1500)")
+    p.add_argument("--realizations", default=None, help="comma-separated realization indices (default: all)")
+    p.add_argument("--sparse-only", action="store_true", help="score the sparse cloud (no dense stereo)")
+    p.add_argument("--sparse-mode", default="known_poses", choices=("known_poses", "incremental"))
+    p.add_argument("--fscore-threshold", type=float, default=0.02, help="F-score threshold, metres")
+    p.add_argument("--voxel", type=float, default=0.002, help="dense voxel downsampling, metres (0: none)")
+    p.add_argument("--mesh-cache", default=None, help="cache folder of Poisson meshes of PLY plant models")
+    p.add_argument("--keep-workdir", action="store_true", help="keep the COLMAP workspaces in OUT/work")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    return p.parse_args(argv)
+
+
+def load_plan(path: str) -> dict:
+    """plan.json as a dict, with ``cameras`` (N, 6) and a ``scene`` dict; CliError naming the problem."""
+    p = Path(path)
+    if not p.is_file():
+        raise CliError(f"plan file not found: {p}")
+    try:
+        plan = json.loads(p.read_text())
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CliError(f"cannot read {p}: {exc}") from None
+    except json.JSONDecodeError as exc:
+        raise CliError(f"{p} is not valid JSON ({exc.msg} at line {exc.lineno})") from None
+    if not isinstance(plan, dict):
+        raise CliError(f"{p} must hold a JSON object, got {type(plan).__name__}")
+    scene = plan.get("scene")
+    if not isinstance(scene, dict) or "scenario" not in scene:
+        raise CliError(f"{p} has no 'scene' object with a 'scenario' (written by an older planner?)")
+    unknown = set(scene) - set(_SCENE_KEYS)
+    if unknown:
+        raise CliError(f"{p}: unknown scene keys {sorted(unknown)}")
+    if "cameras" not in plan:
+        raise CliError(f"{p} has no 'cameras'")
+    return plan
+
+
+def parse_realizations(text: Optional[str]) -> Optional[list[int]]:
+    if text is None or text.strip() in ("", "all"):
+        return None
+    try:
+        return [int(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise CliError(f"--realizations must be comma-separated integers, got {text!r}") from None
+
+
+def run(args: argparse.Namespace) -> dict:
+    """Reconstruct the plan; returns the recon.json dict (also written)."""
+    from vp_scene.build import build_noisy_scene
+
+    from .outputs import contact_sheet, summary, write_image, write_json, write_ply
+    from .pipeline import STAGES, ReconConfig, ReconError, ensure_writable_dir, validate_cameras
+
+    plan = load_plan(args.plan)
+    ks = parse_realizations(args.realizations)
+    try:
+        cams = validate_cameras(plan["cameras"])
+    except ReconError as exc:
+        raise CliError(f"{args.plan}: {exc}") from None
+    fov = float(plan.get("fov", math.pi / 2) or math.pi / 2)
+    try:
+        config = ReconConfig(width=args.width, height=args.height, fov=fov, dense=not args.sparse_only,
+                             sparse_mode=args.sparse_mode, fscore_threshold=args.fscore_threshold,
+                             voxel=args.voxel, mesh_cache=args.mesh_cache, keep_workdir=args.keep_workdir).validate()
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    out = ensure_writable_dir(args.out)
+    scene_kw = dict(plan["scene"])
+    try:
+        noisy, _ = build_noisy_scene(**scene_kw)
+    except (TypeError, ValueError, OSError) as exc:
+        raise CliError(f"cannot rebuild the scene of {args.plan}: {exc}") from None
+    K = noisy.points.shape[0]
+    n_real = K if ks is None else len(ks)
+
+    bars: dict[str, Any] = {}
+    if not args.no_progress:
+        from tqdm import tqdm
+
+        bars = {s: tqdm(total=n_real, desc=f"{s:>6}", unit="real", file=sys.stderr, position=i, leave=True,
+                        dynamic_ncols=True) for i, s in enumerate(STAGES)}
+
+    def progress(stage: str, k: int) -> bool:
+        if stage in bars:
+            bars[stage].update(1)
+        return True
+
+    from .pipeline import reconstruct_plan
+
+    info = {"plan": str(Path(args.plan).resolve()), "method": plan.get("method"),
+            "scenario": plan["scene"]["scenario"], "reward": plan.get("reward"), "num_cameras": int(len(cams)),
+            "width": config.width, "height": config.height, "fov": config.fov, "dense": config.dense,
+            "sparse_mode": config.sparse_mode}
+    try:
+        result = reconstruct_plan(noisy, cams, config, out_dir=out, realizations=ks, progress=progress)
+    except ReconError as exc:
+        # record the failure for batch tools (Table I counts failed plans), then report it
+        write_json(out / "recon.json", {**info, "error": {"code": exc.code, "name": exc.name, "message": str(exc)}})
+        raise
+    finally:
+        for b in bars.values():
+            b.close()
+    for r in result.realizations:
+        write_ply(out / f"recon_{r.realization}.ply", r.points, r.colors)
+    first = result.realizations[0]
+    if first.rendered:
+        write_image(out / "views.png", contact_sheet(first.rendered))
+    data = summary(result, extra=info)
+    write_json(out / "recon.json", data)
+    return data
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    args = parse_args(argv)
+    from .pipeline import EMPTY_PLAN, NO_SCENE, OUTPUT_NOT_WRITABLE, ReconError
+
+    try:
+        data = run(args)
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted", file=sys.stderr)
+        return 130
+    except CliError as exc:
+        print(f"{PROG}: error: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 2
+    except ReconError as exc:
+        print(f"{PROG}: error: [{exc.name}] {' '.join(str(exc).split())}", file=sys.stderr)
+        return 2 if exc.code in (EMPTY_PLAN, NO_SCENE, OUTPUT_NOT_WRITABLE) else 1
+    except (ValueError, OSError) as exc:
+        print(f"{PROG}: error: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 2
+    print(f"{PROG}: chamfer x100 {data['chamfer_mean']:.3f} +- {data['chamfer_std']:.3f} over "
+          f"{data['realizations']} realization(s) ({data['seconds']['total']:.1f} s) -> "
+          f"{Path(args.out) / 'recon.json'}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

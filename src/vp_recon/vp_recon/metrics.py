@@ -1,0 +1,96 @@
+"""Reconstruction quality against the true (noisy-realization) points.
+
+For a reconstruction S and the truth T (point sets in metres), with d(x, Y) = min_{y in Y} |x - y|:
+
+    accuracy     A = (1/|S|) sum_{s in S} d(s, T)      (how close reconstructed points are to the plant)
+    completeness C = (1/|T|) sum_{t in T} d(t, S)      (how much of the plant is covered)
+    Chamfer      CD = A + C
+
+(the symmetric Chamfer distance; point-cloud-utils' ``chamfer_distance`` returns exactly this sum
+of the two mean nearest-neighbour distances, checked in the tests; nearest neighbours here come
+from scipy, see :func:`nn_distances`). The F-score at a threshold
+tau (Knapitsch et al., "Tanks and Temples", SIGGRAPH 2017) is the harmonic mean of
+
+    precision P(tau) = |{s : d(s, T) < tau}| / |S|,   recall R(tau) = |{t : d(t, S) < tau}| / |T|,
+    F(tau) = 2 P R / (P + R)   (0 when P + R = 0).
+
+Everything here is in metres (F in [0, 1]). Paper Table I reports the Chamfer distance x 100:
+that scaling is applied only when writing results (``vp_recon.cli`` recon.json and the ROS
+``ReconstructionScore`` message), never in this module.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = ["DEFAULT_FSCORE_THRESHOLD", "EmptyCloudError", "CloudScore", "nn_distances", "chamfer"]
+
+#: 2 cm: about 1% of a 2 m corn plant, the order of a leaf's width / 5.
+DEFAULT_FSCORE_THRESHOLD = 0.02
+
+
+class EmptyCloudError(ValueError):
+    """The reconstruction (or the truth) has no points: no distance is defined."""
+
+
+@dataclass(frozen=True)
+class CloudScore:
+    """Scores of a reconstruction, metres (fscore and its parts unitless in [0, 1])."""
+
+    chamfer: float
+    accuracy: float
+    completeness: float
+    fscore: float
+    precision: float
+    recall: float
+    threshold: float
+    num_points: int
+
+
+def _cloud(name: str, x: ArrayLike) -> NDArray[np.float64]:
+    p = np.asarray(x, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 3:
+        raise ValueError(f"{name} must have shape (M, 3), got {p.shape}")
+    if len(p) == 0:
+        raise EmptyCloudError(f"{name} point cloud is empty: nothing to score")
+    if not np.all(np.isfinite(p)):
+        raise ValueError(f"{name} contains NaN or infinite coordinates")
+    return np.ascontiguousarray(p)
+
+
+def nn_distances(query: ArrayLike, data: ArrayLike) -> NDArray[np.float64]:
+    """d(q, data) for every query point (exact kd-tree search, scipy's cKDTree, all cores).
+
+    Not point-cloud-utils' ``k_nearest_neighbors``: pcu 0.34 returns a wrong distance for a
+    single query point (caught by the tests); its ``chamfer_distance`` agrees with
+    :func:`chamfer` otherwise and has the same speed (about 0.2 s for 100k vs 100k points).
+    """
+    from scipy.spatial import cKDTree
+
+    q = _cloud("query", query)
+    d = _cloud("data", data)
+    dist, _ = cKDTree(d).query(q, k=1, workers=-1)
+    return np.asarray(dist, dtype=np.float64).reshape(-1)
+
+
+def chamfer(recon: ArrayLike, truth: ArrayLike, threshold: float = DEFAULT_FSCORE_THRESHOLD) -> CloudScore:
+    """Accuracy, completeness, Chamfer (= A + C) and F-score at ``threshold`` (metres) of recon vs truth.
+
+    Raises:
+        EmptyCloudError: recon or truth has no points.
+        ValueError: bad shapes, non-finite coordinates, or threshold <= 0.
+    """
+    if not (np.isfinite(threshold) and threshold > 0):
+        raise ValueError(f"F-score threshold must be > 0 metres, got {threshold}")
+    s = _cloud("reconstruction", recon)
+    t = _cloud("truth", truth)
+    d_st = nn_distances(s, t)
+    d_ts = nn_distances(t, s)
+    acc, comp = float(d_st.mean()), float(d_ts.mean())
+    precision = float(np.mean(d_st < threshold))
+    recall = float(np.mean(d_ts < threshold))
+    f = 0.0 if precision + recall == 0 else 2 * precision * recall / (precision + recall)
+    return CloudScore(chamfer=acc + comp, accuracy=acc, completeness=comp, fscore=f, precision=precision,
+                      recall=recall, threshold=float(threshold), num_points=len(s))

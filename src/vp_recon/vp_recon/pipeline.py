@@ -1,0 +1,385 @@
+"""Render a camera plan, reconstruct it and score it against the truth (paper Sec. V-B, Table I).
+
+For each wind realization k of a :class:`vp_scene.wind.NoisyScene`:
+
+1. mesh: the plants' meshes displaced by realization k's wind (:mod:`vp_recon.meshing`),
+2. render: one image per camera at ``width x height`` (:mod:`vp_recon.render`),
+3. sparse: COLMAP SIFT + matching + triangulation (:mod:`vp_recon.sparse`),
+4. dense: SGBM on neighbouring pairs (:mod:`vp_recon.dense`; COLMAP PatchMatch needs CUDA),
+5. score: Chamfer distance etc. of the (dense, else sparse) cloud against realization k's true
+   points ``noisy_scene.points[k]`` (:mod:`vp_recon.metrics`).
+
+All distances in this module are metres; x100 (Table I) is applied by writers (cli, ROS node).
+Errors are :class:`ReconError` with a ``code`` equal to the ``vp_interfaces/ReconstructionScore``
+constants.
+"""
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Optional, Sequence, Union
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .metrics import DEFAULT_FSCORE_THRESHOLD, EmptyCloudError, chamfer
+
+__all__ = [
+    "NONE", "UNKNOWN", "EMPTY_PLAN", "NO_SCENE", "NOTHING_VISIBLE", "RECONSTRUCTION_FAILED",
+    "OUTPUT_NOT_WRITABLE", "ERROR_NAMES", "STAGES", "ReconError", "ReconCancelled", "ReconConfig",
+    "RealizationResult", "PlanReconResult", "validate_cameras", "ensure_writable_dir", "crop_box",
+    "reconstruct_realization", "reconstruct_plan",
+]
+
+# Error codes: identical to vp_interfaces/msg/ReconstructionScore.msg.
+NONE = 0
+UNKNOWN = 1
+EMPTY_PLAN = 2
+NO_SCENE = 3
+NOTHING_VISIBLE = 4
+RECONSTRUCTION_FAILED = 5
+OUTPUT_NOT_WRITABLE = 6
+ERROR_NAMES = {NONE: "NONE", UNKNOWN: "UNKNOWN", EMPTY_PLAN: "EMPTY_PLAN", NO_SCENE: "NO_SCENE",
+               NOTHING_VISIBLE: "NOTHING_VISIBLE", RECONSTRUCTION_FAILED: "RECONSTRUCTION_FAILED",
+               OUTPUT_NOT_WRITABLE: "OUTPUT_NOT_WRITABLE"}
+
+#: Stages reported to the progress callback, in order.
+STAGES = ("render", "sparse", "dense", "score")
+
+#: progress(stage, realization) after each stage of each realization; returning False cancels.
+ProgressFn = Callable[[str, int], Optional[bool]]
+PathLike = Union[str, os.PathLike]
+
+
+class ReconError(Exception):
+    """A reconstruction failure with a ``ReconstructionScore`` error code (``.code``) and message."""
+
+    def __init__(self, code: int, message: str) -> None:
+        super().__init__(message)
+        self.code = int(code)
+        self.message = message
+
+    @property
+    def name(self) -> str:
+        """The code's constant name, e.g. ``'NOTHING_VISIBLE'``."""
+        return ERROR_NAMES.get(self.code, "UNKNOWN")
+
+
+class ReconCancelled(Exception):
+    """The progress callback returned False."""
+
+
+@dataclass
+class ReconConfig:
+    """Reconstruction settings.
+
+    Attributes:
+        width, height: rendered image size (paper: 2000 x 1500).
+        fov: horizontal field of view, rad (the planner's, default pi/2).
+        sparse_mode: ``'known_poses'`` (triangulate with the planned poses) or ``'incremental'``.
+        dense: run dense stereo (else the sparse cloud is scored).
+        fscore_threshold: F-score distance threshold, metres.
+        mesh_cache: folder of cached Poisson meshes for point-cloud plant models (None: default).
+        keep_workdir: keep the COLMAP workspace (images, database) under ``out_dir/work``.
+        keep_images: keep the rendered images in the result (first realization only in
+            :func:`reconstruct_plan`).
+        voxel: voxel edge for downsampling the dense cloud, metres (0: none).
+        crop_margin: margin around the scene's bounding box (union of all realizations), metres.
+        neighbours: dense stereo partners per camera.
+        sift_masks: restrict SIFT to the (dilated) foreground masks.
+        min_foreground: pixels of plant an image needs to count as seeing the plant.
+        max_features: SIFT features per image.
+    """
+
+    width: int = 2000
+    height: int = 1500
+    fov: float = math.pi / 2
+    sparse_mode: str = "known_poses"
+    dense: bool = True
+    fscore_threshold: float = DEFAULT_FSCORE_THRESHOLD
+    mesh_cache: Optional[str] = None
+    keep_workdir: bool = False
+    keep_images: bool = True
+    voxel: float = 0.002
+    crop_margin: float = 0.05
+    neighbours: int = 2
+    sift_masks: bool = False
+    min_foreground: int = 50
+    max_features: int = 8192
+
+    def validate(self) -> "ReconConfig":
+        """Raise ValueError naming the first bad field; return self."""
+        from .sparse import MODES
+
+        for name in ("width", "height"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 16:
+                raise ValueError(f"{name} must be an integer >= 16 pixels, got {v!r}")
+        if not (isinstance(self.fov, (int, float)) and 0 < self.fov < math.pi):
+            raise ValueError(f"fov must be in (0, pi) rad, got {self.fov!r}")
+        if self.sparse_mode not in MODES:
+            raise ValueError(f"sparse_mode must be one of {', '.join(MODES)}, got {self.sparse_mode!r}")
+        if not (math.isfinite(self.fscore_threshold) and self.fscore_threshold > 0):
+            raise ValueError(f"fscore_threshold must be > 0 metres, got {self.fscore_threshold!r}")
+        if not (math.isfinite(self.voxel) and self.voxel >= 0):
+            raise ValueError(f"voxel must be >= 0 metres, got {self.voxel!r}")
+        if not (math.isfinite(self.crop_margin) and self.crop_margin >= 0):
+            raise ValueError(f"crop_margin must be >= 0 metres, got {self.crop_margin!r}")
+        if int(self.neighbours) < 1 or int(self.min_foreground) < 1 or int(self.max_features) < 16:
+            raise ValueError("neighbours and min_foreground must be >= 1, max_features >= 16")
+        return self
+
+
+@dataclass
+class RealizationResult:
+    """One realization's reconstruction and scores (distances in metres).
+
+    Attributes:
+        realization: k.
+        chamfer, accuracy, completeness: metres (Chamfer = accuracy + completeness).
+        fscore, precision, recall: at ``fscore_threshold`` metres, in [0, 1].
+        points, colors: (M, 3) float64 world / uint8 RGB scored cloud.
+        images: images registered in the sparse model (with a pose and >= 1 point).
+        num_images: images rendered (= cameras).
+        visible_images: images whose foreground has >= ``min_foreground`` pixels.
+        source: ``'dense'`` or ``'sparse'`` (the dense cloud was disabled or empty).
+        sparse_points: points of the sparse model.
+        rendered: the rendered RGB images (empty unless kept).
+        seconds: wall time per stage: mesh, render, sparse, dense, score.
+    """
+
+    realization: int
+    chamfer: float
+    accuracy: float
+    completeness: float
+    fscore: float
+    precision: float
+    recall: float
+    fscore_threshold: float
+    points: NDArray[np.float64]
+    colors: NDArray[np.uint8]
+    images: int
+    num_images: int
+    visible_images: int
+    source: str
+    sparse_points: int
+    rendered: list = field(default_factory=list, repr=False)
+    seconds: dict = field(default_factory=dict)
+
+
+@dataclass
+class PlanReconResult:
+    """All realizations of one plan; chamfer_mean / chamfer_std (population std) in metres."""
+
+    realizations: list
+    chamfer_mean: float
+    chamfer_std: float
+    seconds: dict
+
+    @property
+    def num_images(self) -> int:
+        """Images per realization (= cameras)."""
+        return self.realizations[0].num_images if self.realizations else 0
+
+
+def validate_cameras(cameras: object) -> NDArray[np.float64]:
+    """The plan as an (N, 6) array with N >= 2; ReconError(EMPTY_PLAN) naming the problem otherwise."""
+    try:
+        cams = np.asarray(cameras, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ReconError(EMPTY_PLAN, f"cameras are not a numeric (N, 6) array: {exc}") from None
+    if cams.size == 0:
+        raise ReconError(EMPTY_PLAN, "the plan has no cameras")
+    if cams.ndim == 1 and cams.size % 6 == 0:
+        cams = cams.reshape(-1, 6)
+    if cams.ndim != 2 or cams.shape[1] != 6:
+        raise ReconError(EMPTY_PLAN, f"cameras must have shape (N, 6) = [cx, cy, cz, vx, vy, vz], got {cams.shape}")
+    if not np.all(np.isfinite(cams)):
+        raise ReconError(EMPTY_PLAN, "cameras contain NaN or infinite values")
+    bad = np.flatnonzero(np.linalg.norm(cams[:, 3:], axis=1) <= 1e-12)
+    if len(bad):
+        raise ReconError(EMPTY_PLAN, f"camera(s) {bad.tolist()} have a zero viewing direction")
+    if len(cams) < 2:
+        raise ReconError(EMPTY_PLAN, f"a reconstruction needs at least 2 cameras, the plan has {len(cams)}")
+    return cams
+
+
+def _check_scene(noisy_scene: object) -> NDArray[np.float64]:
+    pts = getattr(noisy_scene, "points", None)
+    if noisy_scene is None or pts is None or getattr(noisy_scene, "scene", None) is None:
+        raise ReconError(NO_SCENE, "no scene: give a vp_scene NoisyScene")
+    pts = np.asarray(pts)
+    if pts.ndim != 3 or pts.shape[0] == 0 or pts.shape[1] == 0 or pts.shape[2] != 3:
+        raise ReconError(NO_SCENE, f"the scene has no points (realizations array of shape {pts.shape})")
+    return pts
+
+
+def ensure_writable_dir(path: PathLike) -> Path:
+    """Create ``path`` if needed and check it is a writable folder; ReconError(OUTPUT_NOT_WRITABLE)."""
+    p = Path(path)
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=p, prefix=".write-test-"):
+            pass
+    except OSError as exc:
+        raise ReconError(OUTPUT_NOT_WRITABLE, f"output folder {p} is not writable: {exc.strerror or exc}") from None
+    return p
+
+
+def crop_box(noisy_scene: object, margin: float) -> NDArray[np.float64]:
+    """(2, 3) [lo, hi]: bounding box of all realizations' points (the scene's extent under any
+    of its winds, not realization k's truth alone) grown by ``margin``; lo z >= -margin."""
+    pts = np.asarray(noisy_scene.points, dtype=np.float64).reshape(-1, 3)
+    return np.stack([pts.min(axis=0) - margin, pts.max(axis=0) + margin])
+
+
+def _tick(progress: Optional[ProgressFn], stage: str, k: int) -> None:
+    if progress is not None and progress(stage, k) is False:
+        raise ReconCancelled(f"cancelled after {stage} of realization {k}")
+
+
+def reconstruct_realization(noisy_scene: object, k: int, cameras: ArrayLike, config: Optional[ReconConfig] = None,
+                            workdir: Optional[PathLike] = None, progress: Optional[ProgressFn] = None
+                            ) -> RealizationResult:
+    """Render, reconstruct and score realization ``k`` of ``noisy_scene`` seen by ``cameras`` (N, 6).
+
+    Args:
+        workdir: COLMAP workspace (created; kept). None: a temporary folder, deleted afterwards.
+        progress: called as ``progress(stage, k)`` after each of :data:`STAGES`; False cancels.
+
+    Raises:
+        ReconError: EMPTY_PLAN (no / malformed cameras), NO_SCENE, NOTHING_VISIBLE (fewer than 2
+            images see a plant), RECONSTRUCTION_FAILED (nothing matched / triangulated),
+            OUTPUT_NOT_WRITABLE (workdir), UNKNOWN (rendering or meshing failed).
+        ReconCancelled: the progress callback returned False.
+    """
+    from .dense import dense_reconstruct
+    from .meshing import scene_meshes
+    from .render import RenderError, Renderer
+    from .sparse import SparseError, sparse_reconstruct
+
+    cfg = (config or ReconConfig()).validate()
+    cams = validate_cameras(cameras)
+    truth_all = _check_scene(noisy_scene)
+    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 0 <= int(k) < truth_all.shape[0]:
+        raise ReconError(NO_SCENE, f"realization {k!r} does not exist (the scene has {truth_all.shape[0]})")
+    k = int(k)
+    temp = workdir is None
+    wd = Path(tempfile.mkdtemp(prefix="vp_recon_")) if temp else ensure_writable_dir(workdir)
+    seconds: dict = {}
+    try:
+        t0 = time.perf_counter()
+        try:
+            meshes = scene_meshes(noisy_scene, k, cfg.mesh_cache)
+        except (RuntimeError, ValueError) as exc:
+            raise ReconError(UNKNOWN, f"cannot mesh the plants: {exc}") from exc
+        seconds["mesh"] = time.perf_counter() - t0
+
+        t0 = time.perf_counter()
+        try:
+            renderer = Renderer(cfg.width, cfg.height, cfg.fov)
+            images, masks, _ = renderer.render(meshes, cams)
+        except RenderError as exc:
+            raise ReconError(UNKNOWN, str(exc)) from exc
+        seconds["render"] = time.perf_counter() - t0
+        fg = np.array([int(m.sum()) for m in masks])
+        seeing = np.flatnonzero(fg >= cfg.min_foreground)
+        if len(seeing) == 0:
+            raise ReconError(NOTHING_VISIBLE, f"none of the {len(cams)} cameras sees a plant "
+                                              f"(at most {int(fg.max())} plant pixels in an image)")
+        if len(seeing) < 2:
+            raise ReconError(NOTHING_VISIBLE, f"only camera {int(seeing[0])} of {len(cams)} sees a plant; "
+                                              "a reconstruction needs at least 2 views of it")
+        _tick(progress, "render", k)
+
+        t0 = time.perf_counter()
+        try:
+            sp = sparse_reconstruct(images, cams, renderer.K, wd / f"realization_{k}", mode=cfg.sparse_mode,
+                                    masks=masks if cfg.sift_masks else None, max_features=cfg.max_features)
+        except SparseError as exc:
+            raise ReconError(RECONSTRUCTION_FAILED, f"sparse reconstruction failed: {exc}") from exc
+        except OSError as exc:
+            raise ReconError(OUTPUT_NOT_WRITABLE, f"cannot write the COLMAP workspace in {wd}: {exc}") from exc
+        seconds["sparse"] = time.perf_counter() - t0
+        _tick(progress, "sparse", k)
+
+        t0 = time.perf_counter()
+        points, colors, source = sp.points, sp.colors, "sparse"
+        if cfg.dense:
+            box = crop_box(noisy_scene, cfg.crop_margin)
+            dn = dense_reconstruct(images, masks, cams, renderer.K, box, guide=sp.points,
+                                   neighbours=cfg.neighbours, voxel=cfg.voxel)
+            if len(dn.points):
+                points, colors, source = dn.points, dn.colors, "dense"
+        seconds["dense"] = time.perf_counter() - t0
+        _tick(progress, "dense", k)
+
+        t0 = time.perf_counter()
+        try:
+            score = chamfer(points, truth_all[k], cfg.fscore_threshold)
+        except EmptyCloudError as exc:
+            raise ReconError(RECONSTRUCTION_FAILED, f"the reconstruction is empty: {exc}") from exc
+        seconds["score"] = time.perf_counter() - t0
+        _tick(progress, "score", k)
+    finally:
+        if temp or not cfg.keep_workdir:
+            shutil.rmtree(wd / f"realization_{k}", ignore_errors=True)
+            if temp:
+                shutil.rmtree(wd, ignore_errors=True)
+    return RealizationResult(
+        realization=k, chamfer=score.chamfer, accuracy=score.accuracy, completeness=score.completeness,
+        fscore=score.fscore, precision=score.precision, recall=score.recall, fscore_threshold=score.threshold,
+        points=points, colors=colors, images=sp.registered, num_images=len(cams), visible_images=len(seeing),
+        source=source, sparse_points=len(sp.points), rendered=images if cfg.keep_images else [], seconds=seconds)
+
+
+def reconstruct_plan(noisy_scene: object, cameras: ArrayLike, config: Optional[ReconConfig] = None,
+                     out_dir: Optional[PathLike] = None, realizations: Optional[Sequence[int]] = None,
+                     progress: Optional[ProgressFn] = None) -> PlanReconResult:
+    """Reconstruct and score a plan on every (or the listed) wind realization(s).
+
+    Args:
+        out_dir: output folder, checked writable (created); the COLMAP workspaces go to
+            ``out_dir/work`` when ``config.keep_workdir``. None: temporary workspaces only.
+        realizations: indices k to run (default: all K of the scene), in order, no duplicates.
+        progress: ``progress(stage, k)`` after every stage; returning False cancels.
+
+    Returns:
+        PlanReconResult with chamfer_mean and the population std over the realizations (metres).
+        The first realization keeps its rendered images when ``config.keep_images``.
+
+    Raises:
+        ReconError as :func:`reconstruct_realization` (the first failing realization stops the plan).
+    """
+    cfg = (config or ReconConfig()).validate()
+    cams = validate_cameras(cameras)
+    pts = _check_scene(noisy_scene)
+    K = pts.shape[0]
+    ks = list(range(K)) if realizations is None else [int(x) for x in realizations]
+    if not ks:
+        raise ReconError(NO_SCENE, "no realization selected")
+    bad = [x for x in ks if not 0 <= x < K]
+    if bad:
+        raise ReconError(NO_SCENE, f"realization(s) {bad} do not exist (the scene has {K}: 0..{K - 1})")
+    if len(set(ks)) != len(ks):
+        raise ReconError(NO_SCENE, f"duplicate realizations in {ks}")
+    work_root = None
+    if out_dir is not None:
+        out = ensure_writable_dir(out_dir)
+        if cfg.keep_workdir:
+            work_root = ensure_writable_dir(out / "work")
+    results = []
+    t_all = time.perf_counter()
+    for n, k in enumerate(ks):
+        sub = ReconConfig(**{**cfg.__dict__, "keep_images": cfg.keep_images and n == 0})
+        results.append(reconstruct_realization(noisy_scene, k, cams, sub, workdir=work_root, progress=progress))
+    ch = np.array([r.chamfer for r in results])
+    seconds = {s: float(sum(r.seconds.get(s, 0.0) for r in results)) for s in ("mesh",) + STAGES}
+    seconds["total"] = time.perf_counter() - t_all
+    return PlanReconResult(realizations=results, chamfer_mean=float(ch.mean()), chamfer_std=float(ch.std()),
+                           seconds=seconds)

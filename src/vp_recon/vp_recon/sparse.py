@@ -1,0 +1,222 @@
+"""Sparse reconstruction with COLMAP (pycolmap, CPU) from rendered views.
+
+Pipeline (Schönberger & Frahm, "Structure-from-Motion Revisited", CVPR 2016):
+
+1. write the images (and optional masks) to ``workdir/images`` (``workdir/masks``),
+2. SIFT features (Lowe 2004) on the CPU into ``workdir/database.db``; one PINHOLE camera with the
+   known calibration ``f, f, cx, cy`` (COLMAP pixel convention: centres at +0.5),
+3. exhaustive matching with geometric verification,
+4. ``mode='known_poses'``: a reconstruction holding the true poses (cam_from_world =
+   (R_cw, t) of :func:`vp_recon.render.world_to_camera`), then ``triangulate_points``;
+   ``mode='incremental'``: ``incremental_mapping`` (unknown poses), the largest model
+   aligned to the true camera centres with a similarity transform (Umeyama 1991; needs 3
+   registered images).
+
+The 3D points come back in the world frame.
+"""
+from __future__ import annotations
+
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional, Sequence
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from .render import check_cameras, principal_point_gl, world_to_camera
+
+__all__ = ["SparseError", "SparseResult", "sparse_reconstruct", "MODES"]
+
+MODES = ("known_poses", "incremental")
+
+
+class SparseError(RuntimeError):
+    """Nothing could be reconstructed (no features, no matches or no triangulated point)."""
+
+
+@dataclass
+class SparseResult:
+    """Output of :func:`sparse_reconstruct`.
+
+    Attributes:
+        points: (M, 3) float64 world points.
+        colors: (M, 3) uint8 RGB.
+        registered: number of images with a pose in the reconstruction (that observe >= 1 point
+            in ``known_poses`` mode).
+        keypoints: SIFT keypoints per image.
+        verified_pairs: image pairs with geometrically verified matches.
+        mean_track_length: mean number of images observing a point.
+    """
+
+    points: NDArray[np.float64]
+    colors: NDArray[np.uint8]
+    registered: int
+    keypoints: list[int]
+    verified_pairs: int
+    mean_track_length: float
+
+
+def _write_images(images: Sequence[NDArray[np.uint8]], masks: Optional[Sequence[NDArray[np.bool_]]],
+                  workdir: Path) -> tuple[Path, Optional[Path], list[str]]:
+    img_dir = workdir / "images"
+    if img_dir.exists():
+        shutil.rmtree(img_dir)
+    img_dir.mkdir(parents=True)
+    mask_dir = None
+    if masks is not None:
+        mask_dir = workdir / "masks"
+        if mask_dir.exists():
+            shutil.rmtree(mask_dir)
+        mask_dir.mkdir(parents=True)
+    names = []
+    for i, img in enumerate(images):
+        name = f"view_{i:03d}.png"
+        if not cv2.imwrite(str(img_dir / name), cv2.cvtColor(np.asarray(img, np.uint8), cv2.COLOR_RGB2BGR)):
+            raise OSError(f"cannot write {img_dir / name}")
+        if mask_dir is not None:
+            # COLMAP masks: <mask_path>/<image name>.png, features only where the mask is non-zero.
+            # Dilate so that keypoints on the silhouette keep their support.
+            m = cv2.dilate(np.asarray(masks[i], np.uint8) * 255, np.ones((9, 9), np.uint8))
+            cv2.imwrite(str(mask_dir / f"{name}.png"), m)
+        names.append(name)
+    return img_dir, mask_dir, names
+
+
+def _read_points(rec: object) -> tuple[NDArray[np.float64], NDArray[np.uint8], float]:
+    pts = rec.points3D
+    if len(pts) == 0:
+        return np.zeros((0, 3)), np.zeros((0, 3), np.uint8), 0.0
+    xyz = np.array([p.xyz for p in pts.values()], dtype=np.float64).reshape(-1, 3)
+    rgb = np.array([p.color for p in pts.values()], dtype=np.uint8).reshape(-1, 3)
+    track = float(np.mean([p.track.length() for p in pts.values()]))
+    return xyz, rgb, track
+
+
+def sparse_reconstruct(images: Sequence[NDArray[np.uint8]], cameras: NDArray[np.float64], K: NDArray[np.float64],
+                       workdir: Path, mode: str = "known_poses",
+                       masks: Optional[Sequence[NDArray[np.bool_]]] = None,
+                       max_features: int = 8192, num_threads: int = -1, quiet: bool = True) -> SparseResult:
+    """SIFT + exhaustive matching + triangulation of the rendered ``images`` (N RGB uint8).
+
+    Args:
+        images: N rendered RGB images, all of the same size.
+        cameras: (N, 6) the cameras that took them ([c, v], docs/CONTRACTS.md).
+        K: 3x3 calibration in the OpenCV pixel convention (:func:`vp_recon.render.intrinsics`).
+        workdir: scratch folder (images, masks, database.db, sparse/); created when missing.
+        mode: ``'known_poses'`` (triangulate with the true poses) or ``'incremental'`` (SfM).
+        masks: optional foreground masks; features are then extracted on (dilated) plant pixels only.
+        max_features: SIFT features per image; num_threads: -1 = all cores.
+        quiet: silence COLMAP's INFO / WARNING log lines (errors still show).
+
+    Raises:
+        ValueError: bad mode, image count or image sizes.
+        SparseError: no features, no verified pair, or no triangulated point.
+    """
+    import pycolmap
+
+    level = pycolmap.logging.minloglevel
+    if quiet:
+        pycolmap.logging.minloglevel = 2
+    try:
+        return _sparse(pycolmap, images, cameras, K, Path(workdir), mode, masks, max_features, num_threads)
+    finally:
+        pycolmap.logging.minloglevel = level
+
+
+def _sparse(pycolmap: object, images: Sequence[NDArray[np.uint8]], cameras: NDArray[np.float64],
+            K: NDArray[np.float64], workdir: Path, mode: str, masks: Optional[Sequence[NDArray[np.bool_]]],
+            max_features: int, num_threads: int) -> SparseResult:
+    if mode not in MODES:
+        raise ValueError(f"unknown sparse mode {mode!r}; expected one of {', '.join(MODES)}")
+    cams = check_cameras(cameras)
+    if len(images) != len(cams):
+        raise ValueError(f"{len(images)} images for {len(cams)} cameras")
+    if len(images) < 2:
+        raise SparseError("sparse reconstruction needs at least 2 images")
+    shapes = {np.asarray(i).shape for i in images}
+    if len(shapes) != 1:
+        raise ValueError(f"images differ in size: {sorted(shapes)}")
+    workdir.mkdir(parents=True, exist_ok=True)
+    img_dir, mask_dir, names = _write_images(images, masks, workdir)
+    db_path = workdir / "database.db"
+    if db_path.exists():
+        db_path.unlink()
+    cx, cy = principal_point_gl(K)
+    reader = pycolmap.ImageReaderOptions()
+    reader.camera_model = "PINHOLE"
+    reader.camera_params = ",".join(repr(float(x)) for x in (K[0, 0], K[1, 1], cx, cy))
+    if mask_dir is not None:
+        reader.mask_path = str(mask_dir)
+    extraction = pycolmap.FeatureExtractionOptions()
+    extraction.num_threads = num_threads
+    extraction.sift.max_num_features = int(max_features)
+    device = pycolmap.Device.cpu
+    pycolmap.extract_features(db_path, img_dir, image_names=names, camera_mode=pycolmap.CameraMode.SINGLE,
+                              reader_options=reader, extraction_options=extraction, device=device)
+    matching = pycolmap.FeatureMatchingOptions()
+    matching.num_threads = num_threads
+    pycolmap.match_exhaustive(db_path, matching_options=matching, device=device)
+
+    with pycolmap.Database.open(db_path) as db:
+        db_images = {im.name: im for im in db.read_all_images()}
+        db_cameras = db.read_all_cameras()
+        keypoints = [db.num_keypoints_for_image(db_images[n].image_id) if n in db_images else 0 for n in names]
+        verified = int(db.num_verified_image_pairs())
+    if sum(keypoints) == 0:
+        raise SparseError("no SIFT features in any image (is the plant visible?)")
+    if verified == 0:
+        raise SparseError(f"no image pair could be matched (keypoints per image: {keypoints}); "
+                          "views too far apart or seeing different sides of the plant")
+
+    out_dir = workdir / "sparse"
+    out_dir.mkdir(exist_ok=True)
+    options = pycolmap.IncrementalPipelineOptions()
+    options.num_threads = num_threads
+    # Few views: keep points seen by only two images (COLMAP drops them by default).
+    options.triangulation.ignore_two_view_tracks = False
+    if mode == "known_poses":
+        rec = pycolmap.Reconstruction()
+        for cam in db_cameras:
+            rec.add_camera_with_trivial_rig(cam)
+        R, t = world_to_camera(cams)
+        for i, name in enumerate(names):
+            dbi = db_images[name]
+            image = pycolmap.Image(name=name, camera_id=dbi.camera_id, image_id=dbi.image_id)
+            pose = pycolmap.Rigid3d(pycolmap.Rotation3d(R[i]), t[i].reshape(3, 1))
+            rec.add_image_with_trivial_frame(image, pose)
+        rec = pycolmap.triangulate_points(rec, db_path, img_dir, out_dir, clear_points=True, options=options)
+        xyz, rgb, track = _read_points(rec)
+        seen = sum(1 for im in rec.images.values() if im.has_pose and im.num_points3D > 0)
+    else:
+        options.ba_refine_focal_length = False
+        options.ba_refine_extra_params = False
+        options.mapper.abs_pose_refine_focal_length = False
+        # small textured plant, few hundred keypoints a view: relax COLMAP's defaults (100 / 30 / 10)
+        options.mapper.init_min_num_inliers = 30
+        options.mapper.abs_pose_min_num_inliers = 15
+        options.min_model_size = 3
+        models = pycolmap.incremental_mapping(db_path, img_dir, out_dir, options=options)
+        if not models:
+            raise SparseError(f"incremental mapping registered no image pair ({verified} verified pairs)")
+        rec = max(models.values(), key=lambda r: r.num_reg_images())
+        seen = int(rec.num_reg_images())
+        xyz, rgb, track = _read_points(rec)
+        if seen < 3:
+            raise SparseError(f"incremental mapping registered {seen} images; aligning to the world needs 3")
+        idx = {n: i for i, n in enumerate(names)}
+        src, tgt = [], []
+        for im in rec.images.values():
+            if im.has_pose:
+                src.append(im.projection_center())
+                tgt.append(cams[idx[im.name], :3])
+        sim = pycolmap.estimate_sim3d(np.array(src), np.array(tgt))
+        if sim is None:
+            raise SparseError("cannot align the incremental reconstruction to the camera positions")
+        M = np.asarray(sim.matrix())
+        xyz = xyz @ M[:, :3].T + M[:, 3]
+    if len(xyz) == 0:
+        raise SparseError(f"no 3D point triangulated ({verified} verified image pairs, keypoints {keypoints})")
+    return SparseResult(points=xyz, colors=rgb, registered=int(seen), keypoints=[int(k) for k in keypoints],
+                        verified_pairs=verified, mean_track_length=track)

@@ -1,0 +1,327 @@
+#!/usr/bin/env python3
+"""Bring up the whole suite without ROS launch: scene, planner and recon nodes, one mission.
+
+Starts the three nodes as separate processes (real ROS 2 nodes, DDS on loopback only), prefixes
+and streams their logs, asks the planner for a plan through the ``/plan_views`` action (with a
+progress bar from its feedback), waits for the recon node's aggregate score on
+``/reconstruction/score`` and writes ``<out>/summary.json``. Everything is shut down on success,
+on Ctrl-C and when any node dies.
+
+Exit codes: 0 success, 1 the plan or the reconstruction failed (the error is printed),
+2 bad arguments or missing build, 3 a node died, 4 timed out, 130 interrupted.
+
+Run after ``make setup`` (``make run`` does both)::
+
+    . .venv/bin/activate && . install/setup.bash
+    python tools/run_suite.py --scenario one_plant --method egp --cameras 4 --out out/demo
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Dict, List, Optional
+
+ROOT = Path(__file__).resolve().parent.parent
+
+EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_NODE_DIED, EXIT_TIMEOUT, EXIT_INTERRUPTED = 0, 1, 2, 3, 4, 130
+
+
+def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
+    ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0],
+                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    ap.add_argument('--scenario', default='one_plant', choices=['one_plant', 'three_row', 'six_rect'])
+    ap.add_argument('--method', default='egp', choices=['egp', 'gp', 'circle', 'sa', 'random'])
+    ap.add_argument('--cameras', type=int, default=4)
+    ap.add_argument('--evals', type=int, default=100, help='reward evaluations')
+    ap.add_argument('--init', type=int, default=50, help='initial random design (egp, gp)')
+    ap.add_argument('--seed', type=int, default=0)
+    ap.add_argument('--models', default='', help='folder of PLY plant models (default: procedural)')
+    ap.add_argument('--realizations', type=int, default=5, help='K wind realizations')
+    ap.add_argument('--points-per-plant', type=int, default=4000)
+    ap.add_argument('--width', type=int, default=2000, help='rendered image width')
+    ap.add_argument('--height', type=int, default=1500, help='rendered image height')
+    ap.add_argument('--out', default='out/run', help='output folder')
+    ap.add_argument('--timeout', type=float, default=3600.0, help='seconds for the whole mission')
+    ap.add_argument('--domain-id', type=int, default=None,
+                    help='ROS_DOMAIN_ID of this run (default: $ROS_DOMAIN_ID, else derived from the process id)')
+    args = ap.parse_args(argv)
+    if args.cameras < 2:
+        ap.error('--cameras must be >= 2')
+    if args.evals < 1:
+        ap.error('--evals must be >= 1')
+    if args.models:
+        if not Path(args.models).is_dir():
+            ap.error(f'--models: no such folder: {args.models}')
+        args.models = str(Path(args.models).resolve())
+    return args
+
+
+class NodeProcess:
+    """One node in its own process group, its output streamed with a ``[name]`` prefix."""
+
+    def __init__(self, name: str, pkg: str, exe: str, params: Dict[str, object], env, log_dir: Path):
+        self.name = name
+        path = ROOT / 'install' / pkg / 'lib' / pkg / exe
+        if not path.exists():
+            raise FileNotFoundError(f'{path} not found: run `make setup` first')
+        cmd = [str(path), '--ros-args', '-r', f'__node:={name}']
+        for key, value in params.items():
+            if value == '':
+                continue  # an empty -p value would be read as null: keep the node's default
+            if isinstance(value, bool):
+                value = 'true' if value else 'false'
+            cmd += ['-p', f'{key}:={value}']
+        self.log_path = log_dir / f'{name}.log'
+        self.proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                     stdin=subprocess.DEVNULL, start_new_session=True, text=True,
+                                     bufsize=1)
+        self._thread = threading.Thread(target=self._pump, daemon=True)
+        self._thread.start()
+        print(f'started {name} (pid {self.proc.pid}): {path.name}', flush=True)
+
+    def _pump(self) -> None:
+        with open(self.log_path, 'w') as log:
+            for line in self.proc.stdout:
+                log.write(line)
+                log.flush()
+                sys.stderr.write(f'[{self.name}] {line}')
+
+    def poll(self) -> Optional[int]:
+        return self.proc.poll()
+
+    def stop(self, timeout: float = 10.0) -> None:
+        """SIGINT the group (clean rclpy shutdown), then SIGTERM, then SIGKILL."""
+        for sig, wait in ((signal.SIGINT, timeout), (signal.SIGTERM, 3.0), (signal.SIGKILL, 3.0)):
+            if self.proc.poll() is not None:
+                break
+            try:
+                os.killpg(self.proc.pid, sig)
+            except ProcessLookupError:
+                break
+            try:
+                self.proc.wait(wait)
+            except subprocess.TimeoutExpired:
+                continue
+        # the group may hold helper processes even after its leader exited
+        try:
+            os.killpg(self.proc.pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            pass
+        self._thread.join(timeout=2.0)
+
+
+class Mission:
+    """The test-side ROS node: action client of the planner, listener of the scores."""
+
+    def __init__(self, args: argparse.Namespace):
+        import rclpy
+        from rclpy.action import ActionClient
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+        from sensor_msgs.msg import PointCloud2
+        from vp_interfaces.action import PlanViews
+        from vp_interfaces.msg import ReconstructionScore
+
+        self.rclpy, self.PlanViews, self.Score = rclpy, PlanViews, ReconstructionScore
+        self.args = args
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.node = rclpy.create_node('vp_mission', context=self.context)
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.scene_ready = threading.Event()
+        self.scores: List[object] = []
+        self.aggregate = threading.Event()
+        self.node.create_subscription(PointCloud2, '/scene/noisy_points',
+                                      lambda _m: self.scene_ready.set(), latched)
+        self.node.create_subscription(ReconstructionScore, '/reconstruction/score',
+                                      self._on_score, 10)
+        self.client = ActionClient(self.node, PlanViews, '/plan_views')
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self._spin = threading.Thread(target=self._spin_forever, daemon=True)
+        self._spin.start()
+        self.progress = None
+
+    def _spin_forever(self) -> None:
+        try:
+            self.executor.spin()
+        except Exception:
+            pass
+
+    def _on_score(self, msg) -> None:
+        self.scores.append(msg)
+        if msg.realization == self.Score.AGGREGATE:
+            self.aggregate.set()
+
+    def on_feedback(self, fb_msg) -> None:
+        fb = fb_msg.feedback
+        if self.progress is None:
+            from tqdm import tqdm
+            self.progress = tqdm(total=fb.evaluations_total, desc=f'planning ({self.args.method})',
+                                 unit='eval', file=sys.stdout, dynamic_ncols=True)
+        self.progress.n = fb.evaluations_done
+        post = {'best reward': f'{fb.best_reward:.4f}'}
+        if fb.ensemble_weights:
+            post['w'] = ' '.join(f'{m}:{w:.2f}' for m, w in zip(fb.ensemble_models, fb.ensemble_weights))
+        self.progress.set_postfix(post, refresh=True)
+
+    def send_goal(self):
+        goal = self.PlanViews.Goal()
+        goal.num_cameras = self.args.cameras
+        goal.method = self.args.method
+        goal.evaluations = self.args.evals
+        goal.initial_evaluations = min(self.args.init, self.args.evals)
+        goal.seed = self.args.seed
+        return self.client.send_goal_async(goal, feedback_callback=self.on_feedback)
+
+    def close(self) -> None:
+        if self.progress is not None:
+            self.progress.close()
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
+        self.rclpy.try_shutdown(context=self.context)
+
+
+def wait_for(predicate, nodes: List[NodeProcess], deadline: float, what: str) -> None:
+    """Poll ``predicate`` while watching the nodes; raise on a dead node or the deadline."""
+    while not predicate():
+        for n in nodes:
+            code = n.poll()
+            if code is not None:
+                raise NodeDied(n.name, code)
+        if time.monotonic() > deadline:
+            raise TimeoutError(f'timed out waiting for {what}')
+        time.sleep(0.1)
+
+
+class NodeDied(RuntimeError):
+    def __init__(self, name: str, code: int):
+        super().__init__(f'node "{name}" died (exit code {code}); see its log above')
+        self.node_name, self.code = name, code
+
+
+def run(args: argparse.Namespace) -> int:
+    out = Path(args.out).resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    env = dict(os.environ)
+    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    if args.domain_id is not None:
+        domain = args.domain_id
+    elif os.environ.get('ROS_DOMAIN_ID', '').isdigit():
+        domain = int(os.environ['ROS_DOMAIN_ID'])
+    else:
+        domain = 10 + os.getpid() % 200
+    env['ROS_DOMAIN_ID'] = str(domain)
+    os.environ.update({k: env[k] for k in ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_DOMAIN_ID')})
+    env.setdefault('PYOPENGL_PLATFORM', 'egl')
+    env['PYTHONUNBUFFERED'] = '1'
+    start = time.monotonic()
+    deadline = start + args.timeout
+    print(f'vp-suite: {args.scenario}, {args.cameras} cameras, {args.method}, {args.evals} evaluations, '
+          f'seed {args.seed}; ROS_DOMAIN_ID={domain} (localhost only); output {out}', flush=True)
+
+    scene_params = {'scenario': args.scenario, 'models_folder': args.models, 'seed': args.seed,
+                    'realizations': args.realizations, 'points_per_plant': args.points_per_plant}
+    nodes: List[NodeProcess] = []
+    mission: Optional[Mission] = None
+    interrupted = threading.Event()
+
+    def on_signal(signum, _frame):
+        interrupted.set()
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, on_signal)
+    try:
+        nodes.append(NodeProcess('scene', 'vp_scene', 'scene', scene_params, env, out))
+        nodes.append(NodeProcess('planner', 'vp_planner', 'planner', {
+            'num_cameras': args.cameras, 'method': args.method, 'evaluations': args.evals,
+            'initial_evaluations': min(args.init, args.evals), 'seed': args.seed}, env, out))
+        nodes.append(NodeProcess('recon', 'vp_recon', 'recon', {
+            'output_folder': str(out), 'width': args.width, 'height': args.height,
+            'method': args.method}, env, out))
+        mission = Mission(args)
+
+        wait_for(mission.scene_ready.is_set, nodes, deadline, 'the scene on /scene/noisy_points')
+        wait_for(lambda: mission.client.server_is_ready(), nodes, deadline, 'the /plan_views server')
+        goal_future = mission.send_goal()
+        wait_for(goal_future.done, nodes, deadline, 'the planner to accept the goal')
+        handle = goal_future.result()
+        if not handle.accepted:
+            print('error: the planner rejected the goal', flush=True)
+            return EXIT_FAILED
+        result_future = handle.get_result_async()
+        wait_for(result_future.done, nodes, deadline, 'the plan')
+        result = result_future.result().result
+        if mission.progress is not None:
+            mission.progress.close()
+            mission.progress = None
+        if result.error_code != 0:
+            print(f'error: planning failed (error_code {result.error_code}): {result.error_msg}',
+                  flush=True)
+            return EXIT_FAILED
+        poses = [[p.position.x, p.position.y, p.position.z, p.orientation.x, p.orientation.y,
+                  p.orientation.z, p.orientation.w] for p in result.plan.poses]
+        cameras = [list(result.cameras[i:i + 6]) for i in range(0, len(result.cameras), 6)]
+        print(f'plan: reward {result.reward:.4f} after {result.evaluations} evaluations '
+              f'({result.planning_time:.1f} s)', flush=True)
+        for i, pose in enumerate(poses):
+            print(f'  cam {i}: position ({pose[0]:+.3f}, {pose[1]:+.3f}, {pose[2]:+.3f}) m  '
+                  f'quaternion ({pose[3]:+.3f}, {pose[4]:+.3f}, {pose[5]:+.3f}, {pose[6]:+.3f})',
+                  flush=True)
+
+        wait_for(mission.aggregate.is_set, nodes, deadline, 'the aggregate reconstruction score')
+        agg = [s for s in mission.scores if s.realization == mission.Score.AGGREGATE][-1]
+        per = [s for s in mission.scores if s.realization != mission.Score.AGGREGATE]
+        summary = {
+            'scenario': args.scenario, 'method': args.method, 'cameras': cameras,
+            'reward': result.reward, 'chamfer_mean': agg.chamfer, 'chamfer_std': agg.chamfer_std,
+            'poses': poses, 'seconds': time.monotonic() - start,
+            'evaluations': result.evaluations, 'trace': list(result.trace), 'seed': args.seed,
+            'error_code': agg.error_code, 'error_msg': agg.error_msg,
+            'per_realization': [{'realization': s.realization, 'chamfer': s.chamfer,
+                                 'accuracy': s.accuracy, 'completeness': s.completeness,
+                                 'fscore': s.fscore, 'points': s.num_points,
+                                 'error_code': s.error_code, 'error_msg': s.error_msg}
+                                for s in per],
+        }
+        (out / 'summary.json').write_text(json.dumps(summary, indent=2))
+        if agg.error_code != 0:
+            print(f'error: reconstruction failed (error_code {agg.error_code}): {agg.error_msg}',
+                  flush=True)
+            return EXIT_FAILED
+        print(f'Chamfer distance x100: {agg.chamfer:.3f} +- {agg.chamfer_std:.3f} over '
+              f'{agg.realizations} wind realizations; summary: {out / "summary.json"}', flush=True)
+        return EXIT_OK
+    except NodeDied as exc:
+        print(f'error: {exc}; stopping the other nodes', flush=True)
+        return EXIT_NODE_DIED
+    except TimeoutError as exc:
+        print(f'error: {exc}', flush=True)
+        return EXIT_TIMEOUT
+    except FileNotFoundError as exc:
+        print(f'error: {exc}', flush=True)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print('interrupted: stopping the nodes', flush=True)
+        return EXIT_INTERRUPTED
+    finally:
+        if mission is not None:
+            mission.close()
+        for n in reversed(nodes):
+            n.stop()
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    return run(parse_args(argv))
+
+
+if __name__ == '__main__':
+    sys.exit(main())
