@@ -16,6 +16,7 @@ SEED     ?= 0
 OUT      ?= out/$(SCENARIO)-$(METHOD)-$(CAMERAS)cams-seed$(SEED)
 MODELS   ?=
 PLAN     ?= $(OUT)/plan.json
+RECON_ARGS ?=
 
 ENV := . .venv/bin/activate && . install/setup.bash &&
 
@@ -38,7 +39,7 @@ plan: setup
 	  --evals $(EVALS) --seed $(SEED) --out $(OUT) $(if $(MODELS),--models $(MODELS))
 
 recon: setup
-	@$(ENV) python -m vp_recon.cli --plan $(PLAN) --out $(OUT)
+	@$(ENV) python -m vp_recon.cli --plan $(PLAN) --out $(OUT) $(RECON_ARGS)
 
 bench: setup
 	@$(ENV) python bench/table1.py $(if $(MODELS),--models $(MODELS))
