@@ -56,17 +56,25 @@ def models_tag(models: str) -> str:
     return Path(models).name if models else 'procedural'
 
 
+#: Benchmark-only method variants: name -> (planner method, structured plans in the initial design).
+VARIANTS = {'egp-random-init': ('egp', 0)}  # the paper's purely random initial design
+
+
 def plan_cell(cache: Path, scenario: str, method: str, seed: int, evals: int = 100, init: int = 50,
               models: str = '', num_cameras: Optional[int] = None) -> dict:
-    """One planning run (cached): cameras, reward, best-so-far trace, seconds."""
+    """One planning run (cached): cameras, reward, best-so-far trace, seconds.
+
+    ``method`` is a planner method or a key of :data:`VARIANTS`."""
     from vp_planner.optimizers import plan_views
 
     n = num_cameras or SCENARIOS[scenario]
+    planner_method, structured = VARIANTS.get(method, (method, 4))
     path = cache / 'plans' / f'{models_tag(models)}-{scenario}-n{n}-{method}-seed{seed}-e{evals}-i{init}.json'
 
     def compute() -> dict:
         noisy, _ = scene(scenario, models)
-        res = plan_views(method, noisy.points, n, evaluations=evals, initial_evaluations=init, seed=seed)
+        res = plan_views(planner_method, noisy.points, n, evaluations=evals, initial_evaluations=init, seed=seed,
+                         structured_init=structured)
         return {'cameras': np.asarray(res.cameras).tolist(), 'reward': float(res.reward),
                 'trace': [float(x) for x in res.trace], 'seconds': float(res.seconds),
                 'ensemble_weights': res.ensemble_weights}
