@@ -127,3 +127,14 @@ def test_bad_parameter_exits_non_zero(ros_env, start_node, params, text) -> None
     planner = start_node("vp_planner", "planner", params, ros_env)
     assert planner.wait(30.0) not in (None, 0), planner.output()
     assert text in planner.output()
+
+
+def test_autostart_plans_when_the_scene_arrives(ros_env, start_node, ros_node) -> None:
+    client = ros_node(ros_env)
+    plans = client.subscribe(PoseArray, "/camera_plan", LATCHED)
+    planner = start_node("vp_planner", "planner", {"autostart": True, "method": "circle", "num_cameras": 5,
+                                                   "evaluations": 12}, ros_env)
+    start_node("vp_scene", "scene", SCENE, ros_env)
+    assert client.spin_until(lambda: plans, TIMEOUT), planner.output()[-3000:]
+    assert len(plans[0].poses) == 5 and plans[0].header.frame_id == "map"
+    assert "published /camera_plan: 5 cameras" in planner.output()
