@@ -137,4 +137,4 @@ def test_autostart_plans_when_the_scene_arrives(ros_env, start_node, ros_node) -
     start_node("vp_scene", "scene", SCENE, ros_env)
     assert client.spin_until(lambda: plans, TIMEOUT), planner.output()[-3000:]
     assert len(plans[0].poses) == 5 and plans[0].header.frame_id == "map"
-    assert "published /camera_plan: 5 cameras" in planner.output()
+    assert client.spin_until(lambda: "published /camera_plan: 5 cameras" in planner.output(), 10), planner.output()

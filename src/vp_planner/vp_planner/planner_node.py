@@ -36,7 +36,7 @@ from vp_planner.optimizers import (METHODS, InvalidBudgetError, InvalidNumCamera
                                    NoFeasiblePlanError, PlanResult, UnknownMethodError, plan_views,
                                    validate_request)
 from vp_planner.poses import cameras_to_poses, rotation_matrix
-from vp_scene.cloud import pointcloud2_to_numpy
+from vp_scene.cloud import realizations_from_cloud
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -44,20 +44,6 @@ LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
 
 class Cancelled(Exception):
     """Raised inside the progress callback when the goal was cancelled."""
-
-
-def realizations_from_cloud(msg: PointCloud2) -> np.ndarray:
-    """Turn the scene node's ``/scene/noisy_points`` cloud into a (K, P, 3) array."""
-    points, _colors, realization = pointcloud2_to_numpy(msg)
-    if points.shape[0] == 0:
-        raise ValueError('the noisy scene cloud is empty')
-    if realization is None:
-        return points[None]
-    ids = np.unique(realization)
-    groups = [points[realization == k] for k in ids]
-    if len({g.shape[0] for g in groups}) != 1:
-        raise ValueError('realizations of the noisy scene have different point counts')
-    return np.stack(groups)
 
 
 def frustum_markers(cameras: np.ndarray, frame_id: str, stamp, fov: float,

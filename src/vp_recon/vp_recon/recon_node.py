@@ -44,7 +44,7 @@ from vp_recon.metrics import DEFAULT_FSCORE_THRESHOLD
 from vp_recon.outputs import contact_sheet, write_image, write_ply
 from vp_recon.pipeline import ReconCancelled, ReconConfig, ReconError, ensure_writable_dir, reconstruct_realization
 from vp_scene.build import build_noisy_scene
-from vp_scene.cloud import numpy_to_pointcloud2, pointcloud2_to_numpy
+from vp_scene.cloud import numpy_to_pointcloud2, realizations_from_cloud
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -106,22 +106,14 @@ class ReconNode(Node):
 
     def _on_truth(self, msg: PointCloud2) -> None:
         try:
-            points, _colors, realization = pointcloud2_to_numpy(msg)
-            if points.shape[0] == 0:
-                raise ValueError('the cloud is empty')
-            if realization is None:
-                realization = np.zeros(points.shape[0], dtype=np.uint16)
-            ids = np.unique(realization)
-            groups = [points[realization == k] for k in ids]
-            if len({g.shape[0] for g in groups}) != 1:
-                raise ValueError('realizations have different point counts')
+            truth = realizations_from_cloud(msg)
         except Exception as exc:  # a bad cloud must not take the node down
             self.get_logger().error(f'ignoring /scene/noisy_points: {exc}')
             return
         with self._lock:
-            self._truth, self._scene = np.stack(groups).astype(np.float64), None
+            self._truth, self._scene = truth, None
             self._lock.notify_all()
-        self.get_logger().info(f'ground truth: {len(groups)} realizations x {len(groups[0])} points')
+        self.get_logger().info(f'ground truth: {truth.shape[0]} realizations x {truth.shape[1]} points')
 
     def _on_plan(self, msg: PoseArray) -> None:
         with self._lock:

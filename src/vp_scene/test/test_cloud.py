@@ -76,3 +76,18 @@ def test_bad_input() -> None:
     with pytest.raises(ValueError, match="'z'"):
         pointcloud2_to_numpy(PointCloud2(fields=[PointField(name="x", offset=0, datatype=7, count=1),
                                                  PointField(name="y", offset=4, datatype=7, count=1)]))
+
+
+def test_realizations_from_cloud() -> None:
+    from vp_scene.cloud import realizations_from_cloud
+
+    rng = np.random.default_rng(0)
+    pts = rng.normal(size=(3, 50, 3))
+    msg = numpy_to_pointcloud2(pts.reshape(-1, 3), realization=np.repeat(np.arange(3, dtype=np.uint16), 50))
+    np.testing.assert_allclose(realizations_from_cloud(msg), pts, atol=1e-6)  # float32 on the wire
+    assert realizations_from_cloud(numpy_to_pointcloud2(pts[0])).shape == (1, 50, 3)
+    with pytest.raises(ValueError, match="empty"):
+        realizations_from_cloud(numpy_to_pointcloud2(np.zeros((0, 3))))
+    uneven = numpy_to_pointcloud2(pts[0], realization=np.array([0] * 20 + [1] * 30, dtype=np.uint16))
+    with pytest.raises(ValueError, match="different point counts"):
+        realizations_from_cloud(uneven)

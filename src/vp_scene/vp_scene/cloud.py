@@ -14,7 +14,7 @@ import numpy as np
 from sensor_msgs.msg import PointCloud2, PointField
 from std_msgs.msg import Header
 
-__all__ = ["numpy_to_pointcloud2", "pointcloud2_to_numpy", "pack_rgb", "unpack_rgb"]
+__all__ = ["numpy_to_pointcloud2", "pointcloud2_to_numpy", "realizations_from_cloud", "pack_rgb", "unpack_rgb"]
 
 _PF_DTYPES = {
     PointField.INT8: "i1", PointField.UINT8: "u1", PointField.INT16: "i2", PointField.UINT16: "u2",
@@ -131,3 +131,19 @@ def pointcloud2_to_numpy(msg: PointCloud2) -> tuple[np.ndarray, Optional[np.ndar
     realization = table["realization"].astype(np.uint16) if "realization" in fields else None
     return points, colors, realization
 
+
+
+def realizations_from_cloud(msg: PointCloud2) -> np.ndarray:
+    """The scene node's ``/scene/noisy_points`` cloud as a (K, P, 3) array (realization order).
+
+    A cloud without a ``realization`` field counts as K = 1. Raises ValueError for an empty cloud
+    or realizations of different sizes."""
+    points, _colors, realization = pointcloud2_to_numpy(msg)
+    if points.shape[0] == 0:
+        raise ValueError("the noisy scene cloud is empty")
+    if realization is None:
+        return points[None]
+    groups = [points[realization == k] for k in np.unique(realization)]
+    if len({g.shape[0] for g in groups}) != 1:
+        raise ValueError("realizations of the noisy scene have different point counts")
+    return np.stack(groups)
