@@ -82,6 +82,8 @@ def test_plan_becomes_scores_and_clouds(recon_system, tmp_path) -> None:
     assert len(pts) == per[0].num_points and set(np.unique(real)) == {0}
     out = list((tmp_path / "out").glob("plan-*"))
     assert out and sorted(p.name for p in out[0].glob("recon_*.ply")) == ["recon_0.ply", "recon_1.ply"]
+    assert sorted(p.name for p in out[0].glob("views_*.png")) == ["views_0.png", "views_1.png"]
+    assert not list(out[0].glob("realization_*"))  # COLMAP workspaces are cleaned up
 
 
 def test_bad_plans_give_error_scores_and_node_keeps_running(recon_system) -> None:

@@ -200,7 +200,7 @@ class ReconNode(Node):
                 self.get_logger().info(f'realization {k + 1}/{K}: {stage} done')
                 return rclpy.ok()
             try:
-                res = reconstruct_realization(scene, k, cameras, self.config, run_dir / f'realization_{k}',
+                res = reconstruct_realization(scene, k, cameras, self.config, run_dir,
                                               progress=progress)
             except ReconCancelled:
                 self.get_logger().info('shutting down: reconstruction abandoned')
