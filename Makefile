@@ -13,6 +13,7 @@ METHOD   ?= egp
 CAMERAS  ?= 4
 EVALS    ?= 100
 SEED     ?= 0
+REWARD   ?=
 OUT      ?= out/$(SCENARIO)-$(METHOD)-$(CAMERAS)cams-seed$(SEED)
 MODELS   ?=
 PLAN     ?= $(OUT)/plan.json
@@ -20,9 +21,9 @@ RECON_ARGS ?=
 
 ENV := . .venv/bin/activate && . install/setup.bash &&
 
-.PHONY: help setup test run plan recon bench clean
+.PHONY: help setup test run plan recon score bench clean
 help:
-	@echo "make setup | test | run | plan | recon | bench | clean   (see README.md)"
+	@echo "make setup | test | run | plan | recon | score | bench | clean   (see README.md)"
 
 setup:
 	@tools/setup.sh
@@ -32,14 +33,17 @@ test: setup
 
 run: setup
 	@$(ENV) python tools/run_suite.py --scenario $(SCENARIO) --method $(METHOD) --cameras $(CAMERAS) \
-	  --evals $(EVALS) --seed $(SEED) --out $(OUT) $(if $(MODELS),--models $(MODELS))
+	  --evals $(EVALS) --seed $(SEED) --out $(OUT) $(if $(MODELS),--models $(MODELS)) $(if $(REWARD),--reward $(REWARD))
 
 plan: setup
 	@$(ENV) python -m vp_planner.cli --scenario $(SCENARIO) --method $(METHOD) --cameras $(CAMERAS) \
-	  --evals $(EVALS) --seed $(SEED) --out $(OUT) $(if $(MODELS),--models $(MODELS))
+	  --evals $(EVALS) --seed $(SEED) --out $(OUT) $(if $(MODELS),--models $(MODELS)) $(if $(REWARD),--reward $(REWARD))
 
 recon: setup
 	@$(ENV) python -m vp_recon.cli --plan $(PLAN) --out $(OUT) $(RECON_ARGS)
+
+score: setup
+	@$(ENV) python -m vp_planner.cli score --plan $(PLAN) $(if $(REWARD),--reward $(REWARD))
 
 bench: setup
 	@$(ENV) python bench/table1.py $(if $(MODELS),--models $(MODELS))

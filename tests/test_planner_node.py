@@ -17,7 +17,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E
 from visualization_msgs.msg import MarkerArray  # noqa: E402
 from vp_interfaces.action import PlanViews  # noqa: E402
 
-from vp_planner.poses import poses_to_cameras  # noqa: E402
+from vp_scene.camera import poses_to_cameras  # noqa: E402
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 SCENE = dict(scenario="one_plant", points_per_plant=600, realizations=2, levels=5, seed=3)
@@ -34,10 +34,10 @@ def send(client, action: ActionClient, goal: PlanViews.Goal, feedback: list | No
     return handle, client.spin_future(handle.get_result_async(), 240.0)
 
 
-def goal(num_cameras=4, method="circle", evaluations=20, initial=0, seed=1) -> PlanViews.Goal:
+def goal(num_cameras=4, method="circle", evaluations=20, initial=0, seed=1, reward="") -> PlanViews.Goal:
     g = PlanViews.Goal()
-    g.num_cameras, g.method, g.evaluations, g.initial_evaluations, g.seed = (
-        num_cameras, method, evaluations, initial, seed)
+    g.num_cameras, g.method, g.evaluations, g.initial_evaluations, g.seed, g.reward = (
+        num_cameras, method, evaluations, initial, seed, reward)
     return g
 
 
@@ -93,6 +93,7 @@ def test_no_scene_goal_aborts_then_plans_and_publishes(ros_env, start_node, ros_
     (dict(num_cameras=1), "INVALID_NUM_CAMERAS"),
     (dict(method="magic"), "UNKNOWN_METHOD"),
     (dict(method="egp", evaluations=5, initial=10), "INVALID_BUDGET"),
+    (dict(reward="magic"), "UNKNOWN_REWARD_MODEL"),
 ])
 def test_bad_goals_are_aborted_and_node_keeps_serving(system, bad, code) -> None:
     client, action, _, planner = system
@@ -138,3 +139,20 @@ def test_autostart_plans_when_the_scene_arrives(ros_env, start_node, ros_node) -
     assert client.spin_until(lambda: plans, TIMEOUT), planner.output()[-3000:]
     assert len(plans[0].poses) == 5 and plans[0].header.frame_id == "map"
     assert client.spin_until(lambda: "published /camera_plan: 5 cameras" in planner.output(), 10), planner.output()
+
+
+def test_goal_reward_model(system) -> None:
+    """The goal's reward field picks the model; the result says which one the plan maximized."""
+    from vp_planner.reward import noisy_reward
+    from vp_scene.build import build_noisy_scene
+
+    client, action, _, planner = system
+    assert client.spin_until(lambda: "scene received" in planner.output(), TIMEOUT), planner.output()
+    _, res = send(client, action, goal(method="random", evaluations=6, reward="paper"))
+    r = res.result
+    assert r.error_code == PlanViews.Result.NONE and r.reward_model == "paper", r.error_msg
+    noisy, _ = build_noisy_scene(**SCENE)
+    cams = np.asarray(r.cameras).reshape(-1, 6)
+    assert r.reward == pytest.approx(float(noisy_reward(cams, noisy.points)), abs=1e-9)
+    _, res = send(client, action, goal(method="random", evaluations=6))  # '' = the node's parameter
+    assert res.result.reward_model == "coverage" and res.result.reward != pytest.approx(r.reward)

@@ -18,7 +18,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E
 from sensor_msgs.msg import PointCloud2  # noqa: E402
 from vp_interfaces.msg import ReconstructionScore as Score  # noqa: E402
 
-from vp_planner.poses import cameras_to_poses  # noqa: E402
+from vp_scene.camera import cameras_to_poses  # noqa: E402
 from vp_scene.cloud import pointcloud2_to_numpy  # noqa: E402
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)

@@ -42,6 +42,7 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
     ap.add_argument('--evals', type=int, default=100, help='reward evaluations')
     ap.add_argument('--init', type=int, default=50, help='initial random design (egp, gp)')
     ap.add_argument('--seed', type=int, default=0)
+    ap.add_argument('--reward', default='', help="reward model: paper | coverage ('': the planner's default)")
     ap.add_argument('--models', default='', help='folder of PLY plant models (default: procedural)')
     ap.add_argument('--realizations', type=int, default=5, help='K wind realizations')
     ap.add_argument('--points-per-plant', type=int, default=4000)
@@ -180,6 +181,7 @@ class Mission:
         goal.evaluations = self.args.evals
         goal.initial_evaluations = min(self.args.init, self.args.evals)
         goal.seed = self.args.seed
+        goal.reward = self.args.reward
         return self.client.send_goal_async(goal, feedback_callback=self.on_feedback)
 
     def close(self) -> None:
@@ -240,13 +242,17 @@ def run(args: argparse.Namespace) -> int:
 
     signal.signal(signal.SIGTERM, on_signal)
     try:
-        nodes.append(NodeProcess('scene', 'vp_scene', 'scene', scene_params, env, out))
+        # the planner and the recon share the cores: 1 thread for the planner, the rest for the recon
+        recon_threads = max(1, (os.cpu_count() or 2) - 1)
+        nodes.append(NodeProcess('scene', 'vp_scene', 'scene', scene_params, {**env, 'OMP_NUM_THREADS': '1'}, out))
         nodes.append(NodeProcess('planner', 'vp_planner', 'planner', {
             'num_cameras': args.cameras, 'method': args.method, 'evaluations': args.evals,
-            'initial_evaluations': min(args.init, args.evals), 'seed': args.seed}, env, out))
+            'initial_evaluations': min(args.init, args.evals), 'seed': args.seed, 'num_threads': 1},
+            {**env, 'OMP_NUM_THREADS': '1'}, out))
         nodes.append(NodeProcess('recon', 'vp_recon', 'recon', {
             'output_folder': str(out), 'width': args.width, 'height': args.height,
-            'method': args.method}, env, out))
+            'method': args.method, 'num_threads': recon_threads},
+            {**env, 'OMP_NUM_THREADS': str(recon_threads)}, out))
         mission = Mission(args)
 
         wait_for(mission.scene_ready.is_set, nodes, deadline, 'the scene on /scene/noisy_points')
@@ -270,7 +276,7 @@ def run(args: argparse.Namespace) -> int:
         poses = [[p.position.x, p.position.y, p.position.z, p.orientation.x, p.orientation.y,
                   p.orientation.z, p.orientation.w] for p in result.plan.poses]
         cameras = [list(result.cameras[i:i + 6]) for i in range(0, len(result.cameras), 6)]
-        print(f'plan: reward {result.reward:.4f} after {result.evaluations} evaluations '
+        print(f'plan: {result.reward_model} reward {result.reward:.4f} after {result.evaluations} evaluations '
               f'({result.planning_time:.1f} s)', flush=True)
         for i, pose in enumerate(poses):
             print(f'  cam {i}: position ({pose[0]:+.3f}, {pose[1]:+.3f}, {pose[2]:+.3f}) m  '
@@ -282,7 +288,8 @@ def run(args: argparse.Namespace) -> int:
         per = [s for s in mission.scores if s.realization != mission.Score.AGGREGATE]
         summary = {
             'scenario': args.scenario, 'method': args.method, 'cameras': cameras,
-            'reward': result.reward, 'chamfer_mean': agg.chamfer, 'chamfer_std': agg.chamfer_std,
+            'reward': result.reward, 'reward_model': result.reward_model,
+            'chamfer_mean': agg.chamfer, 'chamfer_std': agg.chamfer_std,
             'poses': poses, 'seconds': time.monotonic() - start,
             'evaluations': result.evaluations, 'trace': list(result.trace), 'seed': args.seed,
             'error_code': agg.error_code, 'error_msg': agg.error_msg,

@@ -3,6 +3,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
+
+# As the planner node and CLI do by default: one torch thread, the other core for the rest.
+torch.set_num_threads(1)
 
 
 def synthetic_plant(n: int = 1500, seed: int = 0) -> np.ndarray:
@@ -41,3 +45,9 @@ def plant_points() -> np.ndarray:
 @pytest.fixture(scope="session")
 def realizations(plant_points: np.ndarray) -> np.ndarray:
     return wind_realizations(plant_points)
+
+
+@pytest.fixture(scope="session")
+def small_realizations() -> np.ndarray:
+    """A 500-point plant in 2 wind realizations: a small, real reward problem for BO tests."""
+    return wind_realizations(synthetic_plant(500, seed=1), k=2)

@@ -45,3 +45,44 @@ def test_weights_move_to_the_kernel_the_function_was_drawn_from() -> None:
     assert final[MODEL_NAMES.index("RBF-ARD")] > 0.9  # from the uniform prior 0.25
     assert seen[:30] == [None] * 30 and seen[-1] == final  # weights reported once GPs are fitted
     assert torch.all(res.trace[1:] >= res.trace[:-1])
+
+
+def test_trust_region_update_rule() -> None:
+    from vp_planner.trust_region import TrustRegion
+
+    tr = TrustRegion(length=0.1, length_init=0.1, length_min=0.02, length_max=0.3, success_tolerance=2,
+                     failure_tolerance=3)
+    tr.update(True)
+    assert tr.length == 0.1
+    tr.update(True)
+    assert tr.length == pytest.approx(0.2)          # two successes double it
+    tr.update(True)
+    tr.update(True)
+    assert tr.length == pytest.approx(0.3)          # capped at length_max
+    for _ in range(3):
+        tr.update(False)
+    assert tr.length == pytest.approx(0.15)         # three failures halve it
+    for _ in range(9):
+        tr.update(False)
+    assert tr.restarts == 1 and tr.length == pytest.approx(0.1)  # collapsed below 0.02: restart
+    b = tr.bounds(torch.tensor([0.02, 0.5, 0.98], dtype=torch.float64), periodic=torch.tensor([True, False, False]))
+    assert float(b[0, 0]) < 0.0                     # a periodic coordinate may leave the cube
+    assert float(b[1, 2]) == 1.0 and float(b[0, 1]) == pytest.approx(0.45)
+
+
+def test_bo_improves_on_its_initial_design(small_realizations) -> None:
+    """On a small real problem (3 cameras around a 500-point plant, the default reward and the
+    paper's), the BO phase must beat the best plan of its initial design, also from the paper's
+    purely random initial design; every step is recorded."""
+    from vp_planner.optimizers import plan_views
+
+    R = small_realizations
+    for reward, structured in (("coverage", 4), ("paper", 0)):
+        res = plan_views("egp", R, 3, evaluations=30, initial_evaluations=15, seed=0, reward=reward,
+                         structured_init=structured)
+        assert res.initial_best is not None
+        assert res.reward > res.initial_best + 0.01, (reward, res.initial_best, res.reward)
+        assert len(res.steps) == 15 and any(s["improved"] for s in res.steps)
+        for s in res.steps:
+            assert s["model"] in MODEL_NAMES and sum(s["weights"]) == pytest.approx(1.0, abs=1e-5)
+            assert s["trust_region"] is not None and s["trust_region"] > 0

@@ -14,8 +14,10 @@ pytest.importorskip("vp_scene.scenario", reason="vp_scene is not importable")
 pytest.importorskip("vp_scene.wind", reason="vp_scene is not importable")
 
 from vp_planner.cli import main  # noqa: E402
-from vp_planner.poses import pose_to_camera  # noqa: E402
+from vp_scene.camera import poses_to_cameras  # noqa: E402
 from vp_planner.reward import noisy_reward  # noqa: E402
+from vp_planner.reward_models import DEFAULT_REWARD_MODEL, make_reward  # noqa: E402
+from vp_scene.camera import CameraModel  # noqa: E402
 
 
 def test_cli_writes_plan(tmp_path: Path) -> None:
@@ -32,7 +34,8 @@ def test_cli_writes_plan(tmp_path: Path) -> None:
     assert len(plan["trace"]) == 12 and len(plan["simple_regret"]) == 12
     cams = np.array(plan["cameras"])
     assert cams.shape == (3, 6) and np.array(plan["poses"]).shape == (3, 7)
-    c, u = pose_to_camera(np.array(plan["poses"]))
+    back = poses_to_cameras(np.array(plan["poses"]))
+    c, u = back[:, :3], back[:, 3:]
     np.testing.assert_allclose(c, cams[:, :3], atol=1e-12)
     np.testing.assert_allclose(u, cams[:, 3:] / np.linalg.norm(cams[:, 3:], axis=1, keepdims=True), atol=1e-9)
     scene = plan["scene"]
@@ -41,7 +44,10 @@ def test_cli_writes_plan(tmp_path: Path) -> None:
         assert key in scene, key
     pts = np.load(out / "noisy_points.npy")
     assert pts.ndim == 3 and pts.shape[0] == 2 and pts.shape[2] == 3
-    assert plan["reward"] == pytest.approx(float(noisy_reward(cams, pts, plan["fov"], plan["theta_match"])), abs=1e-9)
+    assert plan["reward_model"] == DEFAULT_REWARD_MODEL and plan["image_size"] == [2000, 1500]
+    expected = make_reward(plan["reward_model"], pts, plan["fov"], plan["theta_match"],
+                           CameraModel(*plan["image_size"], plan["fov"]))(cams[None])[0]
+    assert plan["reward"] == pytest.approx(float(expected), abs=1e-6)
     # the scene dict rebuilds the identical realizations
     from vp_scene.scenario import make_scene
     from vp_scene.wind import WindConfig, make_noisy_scene
@@ -76,3 +82,43 @@ def test_cli_argparse_error_is_one_line(capsys: pytest.CaptureFixture) -> None:
     assert info.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "invalid choice" in err[0]
+
+
+def test_cli_paper_reward_and_score(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """--reward paper plans on eqs. 2-7; `score` prints a plan's reward as the last number on stdout."""
+    out = tmp_path / "run"
+    rc = main(["--scenario", "one_plant", "--method", "circle", "--cameras", "3", "--evals", "9", "--seed", "1",
+               "--out", str(out), "--points-per-plant", "500", "--realizations", "2", "--reward", "paper",
+               "--no-progress"])
+    assert rc == 0
+    plan = json.loads((out / "plan.json").read_text())
+    pts = np.load(out / "noisy_points.npy")
+    assert plan["reward_model"] == "paper"
+    assert plan["reward"] == pytest.approx(float(noisy_reward(np.array(plan["cameras"]), pts)), abs=1e-9)
+    capsys.readouterr()
+    assert main(["score", "--plan", str(out / "plan.json")]) == 0
+    last = capsys.readouterr().out.split()[-1]
+    assert float(last) == pytest.approx(plan["reward"], abs=1e-6)          # the plan's own model
+    assert main(["score", "--plan", str(out / "plan.json"), "--reward", "coverage"]) == 0
+    cov = float(capsys.readouterr().out.split()[-1])
+    expected = make_reward("coverage", pts)(np.array(plan["cameras"])[None])[0]
+    assert cov == pytest.approx(float(expected), abs=1e-6) and cov != pytest.approx(plan["reward"])
+    # a flight plan given as poses, without a scene: the scene comes from the options
+    flight = tmp_path / "flight.json"
+    flight.write_text(json.dumps({"poses": plan["poses"]}))
+    assert main(["score", "--plan", str(flight), "--reward", "paper", "--points-per-plant", "500",
+                 "--realizations", "2", "--seed", "1"]) == 0
+    assert float(capsys.readouterr().out.split()[-1]) == pytest.approx(plan["reward"], abs=1e-6)
+
+
+def test_cli_score_errors(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    assert main(["score", "--plan", str(tmp_path / "missing.json")]) == 2
+    assert "not found" in capsys.readouterr().err
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"cameras": [[0, 0, 1, 1, 0, 0], [1, 0, 1, 0, 0, 0]]}))
+    assert main(["score", "--plan", str(bad)]) == 2
+    assert "zero viewing direction" in capsys.readouterr().err
+    bad.write_text(json.dumps({"cameras": [[0, 0, 1, 1, 0, 0]], "fov": "wide"}))
+    assert main(["score", "--plan", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "'fov'" in err and "bad.json" in err

@@ -15,7 +15,7 @@ from vp_planner.optimizers import (
     UnknownMethodError,
     plan_views,
 )
-from vp_planner.reward import noisy_reward
+from vp_planner.reward_models import make_reward
 from vp_planner.space import ViewSpace
 
 
@@ -26,13 +26,14 @@ def check_result(res, method: str, realizations: np.ndarray, n: int, evaluations
     assert res.trace.shape == (evaluations,) and res.rewards.shape == (evaluations,)
     assert np.all(np.diff(res.trace) >= 0)
     assert res.reward == pytest.approx(res.trace[-1]) and res.reward > 0
-    assert res.reward == pytest.approx(float(noisy_reward(res.cameras, realizations)), abs=1e-12)
+    expected = make_reward(res.reward_model, realizations)(res.cameras[None])[0]
+    assert res.reward == pytest.approx(float(expected), abs=1e-6)
     assert ViewSpace(realizations, n).feasible(res.cameras)
     np.testing.assert_allclose(res.simple_regret(), 1.0 - res.trace)
     assert res.seconds > 0
 
 
-@pytest.mark.parametrize("method", ["circle", "sa", "random"])
+@pytest.mark.parametrize("method", ["circle", "arc", "sa", "random"])
 def test_baselines(method: str, realizations: np.ndarray) -> None:
     progress = []
 
@@ -48,6 +49,28 @@ def test_baselines(method: str, realizations: np.ndarray) -> None:
     assert res.ensemble_weights is None
     again = plan_views(method, realizations, 3, evaluations=30, seed=1)
     np.testing.assert_allclose(again.trace, res.trace)
+
+
+def test_arc_is_the_tuned_circle_with_fixed_spacing(realizations: np.ndarray) -> None:
+    """arc: N cameras 30 degrees apart on the radius and height of the circle tuned with the
+    rest of the budget, all facing the circle's target; only arcs are ever returned."""
+    res = plan_views("arc", realizations, 4, evaluations=28, seed=2)
+    circle = plan_views("circle", realizations, 4, evaluations=20, seed=2)
+    centre = ViewSpace(realizations, 4).extent.centre
+    c = res.cameras[:, :3]
+    rad = np.hypot(c[:, 0] - centre[0], c[:, 1] - centre[1])
+    rad_circle = np.hypot(circle.cameras[0, 0] - centre[0], circle.cameras[0, 1] - centre[1])
+    rad_sep = 0.5 / (2 * math.sin(math.radians(15.0)))  # min_separation 0.5 between neighbours
+    np.testing.assert_allclose(rad, max(rad_circle, rad_sep), rtol=1e-6)
+    np.testing.assert_allclose(c[:, 2], circle.cameras[0, 2], atol=1e-9)
+    az = np.unwrap(np.arctan2(c[:, 1] - centre[1], c[:, 0] - centre[0]))
+    np.testing.assert_allclose(np.abs(np.diff(az)), math.radians(30.0), atol=1e-9)
+    target = c + res.cameras[:, 3:]
+    np.testing.assert_allclose(target, target[:1].repeat(4, 0), atol=1e-9)
+    assert np.all(res.trace[:20] == 0.0) and res.trace[-1] > 0  # the circle tuning is never returned
+    wide = plan_views("arc", realizations, 4, evaluations=28, seed=2, arc_spacing=math.radians(45.0))
+    az = np.unwrap(np.arctan2(wide.cameras[:, 1] - centre[1], wide.cameras[:, 0] - centre[0]))
+    np.testing.assert_allclose(np.abs(np.diff(az)), math.radians(45.0), atol=1e-9)
 
 
 def test_circle_geometry(realizations: np.ndarray) -> None:
@@ -94,7 +117,7 @@ def test_bo_methods(method: str, realizations: np.ndarray) -> None:
 
 
 def test_bad_inputs(realizations: np.ndarray) -> None:
-    assert set(METHODS) == {"egp", "gp", "circle", "sa", "random"}
+    assert set(METHODS) == {"egp", "gp", "circle", "arc", "sa", "random"}
     with pytest.raises(InvalidNumCamerasError):
         plan_views("random", realizations, 1)
     with pytest.raises(UnknownMethodError, match="unknown method"):

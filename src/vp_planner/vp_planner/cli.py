@@ -1,18 +1,25 @@
-"""Command line planner: build a noisy scene with vp_scene, plan views, write plan.json.
+"""Command line planner: plan views on a noisy scene (write plan.json), or score a plan.
 
-    python -m vp_planner.cli --scenario one_plant --method egp --cameras 4 --evals 100 \\
-        --init 50 --seed 0 --out out/run [--models FOLDER] [--points-per-plant 4000 ...]
+    python -m vp_planner.cli [plan] --scenario one_plant --method egp --cameras 4 --evals 100 \\
+        --init 50 --seed 0 --out out/run [--reward coverage] [--models FOLDER] [...]
+    python -m vp_planner.cli score --plan out/run/plan.json [--reward paper]
 
-Writes ``OUT/plan.json`` (scenario, method, cameras [[cx,cy,cz,vx,vy,vz], ...], poses
-[[x,y,z,qx,qy,qz,qw], ...], reward, trace, evaluations, seed, seconds, scene (every argument
-needed to rebuild the identical scene), fov, theta_match, simple_regret, ...) and
-``OUT/noisy_points.npy`` (the K x P x 3 realizations the reward was computed on). A progress bar
-with the best reward goes to stderr. Errors: one line on stderr and exit code 2.
+``plan`` (the default command) writes ``OUT/plan.json`` (scenario, method, reward_model,
+cameras [[cx,cy,cz,vx,vy,vz], ...], poses [[x,y,z,qx,qy,qz,qw], ...], reward, trace,
+evaluations, initial_evaluations, seed, seconds, scene (every argument needed to rebuild the
+identical scene), fov, theta_match, image_size, simple_regret, ...) and ``OUT/noisy_points.npy``
+(the K x P x 3 realizations the reward was computed on). A progress bar with the best reward
+goes to stderr.
+
+``score`` rebuilds the scene of a plan file (its ``scene``, or ``--scenario``/``--models``/...
+for a flight plan without one; ``cameras`` or ``poses``) and prints the plan's reward under the
+chosen model as the last number on stdout.
+
+Errors: one line on stderr and exit code 2.
 """
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from pathlib import Path
@@ -34,17 +41,9 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
 
 
-def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
-    from .optimizers import METHODS
-
-    p = _Parser(prog="plan", description="EGP-VP view planning on a noisy corn scene.")
+def _scene_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scenario", default="one_plant", choices=SCENARIO_NAMES)
-    p.add_argument("--method", default="egp", choices=METHODS)
-    p.add_argument("--cameras", type=int, default=4, help="number of cameras N (>= 2)")
-    p.add_argument("--evals", type=int, default=100, help="reward evaluations (initial design included)")
-    p.add_argument("--init", type=int, default=50, help="initial design size of egp/gp")
     p.add_argument("--seed", type=int, default=0, help="seed of the scene, the wind and the planner")
-    p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--models", default=None, help="folder of PLY plant models (default: procedural corn)")
     p.add_argument("--points-per-plant", type=int, default=4000)
     p.add_argument("--plant-spacing", type=float, default=0.6)
@@ -53,63 +52,121 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     p.add_argument("--realizations", type=int, default=5, help="wind realizations K")
     p.add_argument("--wind-variance", type=float, default=0.002)
     p.add_argument("--wind-direction", type=float, default=0.0, help="rad from +x")
-    p.add_argument("--min-standoff", type=float, default=0.5)
-    p.add_argument("--min-altitude", type=float, default=0.3)
-    p.add_argument("--min-separation", type=float, default=0.5)
-    p.add_argument("--fov", type=float, default=math.pi / 2)
-    p.add_argument("--theta-match", type=float, default=math.pi / 4)
-    p.add_argument("--structured-init", type=int, default=4,
-                   help="structured plans in the egp/gp initial design (0: purely random)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    return p.parse_args(argv)
 
 
-def build_scene(args: argparse.Namespace) -> tuple[np.ndarray, dict]:
-    """The noisy realizations (K, P, 3) and the scene dict that rebuilds them."""
+def _reward_args(p: argparse.ArgumentParser, default: Optional[str]) -> None:
+    from .reward_models import REWARD_MODELS
+
+    p.add_argument("--reward", default=default, choices=REWARD_MODELS,
+                   help="reward model (paper: eqs. 2-7; coverage: expected reconstructed fraction)")
+    p.add_argument("--image-width", type=int, default=None, help="image width of the cameras, pixels (2000)")
+    p.add_argument("--image-height", type=int, default=None, help="image height of the cameras, pixels (1500)")
+
+
+def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
+    """Arguments of ``plan`` (the default command) or ``score``; ``args.command`` says which."""
+    from .optimizers import METHODS
+    from .reward_models import DEFAULT_REWARD_MODEL
+
+    argv = list(sys.argv[1:] if argv is None else argv)
+    command = argv.pop(0) if argv and argv[0] in ("plan", "score") else "plan"
+    if command == "score":
+        p = _Parser(prog="plan score",
+                    description="The reward of an existing plan on its scene (the last number on stdout).")
+        p.add_argument("--plan", required=True, help="plan.json (cameras or poses; its scene, or the scene options)")
+        _reward_args(p, None)
+        p.add_argument("--fov", type=float, default=None, help="rad (default: the plan's, else pi/2)")
+        p.add_argument("--theta-match", type=float, default=None, help="rad (default: the plan's, else pi/4)")
+        _scene_args(p)
+    else:
+        p = _Parser(prog="plan", description="EGP-VP view planning on a noisy corn scene.")
+        _scene_args(p)
+        p.add_argument("--method", default="egp", choices=METHODS)
+        p.add_argument("--cameras", type=int, default=4, help="number of cameras N (>= 2)")
+        p.add_argument("--evals", type=int, default=100, help="reward evaluations (initial design included)")
+        p.add_argument("--init", type=int, default=50, help="initial design size of egp/gp")
+        p.add_argument("--out", required=True, help="output folder")
+        _reward_args(p, DEFAULT_REWARD_MODEL)
+        p.add_argument("--min-standoff", type=float, default=0.5)
+        p.add_argument("--min-altitude", type=float, default=0.3)
+        p.add_argument("--min-separation", type=float, default=0.5)
+        p.add_argument("--fov", type=float, default=math.pi / 2)
+        p.add_argument("--theta-match", type=float, default=math.pi / 4)
+        p.add_argument("--structured-init", type=int, default=4,
+                       help="structured plans in the egp/gp initial design (0: purely random, as the paper)")
+        p.add_argument("--bo-mode", default="trust_region", choices=("trust_region", "global"),
+                       help="egp/gp: EI in a trust region about the incumbent, or over the whole space (paper)")
+        p.add_argument("--arc-spacing", type=float, default=math.radians(30.0),
+                       help="arc: rad between neighbouring cameras (default 30 degrees)")
+        p.add_argument("--threads", type=int, default=1,
+                       help="torch threads (default 1: leaves the other cores to a reconstruction beside it)")
+        p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    args = p.parse_args(argv)
+    args.command = command
+    return args
+
+
+def set_threads(n: int) -> None:
+    """Use ``n`` threads for torch and OpenCV in this process (BLAS pools of numpy follow
+    OMP_NUM_THREADS, which the Makefile and the entry script set per process)."""
+    import torch
+
+    torch.set_num_threads(int(n))
     try:
-        from vp_scene.scenario import make_scene
-        from vp_scene.wind import WindConfig, make_noisy_scene
-    except ImportError as exc:  # pragma: no cover - depends on the workspace
-        raise CliError(f"vp_scene is not available: {exc}") from None
+        import cv2
+
+        cv2.setNumThreads(int(n))
+    except ImportError:  # pragma: no cover - OpenCV is a dependency
+        pass
+
+
+def scene_of(args: argparse.Namespace) -> dict:
+    """The scene dict (build_noisy_scene's keyword arguments) of the command line options."""
     models = None
-    models_path = None
     if args.models:
         folder = Path(args.models)
         if not folder.is_dir():
             raise CliError(f"models folder not found: {folder}")
-        from vp_scene.plants import load_models
-
-        models_path = str(folder.resolve())
-        models = load_models(folder)
-        if not models:
-            raise CliError(f"no plant models in {folder}")
-    scene = make_scene(args.scenario, models=models, seed=args.seed, points_per_plant=args.points_per_plant,
-                       plant_spacing=args.plant_spacing, row_spacing=args.row_spacing)
-    config = WindConfig(levels=args.levels, realizations=args.realizations, variance=args.wind_variance,
-                        direction=args.wind_direction)
-    noisy = make_noisy_scene(scene, config, args.seed)
-    desc = {
-        "scenario": args.scenario,
-        "models": models_path,
-        "seed": args.seed,
-        "points_per_plant": args.points_per_plant,
-        "plant_spacing": args.plant_spacing,
-        "row_spacing": args.row_spacing,
-        "levels": args.levels,
-        "realizations": args.realizations,
-        "wind_variance": args.wind_variance,
-        "wind_direction": args.wind_direction,
-    }
-    return np.asarray(noisy.points, dtype=np.float64), desc
+        models = str(folder.resolve())
+    return {"scenario": args.scenario, "models": models, "seed": args.seed,
+            "points_per_plant": args.points_per_plant, "plant_spacing": args.plant_spacing,
+            "row_spacing": args.row_spacing, "levels": args.levels, "realizations": args.realizations,
+            "wind_variance": args.wind_variance, "wind_direction": args.wind_direction}
 
 
-def run(args: argparse.Namespace) -> dict:
+def build_scene(scene: dict) -> np.ndarray:
+    """The noisy realizations (K, P, 3) of a scene dict."""
+    from vp_scene.build import build_noisy_scene
+
+    noisy, _ = build_noisy_scene(**scene)
+    return np.asarray(noisy.points, dtype=np.float64)
+
+
+def _image_size(args: argparse.Namespace, default: tuple[int, int] = (2000, 1500)) -> tuple[int, int]:
+    w = args.image_width if args.image_width is not None else default[0]
+    h = args.image_height if args.image_height is not None else default[1]
+    if w < 16 or h < 16:
+        raise CliError(f"image size must be at least 16 x 16 pixels, got {w} x {h}")
+    return int(w), int(h)
+
+
+def plan(args: argparse.Namespace) -> dict:
+    """Plan views; write OUT/plan.json and OUT/noisy_points.npy; return the plan dict."""
+    from vp_scene.camera import cameras_to_poses
+    from vp_scene.planfile import write_plan
+
     from .optimizers import plan_views, validate_request
-    from .poses import cameras_to_poses
 
     validate_request(args.method, args.cameras, args.evals, args.init)  # fail before building the scene
+    if args.threads < 1:
+        raise CliError(f"--threads must be >= 1, got {args.threads}")
+    if not 0.0 < args.arc_spacing < 2 * math.pi:
+        raise CliError(f"--arc-spacing must be in (0, 2 pi) rad, got {args.arc_spacing}")
+    set_threads(args.threads)
     out = Path(args.out)
-    realizations, scene_desc = build_scene(args)
+    image_size = _image_size(args)
+    scene = scene_of(args)
+    realizations = build_scene(scene)
 
     bar: Any = None
     if not args.no_progress:
@@ -127,14 +184,17 @@ def run(args: argparse.Namespace) -> dict:
         res = plan_views(args.method, realizations, args.cameras, evaluations=args.evals,
                          initial_evaluations=args.init, seed=args.seed, min_standoff=args.min_standoff,
                          min_altitude=args.min_altitude, min_separation=args.min_separation, fov=args.fov,
-                         theta_match=args.theta_match, callback=progress, structured_init=args.structured_init)
+                         theta_match=args.theta_match, callback=progress, structured_init=args.structured_init,
+                         reward=args.reward, image_size=image_size, bo_mode=args.bo_mode,
+                         arc_spacing=args.arc_spacing)
     finally:
         if bar is not None:
             bar.close()
     poses = cameras_to_poses(res.cameras)
-    plan = {
+    data = {
         "scenario": args.scenario,
         "method": args.method,
+        "reward_model": res.reward_model,
         "num_cameras": int(args.cameras),
         "cameras": [[float(x) for x in row] for row in res.cameras],
         "poses": [[float(x) for x in row] for row in poses],
@@ -143,28 +203,61 @@ def run(args: argparse.Namespace) -> dict:
         "simple_regret": [float(x) for x in res.simple_regret()],
         "evaluations": int(res.evaluations),
         "initial_evaluations": int(args.init) if args.method in ("egp", "gp") else None,
+        "structured_init": int(args.structured_init) if args.method in ("egp", "gp") else None,
+        "bo_mode": args.bo_mode if args.method in ("egp", "gp") else None,
+        "initial_best": res.initial_best,
+        "steps": res.steps,
         "seed": int(args.seed),
         "seconds": float(res.seconds),
         "fov": float(args.fov),
         "theta_match": float(args.theta_match),
+        "image_size": list(image_size),
         "feasibility": {"min_standoff": args.min_standoff, "min_altitude": args.min_altitude,
                         "min_separation": args.min_separation},
         "ensemble_weights": res.ensemble_weights,
         "model_names": res.model_names,
-        "scene": scene_desc,
+        "scene": scene,
     }
     out.mkdir(parents=True, exist_ok=True)
     np.save(out / "noisy_points.npy", realizations)
-    tmp = out / "plan.json.tmp"
-    tmp.write_text(json.dumps(plan, indent=1))
-    tmp.replace(out / "plan.json")
-    return plan
+    write_plan(out / "plan.json", data)
+    return data
+
+
+def score(args: argparse.Namespace) -> float:
+    """The reward of the plan file under ``--reward`` (default: the file's reward_model, else
+    the default model) on the plan's scene."""
+    from vp_scene.planfile import PlanFileError, load_plan
+
+    from .reward_models import DEFAULT_REWARD_MODEL, check_reward_model, make_reward
+    from vp_scene.camera import CameraModel
+
+    try:
+        pf = load_plan(args.plan, require_scene=False)
+    except PlanFileError as exc:
+        raise CliError(str(exc)) from None
+    if len(pf.cameras) < 2:
+        raise CliError(f"{args.plan}: a reward needs at least 2 cameras, the plan has {len(pf.cameras)}")
+    scene = pf.scene if pf.scene is not None else scene_of(args)
+    model = check_reward_model(args.reward or pf.data.get("reward_model") or DEFAULT_REWARD_MODEL)
+    fov = args.fov if args.fov is not None else pf.fov
+    theta = args.theta_match if args.theta_match is not None else pf.theta_match
+    image = CameraModel(*_image_size(args, pf.image_size or (2000, 1500)), fov)
+    realizations = build_scene(scene)
+    value = float(np.asarray(make_reward(model, realizations, fov, theta, image)(pf.cameras[None]))[0])
+    print(f"plan score: {model} reward of {args.plan} ({len(pf.cameras)} cameras, {scene['scenario']}):",
+          file=sys.stderr)
+    print(f"{value:.6f}")
+    return value
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     args = parse_args(argv)
     try:
-        plan = run(args)
+        if args.command == "score":
+            score(args)
+            return 0
+        data = plan(args)
     except KeyboardInterrupt:
         print("plan: interrupted", file=sys.stderr)
         return 130
@@ -172,8 +265,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         msg = " ".join(str(exc).split())
         print(f"plan: error: {msg}", file=sys.stderr)
         return 2
-    print(f"plan: {plan['method']} reward {plan['reward']:.4f} after {plan['evaluations']} evaluations "
-          f"({plan['seconds']:.1f} s) -> {Path(args.out) / 'plan.json'}", file=sys.stderr)
+    print(f"plan: {data['method']} ({data['reward_model']} reward) {data['reward']:.4f} after "
+          f"{data['evaluations']} evaluations ({data['seconds']:.1f} s) -> {Path(args.out) / 'plan.json'}",
+          file=sys.stderr)
     return 0
 
 

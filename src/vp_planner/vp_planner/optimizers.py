@@ -9,6 +9,12 @@ the best-so-far reward after every evaluation, and return the best *feasible* pl
 * ``gp``: single-GP EI BO (Sec. IV-A), same space and budget (``ensemble=False``).
 * ``circle``: N cameras evenly spaced on a horizontal circle about the scene's centre, all
   facing the centre at mid-height; radius and altitude tuned by a grid search with the budget.
+* ``arc``: N cameras ``arc_spacing`` apart in azimuth (default 30 degrees) on the tuned circle's
+  radius and height, all facing the scene: the circle's grid search on all but 8 evaluations,
+  then the arc at 8 azimuths about the scene; the best arc is returned (a pattern drone
+  operators fly, and one that reconstructs much better than the full circle). Where the
+  tuned radius would put neighbours closer than ``min_separation``, the arc moves out to the
+  smallest radius that keeps them apart.
 * ``sa``: the discrete formulation of Bacharis et al. 2022: a finite candidate set of
   viewpoints around the scene (azimuths x elevations x distances), each facing the scene,
   choose N of them by simulated annealing (swap one viewpoint for a nearby candidate,
@@ -32,6 +38,7 @@ import torch
 from numpy.typing import NDArray
 
 from .reward import DEFAULT_FOV, DEFAULT_THETA_MATCH
+from .reward_models import DEFAULT_REWARD_MODEL, check_reward_model
 from .space import (
     NoFeasiblePlanError,
     Objective,
@@ -52,7 +59,7 @@ __all__ = [
     "NoFeasiblePlanError",
 ]
 
-METHODS: tuple[str, ...] = ("egp", "gp", "circle", "sa", "random")
+METHODS: tuple[str, ...] = ("egp", "gp", "circle", "arc", "sa", "random")
 
 Callback = Callable[[int, int, float, Optional[list]], bool]
 
@@ -92,6 +99,9 @@ class PlanResult:
         model_names: names of the ensemble's models (egp only, else None).
         stopped: True when the callback cancelled the run.
         rewards: (evaluations,) reward of every evaluated plan (0 for infeasible ones).
+        reward_model: the reward model the plan maximizes.
+        steps: egp/gp: one record per BO step (model drawn, weights, improved, trust region).
+        initial_best: egp/gp: the best reward of the initial design.
     """
 
     method: str
@@ -104,6 +114,9 @@ class PlanResult:
     model_names: Optional[list] = None
     stopped: bool = False
     rewards: Optional[NDArray[np.float64]] = None
+    reward_model: str = DEFAULT_REWARD_MODEL
+    steps: Optional[list] = None
+    initial_best: Optional[float] = None
 
     def simple_regret(self, optimum: float = 1.0) -> NDArray[np.float64]:
         """SR(t) = r~(z*) - max_{tau <= t} r~(z_tau) (paper Sec. V-B), with r~(z*) = ``optimum``."""
@@ -128,76 +141,104 @@ def validate_request(method: str, num_cameras: Any, evaluations: Any, initial_ev
 
 
 # ---------------------------------------------------------------------- baselines
-def _circle_cameras(centre: NDArray, target_z: float, radius: NDArray, height: NDArray, n: int,
-                    phase: float = 0.0) -> NDArray[np.float64]:
-    """Plans (B, n, 6): n cameras evenly spaced on circles (radius, height) facing (centre, target_z)."""
-    radius = np.asarray(radius, float)[:, None]
-    height = np.asarray(height, float)[:, None]
-    a = phase + 2.0 * math.pi * np.arange(n) / n
-    c = np.stack([centre[0] + radius * np.cos(a), centre[1] + radius * np.sin(a),
-                  np.broadcast_to(height, radius.shape[:1] + (n,))], axis=-1)
-    tgt = np.array([centre[0], centre[1], target_z])
-    return np.concatenate([c, tgt - c], axis=-1)
-
-
-def _circle(space: ViewSpace, obj: Objective, evaluations: int, rng: np.random.Generator) -> None:
-    """Grid search over (radius, height) of a horizontal ring facing the scene centre.
+class _CircleFamily:
+    """Horizontal rings of N cameras about the scene's centre facing it at mid-height,
+    parameterized by a height h and a = (radius - rho_lo(h)) / (rho_hi - rho_lo(h)) in [0, 1].
 
     Heights h are spread over [min_altitude, z_max + s + depth]; for each h the radius runs from
     the smallest feasible one, rho_lo(h) = max(min_sep / (2 sin(pi/N)), max_p r_p + sqrt(s^2 -
     (z_p - h)^2) over points within s of the height h) (so every camera is >= s from every point
-    whatever the azimuth), to rho_hi = max_p r_p + s + depth. The grid has n_h = floor(sqrt(E))
-    heights x floor(E / n_h) radii, evaluated in order (trace = best so far); the remaining
-    evaluations (fewer than n_h) jitter around the best cell.
+    whatever the azimuth), to rho_hi = max_p r_p + s + depth.
     """
-    R = space.realizations.reshape(-1, 3)
-    ext = space.extent
-    centre = ext.centre[:2]
-    target_z = float(ext.centre[2])
-    s = space.min_standoff
-    N = space.num_cameras
-    r_p = np.hypot(R[:, 0] - centre[0], R[:, 1] - centre[1])
-    z_p = R[:, 2]
-    rho_sep = space.min_separation / (2.0 * math.sin(math.pi / N))
-    depth = space.shell_depth
-    rho_hi = float(r_p.max()) + s + depth
-    h_lo = space.min_altitude
-    h_hi = float(ext.hi[2]) + s + depth
 
-    def rho_lo(h: float) -> float:
-        dz = np.abs(z_p - h)
-        near = dz < s
-        need = float((r_p[near] + np.sqrt(s * s - dz[near] ** 2)).max()) * (1 + 1e-9) if near.any() else 0.0
-        return max(rho_sep, need)
+    def __init__(self, space: ViewSpace) -> None:
+        R = space.realizations.reshape(-1, 3)
+        ext = space.extent
+        self.centre = ext.centre[:2]
+        self.target = np.array([self.centre[0], self.centre[1], float(ext.centre[2])])
+        self.s = space.min_standoff
+        self.N = space.num_cameras
+        self.r_p = np.hypot(R[:, 0] - self.centre[0], R[:, 1] - self.centre[1])
+        self.z_p = R[:, 2]
+        self.rho_sep = space.min_separation / (2.0 * math.sin(math.pi / self.N))
+        self.rho_hi = float(self.r_p.max()) + self.s + space.shell_depth
+        self.h_lo = space.min_altitude
+        self.h_hi = float(ext.hi[2]) + self.s + space.shell_depth
 
-    def plan(a: float, h: float) -> NDArray[np.float64]:
-        lo = rho_lo(h)
-        rho = lo + a * max(0.0, rho_hi - lo)
-        return _circle_cameras(centre, target_z, np.array([rho]), np.array([h]), N)[0]
+    def rho_lo(self, h: float) -> float:
+        dz = np.abs(self.z_p - h)
+        near = dz < self.s
+        need = float((self.r_p[near] + np.sqrt(self.s ** 2 - dz[near] ** 2)).max()) * (1 + 1e-9) if near.any() else 0.0
+        return max(self.rho_sep, need)
 
+    def plan(self, a: float, h: float) -> NDArray[np.float64]:
+        from .patterns import ring
+
+        lo = self.rho_lo(h)
+        return ring(self.centre, self.target, [lo + a * max(0.0, self.rho_hi - lo)], [h], self.N)[0]
+
+
+def _circle(space: ViewSpace, obj: Objective, evaluations: int, rng: np.random.Generator,
+            candidate: bool = True) -> NDArray[np.float64]:
+    """Grid search over (radius, height) of :class:`_CircleFamily`; returns the best ring.
+
+    The grid has n_h = floor(sqrt(E)) heights x floor(E / n_h) radii, evaluated in order (trace =
+    best so far); the remaining evaluations (fewer than n_h) jitter around the best cell.
+    """
+    fam = _CircleFamily(space)
     n_h = max(1, int(math.isqrt(evaluations)))
     n_r = max(1, evaluations // n_h)
-    hs = np.linspace(h_lo, h_hi, n_h) if n_h > 1 else np.array([0.5 * (h_lo + h_hi)])
+    hs = np.linspace(fam.h_lo, fam.h_hi, n_h) if n_h > 1 else np.array([0.5 * (fam.h_lo + fam.h_hi)])
     As = np.linspace(0.0, 1.0, n_r) if n_r > 1 else np.array([0.5])
     grid = [(a, h) for h in hs for a in As]
     extra = evaluations - len(grid)
-    _evaluate_plans(obj, np.array([plan(a, h) for a, h in grid]))
+    first = obj.count
+    _evaluate_plans(obj, np.array([fam.plan(a, h) for a, h in grid]), candidate)
+    values = np.where(obj.feasible_flags[first:], obj.values[first:], -np.inf)
     if extra > 0:
-        k = int(np.argmax(obj.values[: len(grid)]))
-        a0, h0 = grid[k]
+        a0, h0 = grid[int(np.argmax(values))]
         da = 0.5 / max(1, n_r - 1)
-        dh = 0.5 * (h_hi - h_lo) / max(1, n_h - 1)
-        pts = [(float(np.clip(a0 + rng.uniform(-da, da), 0, 1)), float(np.clip(h0 + rng.uniform(-dh, dh), h_lo, h_hi)))
-               for _ in range(extra)]
-        _evaluate_plans(obj, np.array([plan(a, h) for a, h in pts]))
+        dh = 0.5 * (fam.h_hi - fam.h_lo) / max(1, n_h - 1)
+        pts = [(float(np.clip(a0 + rng.uniform(-da, da), 0, 1)),
+                float(np.clip(h0 + rng.uniform(-dh, dh), fam.h_lo, fam.h_hi))) for _ in range(extra)]
+        _evaluate_plans(obj, np.array([fam.plan(a, h) for a, h in pts]), candidate)
+        values = np.where(obj.feasible_flags[first:], obj.values[first:], -np.inf)
+    return obj.cameras[first + int(np.argmax(values))]
 
 
-def _evaluate_plans(obj: Objective, cams: NDArray[np.float64]) -> None:
+def _evaluate_plans(obj: Objective, cams: NDArray[np.float64], candidate: bool = True) -> None:
     """Evaluate camera plans in small batches (one recorded evaluation each)."""
     nanU = np.full((1, obj.space.dim), np.nan)
     for b0 in range(0, len(cams), _BATCH):
         chunk = cams[b0 : b0 + _BATCH]
-        obj.record(np.repeat(nanU, len(chunk), axis=0), chunk)
+        obj.record(np.repeat(nanU, len(chunk), axis=0), chunk, candidate=candidate)
+
+
+#: Azimuths at which the ``arc`` baseline tries its arc.
+ARC_PHASES = 8
+
+
+def _arc(space: ViewSpace, obj: Objective, evaluations: int, rng: np.random.Generator,
+         spacing: float = math.radians(30.0)) -> None:
+    """The ``arc`` baseline (module docstring): tune the circle, then place the arc on it."""
+    from .patterns import arc
+
+    phases = min(ARC_PHASES, evaluations)
+    tune = evaluations - phases
+    if tune > 0:
+        ring = _circle(space, obj, tune, rng, candidate=False)
+    else:
+        fam = _CircleFamily(space)
+        ring = fam.plan(0.5, 0.5 * (fam.h_lo + fam.h_hi))
+    centre = space.extent.centre
+    radius = float(np.hypot(*(ring[0, :2] - centre[:2])))
+    # neighbours closer than the full ring's: move out until they keep min_separation
+    radius = max(radius, space.min_separation / (2.0 * math.sin(0.5 * spacing)) * (1.0 + 1e-9))
+    height = float(ring[0, 2])
+    target = ring[0, :3] + ring[0, 3:]
+    plans = [arc(centre[:2], target, radius, height, space.num_cameras, spacing, 2 * math.pi * k / phases)
+             for k in range(phases)]
+    _evaluate_plans(obj, np.array(plans))
 
 
 def _random(space: ViewSpace, obj: Objective, evaluations: int, rng: np.random.Generator) -> None:
@@ -310,7 +351,7 @@ def initial_design(space: ViewSpace, n: int, rng: np.random.Generator, structure
 
 
 def _bo(space: ViewSpace, obj: Objective, evaluations: int, initial_evaluations: int, seed: int,
-        rng: np.random.Generator, ensemble: bool, structured_init: int) -> dict:
+        rng: np.random.Generator, ensemble: bool, structured_init: int, bo_mode: str) -> dict:
     from . import bo  # imported lazily: botorch is heavy
 
     X0 = initial_design(space, initial_evaluations, rng, structured_init)
@@ -324,18 +365,18 @@ def _bo(space: ViewSpace, obj: Objective, evaluations: int, initial_evaluations:
 
     def bo_callback(done: int, total: int, best: float, weights: Optional[list]) -> bool:
         if weights is not None:
-            w = [float(x) for x in weights]
-            obj.weights = w
-            info["weights"] = w
+            obj.weights = info["weights"] = [float(x) for x in weights]
         return not obj.cancelled
 
     res = bo.optimize(objective, space.dim, evaluations, initial_evaluations, seed, ensemble=ensemble,
                       feasible=feasible, initial_design=torch.as_tensor(X0, dtype=torch.float64),
-                      callback=bo_callback)
-    weights = getattr(res, "weights", None)
-    if ensemble and weights:
-        info["weights"] = [float(x) for x in weights[-1]]
-    info["model_names"] = list(getattr(res, "model_names", None) or []) or None
+                      callback=bo_callback, settings=bo.BOSettings(mode=bo_mode),
+                      periodic=torch.as_tensor(space.periodic))
+    if ensemble and res.steps:
+        info["weights"] = [float(x) for x in res.steps[-1].weights]
+    info["model_names"] = list(res.model_names)
+    info["steps"] = [st.as_dict(res.model_names) for st in res.steps]
+    info["initial_best"] = float(res.best_initial) if math.isfinite(res.best_initial) else None
     return info
 
 
@@ -357,6 +398,10 @@ def plan_views(
     shell_depth: Optional[float] = None,
     structured_init: int = 4,
     dtype: torch.dtype = torch.float64,
+    reward: str = DEFAULT_REWARD_MODEL,
+    image_size: tuple[int, int] = (2000, 1500),
+    bo_mode: str = "trust_region",
+    arc_spacing: float = math.radians(30.0),
 ) -> PlanResult:
     """Plan ``num_cameras`` views of the noisy scene with ``method`` (one of :data:`METHODS`).
 
@@ -375,6 +420,11 @@ def plan_views(
         shell_depth: outer bound of camera distances (see ViewSpace).
         structured_init: number of structured plans in the egp/gp initial design.
         dtype: reward precision (torch.float64 or torch.float32).
+        reward: the reward model to maximize (:data:`vp_planner.reward_models.REWARD_MODELS`).
+        image_size: (width, height) of the cameras' images (the ``coverage`` model's resolution).
+        bo_mode: egp/gp: ``'trust_region'`` (EI in a trust region about the incumbent) or
+            ``'global'`` (the paper's: EI over the whole space).
+        arc_spacing: arc: azimuth between neighbouring cameras, rad.
 
     Raises:
         UnknownMethodError, InvalidNumCamerasError, InvalidBudgetError, InvalidSceneError (all
@@ -382,6 +432,7 @@ def plan_views(
         was found.
     """
     validate_request(method, num_cameras, evaluations, initial_evaluations)
+    check_reward_model(reward)
     evaluations = int(evaluations)
     num_cameras = int(num_cameras)
     try:
@@ -390,7 +441,8 @@ def plan_views(
         raise InvalidSceneError(str(exc)) from None
     start = time.perf_counter()
     space = ViewSpace(R, num_cameras, min_standoff=min_standoff, min_altitude=min_altitude,
-                      min_separation=min_separation, fov=fov, theta_match=theta_match, shell_depth=shell_depth)
+                      min_separation=min_separation, fov=fov, theta_match=theta_match, shell_depth=shell_depth,
+                      reward_model=reward, image_size=image_size)
     obj = Objective(space, evaluations, callback=callback, dtype=dtype)
     rng = np.random.default_rng(seed)
     torch.manual_seed(seed)
@@ -398,13 +450,15 @@ def plan_views(
     try:
         if method == "circle":
             _circle(space, obj, evaluations, rng)
+        elif method == "arc":
+            _arc(space, obj, evaluations, rng, arc_spacing)
         elif method == "sa":
             _sa(space, obj, evaluations, rng)
         elif method == "random":
             _random(space, obj, evaluations, rng)
         else:
             info = _bo(space, obj, evaluations, int(initial_evaluations), seed, rng, method == "egp",
-                       int(structured_init))
+                       int(structured_init), bo_mode)
     except PlanningCancelled:
         pass
     stopped = obj.cancelled or obj.count < evaluations
@@ -414,13 +468,11 @@ def plan_views(
             raise NoFeasiblePlanError(f"no feasible plan among the {obj.count} evaluated plans")
         best = np.zeros((0, 6))
     weights = info.get("weights") if method == "egp" else None
-    names = info.get("model_names") if method == "egp" else None
-    if method == "egp" and names is None:
-        try:
-            from .bo import MODEL_NAMES
-            names = list(MODEL_NAMES)
-        except Exception:  # pragma: no cover - bo without MODEL_NAMES
-            names = None
+    names = None
+    if method == "egp":
+        from .gp import MODEL_NAMES
+
+        names = info.get("model_names") or list(MODEL_NAMES)
     return PlanResult(
         method=method,
         cameras=np.asarray(best, dtype=np.float64),
@@ -432,4 +484,7 @@ def plan_views(
         model_names=names,
         stopped=bool(stopped),
         rewards=np.asarray(obj.values, dtype=np.float64),
+        reward_model=reward,
+        steps=info.get("steps"),
+        initial_best=info.get("initial_best"),
     )

@@ -19,6 +19,7 @@ from typing import Optional
 
 import numpy as np
 import rclpy
+import torch
 from geometry_msgs.msg import Point, Pose, PoseArray
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
@@ -31,11 +32,12 @@ from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
 from vp_interfaces.action import PlanViews
-from vp_planner.bo import MODEL_NAMES
+from vp_planner.gp import MODEL_NAMES
 from vp_planner.optimizers import (METHODS, InvalidBudgetError, InvalidNumCamerasError, InvalidSceneError,
                                    NoFeasiblePlanError, PlanResult, UnknownMethodError, plan_views,
                                    validate_request)
-from vp_planner.poses import cameras_to_poses, rotation_matrix
+from vp_planner.reward_models import DEFAULT_REWARD_MODEL, REWARD_MODELS, check_reward_model
+from vp_scene.camera import cameras_to_poses, rotation_matrix
 from vp_scene.cloud import realizations_from_cloud
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
@@ -101,6 +103,13 @@ class PlannerNode(Node):
         self.declare_parameter('evaluations', 100)
         self.declare_parameter('initial_evaluations', 50)
         self.declare_parameter('seed', 0)
+        self.declare_parameter('reward', DEFAULT_REWARD_MODEL)
+        self.declare_parameter('image_width', 2000)
+        self.declare_parameter('image_height', 1500)
+        self.declare_parameter('bo_mode', 'trust_region')
+        self.declare_parameter('structured_init', 4)
+        self.declare_parameter('arc_spacing', math.radians(30.0))
+        self.declare_parameter('num_threads', 1)
         self.declare_parameter('autostart', False)
         self.declare_parameter('min_standoff', 0.5)
         self.declare_parameter('min_altitude', 0.3)
@@ -112,9 +121,11 @@ class PlannerNode(Node):
         self.add_on_set_parameters_callback(self._check_parameters)
         bad = self._check_parameters([self.get_parameter(n) for n in (
             'num_cameras', 'method', 'evaluations', 'initial_evaluations', 'fov', 'theta_match',
-            'min_standoff', 'min_altitude', 'min_separation')])
+            'min_standoff', 'min_altitude', 'min_separation', 'reward', 'image_width', 'image_height',
+            'bo_mode', 'structured_init', 'arc_spacing', 'num_threads')])
         if not bad.successful:
             raise ValueError(bad.reason)
+        torch.set_num_threads(int(self._param('num_threads')))  # leave the other cores to the recon
 
         self._realizations: Optional[np.ndarray] = None
         self._scene_arrived = threading.Event()
@@ -139,6 +150,19 @@ class PlannerNode(Node):
             if p.name == 'method' and v not in METHODS:
                 return SetParametersResult(
                     successful=False, reason=f'unknown method {v!r}; one of {", ".join(METHODS)}')
+            if p.name == 'reward' and v not in REWARD_MODELS:
+                return SetParametersResult(
+                    successful=False, reason=f'unknown reward model {v!r}; one of {", ".join(REWARD_MODELS)}')
+            if p.name == 'bo_mode' and v not in ('trust_region', 'global'):
+                return SetParametersResult(successful=False, reason="bo_mode must be 'trust_region' or 'global'")
+            if p.name == 'structured_init' and v < 0:
+                return SetParametersResult(successful=False, reason='structured_init must be >= 0')
+            if p.name == 'arc_spacing' and not 0.0 < v < 2 * math.pi:
+                return SetParametersResult(successful=False, reason='arc_spacing must be in (0, 2 pi) rad')
+            if p.name == 'num_threads' and v < 1:
+                return SetParametersResult(successful=False, reason='num_threads must be >= 1')
+            if p.name in ('image_width', 'image_height') and v < 16:
+                return SetParametersResult(successful=False, reason=f'{p.name} must be >= 16 pixels')
             if p.name in ('evaluations', 'initial_evaluations') and v < 1:
                 return SetParametersResult(successful=False, reason=f'{p.name} must be >= 1')
             if p.name in ('fov', 'theta_match') and not 0.0 < v < math.pi:
@@ -171,7 +195,7 @@ class PlannerNode(Node):
         try:
             result = self._plan(self._param('method'), self._param('num_cameras'),
                                 self._param('evaluations'), self._param('initial_evaluations'),
-                                self._param('seed'), progress=self._log_progress)
+                                self._param('seed'), self._param('reward'), progress=self._log_progress)
             self._publish_plan(result)
         except Exception as exc:
             self.get_logger().error(f'autostart planning failed: {exc}')
@@ -185,18 +209,21 @@ class PlannerNode(Node):
         return rclpy.ok()
 
     # ---------------------------------------------------------------- planning
-    def _plan(self, method: str, num_cameras: int, evaluations: int, initial: int, seed: int,
+    def _plan(self, method: str, num_cameras: int, evaluations: int, initial: int, seed: int, reward: str,
               progress) -> PlanResult:
         realizations = self._realizations
         assert realizations is not None
-        self.get_logger().info(
-            f'planning {num_cameras} cameras with {method}: {evaluations} evaluations, seed {seed}')
+        self.get_logger().info(f'planning {num_cameras} cameras with {method} ({reward} reward): '
+                               f'{evaluations} evaluations, seed {seed}')
         return plan_views(
             method, realizations, num_cameras, evaluations=evaluations,
             initial_evaluations=initial, seed=seed, callback=progress,
             min_standoff=self._param('min_standoff'), min_altitude=self._param('min_altitude'),
             min_separation=self._param('min_separation'), fov=self._param('fov'),
-            theta_match=self._param('theta_match'))
+            theta_match=self._param('theta_match'), reward=reward,
+            image_size=(self._param('image_width'), self._param('image_height')),
+            bo_mode=self._param('bo_mode'), structured_init=self._param('structured_init'),
+            arc_spacing=self._param('arc_spacing'))
 
     def _pose_array(self, cameras: np.ndarray) -> PoseArray:
         msg = PoseArray()
@@ -216,7 +243,7 @@ class PlannerNode(Node):
         self.marker_pub.publish(frustum_markers(result.cameras, msg.header.frame_id,
                                                 msg.header.stamp, self._param('fov')))
         self.get_logger().info(
-            f'published /camera_plan: {len(msg.poses)} cameras, reward {result.reward:.4f} '
+            f'published /camera_plan: {len(msg.poses)} cameras, {result.reward_model} reward {result.reward:.4f} '
             f'({result.method}, {result.evaluations} evaluations, {result.seconds:.1f} s)')
         return msg
 
@@ -234,6 +261,7 @@ class PlannerNode(Node):
         evaluations = goal.evaluations or self._param('evaluations')
         initial = goal.initial_evaluations or self._param('initial_evaluations')
         seed = goal.seed if goal.seed >= 0 else self._param('seed')
+        reward = goal.reward or self._param('reward')
 
         def abort(code: int, text: str) -> PlanViews.Result:
             self.get_logger().error(f'goal aborted: {text}')
@@ -249,6 +277,10 @@ class PlannerNode(Node):
             return abort(PlanViews.Result.UNKNOWN_METHOD, str(exc))
         except InvalidBudgetError as exc:
             return abort(PlanViews.Result.INVALID_BUDGET, str(exc))
+        try:
+            check_reward_model(reward)
+        except ValueError as exc:
+            return abort(PlanViews.Result.UNKNOWN_REWARD_MODEL, str(exc))
         # latched topics from several nodes arrive in any order at start-up: give the scene a moment
         if self._realizations is None and not self._scene_arrived.wait(max(0.0, self._param('scene_timeout'))):
             return abort(PlanViews.Result.NO_SCENE,
@@ -269,7 +301,7 @@ class PlannerNode(Node):
 
         try:
             start = time.monotonic()
-            plan = self._plan(method, goal.num_cameras, evaluations, initial, seed, progress)
+            plan = self._plan(method, goal.num_cameras, evaluations, initial, seed, reward, progress)
             if plan.stopped:
                 text = f'cancelled after {plan.evaluations} evaluations'
                 if goal_handle.is_cancel_requested:
@@ -284,6 +316,7 @@ class PlannerNode(Node):
             result.plan = msg
             result.cameras = [float(x) for x in np.asarray(plan.cameras).ravel()]
             result.reward = float(plan.reward)
+            result.reward_model = plan.reward_model
             result.trace = [float(x) for x in plan.trace]
             result.planning_time = time.monotonic() - start
             result.evaluations = int(plan.evaluations)

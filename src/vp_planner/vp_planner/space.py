@@ -49,7 +49,10 @@ import torch
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from .reward import DEFAULT_FOV, DEFAULT_THETA_MATCH, PreparedPoints, noisy_reward, prepare_points
+from vp_scene.camera import CameraModel
+
+from .reward import DEFAULT_FOV, DEFAULT_THETA_MATCH
+from .reward_models import DEFAULT_REWARD_MODEL, RewardFunction, make_reward
 
 __all__ = [
     "SceneExtent",
@@ -133,6 +136,10 @@ class ViewSpace:
         min_altitude: minimum camera height above the ground z = 0.
         min_separation: minimum distance between any two cameras.
         fov, theta_match: reward parameters (kept here so that the objective uses the same).
+        reward_model: name of the reward model (:data:`vp_planner.reward_models.REWARD_MODELS`)
+            or a ``(name, params)`` spec.
+        image_size: (width, height) in pixels of the images the cameras will take (the
+            ``coverage`` model's resolution term).
         shell_depth: radial thickness of the shell of positions beyond the grown box
             (default: max(1.0, the scene's largest side)). The reward grows with distance (far
             cameras see the whole scene and keep pair angles uniform), so this outer bound is a
@@ -154,6 +161,8 @@ class ViewSpace:
         shell_depth: Optional[float] = None,
         elevation_range: tuple[float, float] = (math.radians(-20.0), math.radians(89.0)),
         target_scale: float = 1.0,
+        reward_model: Any = DEFAULT_REWARD_MODEL,
+        image_size: tuple[int, int] = (2000, 1500),
     ) -> None:
         if int(num_cameras) != num_cameras or num_cameras < 2:
             raise ValueError(f"num_cameras must be an integer >= 2, got {num_cameras}")
@@ -188,7 +197,9 @@ class ViewSpace:
         self.target_lo = self.extent.centre - ts * self.extent.half
         self.target_hi = self.extent.centre + ts * self.extent.half
         self._tree: Optional[cKDTree] = None
-        self._prepared: dict = {}
+        self.reward_model = reward_model
+        self.image = CameraModel(int(image_size[0]), int(image_size[1]), self.fov)
+        self._rewards: dict = {}
 
     # ------------------------------------------------------------------ geometry
     @property
@@ -223,7 +234,7 @@ class ViewSpace:
         return self.target_lo + (self.target_hi - self.target_lo) * u_tgt
 
     def decode(self, U: Any) -> Any:
-        """Plans (B, N, 6) = [c, v] from U (B, 6N) in [0, 1] (values are clipped to [0, 1]).
+        """Plans (B, N, 6) = [c, v] from U (B, 6N): azimuths wrap (mod 1), the rest is clipped to [0, 1].
 
         Returns the same kind (numpy or torch, float64) as the input; a (6N,) vector gives (N, 6).
         """
@@ -232,7 +243,8 @@ class ViewSpace:
         X = np.atleast_2d(X)
         if X.shape[-1] != self.dim:
             raise ValueError(f"U must have {self.dim} columns, got shape {X.shape}")
-        X = np.clip(np.nan_to_num(X, nan=0.5), 0.0, 1.0).reshape(X.shape[0], self.num_cameras, 6)
+        X = np.nan_to_num(X, nan=0.5).reshape(X.shape[0], self.num_cameras, 6)
+        X = np.concatenate([np.mod(X[..., :1], 1.0), np.clip(X[..., 1:], 0.0, 1.0)], axis=-1)  # azimuth wraps
         c = self.positions(X[..., :3])
         v = self.targets(X[..., 3:]) - c
         cams = np.concatenate([c, v], axis=-1)
@@ -240,20 +252,57 @@ class ViewSpace:
             cams = cams[0]
         return torch.from_numpy(cams) if is_torch else cams
 
+    @property
+    def periodic(self) -> NDArray[np.bool_]:
+        """(6N,) True at the azimuth coordinates u_az (periodic: u_az and u_az + 1 are the same plan)."""
+        return np.tile(np.array([True, False, False, False, False, False]), self.num_cameras)
+
+    def encode_cameras(self, cameras: Any) -> NDArray[np.float64]:
+        """U (B, 6N) of camera plans (B, N, 6) (or one (N, 6)): the inverse of :meth:`decode` for
+        plans this space can express; others are projected onto it.
+
+        Position: the direction from the scene's centre gives (u_az, u_el) (elevation clipped to
+        the space's range), the distance beyond the grown box gives u_dist (clipped to the
+        shell). Target: the point of the viewing ray nearest the scene's centre, clipped to
+        the target box. ``decode(encode_cameras(z)) == z`` up to scale of v for a plan whose
+        cameras lie in the shell, above the altitude floor, and look at a point of the box.
+        """
+        cams = np.asarray(cameras, dtype=np.float64)
+        single = cams.ndim == 2
+        cams = cams.reshape(-1, self.num_cameras, 6)
+        c, v = cams[..., :3], cams[..., 3:]
+        rel = c - self.origin
+        dist = np.linalg.norm(rel, axis=-1)
+        d = rel / np.maximum(dist, 1e-12)[..., None]
+        u_az = np.mod(np.arctan2(d[..., 1], d[..., 0]) / (2 * math.pi), 1.0)
+        eps = np.arcsin(np.clip(d[..., 2], -1.0, 1.0))
+        u_el = np.clip((eps - self.elevation_lo) / (self.elevation_hi - self.elevation_lo), 0.0, 1.0)
+        d_used = self.directions(u_az, u_el)
+        u_dist = np.clip((dist - self.exit_distance(d_used)) / self.shell_depth, 0.0, 1.0)
+        vn = v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
+        s = np.einsum("...i,...i->...", self.extent.centre - c, vn)
+        tgt = c + np.maximum(s, 0.0)[..., None] * vn
+        span = np.where(self.target_hi > self.target_lo, self.target_hi - self.target_lo, 1.0)
+        u_tgt = np.clip((tgt - self.target_lo) / span, 0.0, 1.0)
+        U = self.encode(np.stack([u_az, u_el, u_dist], axis=-1), u_tgt)
+        return U[0] if single else U
+
     def encode(self, u_pos: NDArray[np.float64], u_tgt: NDArray[np.float64]) -> NDArray[np.float64]:
         """U (B, 6N) from per-camera position parameters (B, N, 3) and target parameters (B, N, 3)."""
         u = np.concatenate([np.asarray(u_pos, float), np.asarray(u_tgt, float)], axis=-1)
         return np.clip(u, 0.0, 1.0).reshape(u.shape[0], -1)
 
-    def prepared(self, dtype: torch.dtype = torch.float64) -> PreparedPoints:
-        """The realizations laid out once for the reward (cached per dtype)."""
-        if dtype not in self._prepared:
-            self._prepared[dtype] = prepare_points(self.realizations, dtype)
-        return self._prepared[dtype]
+    def reward_function(self, dtype: torch.dtype = torch.float64) -> RewardFunction:
+        """This space's reward model on its realizations (built once per dtype)."""
+        if dtype not in self._rewards:
+            self._rewards[dtype] = make_reward(self.reward_model, self.realizations, self.fov, self.theta_match,
+                                               self.image, dtype=dtype)
+        return self._rewards[dtype]
 
     def reward(self, cams: Any, dtype: torch.dtype = torch.float64) -> Any:
-        """Noisy reward (eq. 7) of camera plans (..., N, 6) with this space's fov/theta_match."""
-        return noisy_reward(cams, self.prepared(dtype), self.fov, self.theta_match, dtype=dtype)
+        """Reward (averaged over the wind realizations, eq. 7) of plans (..., N, 6) under this
+        space's reward model, fov and theta_match."""
+        return self.reward_function(dtype)(cams)
 
     # ------------------------------------------------------------------ feasibility
     def feasible(self, x: Any) -> Any:
@@ -372,10 +421,10 @@ class ViewSpace:
 
 @dataclass
 class Objective:
-    """Noisy reward (eq. 7) on U for optimizers: 0 for infeasible plans; counts and records.
+    """The reward (eq. 7 averaging) on U for optimizers: 0 for infeasible plans; counts and records.
 
     Calling it on U (B, 6N) (numpy or torch) decodes, checks feasibility, evaluates
-    :func:`noisy_reward` for the feasible rows and returns rewards (B,) of the input's kind.
+    the space's reward model for the feasible rows and returns rewards (B,) of the input's kind.
     Every row counts as one evaluation; after each one ``callback(done, total, best, weights)``
     is called (``weights`` = :attr:`weights`, the latest ensemble weights an optimizer stored);
     when it returns False the objective records that row and raises :class:`PlanningCancelled`.
@@ -391,6 +440,7 @@ class Objective:
     cameras: list = field(default_factory=list)
     values: list = field(default_factory=list)
     feasible_flags: list = field(default_factory=list)
+    candidate_flags: list = field(default_factory=list)
     best_value: float = 0.0
     best_index: int = -1
     cancelled: bool = False
@@ -400,12 +450,13 @@ class Objective:
         return len(self.values)
 
     def trace(self) -> NDArray[np.float64]:
-        """Best-so-far feasible reward after each evaluation (0 before the first feasible plan)."""
-        v = np.where(np.asarray(self.feasible_flags, bool), np.asarray(self.values, float), 0.0)
+        """Best-so-far reward of a feasible candidate plan after each evaluation (0 before the first)."""
+        ok = np.asarray(self.feasible_flags, bool) & np.asarray(self.candidate_flags, bool)
+        v = np.where(ok, np.asarray(self.values, float), 0.0)
         return np.maximum.accumulate(np.maximum(v, 0.0)) if len(v) else np.zeros(0)
 
     def evaluate_cameras(self, cams: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Noisy reward of camera plans (B, N, 6) without bookkeeping (no feasibility check)."""
+        """Reward of camera plans (B, N, 6) without bookkeeping (no feasibility check)."""
         if len(cams) == 0:
             return np.zeros(0)
         r = self.space.reward(np.asarray(cams, dtype=np.float64), self.dtype)
@@ -418,9 +469,13 @@ class Objective:
         return self.record(X, cams, is_torch)
 
     def record(self, X: NDArray[np.float64], cams: NDArray[np.float64], as_torch: bool = False,
-               feasible: Optional[NDArray[np.bool_]] = None) -> Any:
+               feasible: Optional[NDArray[np.bool_]] = None, candidate: bool = True) -> Any:
         """Evaluate plans given by both U rows X (B, dim) (may be NaN when not applicable) and
-        cameras (B, N, 6); record them one at a time; return rewards (0 where infeasible)."""
+        cameras (B, N, 6); record them one at a time; return rewards (0 where infeasible).
+
+        ``candidate=False`` marks evaluations a method spends on something it will not return
+        (the ``arc`` baseline tuning its circle): they count against the budget but never
+        become the best plan."""
         if self.cancelled:
             raise PlanningCancelled()
         ok = self.space._feasible_cameras(cams) if feasible is None else np.asarray(feasible, bool)
@@ -434,7 +489,8 @@ class Objective:
             self.cameras.append(cams[k].copy())
             self.values.append(float(vals[k]))
             self.feasible_flags.append(bool(ok[k]))
-            if ok[k] and (self.best_index < 0 or vals[k] > self.best_value):
+            self.candidate_flags.append(bool(candidate))
+            if candidate and ok[k] and (self.best_index < 0 or vals[k] > self.best_value):
                 self.best_value, self.best_index = float(vals[k]), self.count - 1
             if self.callback is not None and self.callback(self.count, self.total, self.best_value, self.weights) is False:
                 self.cancelled = True

@@ -9,7 +9,7 @@ from scipy.spatial.distance import cdist
 from vp_recon.dense import neighbour_pairs, silhouette_filter, voxel_downsample
 from vp_recon.metrics import EmptyCloudError, chamfer
 from vp_recon.outputs import read_ply_points, write_ply
-from vp_recon.render import intrinsics
+from vp_scene.camera import intrinsics
 
 
 @pytest.mark.parametrize("seed,n,m,tau", [(0, 50, 80, 0.1), (1, 200, 30, 0.2), (2, 1, 7, 0.5)])

@@ -57,7 +57,9 @@ def test_degenerate_plan_is_worse_or_fails(noisy_scene, good) -> None:
 def test_sparse_only(noisy_scene) -> None:
     cfg = ReconConfig(width=640, height=480, dense=False, keep_images=False)
     res = reconstruct_realization(noisy_scene, 0, ring(4, 30.0), cfg)
-    assert res.source == "sparse" and len(res.points) == res.sparse_points > 10
+    # the scored sparse cloud is the cleaned one (cropped, silhouette-filtered), as the dense cloud
+    assert res.source == "sparse" and 10 < len(res.points) <= res.sparse_points
+    assert res.sparse_score is not None and res.sparse_score.chamfer == pytest.approx(res.chamfer)
     assert res.accuracy < 0.05 and res.rendered == []
 
 

@@ -7,9 +7,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from vp_planner.poses import rotation_matrix
-from vp_recon.render import (SKY_COLOR, Renderer, check_cameras, foreground_mask, intrinsics, project,
-                             world_to_camera)
+from vp_recon.render import SKY_COLOR, Renderer, foreground_mask
+from vp_scene.camera import check_cameras, intrinsics, project, rotation_matrix, world_to_camera
 
 W, H = 320, 240
 

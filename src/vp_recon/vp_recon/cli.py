@@ -2,7 +2,7 @@
 
     python -m vp_recon.cli --plan out/run/plan.json --out out/run [--width 2000 --height 1500]
         [--realizations 0,1] [--sparse-only] [--sparse-mode known_poses|incremental]
-        [--fscore-threshold 0.02] [--mesh-cache DIR] [--keep-workdir] [--no-progress]
+        [--fscore-threshold 0.02] [--mesh-cache DIR] [--keep-workdir] [--ground] [--no-progress]
 
 Rebuilds the scene from plan.json's ``scene`` dict (vp_scene.build.build_noisy_scene) and writes
 
@@ -27,8 +27,6 @@ from typing import Any, Optional, Sequence
 import numpy as np
 
 PROG = "recon"
-_SCENE_KEYS = ("scenario", "models", "seed", "points_per_plant", "plant_spacing", "row_spacing", "levels",
-               "realizations", "wind_variance", "wind_direction")
 
 
 class CliError(Exception):
@@ -53,32 +51,11 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     p.add_argument("--voxel", type=float, default=0.002, help="dense voxel downsampling, metres (0: none)")
     p.add_argument("--mesh-cache", default=None, help="cache folder of Poisson meshes of PLY plant models")
     p.add_argument("--keep-workdir", action="store_true", help="keep the COLMAP workspaces in OUT/work")
+    p.add_argument("--ground", action="store_true",
+                   help="render a textured soil plane under the plants (masks from the known scene)")
+    p.add_argument("--threads", type=int, default=0, help="threads of COLMAP and OpenCV (0: all cores)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     return p.parse_args(argv)
-
-
-def load_plan(path: str) -> dict:
-    """plan.json as a dict, with ``cameras`` (N, 6) and a ``scene`` dict; CliError naming the problem."""
-    p = Path(path)
-    if not p.is_file():
-        raise CliError(f"plan file not found: {p}")
-    try:
-        plan = json.loads(p.read_text())
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CliError(f"cannot read {p}: {exc}") from None
-    except json.JSONDecodeError as exc:
-        raise CliError(f"{p} is not valid JSON ({exc.msg} at line {exc.lineno})") from None
-    if not isinstance(plan, dict):
-        raise CliError(f"{p} must hold a JSON object, got {type(plan).__name__}")
-    scene = plan.get("scene")
-    if not isinstance(scene, dict) or "scenario" not in scene:
-        raise CliError(f"{p} has no 'scene' object with a 'scenario' (written by an older planner?)")
-    unknown = set(scene) - set(_SCENE_KEYS)
-    if unknown:
-        raise CliError(f"{p}: unknown scene keys {sorted(unknown)}")
-    if "cameras" not in plan:
-        raise CliError(f"{p} has no 'cameras'")
-    return plan
 
 
 def parse_realizations(text: Optional[str]) -> Optional[list[int]]:
@@ -93,27 +70,30 @@ def parse_realizations(text: Optional[str]) -> Optional[list[int]]:
 def run(args: argparse.Namespace) -> dict:
     """Reconstruct the plan; returns the recon.json dict (also written)."""
     from vp_scene.build import build_noisy_scene
+    from vp_scene.planfile import PlanFileError, load_plan
 
     from .outputs import contact_sheet, summary, write_image, write_json, write_ply
     from .pipeline import STAGES, ReconConfig, ReconError, ensure_writable_dir, validate_cameras
 
-    plan = load_plan(args.plan)
+    try:
+        plan = load_plan(args.plan)
+    except PlanFileError as exc:
+        raise CliError(str(exc)) from None
     ks = parse_realizations(args.realizations)
     try:
-        cams = validate_cameras(plan["cameras"])
+        cams = validate_cameras(plan.cameras)
     except ReconError as exc:
         raise CliError(f"{args.plan}: {exc}") from None
-    fov = float(plan.get("fov", math.pi / 2) or math.pi / 2)
     try:
-        config = ReconConfig(width=args.width, height=args.height, fov=fov, dense=not args.sparse_only,
+        config = ReconConfig(width=args.width, height=args.height, fov=plan.fov, dense=not args.sparse_only,
                              sparse_mode=args.sparse_mode, fscore_threshold=args.fscore_threshold,
-                             voxel=args.voxel, mesh_cache=args.mesh_cache, keep_workdir=args.keep_workdir).validate()
+                             voxel=args.voxel, mesh_cache=args.mesh_cache, keep_workdir=args.keep_workdir,
+                             ground=args.ground, num_threads=args.threads).validate()
     except ValueError as exc:
         raise CliError(str(exc)) from None
     out = ensure_writable_dir(args.out)
-    scene_kw = dict(plan["scene"])
     try:
-        noisy, _ = build_noisy_scene(**scene_kw)
+        noisy, _ = build_noisy_scene(**plan.scene)
     except (TypeError, ValueError, OSError) as exc:
         raise CliError(f"cannot rebuild the scene of {args.plan}: {exc}") from None
     K = noisy.points.shape[0]
@@ -133,9 +113,10 @@ def run(args: argparse.Namespace) -> dict:
 
     from .pipeline import reconstruct_plan
 
-    info = {"plan": str(Path(args.plan).resolve()), "method": plan.get("method"),
-            "scenario": plan["scene"]["scenario"], "reward": plan.get("reward"), "num_cameras": int(len(cams)),
-            "width": config.width, "height": config.height, "fov": config.fov, "dense": config.dense,
+    info = {"plan": str(Path(args.plan).resolve()), "method": plan.data.get("method"),
+            "scenario": plan.scene["scenario"], "reward": plan.data.get("reward"),
+            "reward_model": plan.data.get("reward_model"), "num_cameras": int(len(cams)),
+            "width": config.width, "height": config.height, "fov": config.fov, "dense": config.dense, "ground": config.ground,
             "sparse_mode": config.sparse_mode}
     try:
         result = reconstruct_plan(noisy, cams, config, out_dir=out, realizations=ks, progress=progress)

@@ -10,8 +10,9 @@ matching (Hirschmüller, "Stereo Processing by Semiglobal Matching and Mutual In
 TPAMI 2008; ``cv2.StereoSGBM``), and valid disparities d on foreground pixels are lifted to 3D
 with the reprojection matrix Q: (X, Y, Z, W)^T = Q (u, v, d, 1)^T (``cv2.reprojectImageTo3D``),
 then rotated back (X_i = R_1^T X_rect) and moved to the world (X_w = R_i^T (X_i - t_i)).
-Vertical pairs are matched on transposed images. The disparity search range comes from
-projecting the corners of the crop box into both rectified views.
+Vertical pairs are matched on transposed images. The disparity search range comes from the
+guide points (the sparse cloud) as COLMAP's depth ranges do: the 1st-99th percentile of their
+depths in the reference view, stretched by 25%.
 
 The fused cloud is cleaned with image-only tests:
 
@@ -26,14 +27,14 @@ COLMAP's PatchMatch; this module is the CPU path.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Optional, Sequence
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from .render import check_cameras, world_to_camera
+from vp_scene.camera import check_cameras, world_to_camera
 
 __all__ = ["DenseResult", "neighbour_pairs", "dense_reconstruct", "voxel_downsample", "silhouette_filter",
            "crop_to_box"]
@@ -41,12 +42,14 @@ __all__ = ["DenseResult", "neighbour_pairs", "dense_reconstruct", "voxel_downsam
 
 @dataclass
 class DenseResult:
-    """Fused dense cloud: points (M, 3) world, colors (M, 3) uint8, pairs used, raw point count."""
+    """Fused dense cloud: points (M, 3) world, colors (M, 3) uint8, the (reference, other) pairs
+    that produced points, raw point count, and raw points per pair (same order as ``pairs``)."""
 
     points: NDArray[np.float64]
     colors: NDArray[np.uint8]
     pairs: list[tuple[int, int]]
     raw_points: int
+    pair_points: list[int] = field(default_factory=list)
 
 
 def neighbour_pairs(cameras: NDArray[np.float64], center: NDArray[np.float64], neighbours: int = 2,
@@ -132,8 +135,9 @@ def _pair_points(img_i: NDArray[np.uint8], img_j: NDArray[np.uint8], mask_i: NDA
                  block: int, max_disparities: int) -> tuple[NDArray[np.float64], NDArray[np.uint8]]:
     """World points and colours of one rectified pair (reference view i); empty when unusable.
 
-    ``guide`` (G, 3) world points bound the disparity search: d = u_1 - u_2 of their rectified
-    projections (5th-95th percentile, widened by 10% and 8 px). SGBM then searches
+    ``guide`` (G, 3) world points bound the disparity search as COLMAP bounds PatchMatch depths:
+    their depths in the rectified reference view, 1st-99th percentile, stretched by 25%, turned
+    into disparities d = f |B| / Z (plus 4 px for rounding). SGBM then searches
     d' = d - s in [0, num) on column windows around the reference foreground: pixels left of
     ``num`` in an SGBM input have no valid disparity, so the window starts ``num`` columns early.
     """
@@ -150,9 +154,11 @@ def _pair_points(img_i: NDArray[np.uint8], img_j: NDArray[np.uint8], mask_i: NDA
     Xr = Xr[Xr[:, 2] > 1e-6]
     if len(Xr) == 0:
         return _EMPTY
-    d = -base / Xr[:, 2]               # CALIB_ZERO_DISPARITY: d = f |B| / Z
-    lo_d, hi_d = np.percentile(d, [5, 95]) if len(d) >= 20 else (d.min(), d.max())
-    pad = 0.1 * (hi_d - lo_d) + 8
+    # depth range as COLMAP's PatchMatch (mvs::Model::ComputeDepthRanges): the 1st-99th
+    # percentile of the guide's depths, stretched by 25%; CALIB_ZERO_DISPARITY: d = f |B| / Z
+    z_lo, z_hi = np.percentile(Xr[:, 2], [1, 99]) if len(Xr) >= 20 else (Xr[:, 2].min(), Xr[:, 2].max())
+    lo_d, hi_d = -base / (1.25 * z_hi), -base / max(0.75 * z_lo, 1e-6)
+    pad = 4
     shift = int(np.floor(lo_d - pad))
     num = int(np.ceil((hi_d + pad - shift) / 16.0)) * 16
     num = int(np.clip(num, 16, max_disparities))
@@ -241,7 +247,7 @@ def dense_reconstruct(images: Sequence[NDArray[np.uint8]], masks: Sequence[NDArr
                 used.append((a, b))
                 break
     if not pts:
-        return DenseResult(np.zeros((0, 3)), np.zeros((0, 3), np.uint8), used, 0)
+        return DenseResult(np.zeros((0, 3)), np.zeros((0, 3), np.uint8), used, 0, [])
     P = np.concatenate(pts)
     C = np.concatenate(cols)
     raw = len(P)
@@ -251,4 +257,4 @@ def dense_reconstruct(images: Sequence[NDArray[np.uint8]], masks: Sequence[NDArr
         keep = silhouette_filter(P, cams, K, masks)
         P, C = P[keep], C[keep]
     P, C = voxel_downsample(P, C, voxel)
-    return DenseResult(P, C, used, raw)
+    return DenseResult(P, C, used, raw, [len(p) for p in pts])

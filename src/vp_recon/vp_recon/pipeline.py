@@ -7,7 +7,9 @@ For each wind realization k of a :class:`vp_scene.wind.NoisyScene`:
 3. sparse: COLMAP SIFT + matching + triangulation (:mod:`vp_recon.sparse`),
 4. dense: SGBM on neighbouring pairs (:mod:`vp_recon.dense`; COLMAP PatchMatch needs CUDA),
 5. score: Chamfer distance etc. of the (dense, else sparse) cloud against realization k's true
-   points ``noisy_scene.points[k]`` (:mod:`vp_recon.metrics`).
+   points ``noisy_scene.points[k]`` (:mod:`vp_recon.metrics`). The sparse cloud is cleaned
+   like the dense one (cropped to the scene's box, points on background in some view dropped)
+   and is always scored too (``sparse_score``), so that a plan can be judged on either.
 
 All distances in this module are metres; x100 (Table I) is applied by writers (cli, ROS node).
 Errors are :class:`ReconError` with a ``code`` equal to the ``vp_interfaces/ReconstructionScore``
@@ -27,7 +29,7 @@ from typing import Callable, Optional, Sequence, Union
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .metrics import DEFAULT_FSCORE_THRESHOLD, EmptyCloudError, chamfer
+from .metrics import DEFAULT_FSCORE_THRESHOLD, CloudScore, EmptyCloudError, chamfer
 
 __all__ = [
     "NONE", "UNKNOWN", "EMPTY_PLAN", "NO_SCENE", "NOTHING_VISIBLE", "RECONSTRUCTION_FAILED",
@@ -94,6 +96,9 @@ class ReconConfig:
         sift_masks: restrict SIFT to the (dilated) foreground masks.
         min_foreground: pixels of plant an image needs to count as seeing the plant.
         max_features: SIFT features per image.
+        ground: render a textured soil plane under the plants (masks from the known scene,
+            see :mod:`vp_recon.render`) instead of a blue screen.
+        num_threads: threads of COLMAP and OpenCV (0: all cores).
     """
 
     width: int = 2000
@@ -111,6 +116,8 @@ class ReconConfig:
     sift_masks: bool = False
     min_foreground: int = 50
     max_features: int = 8192
+    ground: bool = False
+    num_threads: int = 0
 
     def validate(self) -> "ReconConfig":
         """Raise ValueError naming the first bad field; return self."""
@@ -130,6 +137,9 @@ class ReconConfig:
             raise ValueError(f"voxel must be >= 0 metres, got {self.voxel!r}")
         if not (math.isfinite(self.crop_margin) and self.crop_margin >= 0):
             raise ValueError(f"crop_margin must be >= 0 metres, got {self.crop_margin!r}")
+        if isinstance(self.num_threads, bool) or not isinstance(self.num_threads, (int, np.integer)) \
+                or self.num_threads < 0:
+            raise ValueError(f"num_threads must be an integer >= 0 (0: all cores), got {self.num_threads!r}")
         if int(self.neighbours) < 1 or int(self.min_foreground) < 1 or int(self.max_features) < 16:
             raise ValueError("neighbours and min_foreground must be >= 1, max_features >= 16")
         return self
@@ -148,7 +158,11 @@ class RealizationResult:
         num_images: images rendered (= cameras).
         visible_images: images whose foreground has >= ``min_foreground`` pixels.
         source: ``'dense'`` or ``'sparse'`` (the dense cloud was disabled or empty).
-        sparse_points: points of the sparse model.
+        sparse_points: points of the sparse model (before cleaning).
+        sparse_score: the cleaned sparse cloud's CloudScore (None when cleaning left nothing).
+        pair_inliers: verified SIFT inlier matches per camera pair (i, j), i < j.
+        dense_pairs: (reference, other) camera pairs that gave dense points, and
+        dense_pair_points: the raw points each of them gave.
         rendered: the rendered RGB images (empty unless kept).
         seconds: wall time per stage: mesh, render, sparse, dense, score.
     """
@@ -168,6 +182,10 @@ class RealizationResult:
     visible_images: int
     source: str
     sparse_points: int
+    sparse_score: Optional[CloudScore] = None
+    pair_inliers: dict = field(default_factory=dict)
+    dense_pairs: list = field(default_factory=list)
+    dense_pair_points: list = field(default_factory=list)
     rendered: list = field(default_factory=list, repr=False)
     seconds: dict = field(default_factory=dict)
 
@@ -238,6 +256,13 @@ def crop_box(noisy_scene: object, margin: float) -> NDArray[np.float64]:
     return np.stack([pts.min(axis=0) - margin, pts.max(axis=0) + margin])
 
 
+def set_threads(n: int) -> None:
+    """OpenCV's threads (``n``; 0: all cores) for this process; COLMAP takes its count per call."""
+    import cv2
+
+    cv2.setNumThreads(int(n) if n > 0 else (os.cpu_count() or 1))
+
+
 def _tick(progress: Optional[ProgressFn], stage: str, k: int) -> None:
     if progress is not None and progress(stage, k) is False:
         raise ReconCancelled(f"cancelled after {stage} of realization {k}")
@@ -258,7 +283,7 @@ def reconstruct_realization(noisy_scene: object, k: int, cameras: ArrayLike, con
             OUTPUT_NOT_WRITABLE (workdir), UNKNOWN (rendering or meshing failed).
         ReconCancelled: the progress callback returned False.
     """
-    from .dense import dense_reconstruct
+    from .dense import crop_to_box, dense_reconstruct, silhouette_filter
     from .meshing import scene_meshes
     from .render import RenderError, Renderer
     from .sparse import SparseError, sparse_reconstruct
@@ -266,6 +291,7 @@ def reconstruct_realization(noisy_scene: object, k: int, cameras: ArrayLike, con
     cfg = (config or ReconConfig()).validate()
     cams = validate_cameras(cameras)
     truth_all = _check_scene(noisy_scene)
+    set_threads(cfg.num_threads)
     if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 0 <= int(k) < truth_all.shape[0]:
         raise ReconError(NO_SCENE, f"realization {k!r} does not exist (the scene has {truth_all.shape[0]})")
     k = int(k)
@@ -283,7 +309,7 @@ def reconstruct_realization(noisy_scene: object, k: int, cameras: ArrayLike, con
         t0 = time.perf_counter()
         try:
             renderer = Renderer(cfg.width, cfg.height, cfg.fov)
-            images, masks, _ = renderer.render(meshes, cams)
+            images, masks, _ = renderer.render(meshes, cams, ground=cfg.ground)
         except RenderError as exc:
             raise ReconError(UNKNOWN, str(exc)) from exc
         seconds["render"] = time.perf_counter() - t0
@@ -300,7 +326,8 @@ def reconstruct_realization(noisy_scene: object, k: int, cameras: ArrayLike, con
         t0 = time.perf_counter()
         try:
             sp = sparse_reconstruct(images, cams, renderer.K, wd / f"realization_{k}", mode=cfg.sparse_mode,
-                                    masks=masks if cfg.sift_masks else None, max_features=cfg.max_features)
+                                    masks=masks if cfg.sift_masks else None, max_features=cfg.max_features,
+                                    num_threads=cfg.num_threads or -1)
         except SparseError as exc:
             raise ReconError(RECONSTRUCTION_FAILED, f"sparse reconstruction failed: {exc}") from exc
         except OSError as exc:
@@ -309,9 +336,13 @@ def reconstruct_realization(noisy_scene: object, k: int, cameras: ArrayLike, con
         _tick(progress, "sparse", k)
 
         t0 = time.perf_counter()
-        points, colors, source = sp.points, sp.colors, "sparse"
+        box = crop_box(noisy_scene, cfg.crop_margin)
+        keep = crop_to_box(sp.points, box[0], box[1])
+        keep[keep] = silhouette_filter(sp.points[keep], cams, renderer.K, masks)
+        points, colors, source = sp.points[keep], sp.colors[keep], "sparse"
+        sparse_score = chamfer(points, truth_all[k], cfg.fscore_threshold) if len(points) else None
+        dn = None
         if cfg.dense:
-            box = crop_box(noisy_scene, cfg.crop_margin)
             dn = dense_reconstruct(images, masks, cams, renderer.K, box, guide=sp.points,
                                    neighbours=cfg.neighbours, voxel=cfg.voxel)
             if len(dn.points):
@@ -335,7 +366,9 @@ def reconstruct_realization(noisy_scene: object, k: int, cameras: ArrayLike, con
         realization=k, chamfer=score.chamfer, accuracy=score.accuracy, completeness=score.completeness,
         fscore=score.fscore, precision=score.precision, recall=score.recall, fscore_threshold=score.threshold,
         points=points, colors=colors, images=sp.registered, num_images=len(cams), visible_images=len(seeing),
-        source=source, sparse_points=len(sp.points), rendered=images if cfg.keep_images else [], seconds=seconds)
+        source=source, sparse_points=len(sp.points), sparse_score=sparse_score, pair_inliers=dict(sp.pair_inliers),
+        dense_pairs=list(dn.pairs) if dn is not None else [], dense_pair_points=list(dn.pair_points) if dn is not None else [],
+        rendered=images if cfg.keep_images else [], seconds=seconds)
 
 
 def reconstruct_plan(noisy_scene: object, cameras: ArrayLike, config: Optional[ReconConfig] = None,

@@ -24,6 +24,7 @@ node keeps running.
 from __future__ import annotations
 
 import math
+import os
 import threading
 import time
 from pathlib import Path
@@ -38,7 +39,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
 
 from vp_interfaces.msg import ReconstructionScore, SceneDescription
-from vp_planner.poses import poses_to_cameras
+from vp_scene.camera import poses_to_cameras
 from vp_planner.reward import noisy_reward
 from vp_recon.metrics import DEFAULT_FSCORE_THRESHOLD
 from vp_recon.outputs import contact_sheet, write_image, write_ply
@@ -67,7 +68,11 @@ class ReconNode(Node):
         self.declare_parameter('method', '')
         self.declare_parameter('max_realizations', 0)
         self.declare_parameter('scene_timeout', 10.0)
+        # beside the planner (1 thread by default) the reconstruction takes the other cores
+        self.declare_parameter('num_threads', max(1, (os.cpu_count() or 2) - 1))
         self.config = self._config()  # raises ValueError naming a bad parameter
+        # Mesa's llvmpipe renderer reads its thread count when the first context is created
+        os.environ.setdefault('LP_NUM_THREADS', str(self.config.num_threads))
 
         self._lock = threading.Condition()
         self._pending: Optional[PoseArray] = None
@@ -94,7 +99,8 @@ class ReconNode(Node):
         fov = float(self._param('fov'))
         return ReconConfig(width=int(self._param('width')), height=int(self._param('height')), fov=fov,
                            sparse_mode=self._param('sparse_mode'), dense=bool(self._param('dense')),
-                           fscore_threshold=float(self._param('fscore_threshold')), keep_images=True).validate()
+                           fscore_threshold=float(self._param('fscore_threshold')), keep_images=True,
+                           num_threads=int(self._param('num_threads'))).validate()
 
     # ---------------------------------------------------------------- inputs
     def _on_description(self, msg: SceneDescription) -> None:

@@ -1,32 +1,18 @@
-"""Pinhole camera model of the suite's cameras and headless rendering with pyrender.
+"""Headless rendering of a plan's views with pyrender (camera geometry: :mod:`vp_scene.camera`).
 
-Conventions
------------
-A camera is ``[cx, cy, cz, vx, vy, vz]`` (docs/CONTRACTS.md): centre c, optical axis v.
-:func:`vp_planner.poses.rotation_matrix` gives the body-to-world rotation ``[x_b y_b z_b]``
-(x_b = v/|v| forward, y_b left and horizontal, z_b up-ish). The OpenCV / COLMAP camera frame
-(x right, y down, z forward) has, in world coordinates, the axes
-
-    x_c = -y_b,   y_c = -z_b,   z_c = x_b,
-
-so the world-to-camera transform is ``X_c = R_cw X_w + t`` with ``R_cw = [-y_b, -z_b, x_b]^T``
-and ``t = -R_cw c`` (Hartley & Zisserman, Multiple View Geometry, eq. 6.8).
-
-Pixels follow OpenCV: pixel centres at integer coordinates, u to the right (column), v down
-(row). With a horizontal field of view ``fov`` and square pixels (Hartley & Zisserman eq. 6.4)
-
-    f = (W / 2) / tan(fov / 2),   K = [[f, 0, (W-1)/2], [0, f, (H-1)/2], [0, 0, 1]],
-    (u, v, 1)^T ~ K X_c.
-
-COLMAP and OpenGL put pixel centres at +0.5 (the image corner is (0, 0)); their principal point
-is therefore ``(W/2, H/2)``: see :func:`principal_point_gl`.
-
-Rendering
----------
 :class:`Renderer` draws vertex-coloured triangle meshes without lighting (pyrender's FLAT flag,
-double-sided materials) over a uniform sky of :data:`SKY_COLOR`. The foreground mask is a colour
-key on the rendered RGB image (any pixel farther than :data:`KEY_TOLERANCE` from the sky colour
-is plant): it never reads the depth buffer, so downstream reconstruction sees only the images.
+double-sided materials) through the pinhole cameras of :mod:`vp_scene.camera` (intrinsics from
+the image size and the horizontal field of view; OpenGL pose from :func:`camera_to_world_gl`).
+
+Backgrounds and masks
+---------------------
+* Default: a uniform sky of :data:`SKY_COLOR`; the plant mask is a colour key on the rendered
+  RGB image (any pixel farther than :data:`KEY_TOLERANCE` from the sky colour is plant).
+* ``ground=True``: a textured soil plane at z = 0 under the plants (a real field is not a blue
+  screen: SIFT then also finds features on the soil). The colour key no longer separates the
+  plants, so the mask comes from the *known scene*: a second, segmentation pass
+  (``RenderFlags.SEG``) draws the plant meshes white and the ground black, the way a field
+  pipeline would segment plants. Neither mode ever reads the depth buffer.
 
 The OpenGL platform must be chosen before pyrender (PyOpenGL) is imported: ``PYOPENGL_PLATFORM``
 is used when set, else ``egl`` is tried and, when no EGL context can be created, ``osmesa``.
@@ -40,15 +26,13 @@ import threading
 from typing import Optional, Sequence
 
 import numpy as np
+import trimesh
 from numpy.typing import ArrayLike, NDArray
 
-from vp_planner.poses import rotation_matrix
+from vp_scene.camera import camera_to_world_gl, check_cameras, intrinsics, principal_point_gl
 
-__all__ = [
-    "SKY_COLOR", "KEY_TOLERANCE", "RenderError", "intrinsics", "principal_point_gl",
-    "world_to_camera", "camera_to_world_gl", "project", "foreground_mask", "Renderer",
-    "check_cameras", "release_contexts",
-]
+__all__ = ["SKY_COLOR", "KEY_TOLERANCE", "RenderError", "foreground_mask", "ground_mesh", "Renderer",
+           "release_contexts"]
 
 #: Uniform background colour (pure blue: never a plant colour, corn is green / yellow / brown).
 SKY_COLOR: tuple[int, int, int] = (0, 0, 255)
@@ -58,88 +42,6 @@ KEY_TOLERANCE: float = 60.0
 
 class RenderError(RuntimeError):
     """No OpenGL context could be created, or rendering failed."""
-
-
-def check_cameras(cameras: ArrayLike) -> NDArray[np.float64]:
-    """Cameras as an (N, 6) float64 array; ValueError naming the problem otherwise."""
-    cams = np.asarray(cameras, dtype=np.float64)
-    if cams.ndim == 1 and cams.size == 6:
-        cams = cams[None]
-    if cams.ndim != 2 or cams.shape[1] != 6:
-        raise ValueError(f"cameras must have shape (N, 6) = [cx, cy, cz, vx, vy, vz], got {cams.shape}")
-    if not np.all(np.isfinite(cams)):
-        raise ValueError("cameras contain NaN or infinite values")
-    if np.any(np.linalg.norm(cams[:, 3:], axis=1) <= 0):
-        raise ValueError("a camera has a zero viewing direction")
-    return cams
-
-
-def _check_size(width: int, height: int, fov: float) -> None:
-    if int(width) < 2 or int(height) < 2:
-        raise ValueError(f"image size must be at least 2 x 2, got {width} x {height}")
-    if not (0 < fov < math.pi):
-        raise ValueError(f"fov must be in (0, pi) rad, got {fov}")
-
-
-def intrinsics(width: int, height: int, fov: float = math.pi / 2) -> NDArray[np.float64]:
-    """3x3 calibration K (OpenCV pixel centres) from the horizontal field of view, square pixels.
-
-    f = (W/2) / tan(fov/2); principal point at the image centre ((W-1)/2, (H-1)/2).
-    """
-    _check_size(width, height, fov)
-    f = 0.5 * width / math.tan(0.5 * fov)
-    return np.array([[f, 0.0, 0.5 * (width - 1)], [0.0, f, 0.5 * (height - 1)], [0.0, 0.0, 1.0]])
-
-
-def principal_point_gl(K: ArrayLike) -> tuple[float, float]:
-    """Principal point in the OpenGL / COLMAP pixel convention (pixel centres at +0.5)."""
-    K = np.asarray(K, dtype=np.float64)
-    return float(K[0, 2] + 0.5), float(K[1, 2] + 0.5)
-
-
-def world_to_camera(camera6: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """(R_cw (..., 3, 3), t (..., 3)): X_c = R_cw X_w + t in the OpenCV / COLMAP camera frame.
-
-    R_cw has rows (-y_b, -z_b, x_b) of the body frame of :func:`vp_planner.poses.rotation_matrix`;
-    t = -R_cw c. Vectorized over leading dimensions of ``camera6`` (..., 6).
-    """
-    cam = np.asarray(camera6, dtype=np.float64)
-    if cam.shape[-1] != 6:
-        raise ValueError(f"camera must have shape (..., 6), got {cam.shape}")
-    R_bw = rotation_matrix(cam[..., 3:])                       # columns x_b, y_b, z_b
-    R_wc = np.stack([-R_bw[..., :, 1], -R_bw[..., :, 2], R_bw[..., :, 0]], axis=-1)
-    R_cw = np.swapaxes(R_wc, -1, -2)
-    t = -np.einsum("...ij,...j->...i", R_cw, cam[..., :3])
-    return R_cw, t
-
-
-def camera_to_world_gl(camera6: ArrayLike) -> NDArray[np.float64]:
-    """4x4 OpenGL camera-to-world pose (x right, y up, z backward) for pyrender."""
-    cam = np.asarray(camera6, dtype=np.float64)
-    R_bw = rotation_matrix(cam[3:])
-    T = np.eye(4)
-    T[:3, :3] = np.stack([-R_bw[:, 1], R_bw[:, 2], -R_bw[:, 0]], axis=-1)
-    T[:3, 3] = cam[:3]
-    return T
-
-
-def project(points: ArrayLike, camera6: ArrayLike, width: int, height: int,
-            fov: float = math.pi / 2) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
-    """Pixels (M, 2) = (u, v) of world points (M, 3) and whether each is in front and in the image.
-
-    (u, v, 1)^T ~ K (R_cw X + t); a point is ``visible`` when its depth is > 0 and
-    -0.5 <= u < W - 0.5, -0.5 <= v < H - 0.5 (no occlusion test). Points behind the camera get NaN.
-    """
-    P = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    K = intrinsics(width, height, fov)
-    R, t = world_to_camera(camera6)
-    Xc = P @ R.T + t
-    z = Xc[:, 2]
-    front = z > 1e-9
-    with np.errstate(divide="ignore", invalid="ignore"):
-        uv = (Xc[:, :2] / np.where(front, z, np.nan)[:, None]) * K[[0, 1], [0, 1]] + K[:2, 2]
-    inside = front & (uv[:, 0] >= -0.5) & (uv[:, 0] < width - 0.5) & (uv[:, 1] >= -0.5) & (uv[:, 1] < height - 0.5)
-    return uv, inside
 
 
 def foreground_mask(image: NDArray[np.uint8], sky: Sequence[int] = SKY_COLOR,
@@ -214,9 +116,8 @@ class Renderer:
     """
 
     def __init__(self, width: int, height: int, fov: float = math.pi / 2) -> None:
-        _check_size(width, height, fov)
+        self.K = intrinsics(width, height, fov)  # ValueError for a bad size or fov
         self.width, self.height, self.fov = int(width), int(height), float(fov)
-        self.K = intrinsics(self.width, self.height, self.fov)
         with _LOCK:
             self._pr = _egl_or_osmesa()
             key = (self.width, self.height)
@@ -228,29 +129,47 @@ class Renderer:
                                       f"{type(exc).__name__}: {exc}") from exc
             self._renderer = _CONTEXTS[key]
 
-    def _scene(self, meshes: Sequence) -> object:
+    def _scene(self, meshes: Sequence, ground: bool) -> tuple[object, dict]:
+        """The pyrender scene, and the segmentation map of the ``ground`` mode (else empty).
+
+        pyrender culls back faces in its segmentation pass whatever the flags, so that pass draws
+        its own two-sided copies of the meshes (hidden in the colour pass)."""
         pr = self._pr
         bg = np.array([*SKY_COLOR, 255], dtype=np.float64) / 255.0
         scene = pr.Scene(bg_color=bg, ambient_light=np.ones(3))
-        for m in meshes:
+        items = [(m, (255, 255, 255)) for m in meshes]
+        if ground:
+            items.append((ground_mesh(meshes), (0, 0, 0)))
+        seg_map: dict = {}
+        for m, seg_color in items:
             pm = pr.Mesh.from_trimesh(m, smooth=False)
             for prim in pm.primitives:
                 prim.material.doubleSided = True
             scene.add(pm)
-        return scene
+            if ground:
+                faces = np.asarray(m.faces)
+                two_sided = pr.Mesh.from_trimesh(
+                    trimesh.Trimesh(vertices=np.asarray(m.vertices), faces=np.concatenate([faces, faces[:, ::-1]]),
+                                    process=False), smooth=False)
+                two_sided.is_visible = False
+                seg_map[scene.add(two_sided)] = seg_color
+        return scene, seg_map
 
-    def render(self, meshes: Sequence, cameras: ArrayLike, keep_depth: bool = False
+    def render(self, meshes: Sequence, cameras: ArrayLike, keep_depth: bool = False, ground: bool = False
                ) -> tuple[list[NDArray[np.uint8]], list[NDArray[np.bool_]], Optional[list[NDArray[np.float32]]]]:
         """Render ``meshes`` (trimesh.Trimesh with vertex colours) from every camera (N, 6).
 
+        Args:
+            ground: draw a textured soil plane at z = 0 (masks from a segmentation pass).
+
         Returns:
-            (images: N RGB uint8 (H, W, 3), masks: N bool (H, W) colour-key foreground,
+            (images: N RGB uint8 (H, W, 3), masks: N bool (H, W) plant pixels,
             depths: N float32 (H, W) z-buffer depths (0 = nothing) if ``keep_depth`` else None).
             The depth is for tests only; reconstruction never uses it.
         """
         cams = check_cameras(cameras)
         pr = self._pr
-        scene = self._scene(meshes)
+        scene, seg_map = self._scene(meshes, ground)
         K = self.K
         cx, cy = principal_point_gl(K)
         cam = pr.IntrinsicsCamera(fx=K[0, 0], fy=K[1, 1], cx=cx, cy=cy, znear=0.01, zfar=1000.0)
@@ -262,11 +181,83 @@ class Renderer:
             try:
                 with _LOCK:
                     color, depth = self._renderer.render(scene, flags=flags)
+                    if seg_map:
+                        for n in seg_map:
+                            n.mesh.is_visible = True
+                        seg, _ = self._renderer.render(scene, flags=pr.RenderFlags.SEG, seg_node_map=seg_map)
+                        for n in seg_map:
+                            n.mesh.is_visible = False
             except Exception as exc:  # noqa: BLE001
                 raise RenderError(f"rendering failed: {type(exc).__name__}: {exc}") from exc
             color = np.ascontiguousarray(color[..., :3], dtype=np.uint8)
             images.append(color)
-            masks.append(foreground_mask(color))
+            masks.append(np.asarray(seg)[..., 0] > 127 if seg_map else foreground_mask(color))
             if keep_depth:
                 depths.append(np.asarray(depth, dtype=np.float32))
         return images, masks, (depths if keep_depth else None)
+
+
+#: Soil texture (RGB uint8), built once per process by :func:`soil_texture`.
+_SOIL: dict = {}
+
+
+def soil_texture(size: int = 1024, seed: int = 7) -> NDArray[np.uint8]:
+    """A seamless, seeded soil texture: brown multi-scale value noise with small pebbles and straw.
+
+    Built from the sum of upsampled random grids (periodic, so the plane can tile it) at cell
+    sizes 4-128 texels; about 60 pebbles and 150 straw strokes add corner-like features.
+    """
+    import cv2
+
+    key = (size, seed)
+    if key in _SOIL:
+        return _SOIL[key]
+    rng = np.random.default_rng(seed)
+    field = np.zeros((size, size), np.float64)
+    for cell, amp in ((128, 0.35), (32, 0.3), (8, 0.2), (4, 0.15)):
+        n = max(2, size // cell)
+        g = rng.random((n, n))
+        g = np.tile(g, (3, 3))  # periodic upsampling: resize a 3x3 tiling, keep the middle tile
+        up = cv2.resize(g, (3 * size, 3 * size), interpolation=cv2.INTER_CUBIC)[size:2 * size, size:2 * size]
+        field += amp * up
+    field = (field - field.min()) / max(1e-9, np.ptp(field))
+    dark = np.array([70, 50, 35], np.float64)
+    light = np.array([150, 118, 85], np.float64)
+    img = dark + field[..., None] * (light - dark)
+    for _ in range(60):
+        x, y = rng.integers(0, size, 2)
+        r = int(rng.integers(2, 7))
+        grey = float(rng.uniform(120, 200))
+        cv2.circle(img, (int(x), int(y)), r, (grey, grey * 0.95, grey * 0.9), -1)
+    for _ in range(150):
+        x, y = rng.integers(0, size, 2)
+        a = rng.uniform(0, np.pi)
+        length = rng.uniform(6, 20)
+        p2 = (int(x + length * np.cos(a)), int(y + length * np.sin(a)))
+        cv2.line(img, (int(x), int(y)), p2, (190.0, 165.0, 100.0), 1)
+    out = np.clip(img, 0, 255).astype(np.uint8)
+    _SOIL[key] = out
+    return out
+
+
+def ground_mesh(meshes: Sequence, margin: float = 6.0, texel: float = 0.002) -> object:
+    """A textured quad at z = 0 under ``meshes``: their x-y box grown by ``margin`` metres.
+
+    The soil texture repeats every ``texel * 1024`` metres (2 mm texels: finer than a pixel of a
+    2000-pixel image at the plants' distance).
+    """
+    from PIL import Image
+
+    if len(meshes):
+        v = np.concatenate([np.asarray(m.vertices) for m in meshes])
+        lo, hi = v[:, :2].min(axis=0) - margin, v[:, :2].max(axis=0) + margin
+    else:
+        lo, hi = np.full(2, -margin), np.full(2, margin)
+    tex = soil_texture()
+    period = texel * tex.shape[0]
+    corners = np.array([[lo[0], lo[1], 0.0], [hi[0], lo[1], 0.0], [hi[0], hi[1], 0.0], [lo[0], hi[1], 0.0]])
+    uv = corners[:, :2] / period
+    faces = np.array([[0, 1, 2], [0, 2, 3]])
+    material = trimesh.visual.material.SimpleMaterial(image=Image.fromarray(tex))
+    visual = trimesh.visual.TextureVisuals(uv=uv, image=Image.fromarray(tex), material=material)
+    return trimesh.Trimesh(vertices=corners, faces=faces, visual=visual, process=False)

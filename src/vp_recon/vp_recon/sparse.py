@@ -7,7 +7,7 @@ Pipeline (Schönberger & Frahm, "Structure-from-Motion Revisited", CVPR 2016):
    known calibration ``f, f, cx, cy`` (COLMAP pixel convention: centres at +0.5),
 3. exhaustive matching with geometric verification,
 4. ``mode='known_poses'``: a reconstruction holding the true poses (cam_from_world =
-   (R_cw, t) of :func:`vp_recon.render.world_to_camera`), then ``triangulate_points``;
+   (R_cw, t) of :func:`vp_scene.camera.world_to_camera`), then ``triangulate_points``;
    ``mode='incremental'``: ``incremental_mapping`` (unknown poses), the largest model
    aligned to the true camera centres with a similarity transform (Umeyama 1991; needs 3
    registered images).
@@ -17,7 +17,7 @@ The 3D points come back in the world frame.
 from __future__ import annotations
 
 import shutil
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Optional, Sequence
 
@@ -25,7 +25,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from .render import check_cameras, principal_point_gl, world_to_camera
+from vp_scene.camera import check_cameras, principal_point_gl, world_to_camera
 
 __all__ = ["SparseError", "SparseResult", "sparse_reconstruct", "MODES"]
 
@@ -48,6 +48,7 @@ class SparseResult:
         keypoints: SIFT keypoints per image.
         verified_pairs: image pairs with geometrically verified matches.
         mean_track_length: mean number of images observing a point.
+        pair_inliers: verified inlier matches per image pair (i, j), i < j (indices of ``images``).
     """
 
     points: NDArray[np.float64]
@@ -56,6 +57,7 @@ class SparseResult:
     keypoints: list[int]
     verified_pairs: int
     mean_track_length: float
+    pair_inliers: dict = field(default_factory=dict)
 
 
 def _write_images(images: Sequence[NDArray[np.uint8]], masks: Optional[Sequence[NDArray[np.bool_]]],
@@ -103,7 +105,7 @@ def sparse_reconstruct(images: Sequence[NDArray[np.uint8]], cameras: NDArray[np.
     Args:
         images: N rendered RGB images, all of the same size.
         cameras: (N, 6) the cameras that took them ([c, v], docs/CONTRACTS.md).
-        K: 3x3 calibration in the OpenCV pixel convention (:func:`vp_recon.render.intrinsics`).
+        K: 3x3 calibration in the OpenCV pixel convention (:func:`vp_scene.camera.intrinsics`).
         workdir: scratch folder (images, masks, database.db, sparse/); created when missing.
         mode: ``'known_poses'`` (triangulate with the true poses) or ``'incremental'`` (SfM).
         masks: optional foreground masks; features are then extracted on (dilated) plant pixels only.
@@ -164,6 +166,12 @@ def _sparse(pycolmap: object, images: Sequence[NDArray[np.uint8]], cameras: NDAr
         db_cameras = db.read_all_cameras()
         keypoints = [db.num_keypoints_for_image(db_images[n].image_id) if n in db_images else 0 for n in names]
         verified = int(db.num_verified_image_pairs())
+        index = {db_images[n].image_id: i for i, n in enumerate(names) if n in db_images}
+        pair_inliers = {}
+        for pair_id, n_inl in zip(*db.read_two_view_geometry_num_inliers()):
+            a, b = (index.get(x) for x in pycolmap.pair_id_to_image_pair(pair_id))
+            if a is not None and b is not None and n_inl > 0:
+                pair_inliers[(min(a, b), max(a, b))] = int(n_inl)
     if sum(keypoints) == 0:
         raise SparseError("no SIFT features in any image (is the plant visible?)")
     if verified == 0:
@@ -219,4 +227,4 @@ def _sparse(pycolmap: object, images: Sequence[NDArray[np.uint8]], cameras: NDAr
     if len(xyz) == 0:
         raise SparseError(f"no 3D point triangulated ({verified} verified image pairs, keypoints {keypoints})")
     return SparseResult(points=xyz, colors=rgb, registered=int(seen), keypoints=[int(k) for k in keypoints],
-                        verified_pairs=verified, mean_track_length=track)
+                        verified_pairs=verified, mean_track_length=track, pair_inliers=pair_inliers)

@@ -1,0 +1,344 @@
+#!/usr/bin/env python3
+"""The plan-quality study: how well does each reward model rank plans the way the reconstruction does?
+
+For each scenario (Corn50 plants from ../shared, scene seed 0, as Table I) it builds at least 60
+*feasible* plans from diverse families (structured caps, full circles over a grid of radius and
+height, arcs 15-90 degrees apart, plans at several distances, SA, random feasible plans, BO
+outputs, the tuned circle), reconstructs each with the project's own pipeline (render, COLMAP on
+the CPU, SGBM dense stereo, Chamfer) on the chosen wind realizations, and records what explains
+the result: accuracy, completeness, sparse and dense points, verified SIFT matches per camera
+pair, the pairs the dense step used, each camera's elevation and distance.
+
+Then every reward model of :data:`vp_planner.reward_models.REWARD_MODELS` (and the ingredient
+ablations of ``study_models``) scores every plan, and Spearman's rho between the reward and
+-Chamfer is reported over all plans and over the plans that reconstructed at all.
+
+Phases (``--phase``): ``plans`` (generate, cached), ``recon`` (reconstruct, one cached JSON per
+plan and realization: resumable), ``analyze`` (models, Spearman, ``results/plan_quality.json``
+and ``results/plan_quality.png``), ``all``. Variants: ``--ground`` renders a textured soil plane
+(masks from the known scene) instead of the blue screen; ``--sparse`` analyzes the sparse
+cloud's Chamfer instead of the dense one (same reconstructions).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import ROOT, SCENARIOS, cached, default_models, machine, models_tag, scene  # noqa: E402
+
+CACHE = ROOT / 'results' / 'cache' / 'plan_quality'
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    ap.add_argument('--models', default=default_models(), help='folder of PLY plants (default ../shared/data/corn50)')
+    ap.add_argument('--scenarios', nargs='+', default=['one_plant', 'three_row'], choices=list(SCENARIOS))
+    ap.add_argument('--realizations', default='0,1', help='wind realizations to reconstruct (comma-separated)')
+    ap.add_argument('--width', type=int, default=2000)
+    ap.add_argument('--height', type=int, default=1500)
+    ap.add_argument('--ground', action='store_true', help='render a textured soil plane under the plants')
+    ap.add_argument('--phase', default='all', choices=['plans', 'recon', 'analyze', 'all'])
+    ap.add_argument('--variants', nargs='+', default=None,
+                    help='analyze: variants to report (default: every one found in the cache)')
+    ap.add_argument('--out', default=str(ROOT / 'results'))
+    ap.add_argument('--limit', type=int, default=0, help='reconstruct only the first n plans (0: all)')
+    return ap.parse_args(argv)
+
+
+# ----------------------------------------------------------------------------- plan families
+def _space(scenario: str, models: str):
+    from vp_planner.space import ViewSpace
+
+    noisy, _ = scene(scenario, models)
+    return noisy, ViewSpace(noisy.points, SCENARIOS[scenario])
+
+
+def plan_families(scenario: str, models: str) -> list[dict]:
+    """The study's plans: [{id, family, params, cameras}], feasible only, deterministic."""
+    from vp_planner.optimizers import plan_views
+    from vp_planner.patterns import arc, cap, ring
+
+    noisy, space = _space(scenario, models)
+    N = SCENARIOS[scenario]
+    R = noisy.points
+    ext = space.extent
+    centre = ext.centre
+    target = centre.copy()
+    plans: list[dict] = []
+
+    def add(family: str, params: dict, cams: np.ndarray) -> None:
+        cams = np.asarray(cams, dtype=np.float64)
+        if cams.shape == (N, 6) and bool(space.feasible(cams)):
+            plans.append({'id': f'{family}-{len(plans):03d}', 'family': family, 'params': params,
+                          'cameras': cams.tolist()})
+
+    # structured caps: the planner's own initial plans, then caps over elevation x spread x distance
+    for i, U in enumerate(space.structured(max_plans=8)):
+        add('structured', {'index': i}, space.decode(U))
+    half = float(np.max(ext.half))
+    rng = np.random.default_rng(11)
+    for el in (10, 30, 50, 70):
+        for spread in (0.5, 1.0):
+            for dist in (1.6, 2.4):
+                az = float(rng.uniform(0, 360))
+                add('cap', {'elevation': el, 'half_angle_deg': 22.5 * spread, 'distance': dist + half, 'azimuth': az},
+                    cap(centre, target, dist + half, N, math.radians(az), math.radians(el),
+                        math.radians(22.5 * spread)))
+    # full circles over a grid of radius and height (the paper's circle family)
+    for r in (1.2, 1.8, 2.6):
+        for h in (1.0, 2.2, 3.4):
+            add('circle', {'radius': r + half, 'height': h}, ring(centre[:2], target, [r + half], [h], N)[0])
+    # arcs 15-90 degrees apart at two (radius, height) pairs, facing the row broadside and along it
+    for (r, h, az) in ((1.6, 2.4, 90.0), (2.2, 1.2, 0.0)):
+        for spacing in (15, 20, 30, 40, 50, 60, 75, 90):
+            if spacing * (N - 1) >= 360:
+                continue
+            add('arc', {'radius': r + half, 'height': h, 'spacing_deg': spacing, 'azimuth': az},
+                arc(centre[:2], target, r + half, h, N, math.radians(spacing), math.radians(az)))
+    # a 30-degree arc at several distances (elevation 35 degrees)
+    for d in (1.2, 1.6, 2.0, 2.6, 3.3, 4.2):
+        dd = d + half
+        el = math.radians(35.0)
+        add('distance', {'distance': dd, 'spacing_deg': 30},
+            arc(centre[:2], target, dd * math.cos(el), centre[2] + dd * math.sin(el), N, math.radians(30.0),
+                math.radians(200.0)))
+    # random feasible plans of the planner's space
+    for U in space.sample(14, np.random.default_rng(5)):
+        add('random', {}, space.decode(U))
+    # optimizer outputs (paper reward, 100 evaluations)
+    for method, seeds in (('circle', (0,)), ('sa', (0, 1, 2, 3)), ('egp', (0, 1, 2)), ('gp', (0,))):
+        for seed in seeds:
+            res = plan_views(method, R, N, evaluations=100, initial_evaluations=50, seed=seed)
+            add(method, {'seed': seed, 'reward_model': 'paper'}, res.cameras)
+    return plans
+
+
+def plans_of(scenario: str, models: str) -> list[dict]:
+    return cached(CACHE / models_tag(models) / scenario / 'plans.json', lambda: plan_families(scenario, models))
+
+
+def describe_cameras(cams: np.ndarray, centre: np.ndarray) -> dict:
+    d = cams[:, :3] - centre
+    dist = np.linalg.norm(d, axis=1)
+    elev = np.degrees(np.arcsin(np.clip(d[:, 2] / np.maximum(dist, 1e-12), -1, 1)))
+    return {'distance': dist.round(3).tolist(), 'elevation_deg': elev.round(1).tolist()}
+
+
+# ----------------------------------------------------------------------------- reconstruction
+def variant_name(args) -> str:
+    return f'{args.width}x{args.height}' + ('-ground' if args.ground else '')
+
+
+def recon_cell(scenario: str, models: str, plan: dict, k: int, args) -> dict:
+    from vp_recon.pipeline import ReconConfig, ReconError, reconstruct_realization
+
+    path = CACHE / models_tag(models) / scenario / variant_name(args) / f'{plan["id"]}-k{k}.json'
+
+    def compute() -> dict:
+        noisy, _ = scene(scenario, models)
+        cfg = ReconConfig(width=args.width, height=args.height, ground=args.ground, keep_images=False)
+        t0 = time.perf_counter()
+        try:
+            r = reconstruct_realization(noisy, k, np.asarray(plan['cameras']), cfg)
+        except ReconError as exc:
+            return {'error': exc.name, 'error_msg': str(exc), 'seconds': time.perf_counter() - t0}
+        sp = r.sparse_score
+        return {
+            'chamfer': r.chamfer, 'accuracy': r.accuracy, 'completeness': r.completeness, 'fscore': r.fscore,
+            'points': int(len(r.points)), 'source': r.source, 'images': r.images, 'visible_images': r.visible_images,
+            'sparse_points': r.sparse_points,
+            'sparse_chamfer': sp.chamfer if sp else None, 'sparse_accuracy': sp.accuracy if sp else None,
+            'sparse_completeness': sp.completeness if sp else None,
+            'sparse_clean_points': sp.num_points if sp else 0,
+            'pair_inliers': [[int(a), int(b), int(n)] for (a, b), n in sorted(r.pair_inliers.items())],
+            'dense_pairs': [[int(a), int(b), int(n)] for (a, b), n in zip(r.dense_pairs, r.dense_pair_points)],
+            'seconds': {**r.seconds, 'total': time.perf_counter() - t0},
+        }
+    return cached(path, compute)
+
+
+def run_recon(args) -> None:
+    from tqdm import tqdm
+
+    ks = [int(x) for x in args.realizations.split(',')]
+    jobs = []
+    for s in args.scenarios:
+        plans = plans_of(s, args.models)
+        if args.limit:
+            plans = plans[: args.limit]
+        jobs += [(s, p, k) for p in plans for k in ks]
+    bar = tqdm(jobs, desc=f'reconstructing ({variant_name(args)})', unit='recon', file=sys.stdout, mininterval=5)
+    for s, p, k in bar:
+        bar.set_postfix_str(f'{s} {p["id"]} k{k}')
+        recon_cell(s, args.models, p, k, args)
+
+
+# ----------------------------------------------------------------------------- analysis
+def load_study(scenario: str, models: str, variant: str) -> list[dict]:
+    """Plans with their reconstructions (realizations found in the cache) of one variant."""
+    folder = CACHE / models_tag(models) / scenario / variant
+    out = []
+    for p in plans_of(scenario, models):
+        recs = {}
+        for f in sorted(folder.glob(f'{p["id"]}-k*.json')):
+            recs[int(f.stem.rsplit('-k', 1)[1])] = json.loads(f.read_text())
+        if recs:
+            out.append({**p, 'recon': recs})
+    return out
+
+
+def plan_chamfer(plan: dict, key: str = 'chamfer') -> float:
+    """Mean Chamfer (metres) over the reconstructed realizations; inf when any failed."""
+    vals = []
+    for r in plan['recon'].values():
+        v = r.get(key)
+        if r.get('error') or v is None:
+            return math.inf
+        vals.append(v)
+    return float(np.mean(vals)) if vals else math.inf
+
+
+def spearman(x, y) -> float:
+    from scipy.stats import spearmanr
+
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    if len(x) < 3 or np.ptp(x) == 0 or np.ptp(y[np.isfinite(y)] if np.isfinite(y).any() else y) == 0:
+        return float('nan')
+    return float(spearmanr(x, y).statistic)
+
+
+def score_models(scenario: str, models: str, plans: list[dict], model_specs: dict) -> dict:
+    """Reward of every plan under every model: {model: [reward per plan]} (eq. 7 averaging)."""
+    from vp_planner.reward_models import make_reward
+
+    noisy, _ = scene(scenario, models)
+    cams = np.array([p['cameras'] for p in plans])
+    out = {}
+    for name, spec in model_specs.items():
+        fn = make_reward(spec, noisy.points)
+        t0 = time.perf_counter()
+        vals = np.concatenate([np.asarray(fn(cams[i:i + 16])).reshape(-1) for i in range(0, len(cams), 16)])
+        out[name] = {'reward': vals.tolist(), 'ms_per_plan': 1000 * (time.perf_counter() - t0) / max(1, len(cams))}
+    return out
+
+
+def study_models() -> dict:
+    """The reward models and ingredient ablations the study compares: name -> spec."""
+    from vp_planner.reward_models import REWARD_MODELS, ablations
+
+    specs = {name: name for name in REWARD_MODELS}
+    specs.update(ablations())
+    return specs
+
+
+def analyze(args) -> dict:
+    variants = args.variants or sorted({d.name for s in args.scenarios
+                                        for d in (CACHE / models_tag(args.models) / s).glob('*') if d.is_dir()})
+    specs = study_models()
+    from vp_planner.reward_models import DEFAULT_REWARD_MODEL
+
+    result: dict = {'default': DEFAULT_REWARD_MODEL, 'date': time.strftime('%Y-%m-%d'), 'machine': machine(),
+                    'models_folder': models_tag(args.models), 'plans': {}, 'spearman': {},
+                    'spearman_reconstructed': {}, 'variants': {}, 'ms_per_plan': {}, 'failed': {}}
+    per_plan: dict = {}
+    for variant in variants:
+        for cloud in ('dense', 'sparse'):
+            key = 'chamfer' if cloud == 'dense' else 'sparse_chamfer'
+            vname = f'{variant}/{cloud}'
+            vres: dict = {'plans': {}, 'spearman': {}, 'spearman_reconstructed': {}, 'failed': {}}
+            for s in args.scenarios:
+                plans = load_study(s, args.models, variant)
+                if not plans:
+                    continue
+                rewards = score_models(s, args.models, plans, specs)
+                ch = np.array([plan_chamfer(p, key) for p in plans])
+                ok = np.isfinite(ch)
+                vres['plans'][s] = len(plans)
+                vres['failed'][s] = int((~ok).sum())
+                vres['spearman'][s] = {m: spearman(r['reward'], -ch) for m, r in rewards.items()}
+                vres['spearman_reconstructed'][s] = {m: spearman(np.asarray(r['reward'])[ok], -ch[ok])
+                                                     for m, r in rewards.items()}
+                result['ms_per_plan'][s] = {m: r['ms_per_plan'] for m, r in rewards.items()}
+                per_plan[(vname, s)] = (plans, ch, rewards)
+            result['variants'][vname] = vres
+    main_v = f'{args.width}x{args.height}/dense'
+    if main_v in result['variants']:
+        mv = result['variants'][main_v]
+        result['plans'], result['spearman'] = mv['plans'], mv['spearman']
+        result['spearman_reconstructed'], result['failed'] = mv['spearman_reconstructed'], mv['failed']
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / 'plan_quality.json').write_text(json.dumps(result, indent=1))
+    plot(out / 'plan_quality.png', per_plan, main_v, specs)
+    print_table(result)
+    return result
+
+
+def plot(path: Path, per_plan: dict, variant: str, specs: dict) -> None:
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    cells = [(s, v) for (v, s) in per_plan if v == variant]
+    if not cells:
+        return
+    names = list(specs)
+    fig, axes = plt.subplots(len(cells), len(names), figsize=(3.2 * len(names), 3.0 * len(cells)), squeeze=False)
+    for row, (s, v) in enumerate(cells):
+        plans, ch, rewards = per_plan[(v, s)]
+        fam = [p['family'] for p in plans]
+        fams = sorted(set(fam))
+        cmap = plt.get_cmap('tab10')
+        cap = np.nanmax(np.where(np.isfinite(ch), ch, np.nan)) * 1.15 if np.isfinite(ch).any() else 1.0
+        y = np.where(np.isfinite(ch), ch, cap) * 100
+        for col, m in enumerate(names):
+            ax = axes[row][col]
+            r = np.asarray(rewards[m]['reward'])
+            for i, f in enumerate(fams):
+                sel = np.array([x == f for x in fam])
+                ax.scatter(r[sel], y[sel], s=12, color=cmap(i % 10), label=f)
+            ok = np.isfinite(ch)
+            ax.set_title(f'{s}: {m}\nrho {spearman(r, -ch):.2f} (reconstructed {spearman(r[ok], -ch[ok]):.2f})',
+                         fontsize=8)
+            ax.set_xlabel('reward', fontsize=7)
+            ax.set_ylabel('Chamfer x100 (top row: failed)', fontsize=7)
+            ax.tick_params(labelsize=6)
+            if row == 0 and col == 0:
+                ax.legend(fontsize=5)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+def print_table(result: dict) -> None:
+    for vname, v in result['variants'].items():
+        print(f'\n## {vname}')
+        for s, rhos in v['spearman'].items():
+            print(f'{s} ({v["plans"][s]} plans, {v["failed"][s]} failed):')
+            for m, rho in sorted(rhos.items(), key=lambda kv: -np.nan_to_num(kv[1], nan=-9)):
+                print(f'  {m:40s} rho {rho:+.3f}   reconstructed {v["spearman_reconstructed"][s][m]:+.3f}   '
+                      f'{result["ms_per_plan"].get(s, {}).get(m, float("nan")):.1f} ms/plan')
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    if args.phase in ('plans', 'all', 'recon'):
+        for s in args.scenarios:
+            n = len(plans_of(s, args.models))
+            print(f'{s}: {n} feasible plans')
+    if args.phase in ('recon', 'all'):
+        run_recon(args)
+    if args.phase in ('analyze', 'all'):
+        analyze(args)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

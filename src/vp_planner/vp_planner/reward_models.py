@@ -1,0 +1,291 @@
+"""Reward models: the paper's reward (eqs. 2-7) and a model of what the reconstruction recovers.
+
+Every model maps camera plans z (B, N, 6) and the K wind realizations (K, P, 3) of the scene to
+rewards (B,) in [0, 1], and keeps the paper's wind averaging (eq. 7): the reward of a plan is the
+mean over the K realizations of its reward on each one.
+
+``paper``
+    Eqs. 2-7 exactly as :mod:`vp_planner.reward` implements them: the sine of the triangulation
+    angle, summed over all camera pairs that see a point inside the FoV cone and meet at no more
+    than theta_match, averaged over points and pairs.
+
+``coverage``
+    The expected fraction of the plant's points that some camera pair reconstructs. It models
+    what the plan-quality study (``bench/plan_quality.py``) found decides the Chamfer distance:
+    completeness, i.e. which parts of the plant end up with no reconstructed point at all::
+
+        q_i(p)   = vis_i(p) rho(|p - c_i|)                     camera i images p usefully
+        q_ij(p)  = q_i(p) q_j(p) w(theta_ij(p))                 pair (i, j) reconstructs p
+        cov(p)   = 1 - prod_{i<j} (1 - q_ij(p))                  some pair does (saturation)
+        R(z)     = 1/(K P) sum_k sum_p cov(p~^(k))               eq. 7's average over winds
+
+    * vis_i(p): p lies inside camera i's *image* (the W x H frustum, not a cone) and is not
+      hidden by nearer points of the same realization: a z-buffer of the cloud on a coarse grid
+      of ``zbuffer_width`` cells across the image; p is visible when its depth is within
+      ``occlusion_tolerance`` (relative) of the nearest depth in its cell (self-occlusion).
+    * rho(r) = min(1, (f / r) / ppm_full): image resolution, pixels per metre on the plant at
+      distance r (f = (W/2) / tan(FoV/2) for the rendered image size) relative to the density
+      ``ppm_full`` above which more pixels no longer help.
+    * w(theta): the matching window, the triangulation angle theta_ij(p) between c_i - p and
+      c_j - p that SIFT matching and stereo handle: rising linearly to 1 at ``window_low``
+      (small angles triangulate poorly), 1 up to ``window_high``, falling linearly to 0 at
+      ``window_cutoff`` (wider pairs do not match).
+    * 1 - prod(1 - q): per-point saturation; a point seen by one good pair is covered, ten
+      pairs from the same side do not count ten times (the paper's sum does).
+
+Each ingredient can be switched off (``ablations()``), which is how the study measures it.
+Degenerate cases: a camera on a point or with a zero viewing vector sees nothing; an empty
+cloud is refused; N < 2 is refused (no pairs).
+
+Cost and memory: the camera terms are (B, N, K P), the pair terms (B, S, K P) with
+S = N (N - 1) / 2; plans are processed in chunks and pairs in blocks so that no intermediate
+array exceeds ``max_elements`` elements.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields, replace
+from typing import Any, Callable, Union
+
+import numpy as np
+import torch
+
+from vp_scene.camera import CameraModel
+
+from .reward import DEFAULT_FOV, DEFAULT_THETA_MATCH, noisy_reward, prepare_points
+
+__all__ = ["REWARD_MODELS", "DEFAULT_REWARD_MODEL", "CoverageParams", "RewardFunction", "make_reward",
+           "coverage_reward", "point_coverage", "ablations", "check_reward_model"]
+
+#: Reward models by name (``reward`` parameter, PlanViews goal field, ``--reward``).
+REWARD_MODELS: tuple[str, ...] = ("paper", "coverage")
+#: The model the plan-quality study supports (README, results/plan_quality.json).
+DEFAULT_REWARD_MODEL: str = "coverage"
+
+RewardFunction = Callable[[Any], np.ndarray]
+
+
+def check_reward_model(name: Any) -> str:
+    """``name`` if it is one of :data:`REWARD_MODELS`, else ValueError naming the choices."""
+    if not isinstance(name, str) or name not in REWARD_MODELS:
+        raise ValueError(f"unknown reward model {name!r}; one of {', '.join(REWARD_MODELS)}")
+    return name
+
+
+@dataclass(frozen=True)
+class CoverageParams:
+    """Ingredients of the ``coverage`` model (see the module docstring); angles in degrees.
+
+    Attributes:
+        occlusion: z-buffer self-occlusion test.
+        zbuffer_width: z-buffer cells across the image width (height in proportion).
+        occlusion_tolerance: a point within this fraction of the cell's nearest depth is visible.
+        resolution: weight cameras by pixels per metre on the plant.
+        ppm_full: pixels per metre above which rho = 1.
+        window: the matching window on the triangulation angle (else every angle counts 1,
+            up to ``window_cutoff``).
+        window_low, window_high, window_cutoff: the window's corners.
+        saturation: per-point 1 - prod(1 - q) (else the mean of q over pairs, as the paper).
+        frustum: the rectangular W x H image (else the paper's cone of half-angle FoV/2).
+        max_points: subsample each realization to at most this many points (0: all).
+    """
+
+    occlusion: bool = True
+    zbuffer_width: int = 64
+    occlusion_tolerance: float = 0.03
+    resolution: bool = True
+    ppm_full: float = 500.0
+    window: bool = True
+    window_low: float = 5.0
+    window_high: float = 25.0
+    window_cutoff: float = 45.0
+    saturation: bool = True
+    frustum: bool = True
+    max_points: int = 3000
+
+
+def ablations() -> dict[str, tuple[str, CoverageParams]]:
+    """Ingredient ablations of ``coverage`` (name -> spec) measured by the plan-quality study."""
+    base = CoverageParams()
+    out = {
+        "coverage-no-occlusion": ("coverage", replace(base, occlusion=False)),
+        "coverage-no-resolution": ("coverage", replace(base, resolution=False)),
+        "coverage-no-window": ("coverage", replace(base, window=False)),
+        "coverage-no-saturation": ("coverage", replace(base, saturation=False)),
+        "coverage-cone": ("coverage", replace(base, frustum=False)),
+    }
+    return out
+
+
+def _unit_rows(cams: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Camera centres (B, N, 3) and optical-frame axes x_o, y_o, z_o (B, N, 3) (vp_scene.camera)."""
+    c = cams[..., :3]
+    v = cams[..., 3:]
+    n = torch.linalg.vector_norm(v, dim=-1, keepdim=True)
+    ok = (n > 0) & torch.isfinite(n)
+    z_o = torch.where(ok, v / torch.where(ok, n, torch.ones_like(n)), torch.zeros_like(v))
+    ez = torch.tensor([0.0, 0.0, 1.0], dtype=cams.dtype)
+    y_b = torch.linalg.cross(ez.expand_as(z_o), z_o)
+    yn = torch.linalg.vector_norm(y_b, dim=-1, keepdim=True)
+    vertical = yn < 1e-9
+    y_b = torch.where(vertical, torch.tensor([0.0, 1.0, 0.0], dtype=cams.dtype).expand_as(y_b),
+                      y_b / torch.where(vertical, torch.ones_like(yn), yn))
+    z_b = torch.linalg.cross(z_o, y_b)
+    return c, -y_b, -z_b, z_o
+
+
+def _window(theta_deg: torch.Tensor, p: CoverageParams) -> torch.Tensor:
+    """w(theta): linear rise to 1 at window_low, flat to window_high, linear fall to 0 at cutoff."""
+    if not p.window:
+        return (theta_deg <= p.window_cutoff).to(theta_deg.dtype)
+    rise = (theta_deg / max(p.window_low, 1e-9)).clamp(0.0, 1.0)
+    fall = ((p.window_cutoff - theta_deg) / max(p.window_cutoff - p.window_high, 1e-9)).clamp(0.0, 1.0)
+    return torch.minimum(rise, fall)
+
+
+def coverage_reward(cameras: Any, realizations: Any, params: CoverageParams = CoverageParams(),
+                    image: CameraModel = CameraModel(), *, max_elements: int = 1 << 22,
+                    dtype: torch.dtype = torch.float32, seed: int = 0) -> np.ndarray:
+    """The ``coverage`` model (module docstring) of plans (..., N, 6) on realizations (K, P, 3).
+
+    Returns rewards of shape ``cameras.shape[:-2]`` (a float for one (N, 6) plan).
+    """
+    cams = torch.as_tensor(np.asarray(cameras, dtype=np.float64)).to(dtype)
+    if cams.ndim < 2 or cams.shape[-1] != 6:
+        raise ValueError(f"cameras must have shape (..., N, 6), got {tuple(cams.shape)}")
+    batch_shape = tuple(cams.shape[:-2])
+    N = cams.shape[-2]
+    if N < 2:
+        raise ValueError(f"the reward needs at least 2 cameras (pairs), got N = {N}")
+    pts = _points(realizations, params.max_points, seed).to(dtype)  # (K, P, 3)
+    K, P, _ = pts.shape
+    cams = cams.reshape(-1, N, 6)
+    B = cams.shape[0]
+    out = torch.zeros(B, dtype=torch.float64)
+    S = N * (N - 1) // 2
+    per_plan = K * P * max(3 * N, min(S, 64))
+    chunk = max(1, max_elements // max(1, per_plan))
+    for b0 in range(0, B, chunk):
+        cov = _point_coverage(cams[b0:b0 + chunk], pts, params, image, max_elements)
+        out[b0:b0 + chunk] = cov.mean(-1).to(torch.float64)   # 1/(K P) sum_k sum_p (eq. 7)
+    res = out.numpy()
+    return res.reshape(batch_shape) if batch_shape else float(res.reshape(-1)[0])
+
+
+def _points(realizations: Any, max_points: int, seed: int) -> torch.Tensor:
+    R = torch.as_tensor(np.asarray(realizations, dtype=np.float64))
+    if R.ndim == 2:
+        R = R[None]
+    if R.ndim != 3 or R.shape[-1] != 3:
+        raise ValueError(f"realizations must have shape (K, P, 3), got {tuple(R.shape)}")
+    if R.shape[0] == 0 or R.shape[1] == 0:
+        raise ValueError("the point cloud is empty")
+    if max_points and R.shape[1] > max_points:
+        idx = np.sort(np.random.default_rng(seed).choice(R.shape[1], size=max_points, replace=False))
+        R = R[:, torch.as_tensor(idx)]
+    return R
+
+
+def _point_coverage(cams: torch.Tensor, pts: torch.Tensor, p: CoverageParams, image: CameraModel,
+                    max_elements: int) -> torch.Tensor:
+    """cov(p) (B, K P) of plans (B, N, 6) on realizations (K, P, 3), flattened realization-major."""
+    B, N, _ = cams.shape
+    K, P, _ = pts.shape
+    dt = cams.dtype
+    c, x_o, y_o, z_o = _unit_rows(cams)
+    valid_cam = torch.isfinite(cams).all(-1) & (torch.linalg.vector_norm(cams[..., 3:], dim=-1) > 0)
+    flat = pts.reshape(1, 1, K * P, 3)
+    d = flat - c[:, :, None, :]                                     # (B, N, KP, 3): p - c_i
+    r = torch.linalg.vector_norm(d, dim=-1)                          # (B, N, KP)
+    depth = (d * z_o[:, :, None, :]).sum(-1)
+    xs = (d * x_o[:, :, None, :]).sum(-1)
+    ys = (d * y_o[:, :, None, :]).sum(-1)
+    front = (depth > 1e-6) & valid_cam[:, :, None] & (r > 1e-9)
+    safe = torch.where(front, depth, torch.ones_like(depth))
+    tx = math.tan(0.5 * image.fov)
+    ty = tx * image.height / image.width
+    if p.frustum:
+        u, v = xs / safe, ys / safe
+        inside = front & (u.abs() <= tx) & (v.abs() <= ty)
+    else:  # the paper's cone: angle between v and p - c at most FoV / 2
+        inside = front & (depth >= math.cos(0.5 * image.fov) * r)
+        u = (xs / safe).clamp(-tx, tx)
+        v = (ys / safe).clamp(-ty, ty)
+    vis = inside
+    if p.occlusion:
+        gw = max(1, int(p.zbuffer_width))
+        gh = max(1, int(round(gw * image.height / image.width)))
+        iu = ((u / tx + 1.0) * 0.5 * gw).floor().clamp(0, gw - 1).long()
+        iv = ((v / ty + 1.0) * 0.5 * gh).floor().clamp(0, gh - 1).long()
+        # one buffer per (plan, camera, realization): points of other winds do not occlude
+        k_of = torch.arange(K).repeat_interleave(P).view(1, 1, K * P)
+        bn = torch.arange(B * N).view(B, N, 1)
+        key = ((bn * K + k_of) * gh + iv) * gw + iu
+        inf = torch.full((B * N * K * gh * gw,), math.inf, dtype=dt)
+        zmin = inf.scatter_reduce(0, key[inside], depth[inside], reduce="amin", include_self=True)
+        near = depth <= zmin[key.clamp_min(0)] * (1.0 + p.occlusion_tolerance)
+        vis = inside & near
+    q = vis.to(dt)
+    if p.resolution:
+        q = q * ((image.focal_px / r.clamp_min(1e-9)) / p.ppm_full).clamp(max=1.0)
+    unit = d / r.clamp_min(1e-12)[..., None]
+    ii, jj = torch.triu_indices(N, N, offset=1)
+    S = ii.numel()
+    log_miss = torch.zeros(B, K * P, dtype=dt)
+    total = torch.zeros(B, K * P, dtype=dt)
+    block = max(1, max_elements // max(1, 3 * B * K * P))
+    for s0 in range(0, S, block):
+        a, b = ii[s0:s0 + block], jj[s0:s0 + block]
+        cos = (unit[:, a] * unit[:, b]).sum(-1).clamp(-1.0, 1.0)    # (B, s, KP)
+        theta = torch.rad2deg(torch.arccos(cos))
+        qij = q[:, a] * q[:, b] * _window(theta, p)
+        if p.saturation:
+            log_miss += torch.log1p(-qij.clamp(max=1.0 - 1e-7)).sum(1)
+        else:
+            total += qij.sum(1)
+    return -torch.expm1(log_miss) if p.saturation else total / S     # cov(p), (B, K P)
+
+
+def point_coverage(cameras: Any, realizations: Any, params: CoverageParams = CoverageParams(),
+                   image: CameraModel = CameraModel()) -> np.ndarray:
+    """cov(p) of every point (K, P) of the realizations for one plan (N, 6), all points kept."""
+    cams = torch.as_tensor(np.asarray(cameras, dtype=np.float64)).reshape(1, -1, 6)
+    if cams.shape[1] < 2:
+        raise ValueError(f"the reward needs at least 2 cameras (pairs), got N = {cams.shape[1]}")
+    pts = _points(realizations, 0, 0)
+    cov = _point_coverage(cams, pts, params, image, 1 << 22)
+    return cov.reshape(pts.shape[0], pts.shape[1]).numpy()
+
+
+def make_reward(spec: Union[str, tuple], realizations: Any, fov: float = DEFAULT_FOV,
+                theta_match: float = DEFAULT_THETA_MATCH, image: CameraModel | None = None,
+                dtype: torch.dtype = torch.float64) -> RewardFunction:
+    """A function cams (..., N, 6) -> rewards of the named model on these realizations.
+
+    ``spec`` is a name of :data:`REWARD_MODELS` or ``("coverage", CoverageParams)``. ``image``
+    gives the image size the resolution term uses (default 2000 x 1500, the paper's) and its
+    field of view is ``fov``.
+    """
+    name, params = (spec, None) if isinstance(spec, str) else spec
+    check_reward_model(name)
+    if name == "paper":
+        prep = prepare_points(realizations, dtype)
+
+        def paper(cams: Any) -> np.ndarray:
+            return np.asarray(noisy_reward(np.asarray(cams, dtype=np.float64), prep, fov, theta_match, dtype=dtype))
+        return paper
+    cam_model = image or CameraModel(fov=fov)
+    if abs(cam_model.fov - fov) > 1e-12:
+        cam_model = CameraModel(cam_model.width, cam_model.height, fov)
+    params = params or CoverageParams()
+    R = np.asarray(realizations, dtype=np.float64)
+    pts = _points(R, params.max_points, 0).numpy()
+
+    def coverage(cams: Any) -> np.ndarray:
+        return np.asarray(coverage_reward(cams, pts, replace(params, max_points=0), cam_model))
+    return coverage
+
+
+def params_dict(params: CoverageParams) -> dict:
+    """The parameters as a plain dict (for plan.json and the study's output)."""
+    return {f.name: getattr(params, f.name) for f in fields(params)}

@@ -1,0 +1,250 @@
+"""Camera geometry of the suite: the pose convention, intrinsics and projection (one home).
+
+Planner, reconstruction and dispatcher all import this module; nothing else defines a camera.
+
+The camera convention (documented here once; README "Camera convention" quotes it)
+----------------------------------------------------------------------------------
+Units are metres and radians, frame ``map``, REP-103 axes (x forward/east, y left/north, z up;
+the ground is z = 0). A camera is 6 numbers ``[cx, cy, cz, vx, vy, vz]``: its centre c and its
+viewing direction v, **the optical axis** (v need not be unit). Its *body frame* has
+
+* +x along the optical axis: x_b = v / |v|,
+* +y to the camera's left and horizontal (no roll): y_b = (e_z x x_b) / |e_z x x_b|,
+* +z up-ish: z_b = x_b x y_b (right-handed, z_b . e_z >= 0);
+
+for a vertical v (e_z x x_b = 0), y_b = world +y. As a ``geometry_msgs/Pose`` (x, y, z, qx, qy,
+qz, qw) the quaternion is the rotation R = [x_b y_b z_b] from the body frame to ``map`` (qw >=
+0): the REP-103 body convention, so RViz's PoseArray arrows point where each camera looks.
+The REP-103 *optical* frame (z forward, x right, y down), the one image pipelines use, is the
+body frame turned by the fixed rotation between ``camera_link`` and ``camera_optical_frame``,
+:data:`OPTICAL_IN_BODY` (quaternion x, y, z, w = -0.5, 0.5, -0.5, 0.5): x_o = -y_b, y_o = -z_b,
+z_o = x_b. OpenCV and COLMAP use that optical frame; OpenGL (pyrender) uses x right, y up, z
+backward.
+
+Intrinsics
+----------
+Square pixels, principal point at the image centre, no distortion, horizontal field of view
+``fov`` (Hartley & Zisserman, Multiple View Geometry, eq. 6.4)::
+
+    f = (W / 2) / tan(fov / 2),   K = [[f, 0, (W-1)/2], [0, f, (H-1)/2], [0, 0, 1]],
+    (u, v, 1)^T ~ K X_o,          X_o = R_cw X_w + t,  R_cw = [x_o y_o z_o]^T,  t = -R_cw c
+
+with OpenCV pixel centres at integer coordinates (u right, v down). OpenGL and COLMAP put pixel
+centres at +0.5, so their principal point is (W/2, H/2) (:func:`principal_point_gl`).
+
+Quaternions go through :class:`scipy.spatial.transform.Rotation`. Everything is vectorized
+over leading dimensions and works on numpy arrays. ROS-free.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial.transform import Rotation
+
+__all__ = [
+    "OPTICAL_IN_BODY",
+    "CameraModel",
+    "rotation_matrix",
+    "cameras_to_poses",
+    "poses_to_cameras",
+    "optical_orientation",
+    "look_at",
+    "intrinsics",
+    "principal_point_gl",
+    "world_to_camera",
+    "camera_to_world_gl",
+    "project",
+    "check_cameras",
+]
+
+#: Quaternion (x, y, z, w) of the optical frame (z forward, x right, y down) in the body frame.
+OPTICAL_IN_BODY: tuple[float, float, float, float] = (-0.5, 0.5, -0.5, 0.5)
+
+#: |e_z x x_b| below this counts as a vertical viewing direction.
+_VERTICAL_TOL = 1e-9
+
+
+def check_cameras(cameras: ArrayLike) -> NDArray[np.float64]:
+    """Cameras as an (N, 6) float64 array; ValueError naming the problem otherwise."""
+    cams = np.asarray(cameras, dtype=np.float64)
+    if cams.ndim == 1 and cams.size == 6:
+        cams = cams[None]
+    if cams.ndim != 2 or cams.shape[1] != 6:
+        raise ValueError(f"cameras must have shape (N, 6) = [cx, cy, cz, vx, vy, vz], got {cams.shape}")
+    if not np.all(np.isfinite(cams)):
+        raise ValueError("cameras contain NaN or infinite values")
+    if np.any(np.linalg.norm(cams[:, 3:], axis=1) <= 0):
+        raise ValueError("a camera has a zero viewing direction")
+    return cams
+
+
+def rotation_matrix(v: ArrayLike) -> NDArray[np.float64]:
+    """Body-to-world rotation R (..., 3, 3), columns x_b, y_b, z_b, for viewing directions v (..., 3).
+
+    Raises:
+        ValueError: for a zero or non-finite viewing direction.
+    """
+    v = np.asarray(v, dtype=np.float64)
+    if v.shape[-1] != 3:
+        raise ValueError(f"v must have shape (..., 3), got {v.shape}")
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    if not np.all(np.isfinite(v)) or np.any(n <= 0):
+        raise ValueError("viewing directions must be finite and non-zero")
+    x = v / n
+    # y_b = e_z x x_b = (-x_y, x_x, 0), normalized; world +y for a vertical axis.
+    y = np.stack([-x[..., 1], x[..., 0], np.zeros_like(x[..., 0])], axis=-1)
+    yn = np.linalg.norm(y, axis=-1, keepdims=True)
+    vertical = yn[..., 0] < _VERTICAL_TOL
+    y = np.where(vertical[..., None], np.array([0.0, 1.0, 0.0]), y / np.where(yn > 0, yn, 1.0))
+    z = np.cross(x, y)
+    z /= np.linalg.norm(z, axis=-1, keepdims=True)
+    return np.stack([x, y, z], axis=-1)
+
+
+def _canonical(q: NDArray[np.float64]) -> NDArray[np.float64]:
+    return np.where(q[..., 3:4] < 0, -q, q)
+
+
+def cameras_to_poses(cameras: ArrayLike) -> NDArray[np.float64]:
+    """Poses (..., 7) = (x, y, z, qx, qy, qz, qw), qw >= 0, of cameras (..., 6) = [c, v]."""
+    cams = np.asarray(cameras, dtype=np.float64)
+    if cams.shape[-1] != 6:
+        raise ValueError(f"cameras must have shape (..., 6), got {cams.shape}")
+    R = rotation_matrix(cams[..., 3:])
+    q = Rotation.from_matrix(R.reshape(-1, 3, 3)).as_quat().reshape(R.shape[:-2] + (4,))
+    return np.concatenate([cams[..., :3], _canonical(q)], axis=-1)
+
+
+def _rotations(quaternions: NDArray[np.float64]) -> NDArray[np.float64]:
+    q = np.asarray(quaternions, dtype=np.float64)
+    n = np.linalg.norm(q, axis=-1)
+    if not np.all(np.isfinite(q)) or np.any(n <= 0):
+        raise ValueError("quaternions must be finite and non-zero")
+    return Rotation.from_quat(q.reshape(-1, 4)).as_matrix().reshape(q.shape[:-1] + (3, 3))
+
+
+def poses_to_cameras(poses: ArrayLike) -> NDArray[np.float64]:
+    """Cameras (..., 6) = [c, unit v] of poses (..., 7); v is the body +x axis in ``map``.
+
+    The quaternion is normalized (any non-zero length is accepted); ValueError otherwise."""
+    p = np.asarray(poses, dtype=np.float64)
+    if p.shape[-1] != 7:
+        raise ValueError(f"poses must have shape (..., 7), got {p.shape}")
+    R = _rotations(p[..., 3:])
+    return np.concatenate([p[..., :3], R[..., :, 0]], axis=-1)
+
+
+def optical_orientation(quaternions: ArrayLike) -> NDArray[np.float64]:
+    """Quaternions (..., 4) of the REP-103 optical frame for body-frame quaternions (..., 4)."""
+    q = np.asarray(quaternions, dtype=np.float64)
+    body = Rotation.from_quat(q.reshape(-1, 4))
+    out = (body * Rotation.from_quat(OPTICAL_IN_BODY)).as_quat().reshape(q.shape)
+    return _canonical(out)
+
+
+def look_at(positions: ArrayLike, targets: ArrayLike) -> NDArray[np.float64]:
+    """Cameras (..., 6) at ``positions`` (..., 3) looking at ``targets`` (..., 3) (v = target - c)."""
+    c = np.asarray(positions, dtype=np.float64)
+    t = np.asarray(targets, dtype=np.float64)
+    c, t = np.broadcast_arrays(c, t)
+    return np.concatenate([c, t - c], axis=-1)
+
+
+@dataclass(frozen=True)
+class CameraModel:
+    """Pinhole intrinsics shared by all cameras of a plan: image size and horizontal field of view.
+
+    Attributes:
+        width, height: pixels (the paper: 2000 x 1500).
+        fov: horizontal field of view, rad, in (0, pi) (the paper: pi / 2).
+    """
+
+    width: int = 2000
+    height: int = 1500
+    fov: float = math.pi / 2
+
+    def __post_init__(self) -> None:
+        _check_size(self.width, self.height, self.fov)
+
+    @property
+    def focal_px(self) -> float:
+        """f = (W / 2) / tan(fov / 2), pixels."""
+        return 0.5 * self.width / math.tan(0.5 * self.fov)
+
+    @property
+    def K(self) -> NDArray[np.float64]:
+        return intrinsics(self.width, self.height, self.fov)
+
+    @property
+    def half_fov_vertical(self) -> float:
+        """atan((H / 2) / f), rad."""
+        return math.atan(0.5 * self.height / self.focal_px)
+
+
+def _check_size(width: int, height: int, fov: float) -> None:
+    if isinstance(width, bool) or isinstance(height, bool) or int(width) != width or int(height) != height:
+        raise ValueError(f"image size must be integers, got {width!r} x {height!r}")
+    if int(width) < 2 or int(height) < 2:
+        raise ValueError(f"image size must be at least 2 x 2, got {width} x {height}")
+    if not (math.isfinite(fov) and 0 < fov < math.pi):
+        raise ValueError(f"fov must be in (0, pi) rad, got {fov}")
+
+
+def intrinsics(width: int, height: int, fov: float = math.pi / 2) -> NDArray[np.float64]:
+    """3x3 calibration K (OpenCV pixel centres) from the horizontal field of view, square pixels."""
+    _check_size(width, height, fov)
+    f = 0.5 * width / math.tan(0.5 * fov)
+    return np.array([[f, 0.0, 0.5 * (width - 1)], [0.0, f, 0.5 * (height - 1)], [0.0, 0.0, 1.0]])
+
+
+def principal_point_gl(K: ArrayLike) -> tuple[float, float]:
+    """Principal point in the OpenGL / COLMAP pixel convention (pixel centres at +0.5)."""
+    K = np.asarray(K, dtype=np.float64)
+    return float(K[0, 2] + 0.5), float(K[1, 2] + 0.5)
+
+
+def world_to_camera(camera6: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(R_cw (..., 3, 3), t (..., 3)): X_o = R_cw X_w + t in the optical (OpenCV / COLMAP) frame.
+
+    R_cw has rows x_o = -y_b, y_o = -z_b, z_o = x_b; t = -R_cw c.
+    """
+    cam = np.asarray(camera6, dtype=np.float64)
+    if cam.shape[-1] != 6:
+        raise ValueError(f"camera must have shape (..., 6), got {cam.shape}")
+    R_bw = rotation_matrix(cam[..., 3:])
+    R_wc = np.stack([-R_bw[..., :, 1], -R_bw[..., :, 2], R_bw[..., :, 0]], axis=-1)
+    R_cw = np.swapaxes(R_wc, -1, -2)
+    t = -np.einsum("...ij,...j->...i", R_cw, cam[..., :3])
+    return R_cw, t
+
+
+def camera_to_world_gl(camera6: ArrayLike) -> NDArray[np.float64]:
+    """4x4 OpenGL camera-to-world pose (x right, y up, z backward) of one camera, for pyrender."""
+    cam = np.asarray(camera6, dtype=np.float64)
+    R_bw = rotation_matrix(cam[3:])
+    T = np.eye(4)
+    T[:3, :3] = np.stack([-R_bw[:, 1], R_bw[:, 2], -R_bw[:, 0]], axis=-1)
+    T[:3, 3] = cam[:3]
+    return T
+
+
+def project(points: ArrayLike, camera6: ArrayLike, width: int, height: int,
+            fov: float = math.pi / 2) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """Pixels (M, 2) = (u, v) of world points (M, 3) and whether each is in front and in the image.
+
+    (u, v, 1)^T ~ K (R_cw X + t); a point is in the image when its depth is > 0 and
+    -0.5 <= u < W - 0.5, -0.5 <= v < H - 0.5 (no occlusion test). Points behind get NaN.
+    """
+    P = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    K = intrinsics(width, height, fov)
+    R, t = world_to_camera(camera6)
+    Xc = P @ R.T + t
+    z = Xc[:, 2]
+    front = z > 1e-9
+    with np.errstate(divide="ignore", invalid="ignore"):
+        uv = (Xc[:, :2] / np.where(front, z, np.nan)[:, None]) * K[[0, 1], [0, 1]] + K[:2, 2]
+    inside = front & (uv[:, 0] >= -0.5) & (uv[:, 0] < width - 0.5) & (uv[:, 1] >= -0.5) & (uv[:, 1] < height - 0.5)
+    return uv, inside
