@@ -11,8 +11,10 @@ whole cube in the paper's global mode):
 
 1. a pool of ``raw_samples`` candidates in the box: in a trust region, TuRBO's perturbations
    (each candidate changes a random subset of about ``perturb_dims`` coordinates of the
-   incumbent to scrambled-Sobol values in the box, so that one camera can move alone), else
-   scrambled-Sobol points of the cube plus perturbations of the best observed plans;
+   incumbent to scrambled-Sobol values in the box, so that one camera can move alone) and
+   coherent moves (one kind of coordinate of every camera shifted together: the whole plan up,
+   out, or turned), else scrambled-Sobol points of the cube plus perturbations of the best
+   observed plans;
 2. infeasible candidates are dropped (the feasibility rules of the plan are the constraints
    of the acquisition optimization, applied to every candidate before it is scored);
 3. the best ``num_restarts`` feasible candidates by LogEI start BoTorch's ``optimize_acqf``
@@ -72,15 +74,29 @@ def _sobol(n: int, bounds: Tensor, gen: torch.Generator) -> Tensor:
     return bounds[0] + (bounds[1] - bounds[0]) * u
 
 
+def _coherent(center: Tensor, bounds: Tensor, groups: Tensor, n: int, gen: torch.Generator) -> Tensor:
+    """n candidates that move every coordinate of one group by the same offset (within the box):
+    e.g. all cameras up, all out, the whole plan turned in azimuth."""
+    kinds = torch.unique(groups)
+    pick = kinds[torch.randint(0, kinds.numel(), (n,), generator=gen)]
+    sel = groups[None, :] == pick[:, None]                                  # (n, d)
+    half = 0.5 * (bounds[1] - bounds[0])
+    step = (2 * torch.rand(n, 1, generator=gen, dtype=torch.float64) - 1) * half[None, :]
+    return torch.where(sel, center[None, :] + step, center[None, :]).clamp(bounds[0], bounds[1])
+
+
 def _pool(bounds: Tensor, center: Optional[Tensor], X: Tensor, y: Tensor, valid: Tensor,
-          s: AcquisitionSettings, gen: torch.Generator) -> Tensor:
+          s: AcquisitionSettings, gen: torch.Generator, groups: Optional[Tensor] = None) -> Tensor:
     d = bounds.shape[1]
     raw = _sobol(s.raw_samples, bounds, gen)
     if center is not None:  # trust region: perturb a random subset of the incumbent's coordinates
         prob = min(1.0, s.perturb_dims / d)
         mask = torch.rand(raw.shape, generator=gen, dtype=torch.float64) < prob
         mask[torch.arange(raw.shape[0]), torch.randint(0, d, (raw.shape[0],), generator=gen)] = True
-        return torch.where(mask, raw, center.expand_as(raw))
+        local = torch.where(mask, raw, center.expand_as(raw))
+        if groups is None:
+            return local
+        return torch.cat([local, _coherent(center, bounds, groups, s.raw_samples // 4, gen)])
     if not valid.any():
         return raw
     order = torch.nonzero(valid).reshape(-1)
@@ -93,7 +109,7 @@ def _pool(bounds: Tensor, center: Optional[Tensor], X: Tensor, y: Tensor, valid:
 
 def propose(model, best_f: float, bounds: Tensor, X: Tensor, y: Tensor, valid: Tensor,
             feasible: Optional[Feasible], gen: torch.Generator, settings: AcquisitionSettings,
-            center: Optional[Tensor] = None) -> Optional[Tensor]:
+            center: Optional[Tensor] = None, groups: Optional[Tensor] = None) -> Optional[Tensor]:
     """The next point (d,) by the module's recipe, or None when no feasible candidate exists.
 
     Args:
@@ -102,12 +118,14 @@ def propose(model, best_f: float, bounds: Tensor, X: Tensor, y: Tensor, valid: T
         bounds: (2, d) the box (a trust region, or the unit cube).
         X, y, valid: the observations so far (valid: finite value and feasible point).
         center: the incumbent (trust-region mode: candidates perturb it); None for global mode.
+        groups: (d,) int kind of every coordinate (e.g. which camera parameter it is): a quarter
+            more trust-region candidates move all coordinates of one kind together.
     """
     from botorch.acquisition.analytic import LogExpectedImprovement
     from botorch.optim import optimize_acqf
 
     acq = LogExpectedImprovement(model, best_f=best_f)
-    pool = _pool(bounds, center, X, y, valid, settings, gen)
+    pool = _pool(bounds, center, X, y, valid, settings, gen, groups)
     pool = pool[feasible_mask(feasible, pool)]
     if pool.shape[0] == 0:
         return None

@@ -196,7 +196,7 @@ def optimize(objective: Objective, dim: int, evaluations: int = 100, initial_eva
              seed: int = 0, ensemble: bool = True, feasible: Optional[Feasible] = None,
              initial_design: Optional[Tensor] = None, callback: Optional[Callback] = None, *,
              settings: Optional[BOSettings] = None, init_batch: Optional[int] = None,
-             periodic: Optional[Tensor] = None) -> BOResult:
+             periodic: Optional[Tensor] = None, groups: Optional[Tensor] = None) -> BOResult:
     r"""Maximize ``objective`` over [0, 1]^dim with EGP-EI (``ensemble=True``) or GP-EI.
 
     Args:
@@ -212,6 +212,8 @@ def optimize(objective: Objective, dim: int, evaluations: int = 100, initial_eva
         settings: :class:`BOSettings`. init_batch: evaluations per objective call in the design.
         periodic: bool (dim,) coordinates that are periodic (the trust region may leave [0, 1]
             along them; ``objective`` and ``feasible`` must wrap them).
+        groups: int (dim,) kind of every coordinate (trust-region candidates also move all
+            coordinates of one kind together, see :mod:`vp_planner.acquisition`).
 
     Raises:
         ValueError for bad arguments; :class:`NoFeasiblePointError` when the random initial
@@ -230,15 +232,16 @@ def optimize(objective: Objective, dim: int, evaluations: int = 100, initial_eva
             raise ValueError("initial_design has non-finite entries")
         D0 = D0[:n0]
     per = torch.zeros(dim, dtype=torch.bool) if periodic is None else torch.as_tensor(periodic).reshape(dim).bool()
-    return _Run(objective, dim, E, n0, int(seed), bool(ensemble), feasible, callback, s, per).run(D0, init_batch)
+    grp = None if groups is None else torch.as_tensor(groups).reshape(dim).long()
+    return _Run(objective, dim, E, n0, int(seed), bool(ensemble), feasible, callback, s, per, grp).run(D0, init_batch)
 
 
 class _Run:
     """The state of one optimization (kept together so that the loop reads as the paper's steps)."""
 
-    def __init__(self, objective, dim, E, n0, seed, ensemble, feasible, callback, s: BOSettings, periodic):
+    def __init__(self, objective, dim, E, n0, seed, ensemble, feasible, callback, s: BOSettings, periodic, groups):
         self.objective, self.dim, self.E, self.n0 = objective, dim, E, n0
-        self.feasible, self.callback, self.s, self.periodic = feasible, callback, s, periodic
+        self.feasible, self.callback, self.s, self.periodic, self.groups = feasible, callback, s, periodic, groups
         self.gen = torch.Generator().manual_seed(seed)
         self.sampler = _Sampler(dim, self.gen, feasible, s.max_rejection_draws)
         self.names = list(MODEL_NAMES) if ensemble else [SINGLE_MODEL_NAME]
@@ -318,7 +321,8 @@ class _Run:
             else:
                 center = None
                 bounds = torch.stack([torch.zeros(self.dim), torch.ones(self.dim)]).to(torch.float64)
-            x = propose(models[m_t], best_f, bounds, Xn, yt, vn, self.feasible, self.gen, self.s.acquisition, center)
+            x = propose(models[m_t], best_f, bounds, Xn, yt, vn, self.feasible, self.gen, self.s.acquisition, center,
+                        self.groups)
         if x is None:
             x = self._random_point()
             m_t = -1

@@ -342,7 +342,7 @@ def _sa(space: ViewSpace, obj: Objective, evaluations: int, rng: np.random.Gener
 
 
 # ---------------------------------------------------------------------- BO
-def initial_design(space: ViewSpace, n: int, rng: np.random.Generator, structured: int = 4) -> NDArray[np.float64]:
+def initial_design(space: ViewSpace, n: int, rng: np.random.Generator, structured: int = 10) -> NDArray[np.float64]:
     """n initial plans U (n, 6N): up to ``structured`` structured plans, then random feasible ones."""
     S = space.structured(max_plans=max(0, min(structured, n))) if structured > 0 else np.zeros((0, space.dim))
     S = S[:n]
@@ -371,7 +371,8 @@ def _bo(space: ViewSpace, obj: Objective, evaluations: int, initial_evaluations:
     res = bo.optimize(objective, space.dim, evaluations, initial_evaluations, seed, ensemble=ensemble,
                       feasible=feasible, initial_design=torch.as_tensor(X0, dtype=torch.float64),
                       callback=bo_callback, settings=bo.BOSettings(mode=bo_mode),
-                      periodic=torch.as_tensor(space.periodic))
+                      periodic=torch.as_tensor(space.periodic),
+                      groups=torch.arange(space.dim) % 6)  # the 6 parameters of a camera
     if ensemble and res.steps:
         info["weights"] = [float(x) for x in res.steps[-1].weights]
     info["model_names"] = list(res.model_names)
@@ -396,7 +397,7 @@ def plan_views(
     callback: Optional[Callback] = None,
     *,
     shell_depth: Optional[float] = None,
-    structured_init: int = 4,
+    structured_init: int = 10,
     dtype: torch.dtype = torch.float64,
     reward: str = DEFAULT_REWARD_MODEL,
     image_size: tuple[int, int] = (2000, 1500),

@@ -368,44 +368,63 @@ class ViewSpace:
                 f"min_altitude {self.min_altitude})")
         return np.concatenate(out)[:n] if n > 0 else np.zeros((0, self.dim))
 
-    def structured(self, max_plans: int = 8) -> NDArray[np.float64]:
-        """A few structured plans U (M, 6N): clusters of cameras on the shell looking at the centre.
+    def structured(self, max_plans: int = 10) -> NDArray[np.float64]:
+        """Up to ``max_plans`` structured plans U (M, 6N), the patterns a good plan is made of.
 
-        The reward counts a pair only where its rays meet at <= theta_match, and grows with the
-        sine of that angle, so good plans keep every pair's angle near but below theta_match.
-        Each plan puts the N cameras on a small circle (a spherical cap) of angular radius rho
-        about a central direction, plus one camera at the centre for N >= 5, with rho chosen so
-        that the widest pair is about theta_match (as seen from the scene's centre); variants
-        differ in central elevation/azimuth and radial distance. Plans that are infeasible are
-        dropped.
+        In this order (infeasible ones are dropped):
+
+        * 4 caps: the N cameras on a small circle (a spherical cap) of angular radius
+          rho = theta_match / 2 about a central direction (plus one camera on the axis for
+          N >= 5), so that the widest pair is about theta_match as seen from the scene's centre,
+          at elevations 35, 50, 20, 65 degrees and several distances;
+        * 2 rings: N cameras evenly spread in azimuth at the elevation 90 - theta_match/2 + 2
+          degrees, where opposite cameras meet at just under theta_match (the paper reward's
+          best circle), at the shell's outer edge and a little inside it;
+        * 4 arcs: N cameras 30 degrees apart in azimuth at elevations 25 and 45 degrees, facing
+          the long and the short side of the scene (the pattern that reconstructs best);
+        * 4 more caps.
+
+        Every camera looks at the scene's centre; positions are on the shell of the space.
         """
         N = self.num_cameras
         tm = self.theta_match
-        plans = []
-        # (central elevation (deg), azimuth (deg), u_dist, spread factor) variants.
-        variants = [(35, 0, 1.0, 1.0), (50, 90, 0.75, 1.0), (20, 180, 1.0, 0.9), (65, 270, 0.5, 1.0),
-                    (35, 45, 0.5, 0.8), (80, 135, 1.0, 1.0), (50, 225, 0.25, 1.1), (20, 315, 0.75, 1.0)]
-        for el_deg, az_deg, u_dist, spread in variants[: max(0, max_plans)]:
-            centre_dir = np.array(self._dir_from_angles(math.radians(az_deg), math.radians(el_deg)))
-            ring = N if N <= 4 else N - 1
-            # widest pair on a ring of angular radius rho: 2 rho for an even ring, ~2 rho otherwise
-            rho = spread * tm / 2.0
-            dirs = []
-            if N > 4:
-                dirs.append(centre_dir)
-            e1 = np.cross([0.0, 0.0, 1.0], centre_dir)
-            e1 /= np.linalg.norm(e1)
-            e2 = np.cross(centre_dir, e1)
-            for k in range(ring):
-                a = 2 * math.pi * k / ring
-                d = math.cos(rho) * centre_dir + math.sin(rho) * (math.cos(a) * e1 + math.sin(a) * e2)
-                dirs.append(d / np.linalg.norm(d))
-            u_pos = np.array([self._u_from_dir(d) + (u_dist,) for d in dirs])
-            u_tgt = np.full((N, 3), 0.5)
-            plans.append(self.encode(u_pos[None], u_tgt[None])[0])
-        if not plans:
+        span = self.elevation_hi - self.elevation_lo
+
+        def u_el(deg: float) -> float:
+            return float(np.clip((math.radians(deg) - self.elevation_lo) / span, 0.0, 1.0))
+
+        def caps(variants) -> list:
+            out = []
+            for el_deg, az_deg, u_dist, spread in variants:
+                centre_dir = np.array(self._dir_from_angles(math.radians(az_deg), math.radians(el_deg)))
+                ring = N if N <= 4 else N - 1
+                rho = spread * tm / 2.0
+                dirs = [centre_dir] if N > 4 else []
+                e1 = np.cross([0.0, 0.0, 1.0], centre_dir)
+                e1 /= np.linalg.norm(e1)
+                e2 = np.cross(centre_dir, e1)
+                for k in range(ring):
+                    a = 2 * math.pi * k / ring
+                    d = math.cos(rho) * centre_dir + math.sin(rho) * (math.cos(a) * e1 + math.sin(a) * e2)
+                    dirs.append(d / np.linalg.norm(d))
+                out.append(np.array([self._u_from_dir(d) + (u_dist,) for d in dirs]))
+            return out
+
+        def along(az0_deg: float, step_deg: float, el_deg: float, u_dist: float) -> NDArray[np.float64]:
+            az = (az0_deg + step_deg * (np.arange(N) - 0.5 * (N - 1))) / 360.0
+            return np.stack([np.mod(az, 1.0), np.full(N, u_el(el_deg)), np.full(N, u_dist)], axis=1)
+
+        ring_el = min(85.0, 90.0 - math.degrees(tm) / 2.0 + 2.0)
+        u_pos = caps([(35, 0, 1.0, 1.0), (50, 90, 0.75, 1.0), (20, 180, 1.0, 0.9), (65, 270, 0.5, 1.0)])
+        u_pos += [along(0.0, 360.0 / N, ring_el, 1.0), along(0.0, 360.0 / N, ring_el, 0.6)]
+        long_side = 90.0 if self.extent.half[0] >= self.extent.half[1] else 0.0
+        u_pos += [along(long_side, 30.0, 25.0, 0.5), along(long_side + 180.0, 30.0, 45.0, 0.5),
+                  along(long_side + 90.0, 30.0, 25.0, 0.25), along(long_side + 270.0, 30.0, 45.0, 0.25)]
+        u_pos += caps([(35, 45, 0.5, 0.8), (80, 135, 1.0, 1.0), (50, 225, 0.25, 1.1), (20, 315, 0.75, 1.0)])
+        u_pos = u_pos[: max(0, max_plans)]
+        if not u_pos:
             return np.zeros((0, self.dim))
-        U = np.array(plans)
+        U = self.encode(np.array(u_pos), np.full((len(u_pos), N, 3), 0.5))
         return U[self.feasible(U)]
 
     @staticmethod

@@ -1,7 +1,9 @@
 """CPU dense stereo: a stand-in for COLMAP's PatchMatch stereo (which needs CUDA).
 
-For neighbouring camera pairs (each camera with its nearest ``neighbours`` others by the angle
-between the rays from the scene centre to the cameras), with the known relative pose
+For overlapping camera pairs (each camera with the ``neighbours`` others it shares the most
+verified SIFT matches with, as COLMAP's PatchMatch picks its source images; without matches, its
+nearest others by the angle between the rays from the scene centre to the cameras), with the
+known relative pose
 
     X_j = R X_i + T,   R = R_j R_i^T,   T = t_j - R t_i      (X = R_cw X_w + t per camera)
 
@@ -36,7 +38,7 @@ from numpy.typing import NDArray
 
 from vp_scene.camera import check_cameras, world_to_camera
 
-__all__ = ["DenseResult", "neighbour_pairs", "dense_reconstruct", "voxel_downsample", "silhouette_filter",
+__all__ = ["DenseResult", "neighbour_pairs", "overlap_pairs", "dense_reconstruct", "voxel_downsample", "silhouette_filter",
            "crop_to_box"]
 
 
@@ -70,6 +72,24 @@ def neighbour_pairs(cameras: NDArray[np.float64], center: NDArray[np.float64], n
         for j in np.argsort(ang[i])[:neighbours]:
             if min_angle <= ang[i, j] <= max_angle:
                 pairs.add((min(i, int(j)), max(i, int(j))))
+    return sorted(pairs)
+
+
+def overlap_pairs(pair_inliers: dict, num_cameras: int, neighbours: int = 2, min_inliers: int = 15
+                  ) -> list[tuple[int, int]]:
+    """Unique pairs (i, j), i < j: each camera with the ``neighbours`` others it shares the most
+    verified matches with (at least ``min_inliers``, COLMAP's minimum for a two-view geometry).
+
+    This is how COLMAP's PatchMatch picks its source images (``mvs::Model``'s
+    ``GetMaxOverlappingImages``: the images sharing the most sparse points): by what the images
+    have in common, not by where the cameras stand.
+    """
+    pairs = set()
+    for i in range(num_cameras):
+        cand = [(n, j) for (a, b), n in pair_inliers.items() if n >= min_inliers and i in (a, b)
+                for j in ((b if a == i else a),)]
+        for _, j in sorted(cand, reverse=True)[:neighbours]:
+            pairs.add((min(i, j), max(i, j)))
     return sorted(pairs)
 
 
@@ -130,10 +150,45 @@ def _columns(g: NDArray[np.uint8], lo: int, hi: int) -> NDArray[np.uint8]:
     return out
 
 
+def _frame(mask_i: NDArray[np.bool_], mask_j: NDArray[np.bool_], K: NDArray, D: NDArray, R1: NDArray,
+           R2: NDArray, P1: NDArray, P2: NDArray, Q: NDArray, margin: int, max_side: int
+           ) -> Optional[tuple[NDArray, NDArray, NDArray, tuple[int, int]]]:
+    """Frame the rectified pair on the foreground: (P1, P2, Q, (width, height)), or None.
+
+    Rectifying a strongly rotated pair into an image of the original size (alpha = -1 keeps
+    the principal point's neighbourhood) can put the plant outside it. Both principal points
+    are shifted by the same offset, which leaves every disparity unchanged, so that the
+    rectified foreground of both views (plus ``margin``) starts at (0, 0); the output is sized
+    to hold it (at most ``max_side`` pixels a side).
+    """
+    corners = []
+    for m, Rr, Pr in ((mask_i, R1, P1), (mask_j, R2, P2)):
+        ys, xs = np.nonzero(m[::4, ::4])
+        if len(xs) == 0:
+            return None
+        pts = np.stack([xs * 4.0, ys * 4.0], axis=1).reshape(-1, 1, 2)
+        corners.append(cv2.undistortPoints(pts, K, D, R=Rr, P=Pr).reshape(-1, 2))
+    allc = np.concatenate(corners)
+    allc = allc[np.all(np.isfinite(allc), axis=1)]
+    if len(allc) == 0:
+        return None
+    lo = np.floor(allc.min(axis=0)) - margin
+    hi = np.ceil(allc.max(axis=0)) + margin
+    size = np.minimum(hi - lo, max_side).astype(int)
+    P1, P2, Q = P1.copy(), P2.copy(), Q.copy()
+    for P in (P1, P2):
+        P[0, 2] -= lo[0]
+        P[1, 2] -= lo[1]
+    Q[0, 3], Q[1, 3] = -P1[0, 2], -P1[1, 2]
+    return P1, P2, Q, (int(size[0]), int(size[1]))
+
+
 def _pair_points(img_i: NDArray[np.uint8], img_j: NDArray[np.uint8], mask_i: NDArray[np.bool_],
-                 Ri: NDArray, ti: NDArray, Rj: NDArray, tj: NDArray, K: NDArray, guide: NDArray,
-                 block: int, max_disparities: int) -> tuple[NDArray[np.float64], NDArray[np.uint8]]:
+                 mask_j: NDArray[np.bool_], Ri: NDArray, ti: NDArray, Rj: NDArray, tj: NDArray, K: NDArray,
+                 guide: NDArray, block: int, max_disparities: int) -> tuple[NDArray[np.float64], NDArray[np.uint8]]:
     """World points and colours of one rectified pair (reference view i); empty when unusable.
+
+    The rectified views are framed on both views' foreground (:func:`_frame`).
 
     ``guide`` (G, 3) world points bound the disparity search as COLMAP bounds PatchMatch depths:
     their depths in the rectified reference view, 1st-99th percentile, stretched by 25%, turned
@@ -150,6 +205,10 @@ def _pair_points(img_i: NDArray[np.uint8], img_j: NDArray[np.uint8], mask_i: NDA
     base = P2[1, 3] if vertical else P2[0, 3]
     if base >= 0:                      # reference must be the left (upper) view: positive disparities
         return _EMPTY
+    framed = _frame(mask_i, mask_j, K, D, R1, R2, P1, P2, Q, block + 16, 2 * max(w, h))
+    if framed is None:
+        return _EMPTY
+    P1, P2, Q, (w, h) = framed
     Xr = (guide @ Ri.T + ti) @ R1.T    # guide points in the rectified reference frame
     Xr = Xr[Xr[:, 2] > 1e-6]
     if len(Xr) == 0:
@@ -206,7 +265,7 @@ def dense_reconstruct(images: Sequence[NDArray[np.uint8]], masks: Sequence[NDArr
                       cameras: NDArray[np.float64], K: NDArray[np.float64], box: NDArray[np.float64],
                       guide: Optional[NDArray[np.float64]] = None, center: Optional[NDArray[np.float64]] = None,
                       neighbours: int = 2, block: int = 5, voxel: float = 0.0,
-                      silhouette: bool = True) -> DenseResult:
+                      silhouette: bool = True, pair_inliers: Optional[dict] = None) -> DenseResult:
     """Fused SGBM cloud of neighbouring pairs, cropped to ``box`` ((2, 3) = [lo, hi]), cleaned.
 
     Args:
@@ -217,7 +276,10 @@ def dense_reconstruct(images: Sequence[NDArray[np.uint8]], masks: Sequence[NDArr
             COLMAP bounds PatchMatch depths with the sparse points); points outside ``box`` are
             ignored; fewer than 10 left: a 5 x 5 x 5 grid over ``box``.
         center: scene centre for the neighbour angles (default: the box centre).
-        neighbours: neighbours per camera; block: SGBM block size (odd).
+        neighbours: stereo partners per camera; block: SGBM block size (odd).
+        pair_inliers: verified SIFT matches per pair (i, j) from the sparse step: partners are
+            then chosen by :func:`overlap_pairs` (as COLMAP's PatchMatch chooses its source
+            images); a camera with no such partner falls back to :func:`neighbour_pairs`.
         voxel: voxel edge for downsampling, metres (0: none).
         silhouette: drop points that project onto background in some view.
     """
@@ -236,11 +298,15 @@ def dense_reconstruct(images: Sequence[NDArray[np.uint8]], masks: Sequence[NDArr
     max_disp = max(16, (max(width, np.asarray(images[0]).shape[0]) // 16) * 16) if len(images) else 16
     R, t = world_to_camera(cams)
     pairs = neighbour_pairs(cams, center, neighbours)
+    if pair_inliers:
+        chosen = overlap_pairs(pair_inliers, len(cams), neighbours)
+        covered = {i for pair in chosen for i in pair}
+        pairs = sorted(set(chosen) | {pr for pr in pairs if pr[0] not in covered or pr[1] not in covered})
     pts, cols, used = [], [], []
     for i, j in pairs:
         for a, b in ((i, j), (j, i)):          # the order with positive disparities succeeds
-            p, c = _pair_points(images[a], images[b], np.asarray(masks[a], bool), R[a], t[a], R[b], t[b], K,
-                                g, block, max_disp)
+            p, c = _pair_points(images[a], images[b], np.asarray(masks[a], bool), np.asarray(masks[b], bool),
+                                R[a], t[a], R[b], t[b], K, g, block, max_disp)
             if len(p):
                 pts.append(p)
                 cols.append(c)

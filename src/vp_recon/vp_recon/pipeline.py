@@ -344,7 +344,7 @@ def reconstruct_realization(noisy_scene: object, k: int, cameras: ArrayLike, con
         dn = None
         if cfg.dense:
             dn = dense_reconstruct(images, masks, cams, renderer.K, box, guide=sp.points,
-                                   neighbours=cfg.neighbours, voxel=cfg.voxel)
+                                   neighbours=cfg.neighbours, voxel=cfg.voxel, pair_inliers=sp.pair_inliers)
             if len(dn.points):
                 points, colors, source = dn.points, dn.colors, "dense"
         seconds["dense"] = time.perf_counter() - t0
