@@ -1,14 +1,20 @@
 #!/usr/bin/env python3
-"""Planner quality and speed: final noisy reward of every method, 5 seeds, 100 evaluations.
+"""Planner quality and speed: final reward of every method, 5 seeds, 100 evaluations, both rewards.
 
-For each scenario (one_plant N=4, three_row N=6, six_rect N=6) and method (egp, gp, circle, sa,
-random) it plans with seeds 0..S-1 and reports mean +- std of the final noisy reward (eq. 7),
-beside the best reward found by any run including long runs (sa and random with ``--long``
-evaluations): the regret baseline. Also the EGP-EI wall time per 100-evaluation plan in 24-D
-(N=4) and 36-D (N=6). Runs are cached under ``results/cache/plans`` (shared with table1.py), so
-a re-run resumes. Writes ``results/bench_planners.json`` and prints a markdown table.
+For each scenario (one_plant N=4, three_row N=6, six_rect N=6), reward model (the default
+``coverage`` and the paper's) and planner variant (:data:`common.VARIANTS`: egp, egp with the
+paper's purely random initial design, egp in the paper's configuration, gp, circle, arc, sa,
+random) it plans with seeds 0..S-1 (100 evaluations; egp/gp: 50 initial + 50 BO) and reports
 
-    python bench/bench_planners.py [--seeds 5] [--long 2000] [--models DIR] [--scenarios ...]
+* the final reward, mean +- std over seeds;
+* for egp/gp: in how many seeds the final plan beats the best plan of the initial design (the
+  BO phase did the work), and by how much;
+* wall time per plan (one torch thread, as the planner node and CLI run).
+
+Runs are cached under ``results/cache/plans`` (shared with table1.py), so a re-run resumes.
+Writes ``results/bench_planners.json`` and ``results/bench_planners.md``.
+
+    python bench/bench_planners.py [--seeds 5] [--rewards coverage paper] [--variants ...]
 """
 from __future__ import annotations
 
@@ -21,67 +27,79 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import ROOT, SCENARIOS, default_models, machine, models_tag, plan_cell  # noqa: E402
+from common import ROOT, SCENARIOS, VARIANTS, default_models, machine, models_tag, plan_cell  # noqa: E402
 
-METHODS = ('egp', 'gp', 'circle', 'sa', 'random')
+DEFAULT_VARIANTS = ('egp', 'egp-random-init', 'circle', 'arc', 'sa', 'random')
+BASELINES = ('circle', 'arc', 'sa', 'random')
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     ap.add_argument('--models', default=default_models(), help="PLY folder ('' for procedural plants)")
     ap.add_argument('--scenarios', nargs='+', default=list(SCENARIOS), choices=list(SCENARIOS))
-    ap.add_argument('--methods', nargs='+', default=list(METHODS), choices=list(METHODS))
+    ap.add_argument('--variants', nargs='+', default=list(DEFAULT_VARIANTS), choices=list(VARIANTS))
+    ap.add_argument('--rewards', nargs='+', default=['coverage', 'paper'], choices=['coverage', 'paper'])
     ap.add_argument('--seeds', type=int, default=5)
     ap.add_argument('--evals', type=int, default=100)
     ap.add_argument('--init', type=int, default=50)
-    ap.add_argument('--long', type=int, default=2000, help='evaluations of the long sa/random runs')
     ap.add_argument('--out', default=str(ROOT / 'results'))
     args = ap.parse_args(argv)
     from tqdm import tqdm
 
     out = Path(args.out)
     cache = out / 'cache'
-    jobs = [(s, m, seed, args.evals) for s in args.scenarios for m in args.methods for seed in range(args.seeds)]
-    jobs += [(s, m, 0, args.long) for s in args.scenarios for m in ('sa', 'random') if args.long > 0]
+    jobs = [(s, r, v, seed) for r in args.rewards for s in args.scenarios for v in args.variants
+            for seed in range(args.seeds)]
     runs = {}
-    bar = tqdm(jobs, desc='planning', unit='run', file=sys.stdout)
+    bar = tqdm(jobs, desc='planning', unit='run', file=sys.stdout, mininterval=10)
     t0 = time.time()
-    for scenario, method, seed, evals in bar:
-        bar.set_postfix_str(f'{scenario} {method} seed {seed} ({evals} evals)')
-        runs[(scenario, method, seed, evals)] = plan_cell(cache, scenario, method, seed, evals, args.init,
-                                                          args.models)
+    for scenario, reward, variant, seed in bar:
+        bar.set_postfix_str(f'{scenario} {reward} {variant} seed {seed}')
+        runs[(scenario, reward, variant, seed)] = plan_cell(cache, scenario, variant, seed, args.evals, args.init,
+                                                            args.models, reward=reward)
     report = {'machine': machine(), 'date': time.strftime('%Y-%m-%d'), 'models': models_tag(args.models),
-              'evaluations': args.evals, 'initial_evaluations': args.init, 'seeds': args.seeds,
-              'long_evaluations': args.long, 'scenarios': {}}
+              'evaluations': args.evals, 'initial_evaluations': args.init, 'seeds': args.seeds, 'cells': {}}
     lines = [f'# Planner benchmark ({report["date"]}, {report["machine"]}, plants: {report["models"]})', '',
-             f'Final noisy reward after {args.evals} evaluations, mean +- std over {args.seeds} seeds; '
-             f'best known = best of every run incl. {args.long}-evaluation sa/random runs.', '',
-             '| scenario (N) | best known | ' + ' | '.join(args.methods) + ' |',
-             '|---|---|' + '---|' * len(args.methods)]
-    for scenario in args.scenarios:
-        best = max(r['reward'] for (s, *_), r in runs.items() if s == scenario)
-        entry = {'best_known': best, 'methods': {}}
-        cells = []
-        for method in args.methods:
-            rs = [runs[(scenario, method, seed, args.evals)] for seed in range(args.seeds)]
-            finals = np.array([r['reward'] for r in rs])
-            secs = np.array([r['seconds'] for r in rs])
-            entry['methods'][method] = {'final_mean': float(finals.mean()), 'final_std': float(finals.std()),
-                                        'finals': finals.tolist(), 'seconds_mean': float(secs.mean()),
-                                        'simple_regret_vs_best_known': float(best - finals.mean())}
-            cells.append(f'{finals.mean():.4f} +- {finals.std():.4f}')
-        report['scenarios'][scenario] = entry
-        lines.append(f'| {scenario} ({SCENARIOS[scenario]}) | {best:.4f} | ' + ' | '.join(cells) + ' |')
-    lines += ['', '| scenario | dims | egp seconds per plan (mean) | gp | circle | sa | random |', '|---|---|---|---|---|---|---|']
-    for scenario in args.scenarios:
-        m = report['scenarios'][scenario]['methods']
-        lines.append(f'| {scenario} | {6 * SCENARIOS[scenario]} | ' + ' | '.join(
-            f'{m[k]["seconds_mean"]:.1f}' if k in m else '-' for k in METHODS) + ' |')
+             f'Final reward after {args.evals} evaluations, mean +- std over {args.seeds} seeds (one torch '
+             'thread). "BO did the work": seeds whose final plan beats the best plan of the initial design, '
+             'and the mean gain.', '']
+    for reward in args.rewards:
+        lines += [f'## reward model: {reward}', '',
+                  '| scenario (N) | ' + ' | '.join(args.variants) + ' |', '|---|' + '---|' * len(args.variants)]
+        bo_lines = ['', '| scenario | variant | BO beat its initial design | mean gain | seconds per plan |',
+                    '|---|---|---|---|---|']
+        for scenario in args.scenarios:
+            cells = []
+            for variant in args.variants:
+                rs = [runs[(scenario, reward, variant, seed)] for seed in range(args.seeds)]
+                finals = np.array([r['reward'] for r in rs])
+                secs = np.array([r['seconds'] for r in rs])
+                entry = {'final_mean': float(finals.mean()), 'final_std': float(finals.std()),
+                         'finals': finals.tolist(), 'seconds_mean': float(secs.mean()), 'seconds': secs.tolist()}
+                if rs[0].get('initial_best') is not None:
+                    init = np.array([r['initial_best'] for r in rs])
+                    entry['initial_best'] = init.tolist()
+                    entry['bo_improved_seeds'] = int(np.sum(finals > init + 1e-9))
+                    entry['bo_gain_mean'] = float(np.mean(finals - init))
+                    bo_lines.append(f'| {scenario} | {variant} | {entry["bo_improved_seeds"]} of {args.seeds} | '
+                                    f'{entry["bo_gain_mean"]:+.4f} | {secs.mean():.1f} |')
+                report['cells'][f'{reward}/{scenario}/{variant}'] = entry
+                cells.append(f'{finals.mean():.4f} +- {finals.std():.4f}')
+            lines.append(f'| {scenario} ({SCENARIOS[scenario]}) | ' + ' | '.join(cells) + ' |')
+        lines += bo_lines + ['']
+        if 'egp' in args.variants:
+            verdict = []
+            for scenario in args.scenarios:
+                e = report['cells'][f'{reward}/{scenario}/egp']['final_mean']
+                beaten = [b for b in BASELINES if b in args.variants
+                          and report['cells'][f'{reward}/{scenario}/{b}']['final_mean'] >= e]
+                verdict.append(f'{scenario}: egp {"above every baseline" if not beaten else "not above " + ", ".join(beaten)}')
+            lines += ['Acceptance (egp mean above circle, arc, sa, random): ' + '; '.join(verdict), '']
     out.mkdir(parents=True, exist_ok=True)
     (out / 'bench_planners.json').write_text(json.dumps(report, indent=1))
     (out / 'bench_planners.md').write_text('\n'.join(lines) + '\n')
     print('\n'.join(lines))
-    print(f'({time.time() - t0:.0f} s) wrote {out / "bench_planners.json"}')
+    print(f'({time.time() - t0:.0f} s) wrote {out / "bench_planners.json"}, {out / "bench_planners.md"}')
     return 0
 
 

@@ -1,9 +1,10 @@
 #!/usr/bin/env python3
-"""Benchmark of the paper's noisy reward (eq. 7): JSON on stdout.
+"""Benchmark of the reward models' cost per plan: JSON on stdout (and results/bench_reward.json).
 
-Times one plan (raw points, and points laid out once with ``prepare_points`` as the optimizers
-do) and a batch of plans (default 1000) of 4 cameras on 10k points x 5 realizations,
-in float64 and float32. Points: a Corn50 plant from ../shared/data/corn50 when present (wind
+The paper's noisy reward (eq. 7): one plan (raw points, and points laid out once with
+``prepare_points`` as the optimizers do) and a batch of plans (default 1000) of 4 cameras on 10k
+points x 5 realizations, in float64 and float32. The ``coverage`` model: one plan and a batch,
+as :func:`vp_planner.reward_models.make_reward` builds it (its default subsample of the points). Points: a Corn50 plant from ../shared/data/corn50 when present (wind
 displacement as the paper's L-level model), else a synthetic cylinder-ish plant.
 
     python bench/bench_reward.py [--points 10000] [--realizations 5] [--cameras 4] [--batch 1000]
@@ -24,6 +25,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src" / "vp_planner"))
 
 from vp_planner.reward import noisy_reward, prepare_points  # noqa: E402
+from vp_planner.reward_models import make_reward  # noqa: E402
 from vp_planner.space import ViewSpace  # noqa: E402
 
 
@@ -81,7 +83,9 @@ def main() -> int:
     ap.add_argument("--cameras", type=int, default=4)
     ap.add_argument("--batch", type=int, default=1000)
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--threads", type=int, default=1, help="torch threads (the planner's default: 1)")
     args = ap.parse_args()
+    torch.set_num_threads(args.threads)
     R, source = scene(args.points, args.realizations)
     space = ViewSpace(R, args.cameras)
     plans = space.decode(space.sample(args.batch, np.random.default_rng(1)))
@@ -106,8 +110,16 @@ def main() -> int:
     r64 = noisy_reward(plans[:50], R)
     r32 = noisy_reward(plans[:50], R, dtype=torch.float32)
     result["max_abs_diff_float32"] = float(np.max(np.abs(r64 - r32)))
+    cov = make_reward("coverage", R)
+    cov(plans[:2])  # warm-up
+    one = best_of(lambda: cov(plans[:1]), args.repeats * 3)
+    many = best_of(lambda: cov(plans[: min(args.batch, 200)]), args.repeats)
+    result["results"]["coverage"] = {"one_plan_ms": round(one * 1e3, 3),
+                                     "batch_ms_per_plan": round(many / min(args.batch, 200) * 1e3, 3)}
     json.dump(result, sys.stdout, indent=1)
     print()
+    (ROOT / "results").mkdir(exist_ok=True)
+    (ROOT / "results" / "bench_reward.json").write_text(json.dumps(result, indent=1))
     return 0
 
 

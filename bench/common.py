@@ -56,26 +56,41 @@ def models_tag(models: str) -> str:
     return Path(models).name if models else 'procedural'
 
 
-#: Benchmark-only method variants: name -> (planner method, structured plans in the initial design).
-VARIANTS = {'egp-random-init': ('egp', 0)}  # the paper's purely random initial design
+#: Planner variants of the benchmarks: name -> plan_views keyword arguments.
+VARIANTS = {
+    'egp': {'method': 'egp'},                                           # the default planner
+    'egp-random-init': {'method': 'egp', 'structured_init': 0},          # the paper's random design
+    'egp-paper-config': {'method': 'egp', 'structured_init': 0, 'bo_mode': 'global'},  # the paper's BO
+    'gp': {'method': 'gp'},
+    'circle': {'method': 'circle'},
+    'arc': {'method': 'arc'},
+    'sa': {'method': 'sa'},
+    'random': {'method': 'random'},
+}
 
 
-def plan_cell(cache: Path, scenario: str, method: str, seed: int, evals: int = 100, init: int = 50,
-              models: str = '', num_cameras: Optional[int] = None) -> dict:
-    """One planning run (cached): cameras, reward, best-so-far trace, seconds.
-
-    ``method`` is a planner method or a key of :data:`VARIANTS`."""
+def plan_cell(cache: Path, scenario: str, variant: str, seed: int, evals: int = 100, init: int = 50,
+              models: str = '', num_cameras: Optional[int] = None, reward: Optional[str] = None) -> dict:
+    """One planning run (cached): cameras, reward, best-so-far trace, seconds, the initial
+    design's best and the BO steps (egp/gp). ``variant`` is a key of :data:`VARIANTS`;
+    ``reward`` a reward model (None: the planner's default)."""
     from vp_planner.optimizers import plan_views
+    from vp_planner.reward_models import DEFAULT_REWARD_MODEL
 
     n = num_cameras or SCENARIOS[scenario]
-    planner_method, structured = VARIANTS.get(method, (method, 4))
-    path = cache / 'plans' / f'{models_tag(models)}-{scenario}-n{n}-{method}-seed{seed}-e{evals}-i{init}.json'
+    reward = reward or DEFAULT_REWARD_MODEL
+    kwargs = dict(VARIANTS[variant])
+    method = kwargs.pop('method')
+    path = cache / 'plans' / f'{models_tag(models)}-{scenario}-n{n}-{variant}-{reward}-seed{seed}-e{evals}-i{init}.json'
 
     def compute() -> dict:
+        import torch
+
+        torch.set_num_threads(1)  # as the planner node and CLI
         noisy, _ = scene(scenario, models)
-        res = plan_views(planner_method, noisy.points, n, evaluations=evals, initial_evaluations=init, seed=seed,
-                         structured_init=structured)
-        return {'cameras': np.asarray(res.cameras).tolist(), 'reward': float(res.reward),
+        res = plan_views(method, noisy.points, n, evaluations=evals, initial_evaluations=init, seed=seed,
+                         reward=reward, **kwargs)
+        return {'cameras': np.asarray(res.cameras).tolist(), 'reward': float(res.reward), 'reward_model': reward,
                 'trace': [float(x) for x in res.trace], 'seconds': float(res.seconds),
-                'ensemble_weights': res.ensemble_weights}
+                'ensemble_weights': res.ensemble_weights, 'initial_best': res.initial_best, 'steps': res.steps}
     return cached(path, compute)

@@ -1,16 +1,18 @@
 #!/usr/bin/env python3
 """The paper's experiment: Table I (Chamfer x100 per method and scenario) and Fig. SR.
 
-For each scenario (one_plant with 4 cameras, three_row and six_rect with 6) and each method
-(circle, sa, egp; plus random and gp for the regret figure) it plans with ``--seeds`` seeds
-(100 evaluations: 50 random + 50 BO for egp), keeps the simple regret SR(t) = 1 - best-so-far
-(paper eq. SR, optimum 1) of every run, and reconstructs the seed-0 plan of circle, sa and egp in
-every wind realization (render, COLMAP, CPU dense stereo, Chamfer). Writes
+Rows (:data:`ROWS`): the baselines a drone operator flies anyway (circle, arc) and the paper's
+(sa), each tuned with the default reward model; the default planner (egp); and EGP-VP exactly as
+the paper configures it (the paper's reward, EI over the whole space, a random initial design).
+For each scenario (one_plant with 4 cameras, three_row and six_rect with 6) every row plans with
+``--seeds`` seeds (100 evaluations; egp: 50 initial + 50 BO), keeps the simple regret
+SR(t) = 1 - best-so-far (paper eq. SR, optimum 1) of every run, and reconstructs the seed-0 plan
+in every wind realization (render, COLMAP on the CPU, CPU dense stereo, Chamfer). Writes
 ``results/table1.md``, ``results/table1.json`` and ``results/simple_regret.png``.
 
-Every finished cell (one plan, one reconstruction) is cached as JSON under
-``results/cache/``; a re-run resumes instead of recomputing. Uses Corn50 plants from
-``../shared/data/corn50`` when present (``--models`` to choose), else procedural plants.
+Every finished cell (one plan, one reconstruction) is cached as JSON under ``results/cache/``;
+a re-run resumes instead of recomputing. Uses Corn50 plants from ``../shared/data/corn50`` when
+present (``--models`` to choose), else procedural plants.
 """
 from __future__ import annotations
 
@@ -23,13 +25,20 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import ROOT, SCENARIOS, VARIANTS, cached, default_models, machine, models_tag, plan_cell, scene  # noqa: E402
+from common import ROOT, SCENARIOS, cached, default_models, machine, models_tag, plan_cell, scene  # noqa: E402
 
-TABLE_METHODS = ('circle', 'sa', 'egp')
+#: Table rows: label -> (planner variant of common.VARIANTS, reward model).
+ROWS = {
+    'circle': ('circle', 'coverage'),
+    'arc': ('arc', 'coverage'),
+    'sa': ('sa', 'coverage'),
+    'egp': ('egp', 'coverage'),
+    'egp (paper configuration)': ('egp-paper-config', 'paper'),
+}
 PAPER = {  # Table I of the paper, Chamfer x100 (mean, std)
-    'one_plant': {'circle': (4.127, 0.194), 'sa': (3.844, 0.224), 'egp': (3.256, 0.245)},
-    'three_row': {'circle': (2.817, 0.079), 'sa': (2.43, 0.192), 'egp': (1.614, 0.166)},
-    'six_rect': {'circle': (2.717, 0.072), 'sa': (3.905, 0.184), 'egp': (2.54, 0.578)},
+    'one_plant': {'circle': (4.127, 0.194), 'sa': (3.844, 0.224), 'egp (paper configuration)': (3.256, 0.245)},
+    'three_row': {'circle': (2.817, 0.079), 'sa': (2.43, 0.192), 'egp (paper configuration)': (1.614, 0.166)},
+    'six_rect': {'circle': (2.717, 0.072), 'sa': (3.905, 0.184), 'egp (paper configuration)': (2.54, 0.578)},
 }
 
 
@@ -38,11 +47,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument('--models', default=default_models(),
                     help="folder of PLY plant models (default: ../shared/data/corn50 if present; '' procedural)")
     ap.add_argument('--scenarios', nargs='+', default=list(SCENARIOS), choices=list(SCENARIOS))
-    ap.add_argument('--methods', nargs='+', default=['circle', 'sa', 'egp', 'random', 'egp-random-init'],
-                    choices=['circle', 'sa', 'egp', 'gp', 'random', *VARIANTS])
+    ap.add_argument('--rows', nargs='+', default=list(ROWS), choices=list(ROWS))
     ap.add_argument('--seeds', type=int, default=5, help='planning seeds for the regret figure')
-    ap.add_argument('--variant-seeds', type=int, default=3,
-                    help='seeds of the (slow) egp-random-init variant, the paper\'s purely random initial design')
     ap.add_argument('--evals', type=int, default=100)
     ap.add_argument('--init', type=int, default=50)
     ap.add_argument('--width', type=int, default=2000)
@@ -51,16 +57,13 @@ def parse_args(argv=None) -> argparse.Namespace:
     return ap.parse_args(argv)
 
 
-def seeds_of(method: str, args) -> int:
-    return min(args.seeds, args.variant_seeds) if method in VARIANTS else args.seeds
-
-
-def recon_cell(cache: Path, out: Path, scenario: str, method: str, plan: dict, args) -> dict:
+def recon_cell(cache: Path, out: Path, scenario: str, row: str, plan: dict, args) -> dict:
     """Reconstruct one plan in every wind realization (cached); Chamfer etc. x100 as Table I."""
     from vp_recon.outputs import TABLE_SCALE, contact_sheet, write_image, write_ply
     from vp_recon.pipeline import ReconConfig, ReconError, reconstruct_plan
 
-    tag = f'{models_tag(args.models)}-{scenario}-{method}-seed0-e{args.evals}-{args.width}x{args.height}'
+    variant, reward = ROWS[row]
+    tag = f'{models_tag(args.models)}-{scenario}-{variant}-{reward}-seed0-e{args.evals}-{args.width}x{args.height}'
 
     def compute() -> dict:
         noisy, _ = scene(scenario, args.models)
@@ -91,19 +94,27 @@ def main(argv=None) -> int:
     out = Path(args.out)
     cache = out / 'cache'
     plans, recons = {}, {}
-    jobs = [(s, m, seed) for s in args.scenarios for m in args.methods for seed in range(seeds_of(m, args))]
+    jobs = [(s, row, seed) for s in args.scenarios for row in args.rows for seed in range(args.seeds)]
     bar = tqdm(jobs, desc='planning', unit='plan', file=sys.stdout)
-    for scenario, method, seed in bar:
-        bar.set_postfix_str(f'{scenario} {method} seed {seed}')
-        plans[(scenario, method, seed)] = plan_cell(cache, scenario, method, seed, args.evals, args.init,
-                                                    args.models)
-    cells = [(s, m) for s in args.scenarios for m in args.methods if m in TABLE_METHODS]
+    for scenario, row, seed in bar:
+        bar.set_postfix_str(f'{scenario} {row} seed {seed}')
+        variant, reward = ROWS[row]
+        plans[(scenario, row, seed)] = plan_cell(cache, scenario, variant, seed, args.evals, args.init,
+                                                 args.models, reward=reward)
+    cells = [(s, row) for s in args.scenarios for row in args.rows]
     bar = tqdm(cells, desc='reconstructing', unit='plan', file=sys.stdout)
-    for scenario, method in bar:
-        bar.set_postfix_str(f'{scenario} {method}')
-        recons[(scenario, method)] = recon_cell(cache, out, scenario, method, plans[(scenario, method, 0)], args)
+    for scenario, row in bar:
+        bar.set_postfix_str(f'{scenario} {row}')
+        recons[(scenario, row)] = recon_cell(cache, out, scenario, row, plans[(scenario, row, 0)], args)
     write_results(args, out, plans, recons)
     return 0
+
+
+def _score(plan: dict, scenario: str, models: str, reward: str) -> float:
+    from vp_planner.reward_models import make_reward
+
+    noisy, _ = scene(scenario, models)
+    return float(make_reward(reward, noisy.points)(np.asarray(plan['cameras'])[None])[0])
 
 
 def write_results(args, out: Path, plans, recons) -> None:
@@ -113,28 +124,28 @@ def write_results(args, out: Path, plans, recons) -> None:
 
     stamp = datetime.now(timezone.utc).strftime('%Y-%m-%d')
     host = machine()
-    table = {'date': stamp, 'machine': host, 'models': models_tag(args.models),
+    table = {'date': stamp, 'machine': host, 'models': models_tag(args.models), 'rows': ROWS,
              'evaluations': args.evals, 'resolution': [args.width, args.height], 'cells': {}}
     lines = [f'# Table I, measured {stamp} ({host})', '',
              f'Plants: {args.models or "built-in procedural corn"}. Chamfer distance x 100 '
              '(mean +- std over the 5 wind realizations), lower is better; the paper\'s value in '
-             'brackets. Reward: noisy reward (eq. 7) of the plan.', '',
+             'brackets. Rewards of the plan under both models (coverage / paper).', '',
              '| method | ' + ' | '.join(f'{s} (N={SCENARIOS[s]})' for s in args.scenarios) + ' |',
              '|---|' + '---|' * len(args.scenarios)]
-    for method in TABLE_METHODS:
-        if method not in args.methods:
-            continue
-        row = [method]
+    for row in args.rows:
+        cells = [row]
         for scenario in args.scenarios:
-            r = recons.get((scenario, method))
-            paper = PAPER[scenario][method]
-            plan = plans[(scenario, method, 0)]
-            table['cells'][f'{scenario}/{method}'] = {'recon': r, 'reward': plan['reward'],
-                                                      'paper': paper}
+            r = recons[(scenario, row)]
+            plan = plans[(scenario, row, 0)]
+            rewards = {m: _score(plan, scenario, args.models, m) for m in ('coverage', 'paper')}
+            paper = PAPER[scenario].get(row)
+            table['cells'][f'{scenario}/{row}'] = {'recon': r, 'reward': plan['reward'], 'rewards': rewards,
+                                                   'paper': paper, 'cameras': plan['cameras']}
             failed = f' ({r["error"]})' if r.get('error') else ''
-            row.append(f'{r["chamfer_mean"]:.3f} +- {r["chamfer_std"]:.3f}{failed} '
-                       f'[{paper[0]:.3f} +- {paper[1]:.3f}], reward {plan["reward"]:.3f}')
-        lines.append('| ' + ' | '.join(row) + ' |')
+            ref = f' [{paper[0]:.3f} +- {paper[1]:.3f}]' if paper else ''
+            cells.append(f'{r["chamfer_mean"]:.3f} +- {r["chamfer_std"]:.3f}{failed}{ref}, '
+                         f'reward {rewards["coverage"]:.3f} / {rewards["paper"]:.3f}')
+        lines.append('| ' + ' | '.join(cells) + ' |')
     lines += ['', 'Plants used (scene seed 0; name, yaw deg, scale):', '']
     for scenario in args.scenarios:
         noisy, _ = scene(scenario, args.models)
@@ -142,38 +153,36 @@ def write_results(args, out: Path, plans, recons) -> None:
                 for p in noisy.scene.plants]
         table.setdefault('plants', {})[scenario] = used
         lines.append(f'- {scenario}: ' + ', '.join(f'{n} ({y}, {sc})' for n, y, sc in used))
-    lines += ['', '## Final noisy reward (mean +- std over seeds)', '',
+    lines += ['', '## Final reward of each row\'s own reward model (mean +- std over seeds)', '',
               '| method | ' + ' | '.join(args.scenarios) + ' |', '|---|' + '---|' * len(args.scenarios)]
     regret = {}
-    for method in args.methods:
-        row = [method]
+    for row in args.rows:
+        cells = [row]
         for scenario in args.scenarios:
-            traces = np.array([plans[(scenario, method, s)]['trace'] for s in range(seeds_of(method, args))])
+            traces = np.array([plans[(scenario, row, s)]['trace'] for s in range(args.seeds)])
             finals = traces[:, -1]
-            row.append(f'{finals.mean():.4f} +- {finals.std():.4f} ({len(finals)} seeds)')
-            regret[(scenario, method)] = 1.0 - traces  # paper eq. SR with optimum 1
-            table['cells'].setdefault(f'{scenario}/{method}', {})['final_reward'] = {
-                'mean': float(finals.mean()), 'std': float(finals.std()),
-                'seconds_mean': float(np.mean([plans[(scenario, method, s)]['seconds']
-                                               for s in range(seeds_of(method, args))])),
-                'seeds': seeds_of(method, args)}
-        lines.append('| ' + ' | '.join(row) + ' |')
+            cells.append(f'{finals.mean():.4f} +- {finals.std():.4f} ({ROWS[row][1]})')
+            regret[(scenario, row)] = 1.0 - traces  # paper eq. SR with optimum 1
+            table['cells'][f'{scenario}/{row}']['final_reward'] = {
+                'mean': float(finals.mean()), 'std': float(finals.std()), 'model': ROWS[row][1],
+                'seconds_mean': float(np.mean([plans[(scenario, row, s)]['seconds'] for s in range(args.seeds)]))}
+        lines.append('| ' + ' | '.join(cells) + ' |')
     out.mkdir(parents=True, exist_ok=True)
     (out / 'table1.md').write_text('\n'.join(lines) + '\n')
     (out / 'table1.json').write_text(json.dumps(table, indent=2))
 
     fig, axes = plt.subplots(1, len(args.scenarios), figsize=(5 * len(args.scenarios), 4), squeeze=False)
     for ax, scenario in zip(axes[0], args.scenarios):
-        for method in args.methods:
-            sr = regret[(scenario, method)]
+        for row in args.rows:
+            sr = regret[(scenario, row)]
             t = np.arange(1, sr.shape[1] + 1)
-            ax.plot(t, sr.mean(0), label=method)
+            ax.plot(t, sr.mean(0), label=f'{row} ({ROWS[row][1]})')
             ax.fill_between(t, sr.mean(0) - sr.std(0), sr.mean(0) + sr.std(0), alpha=0.15)
         ax.set_title(f'{scenario} (N={SCENARIOS[scenario]})')
         ax.set_xlabel('evaluation t')
         ax.set_ylabel('simple regret 1 - max reward')
         ax.grid(alpha=0.3)
-        ax.legend()
+        ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(out / 'simple_regret.png', dpi=120)
     print('\n'.join(lines))

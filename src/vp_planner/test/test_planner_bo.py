@@ -71,17 +71,17 @@ def test_trust_region_update_rule() -> None:
 
 
 def test_bo_improves_on_its_initial_design(small_realizations) -> None:
-    """On a small real problem (3 cameras around a 500-point plant, the default reward and the
-    paper's), the BO phase must beat the best plan of its initial design, also from the paper's
-    purely random initial design; every step is recorded."""
+    """On a small real problem (3 cameras around a 500-point plant, the default structured initial
+    design) the BO phase must beat the best plan of its initial design, under the default reward
+    and the paper's. The BO of commit 8effa61 (EI over the whole cube) gained 0.0065 and 0.0000
+    here: it never left the structured incumbent; the trust region gains 0.087 and 0.016."""
     from vp_planner.optimizers import plan_views
 
-    R = small_realizations
-    for reward, structured in (("coverage", 4), ("paper", 0)):
-        res = plan_views("egp", R, 3, evaluations=30, initial_evaluations=15, seed=0, reward=reward,
-                         structured_init=structured)
+    for reward, margin in (("coverage", 0.03), ("paper", 0.005)):
+        res = plan_views("egp", small_realizations, 3, evaluations=30, initial_evaluations=15, seed=0,
+                         reward=reward)
         assert res.initial_best is not None
-        assert res.reward > res.initial_best + 0.01, (reward, res.initial_best, res.reward)
+        assert res.reward > res.initial_best + margin, (reward, res.initial_best, res.reward)
         assert len(res.steps) == 15 and any(s["improved"] for s in res.steps)
         for s in res.steps:
             assert s["model"] in MODEL_NAMES and sum(s["weights"]) == pytest.approx(1.0, abs=1e-5)

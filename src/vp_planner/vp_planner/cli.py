@@ -92,7 +92,7 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
         p.add_argument("--min-separation", type=float, default=0.5)
         p.add_argument("--fov", type=float, default=math.pi / 2)
         p.add_argument("--theta-match", type=float, default=math.pi / 4)
-        p.add_argument("--structured-init", type=int, default=10,
+        p.add_argument("--structured-init", type=int, default=20,
                        help="structured plans in the egp/gp initial design (0: purely random, as the paper)")
         p.add_argument("--bo-mode", default="trust_region", choices=("trust_region", "global"),
                        help="egp/gp: EI in a trust region about the incumbent, or over the whole space (paper)")

@@ -342,7 +342,7 @@ def _sa(space: ViewSpace, obj: Objective, evaluations: int, rng: np.random.Gener
 
 
 # ---------------------------------------------------------------------- BO
-def initial_design(space: ViewSpace, n: int, rng: np.random.Generator, structured: int = 10) -> NDArray[np.float64]:
+def initial_design(space: ViewSpace, n: int, rng: np.random.Generator, structured: int = 20) -> NDArray[np.float64]:
     """n initial plans U (n, 6N): up to ``structured`` structured plans, then random feasible ones."""
     S = space.structured(max_plans=max(0, min(structured, n))) if structured > 0 else np.zeros((0, space.dim))
     S = S[:n]
@@ -397,7 +397,7 @@ def plan_views(
     callback: Optional[Callback] = None,
     *,
     shell_depth: Optional[float] = None,
-    structured_init: int = 10,
+    structured_init: int = 20,
     dtype: torch.dtype = torch.float64,
     reward: str = DEFAULT_REWARD_MODEL,
     image_size: tuple[int, int] = (2000, 1500),

@@ -107,7 +107,7 @@ class PlannerNode(Node):
         self.declare_parameter('image_width', 2000)
         self.declare_parameter('image_height', 1500)
         self.declare_parameter('bo_mode', 'trust_region')
-        self.declare_parameter('structured_init', 10)
+        self.declare_parameter('structured_init', 20)
         self.declare_parameter('arc_spacing', math.radians(30.0))
         self.declare_parameter('num_threads', 1)
         self.declare_parameter('autostart', False)

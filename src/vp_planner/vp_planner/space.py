@@ -368,7 +368,7 @@ class ViewSpace:
                 f"min_altitude {self.min_altitude})")
         return np.concatenate(out)[:n] if n > 0 else np.zeros((0, self.dim))
 
-    def structured(self, max_plans: int = 10) -> NDArray[np.float64]:
+    def structured(self, max_plans: int = 20) -> NDArray[np.float64]:
         """Up to ``max_plans`` structured plans U (M, 6N), the patterns a good plan is made of.
 
         In this order (infeasible ones are dropped):
@@ -380,8 +380,9 @@ class ViewSpace:
         * 2 rings: N cameras evenly spread in azimuth at the elevation 90 - theta_match/2 + 2
           degrees, where opposite cameras meet at just under theta_match (the paper reward's
           best circle), at the shell's outer edge and a little inside it;
-        * 4 arcs: N cameras 30 degrees apart in azimuth at elevations 25 and 45 degrees, facing
-          the long and the short side of the scene (the pattern that reconstructs best);
+        * 12 arcs: N cameras 30 degrees apart in azimuth (the pattern that reconstructs best),
+          at elevations 20, 40 and 60 degrees, close to the stand-off distance and farther out,
+          facing the long side of the scene and the opposite side;
         * 4 more caps.
 
         Every camera looks at the scene's centre; positions are on the shell of the space.
@@ -418,8 +419,8 @@ class ViewSpace:
         u_pos = caps([(35, 0, 1.0, 1.0), (50, 90, 0.75, 1.0), (20, 180, 1.0, 0.9), (65, 270, 0.5, 1.0)])
         u_pos += [along(0.0, 360.0 / N, ring_el, 1.0), along(0.0, 360.0 / N, ring_el, 0.6)]
         long_side = 90.0 if self.extent.half[0] >= self.extent.half[1] else 0.0
-        u_pos += [along(long_side, 30.0, 25.0, 0.5), along(long_side + 180.0, 30.0, 45.0, 0.5),
-                  along(long_side + 90.0, 30.0, 25.0, 0.25), along(long_side + 270.0, 30.0, 45.0, 0.25)]
+        u_pos += [along(long_side + side, 30.0, el, u_dist) for el in (60.0, 40.0, 20.0)
+                  for u_dist in (0.05, 0.4) for side in (0.0, 180.0)]
         u_pos += caps([(35, 45, 0.5, 0.8), (80, 135, 1.0, 1.0), (50, 225, 0.25, 1.1), (20, 315, 0.75, 1.0)])
         u_pos = u_pos[: max(0, max_plans)]
         if not u_pos:
