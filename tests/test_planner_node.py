@@ -163,7 +163,8 @@ def test_goal_without_num_cameras_uses_the_parameter(ros_env, start_node, ros_no
     planner = start_node("vp_planner", "planner", {"num_cameras": 3}, ros_env)
     client = ros_node(ros_env)
     action = ActionClient(client.node, PlanViews, "/plan_views")
-    assert client.spin_until(lambda: "scene received" in planner.output(), TIMEOUT), planner.output()
+    assert client.spin_until(lambda: action.server_is_ready() and "scene received" in planner.output(),
+                             TIMEOUT), planner.output()
     _, res = send(client, action, goal(num_cameras=0, method="circle", evaluations=6))
     assert res.result.error_code == PlanViews.Result.NONE, res.result.error_msg
     assert len(res.result.plan.poses) == 3
@@ -203,8 +204,9 @@ def test_cloud_in_another_frame_is_refused(ros_env, start_node, ros_node) -> Non
     k, p, _ = noisy.points.shape
     pub.publish(numpy_to_pointcloud2(noisy.points.reshape(-1, 3), realization=np.repeat(np.arange(k), p).astype(np.uint16),
                                      frame_id="odom"))
-    assert client.spin_until(lambda: "ignoring /scene/noisy_points" in planner.output(), TIMEOUT), planner.output()
     action = ActionClient(client.node, PlanViews, "/plan_views")
+    assert client.spin_until(lambda: action.server_is_ready() and "ignoring /scene/noisy_points" in planner.output(),
+                             TIMEOUT), planner.output()
     _, res = send(client, action, goal())
     assert res.result.error_code == PlanViews.Result.NO_SCENE and "'odom'" in res.result.error_msg
     assert planner.alive()
