@@ -8,7 +8,8 @@ Fixtures:
     ros_env       -> dict: os.environ + LOCALHOST discovery + a reserved ROS_DOMAIN_ID.
     start_node    -> factory ``start_node(pkg, exe, params, env, args=()) -> NodeProcess``
                      starting ``install/<pkg>/lib/<pkg>/<exe> --ros-args -p k:=v ...`` in its own
-                     process group (output to a log file); teardown sends SIGINT, then SIGKILL.
+                     session, dying with the test process (tools/node_process.py, shared with
+                     tools/run_suite.py); teardown sends SIGTERM, then SIGKILL.
     ros_node      -> factory ``ros_node(env_or_domain_id, name='test_client') -> RosTestNode``:
                      an rclpy context + node + executor in the test process on the same domain;
                      torn down after the test.
@@ -17,11 +18,8 @@ from __future__ import annotations
 
 import fcntl
 import itertools
-import math
 import os
-import re
-import signal
-import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -31,6 +29,9 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED_DATA = REPO.parent / "shared" / "data"
+
+sys.path.insert(0, str(REPO / "tools"))
+from node_process import NodeProcess, node_command  # noqa: E402  (tools/node_process.py)
 
 # The test process itself talks DDS (RosTestNode): keep discovery on this machine.
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
@@ -91,88 +92,6 @@ def ros_env():
         lease.release()
 
 
-_YAML_LITERAL = re.compile(r"^(|~|null|Null|NULL|true|True|TRUE|false|False|FALSE|yes|no|on|off|"
-                           r"[-+]?(\d[\d_]*)?\.?\d*([eE][-+]?\d+)?|[-+]?\.(inf|Inf|INF)|\.(nan|NaN|NAN))$")
-
-
-def ros_arg_value(value: Any) -> str:
-    """A Python value as the YAML text of ``-p name:=value`` (strings quoted when YAML would
-    read them as another type)."""
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int):
-        return str(value)
-    if isinstance(value, float):
-        return repr(value) if math.isfinite(value) else (".nan" if math.isnan(value) else
-                                                         (".inf" if value > 0 else "-.inf"))
-    if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(ros_arg_value(v) for v in value) + "]"
-    s = str(value)
-    if _YAML_LITERAL.match(s) or re.search(r"[:#\[\]{},'\"&*!|>%@`]|^[-?]", s) or s != s.strip():
-        return "'" + s.replace("'", "''") + "'"
-    return s
-
-
-def executable(pkg: str, exe: str) -> Path:
-    """``<repo>/install/<pkg>/lib/<pkg>/<exe>``, else the package prefix from the ament index."""
-    path = REPO / "install" / pkg / "lib" / pkg / exe
-    if path.exists():
-        return path
-    try:
-        from ament_index_python.packages import get_package_prefix
-
-        return Path(get_package_prefix(pkg)) / "lib" / pkg / exe
-    except Exception:  # noqa: BLE001 - report the expected path below
-        return path
-
-
-class NodeProcess:
-    """A ROS node started as its own process (own process group), output in ``log_path``."""
-
-    def __init__(self, cmd: list, env: dict, log_path: Path) -> None:
-        self.cmd, self.log_path = cmd, log_path
-        self._log = open(log_path, "wb")
-        self.proc = subprocess.Popen(cmd, env=env, stdout=self._log, stderr=subprocess.STDOUT,
-                                     stdin=subprocess.DEVNULL, start_new_session=True)
-
-    @property
-    def pid(self) -> int:
-        return self.proc.pid
-
-    def alive(self) -> bool:
-        return self.proc.poll() is None
-
-    def output(self) -> str:
-        """Everything the process has written so far (stdout and stderr)."""
-        self._log.flush()
-        return self.log_path.read_text(errors="replace")
-
-    def wait(self, timeout: float) -> Optional[int]:
-        """Exit status, or None if still running after ``timeout`` seconds."""
-        try:
-            return self.proc.wait(timeout=timeout)
-        except subprocess.TimeoutExpired:
-            return None
-
-    def _signal_group(self, sig: int) -> None:
-        try:
-            os.killpg(self.proc.pid, sig)
-        except (ProcessLookupError, PermissionError):
-            pass
-
-    def stop(self, timeout: float = 10.0) -> Optional[int]:
-        """SIGINT the process group, wait, then SIGKILL; returns the exit status."""
-        if self.alive():
-            self._signal_group(signal.SIGINT)
-            if self.wait(timeout) is None:
-                self._signal_group(signal.SIGKILL)
-                self.wait(5.0)
-        else:
-            self._signal_group(signal.SIGKILL)  # stray children of an exited leader
-        self._log.close()
-        return self.proc.returncode
-
-
 @pytest.fixture
 def start_node(tmp_path: Path):
     """Factory: ``start_node(pkg, exe, params, env, args=()) -> NodeProcess``; stopped at teardown."""
@@ -180,14 +99,12 @@ def start_node(tmp_path: Path):
 
     def _start(pkg: str, exe: str, params: Optional[dict] = None, env: Optional[dict] = None,
                args: Iterable[str] = ()) -> NodeProcess:
-        path = executable(pkg, exe)
-        if not path.exists():
-            pytest.fail(f"{pkg}/{exe} is not installed at {path}: run tools/setup.sh")
         if env is None or env.get("ROS_AUTOMATIC_DISCOVERY_RANGE") != "LOCALHOST" or "ROS_DOMAIN_ID" not in env:
             raise ValueError("start_node needs an env from the ros_env fixture (LOCALHOST + ROS_DOMAIN_ID)")
-        cmd = [str(path), *args, "--ros-args"]
-        for k, v in (params or {}).items():
-            cmd += ["-p", f"{k}:={ros_arg_value(v)}"]
+        try:
+            cmd = node_command(pkg, exe, params, args)
+        except FileNotFoundError as exc:
+            pytest.fail(f"{pkg}/{exe} is not installed: {exc}")
         log = tmp_path / f"{pkg}-{exe}-{len(started)}.log"
         node = NodeProcess(cmd, env, log)
         started.append(node)

@@ -1,7 +1,10 @@
 """The entry script (tools/run_suite.py): the three real nodes as processes, one mission, over DDS.
 
 End-to-end on a small configuration, with a separate subscriber process on /camera_plan; and the
-fault case: the planner killed mid-run makes the script stop the others and exit non-zero.
+fault cases: the planner killed mid-run makes the script stop the others and exit non-zero; a
+node that exits with a one-line error gets that line reported last, without tracebacks from the
+nodes the script stops; the script killed with SIGKILL takes its nodes with it. Every wait has a
+deadline.
 """
 from __future__ import annotations
 
@@ -16,10 +19,8 @@ import time
 from pathlib import Path
 
 import numpy as np
-import pytest
 
-pytest.importorskip("rclpy", reason="rclpy is not importable: source install/setup.bash in the venv")
-pytest.importorskip("vp_recon.pipeline", reason="vp_recon is not built: run tools/setup.sh")
+from node_process import NodeProcess  # tools/, on sys.path through conftest.py
 
 REPO = Path(__file__).resolve().parents[1]
 SCRIPT = REPO / "tools" / "run_suite.py"
@@ -46,18 +47,16 @@ def started_pids(text: str) -> dict:
 def test_end_to_end_small_mission(ros_env, tmp_path) -> None:
     out = tmp_path / "run"
     echo_out = tmp_path / "echo.json"
-    echo = subprocess.Popen([sys.executable, str(ECHO), str(echo_out), "600"], env=ros_env,
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    echo = NodeProcess([sys.executable, str(ECHO), str(echo_out), "600"], ros_env, tmp_path / "echo.log")
     try:
         proc = subprocess.run([sys.executable, str(SCRIPT), *SMALL, "--method", "egp", "--evals", "16",
-                               "--init", "10", "--out", str(out), "--timeout", "600"],
-                              env=ros_env, capture_output=True, text=True, timeout=900)
+                               "--init", "10", "--out", str(out), "--timeout", "500"],
+                              env=ros_env, capture_output=True, text=True, timeout=560)
         log = proc.stdout + proc.stderr
         assert proc.returncode == 0, log[-6000:]
-        assert echo.wait(60) == 0, echo.stdout.read()
+        assert echo.wait(60) == 0, echo.output()
     finally:
-        if echo.poll() is None:
-            echo.kill()
+        echo.stop()
     summary = json.loads((out / "summary.json").read_text())
     for key in ("scenario", "method", "cameras", "reward", "chamfer_mean", "chamfer_std", "poses", "seconds"):
         assert key in summary, key
@@ -73,30 +72,70 @@ def test_end_to_end_small_mission(ros_env, tmp_path) -> None:
         assert not alive(pid)
 
 
+def wait_gone(pids: dict, timeout: float) -> list:
+    """Names of the processes still alive after waiting up to ``timeout`` seconds for all to end."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and any(alive(p) for p in pids.values()):
+        time.sleep(0.1)
+    return [name for name, pid in pids.items() if alive(pid)]
+
+
+def start_script(ros_env, tmp_path, *args) -> NodeProcess:
+    """run_suite.py as a child process (its output collected by a reader thread: no blocking reads)."""
+    return NodeProcess([sys.executable, str(SCRIPT), *SMALL, "--out", str(tmp_path / "run"), *args],
+                       ros_env, tmp_path / "run_suite.log")
+
+
+def planning_started(ros_env, tmp_path) -> tuple[NodeProcess, dict]:
+    """The script on a long egp mission, once the planner works on the goal; (script, node pids)."""
+    script = start_script(ros_env, tmp_path, "--method", "egp", "--evals", "3000", "--init", "10",
+                          "--timeout", "300")
+    assert script.wait_for_output("planning 4 cameras", 120), script.output()[-3000:]
+    pids = started_pids(script.output())
+    assert set(pids) == {"scene", "planner", "recon"}, script.output()[-3000:]
+    return script, pids
+
+
 def test_killing_the_planner_stops_everything(ros_env, tmp_path) -> None:
-    proc = subprocess.Popen([sys.executable, str(SCRIPT), *SMALL, "--method", "egp", "--evals", "3000",
-                             "--init", "10", "--out", str(tmp_path / "run"), "--timeout", "300"],
-                            env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    lines: list[str] = []
+    script, pids = planning_started(ros_env, tmp_path)
     try:
-        deadline = time.monotonic() + 120
-        while time.monotonic() < deadline:  # until the planner is working on the goal
-            line = proc.stdout.readline()
-            if not line:
-                break
-            lines.append(line)
-            if line.startswith("[planner]") and "planning 4 cameras" in line:
-                break
-        text = "".join(lines)
-        pids = started_pids(text)
-        assert set(pids) == {"scene", "planner", "recon"} and "planning 4 cameras" in text, text
         os.kill(pids["planner"], signal.SIGKILL)
-        rest, _ = proc.communicate(timeout=60)
+        code = script.wait(60)
     finally:
-        if proc.poll() is None:
-            proc.kill()
-    text = "".join(lines) + rest
-    assert proc.returncode == 3, text[-3000:]
+        script.stop()
+    text = script.output()
+    assert code == 3, text[-3000:]
     assert re.search(r'node "planner" died', text), text[-3000:]
-    time.sleep(0.5)
-    assert not [name for name, pid in pids.items() if alive(pid)], text[-3000:]
+    assert not wait_gone(pids, 10.0), text[-3000:]
+
+
+def test_sigkill_of_the_script_takes_the_nodes_with_it(ros_env, tmp_path) -> None:
+    """Issue 10, item 3: no orphaned nodes when the supervisor itself is killed."""
+    script, pids = planning_started(ros_env, tmp_path)
+    try:
+        script.signal(signal.SIGKILL)
+        assert script.wait(10) == -signal.SIGKILL
+        t0 = time.monotonic()
+        left = wait_gone(pids, 15.0)
+    finally:
+        for pid in pids.values():  # never leave them behind, even when the test fails
+            if alive(pid):
+                os.kill(pid, signal.SIGKILL)
+    assert not left, f"still running {time.monotonic() - t0:.1f} s after the script was killed: {left}"
+
+
+def test_a_dead_node_is_reported_last_without_tracebacks(ros_env, tmp_path) -> None:
+    """Issue 10, item 11: the recon exits at once with a one-line error (bad width); the script
+    stops the other two; its last line names the node and repeats that error, and no node prints
+    a traceback while being stopped."""
+    script = start_script(ros_env, tmp_path, "--method", "circle", "--evals", "4", "--width", "4",
+                          "--timeout", "120")
+    try:
+        code = script.wait(120)
+    finally:
+        script.stop()
+    text = script.output()
+    assert code == 3, text[-3000:]
+    last = text.strip().splitlines()[-1]
+    assert 'node "recon" died (exit code 2)' in last and "width" in last, text[-3000:]
+    assert "Traceback" not in text and "KeyboardInterrupt" not in text, text[-6000:]

@@ -5,7 +5,10 @@ Starts the three nodes as separate processes (real ROS 2 nodes, DDS on loopback 
 and streams their logs, asks the planner for a plan through the ``/plan_views`` action (with a
 progress bar from its feedback), waits for the recon node's aggregate score on
 ``/reconstruction/score`` and writes ``<out>/summary.json``. Everything is shut down on success,
-on Ctrl-C and when any node dies.
+on Ctrl-C and when any node dies; the nodes die with this script even when it is killed with
+SIGKILL (parent-death signal, tools/node_process.py). While the nodes are stopped their output
+goes to ``<out>/<node>.log`` only, so the outcome (or the error, with the dead node's last line)
+is the last thing printed.
 
 Exit codes: 0 success, 1 the plan or the reconstruction failed (the error is printed),
 2 bad arguments or missing build, 3 a node died, 4 timed out, 130 interrupted.
@@ -21,12 +24,13 @@ import argparse
 import json
 import os
 import signal
-import subprocess
 import sys
 import threading
 import time
 from pathlib import Path
 from typing import Dict, List, Optional
+
+from node_process import NodeProcess, node_command
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -62,60 +66,6 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
             ap.error(f'--models: no such folder: {args.models}')
         args.models = str(Path(args.models).resolve())
     return args
-
-
-class NodeProcess:
-    """One node in its own process group, its output streamed with a ``[name]`` prefix."""
-
-    def __init__(self, name: str, pkg: str, exe: str, params: Dict[str, object], env, log_dir: Path):
-        self.name = name
-        path = ROOT / 'install' / pkg / 'lib' / pkg / exe
-        if not path.exists():
-            raise FileNotFoundError(f'{path} not found: run `make setup` first')
-        cmd = [str(path), '--ros-args', '-r', f'__node:={name}']
-        for key, value in params.items():
-            if value == '':
-                continue  # an empty -p value would be read as null: keep the node's default
-            if isinstance(value, bool):
-                value = 'true' if value else 'false'
-            cmd += ['-p', f'{key}:={value}']
-        self.log_path = log_dir / f'{name}.log'
-        self.proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                     stdin=subprocess.DEVNULL, start_new_session=True, text=True,
-                                     bufsize=1)
-        self._thread = threading.Thread(target=self._pump, daemon=True)
-        self._thread.start()
-        print(f'started {name} (pid {self.proc.pid}): {path.name}', flush=True)
-
-    def _pump(self) -> None:
-        with open(self.log_path, 'w') as log:
-            for line in self.proc.stdout:
-                log.write(line)
-                log.flush()
-                sys.stderr.write(f'[{self.name}] {line}')
-
-    def poll(self) -> Optional[int]:
-        return self.proc.poll()
-
-    def stop(self, timeout: float = 10.0) -> None:
-        """SIGINT the group (clean rclpy shutdown), then SIGTERM, then SIGKILL."""
-        for sig, wait in ((signal.SIGINT, timeout), (signal.SIGTERM, 3.0), (signal.SIGKILL, 3.0)):
-            if self.proc.poll() is not None:
-                break
-            try:
-                os.killpg(self.proc.pid, sig)
-            except ProcessLookupError:
-                break
-            try:
-                self.proc.wait(wait)
-            except subprocess.TimeoutExpired:
-                continue
-        # the group may hold helper processes even after its leader exited
-        try:
-            os.killpg(self.proc.pid, signal.SIGKILL)
-        except (ProcessLookupError, PermissionError):
-            pass
-        self._thread.join(timeout=2.0)
 
 
 class Mission:
@@ -192,21 +142,31 @@ class Mission:
         self.rclpy.try_shutdown(context=self.context)
 
 
+def start_node(name: str, pkg: str, exe: str, params: Dict[str, object], env, log_dir: Path) -> NodeProcess:
+    """One node as a child process named ``name``, its output streamed with a ``[name]`` prefix."""
+    node = NodeProcess(node_command(pkg, exe, params, name=name), env, log_dir / f'{name}.log', echo=name)
+    print(f'started {name} (pid {node.pid}): {exe}', flush=True)
+    return node
+
+
 def wait_for(predicate, nodes: List[NodeProcess], deadline: float, what: str) -> None:
     """Poll ``predicate`` while watching the nodes; raise on a dead node or the deadline."""
     while not predicate():
         for n in nodes:
             code = n.poll()
             if code is not None:
-                raise NodeDied(n.name, code)
+                n.wait(1.0)  # its last lines
+                raise NodeDied(n.echo, code, n.last_line(), n.log_path)
         if time.monotonic() > deadline:
             raise TimeoutError(f'timed out waiting for {what}')
         time.sleep(0.1)
 
 
 class NodeDied(RuntimeError):
-    def __init__(self, name: str, code: int):
-        super().__init__(f'node "{name}" died (exit code {code}); see its log above')
+    def __init__(self, name: str, code: int, last_line: str = '', log: Optional[Path] = None):
+        said = f': {last_line}' if last_line else ''
+        where = f' (log: {log})' if log is not None else ''
+        super().__init__(f'node "{name}" died (exit code {code}){said}{where}')
         self.node_name, self.code = name, code
 
 
@@ -234,22 +194,21 @@ def run(args: argparse.Namespace) -> int:
                     'realizations': args.realizations, 'points_per_plant': args.points_per_plant}
     nodes: List[NodeProcess] = []
     mission: Optional[Mission] = None
-    interrupted = threading.Event()
+    outcome: List[str] = []  # printed after the nodes are stopped, so that it is the last line
 
     def on_signal(signum, _frame):
-        interrupted.set()
         raise KeyboardInterrupt
 
     signal.signal(signal.SIGTERM, on_signal)
     try:
         # the planner and the recon share the cores: 1 thread for the planner, the rest for the recon
         recon_threads = max(1, (os.cpu_count() or 2) - 1)
-        nodes.append(NodeProcess('scene', 'vp_scene', 'scene', scene_params, {**env, 'OMP_NUM_THREADS': '1'}, out))
-        nodes.append(NodeProcess('planner', 'vp_planner', 'planner', {
+        nodes.append(start_node('scene', 'vp_scene', 'scene', scene_params, {**env, 'OMP_NUM_THREADS': '1'}, out))
+        nodes.append(start_node('planner', 'vp_planner', 'planner', {
             'num_cameras': args.cameras, 'method': args.method, 'evaluations': args.evals,
             'initial_evaluations': min(args.init, args.evals), 'seed': args.seed, 'num_threads': 1},
             {**env, 'OMP_NUM_THREADS': '1'}, out))
-        nodes.append(NodeProcess('recon', 'vp_recon', 'recon', {
+        nodes.append(start_node('recon', 'vp_recon', 'recon', {
             'output_folder': str(out), 'width': args.width, 'height': args.height,
             'method': args.method, 'num_threads': recon_threads},
             {**env, 'OMP_NUM_THREADS': str(recon_threads)}, out))
@@ -261,7 +220,7 @@ def run(args: argparse.Namespace) -> int:
         wait_for(goal_future.done, nodes, deadline, 'the planner to accept the goal')
         handle = goal_future.result()
         if not handle.accepted:
-            print('error: the planner rejected the goal', flush=True)
+            outcome.append('error: the planner rejected the goal')
             return EXIT_FAILED
         result_future = handle.get_result_async()
         wait_for(result_future.done, nodes, deadline, 'the plan')
@@ -270,8 +229,7 @@ def run(args: argparse.Namespace) -> int:
             mission.progress.close()
             mission.progress = None
         if result.error_code != 0:
-            print(f'error: planning failed (error_code {result.error_code}): {result.error_msg}',
-                  flush=True)
+            outcome.append(f'error: planning failed (error_code {result.error_code}): {result.error_msg}')
             return EXIT_FAILED
         poses = [[p.position.x, p.position.y, p.position.z, p.orientation.x, p.orientation.y,
                   p.orientation.z, p.orientation.w] for p in result.plan.poses]
@@ -301,29 +259,34 @@ def run(args: argparse.Namespace) -> int:
         }
         (out / 'summary.json').write_text(json.dumps(summary, indent=2))
         if agg.error_code != 0:
-            print(f'error: reconstruction failed (error_code {agg.error_code}): {agg.error_msg}',
-                  flush=True)
+            outcome.append(f'error: reconstruction failed (error_code {agg.error_code}): {agg.error_msg}')
             return EXIT_FAILED
-        print(f'Chamfer distance x100: {agg.chamfer:.3f} +- {agg.chamfer_std:.3f} over '
-              f'{agg.realizations} wind realizations; summary: {out / "summary.json"}', flush=True)
+        outcome.append(f'Chamfer distance x100: {agg.chamfer:.3f} +- {agg.chamfer_std:.3f} over '
+                       f'{agg.realizations} wind realizations; summary: {out / "summary.json"}')
         return EXIT_OK
     except NodeDied as exc:
-        print(f'error: {exc}; stopping the other nodes', flush=True)
+        print(f'node "{exc.node_name}" died: stopping the other nodes', flush=True)
+        outcome.append(f'error: {exc}')
         return EXIT_NODE_DIED
     except TimeoutError as exc:
-        print(f'error: {exc}', flush=True)
+        outcome.append(f'error: {exc}')
         return EXIT_TIMEOUT
     except FileNotFoundError as exc:
-        print(f'error: {exc}', flush=True)
+        outcome.append(f'error: {exc}')
         return EXIT_USAGE
     except KeyboardInterrupt:
         print('interrupted: stopping the nodes', flush=True)
+        outcome.append('interrupted')
         return EXIT_INTERRUPTED
     finally:
         if mission is not None:
             mission.close()
+        for n in nodes:  # their shutdown lines go to <out>/<node>.log only
+            n.mute()
         for n in reversed(nodes):
             n.stop()
+        for line in outcome:
+            print(line, flush=True)
 
 
 def main(argv: Optional[List[str]] = None) -> int:

@@ -10,14 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytest.importorskip("vp_scene.scenario", reason="vp_scene is not importable")
-pytest.importorskip("vp_scene.wind", reason="vp_scene is not importable")
-
-from vp_planner.cli import main  # noqa: E402
-from vp_scene.camera import poses_to_cameras  # noqa: E402
-from vp_planner.reward import noisy_reward  # noqa: E402
-from vp_planner.reward_models import DEFAULT_REWARD_MODEL, make_reward  # noqa: E402
-from vp_scene.camera import CameraModel  # noqa: E402
+from vp_planner.cli import main
+from vp_planner.reward import noisy_reward
+from vp_planner.reward_models import DEFAULT_REWARD_MODEL, make_reward
+from vp_scene.camera import CameraModel, poses_to_cameras
 
 
 def test_cli_writes_plan(tmp_path: Path) -> None:
@@ -122,3 +118,17 @@ def test_cli_score_errors(tmp_path: Path, capsys: pytest.CaptureFixture) -> None
     assert main(["score", "--plan", str(bad)]) == 2
     err = capsys.readouterr().err
     assert "'fov'" in err and "bad.json" in err
+
+
+def test_cli_refuses_more_cameras_than_it_can_plan(tmp_path: Path) -> None:
+    """Issue 10, item 2: `make plan METHOD=circle CAMERAS=1000` tried to allocate 80 GB and died
+    with a traceback. Now: one line naming the bound, exit 2, before the scene is even built."""
+    import time
+
+    t0 = time.monotonic()
+    out = subprocess.run([sys.executable, "-m", "vp_planner.cli", "--method", "circle", "--cameras", "1000",
+                          "--reward", "paper", "--evals", "4", "--out", str(tmp_path / "run"), "--no-progress"],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2, out.stderr[-3000:]
+    assert out.stderr.count("\n") == 1 and "num_cameras" in out.stderr and "100" in out.stderr, out.stderr
+    assert time.monotonic() - t0 < 60 and not (tmp_path / "run").exists()

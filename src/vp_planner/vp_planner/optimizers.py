@@ -25,6 +25,17 @@ The initial design of egp/gp is ``initial_evaluations`` plans: a few structured 
 (:meth:`ViewSpace.structured`, clusters of cameras looking at the scene) followed by random
 feasible plans (``structured_init`` sets how many structured ones; 0 gives the paper's purely
 random initial design).
+
+Size of a plan: 2 <= N <= :data:`MAX_CAMERAS`. Memory does not limit N by itself: both reward
+models and the feasibility check work in chunks of a fixed number of elements (the paper
+reward's pair term included), so one evaluation needs O(N^2) small arrays (pair indices, one
+accumulator per pair) plus the coverage model's per-camera terms, N x K x min(P, 3000) elements
+(:func:`estimate_memory`; a plan that would not fit in the memory available is refused before
+anything is allocated). What limits N is time and feasibility: one evaluation costs O(N^2 K P)
+(N = 100 on 5 x 4000 points: about 1e8 pair-point terms, a second or two on one core), the
+BO methods work in 6N dimensions, and random feasible plans (min_separation between every pair)
+become rare beyond a few dozen cameras. Hence the bound of 100 cameras, far above the paper's
+N <= 6; a run is cancellable throughout (``should_stop``), the feasible-plan search included.
 """
 from __future__ import annotations
 
@@ -49,9 +60,12 @@ from .space import (
 
 __all__ = [
     "METHODS",
+    "MAX_CAMERAS",
     "PlanResult",
     "plan_views",
     "validate_request",
+    "estimate_memory",
+    "check_memory",
     "InvalidNumCamerasError",
     "UnknownMethodError",
     "InvalidBudgetError",
@@ -61,14 +75,27 @@ __all__ = [
 
 METHODS: tuple[str, ...] = ("egp", "gp", "circle", "arc", "sa", "random")
 
-Callback = Callable[[int, int, float, Optional[list]], bool]
+#: The largest number of cameras N of a plan (see the module docstring).
+MAX_CAMERAS: int = 100
 
-#: Plans evaluated per reward call by the non-BO methods (bounds how late a cancel is seen).
+Callback = Callable[[int, int, float, Optional[list]], bool]
+StopCheck = Callable[[], bool]
+
+#: Plans evaluated per reward call by the non-BO methods (bounds how late a cancel is seen) ...
 _BATCH = 16
+#: ... fewer for large plans: at most this many pair-point terms (N (N-1)/2 x K P) per call.
+_BATCH_TERMS = 1e8
+
+
+def _batch(space: ViewSpace) -> int:
+    """Plans per reward call: 16, fewer when one plan alone is a large computation."""
+    N = space.num_cameras
+    pair_points = N * (N - 1) / 2 * space.realizations.shape[0] * space.realizations.shape[1]
+    return int(max(1, min(_BATCH, _BATCH_TERMS // max(pair_points, 1.0))))
 
 
 class InvalidNumCamerasError(ValueError):
-    """num_cameras < 2 or not an integer."""
+    """num_cameras not an integer in [2, MAX_CAMERAS], or more cameras than the memory holds."""
 
 
 class UnknownMethodError(ValueError):
@@ -128,8 +155,8 @@ def validate_request(method: str, num_cameras: Any, evaluations: Any, initial_ev
     """Raise the ValueError subclass for a bad method, camera count or budget (cheap; no scene)."""
     if not isinstance(method, str) or method not in METHODS:
         raise UnknownMethodError(f"unknown method {method!r}; one of {', '.join(METHODS)}")
-    if isinstance(num_cameras, bool) or int(num_cameras) != num_cameras or num_cameras < 2:
-        raise InvalidNumCamerasError(f"num_cameras must be an integer >= 2, got {num_cameras}")
+    if isinstance(num_cameras, bool) or int(num_cameras) != num_cameras or not 2 <= num_cameras <= MAX_CAMERAS:
+        raise InvalidNumCamerasError(f"num_cameras must be an integer from 2 to {MAX_CAMERAS}, got {num_cameras}")
     if isinstance(evaluations, bool) or int(evaluations) != evaluations or evaluations < 1:
         raise InvalidBudgetError(f"evaluations must be an integer >= 1, got {evaluations}")
     if method in ("egp", "gp"):
@@ -138,6 +165,51 @@ def validate_request(method: str, num_cameras: Any, evaluations: Any, initial_ev
         if evaluations < initial_evaluations:
             raise InvalidBudgetError(
                 f"evaluation budget {evaluations} is smaller than the initial design ({initial_evaluations})")
+
+
+def estimate_memory(num_cameras: int, num_realizations: int, num_points: int, reward: str) -> int:
+    """Bytes one reward evaluation of an N-camera plan needs at most (an upper estimate).
+
+    paper: its chunks (``reward.DEFAULT_MAX_ELEMENTS`` elements, about 10 float64 arrays of that
+    size alive at once) plus per pair S = N (N - 1) / 2 an accumulator, two indices and the pair's
+    coefficients (about 80 bytes). coverage: the per-camera terms, N x K x min(P, 3000) elements
+    (each realization subsampled to 3000 points) of about 200 bytes in all (measured: 150), and
+    its pair blocks (``max_elements`` = 2^22 float32 elements, about 6 arrays).
+    """
+    from .reward import DEFAULT_MAX_ELEMENTS
+    from .reward_models import CoverageParams
+
+    N, K, P = int(num_cameras), int(num_realizations), int(num_points)
+    S = N * (N - 1) // 2
+    if reward == "paper":
+        return 10 * 8 * DEFAULT_MAX_ELEMENTS + 80 * S
+    kp = K * min(P, CoverageParams().max_points or P)
+    return 200 * N * kp + 6 * 4 * (1 << 22) + 80 * S
+
+
+def available_memory() -> Optional[int]:
+    """MemAvailable of /proc/meminfo in bytes (None where unknown)."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def check_memory(num_cameras: int, realizations_shape: tuple, reward: str,
+                 available: Optional[int] = None) -> None:
+    """InvalidNumCamerasError when :func:`estimate_memory` exceeds 80 % of the available memory
+    (``available`` bytes; default: :func:`available_memory`), before anything is allocated."""
+    K, P = int(realizations_shape[0]), int(realizations_shape[1])
+    need = estimate_memory(num_cameras, K, P, reward)
+    have = available_memory() if available is None else int(available)
+    if have is not None and need > 0.8 * have:
+        raise InvalidNumCamerasError(
+            f"num_cameras = {num_cameras} on {K} x {P} points needs about {need / 2**30:.1f} GiB for the "
+            f"{reward} reward; {have / 2**30:.1f} GiB are available: use fewer cameras or points")
 
 
 # ---------------------------------------------------------------------- baselines
@@ -209,8 +281,9 @@ def _circle(space: ViewSpace, obj: Objective, evaluations: int, rng: np.random.G
 def _evaluate_plans(obj: Objective, cams: NDArray[np.float64], candidate: bool = True) -> None:
     """Evaluate camera plans in small batches (one recorded evaluation each)."""
     nanU = np.full((1, obj.space.dim), np.nan)
-    for b0 in range(0, len(cams), _BATCH):
-        chunk = cams[b0 : b0 + _BATCH]
+    step = _batch(obj.space)
+    for b0 in range(0, len(cams), step):
+        chunk = cams[b0 : b0 + step]
         obj.record(np.repeat(nanU, len(chunk), axis=0), chunk, candidate=candidate)
 
 
@@ -243,9 +316,10 @@ def _arc(space: ViewSpace, obj: Objective, evaluations: int, rng: np.random.Gene
 
 def _random(space: ViewSpace, obj: Objective, evaluations: int, rng: np.random.Generator) -> None:
     done = 0
+    step = _batch(space)
     while done < evaluations:
-        n = min(_BATCH, evaluations - done)
-        U = space.sample(n, rng)
+        n = min(step, evaluations - done)
+        U = space.sample(n, rng, should_stop=obj.should_stop)
         obj(U)
         done += n
 
@@ -306,7 +380,9 @@ def _sa(space: ViewSpace, obj: Objective, evaluations: int, rng: np.random.Gener
         return bool(sub[np.triu_indices(N, 1)].all())
 
     cur = None
-    for _ in range(10000):
+    for attempt in range(10000):
+        if attempt % 100 == 0:
+            obj.check_stop()
         sel = rng.choice(M, size=N, replace=False)
         if valid(sel):
             cur = sel
@@ -342,11 +418,13 @@ def _sa(space: ViewSpace, obj: Objective, evaluations: int, rng: np.random.Gener
 
 
 # ---------------------------------------------------------------------- BO
-def initial_design(space: ViewSpace, n: int, rng: np.random.Generator, structured: int = 20) -> NDArray[np.float64]:
-    """n initial plans U (n, 6N): up to ``structured`` structured plans, then random feasible ones."""
+def initial_design(space: ViewSpace, n: int, rng: np.random.Generator, structured: int = 20,
+                   should_stop: Optional[StopCheck] = None) -> NDArray[np.float64]:
+    """n initial plans U (n, 6N): up to ``structured`` structured plans, then random feasible ones
+    (PlanningCancelled as soon as ``should_stop()`` is True)."""
     S = space.structured(max_plans=max(0, min(structured, n))) if structured > 0 else np.zeros((0, space.dim))
     S = S[:n]
-    rest = space.sample(n - len(S), rng) if n > len(S) else np.zeros((0, space.dim))
+    rest = space.sample(n - len(S), rng, should_stop=should_stop) if n > len(S) else np.zeros((0, space.dim))
     return np.concatenate([S, rest], axis=0)
 
 
@@ -354,13 +432,16 @@ def _bo(space: ViewSpace, obj: Objective, evaluations: int, initial_evaluations:
         rng: np.random.Generator, ensemble: bool, structured_init: int, bo_mode: str) -> dict:
     from . import bo  # imported lazily: botorch is heavy
 
-    X0 = initial_design(space, initial_evaluations, rng, structured_init)
+    X0 = initial_design(space, initial_evaluations, rng, structured_init, obj.should_stop)
     info: dict = {"weights": None, "model_names": None}
 
     def objective(U: torch.Tensor) -> torch.Tensor:
         return obj(U).to(U.dtype) if isinstance(U, torch.Tensor) else torch.as_tensor(obj(U))
 
     def feasible(U: torch.Tensor) -> torch.Tensor:
+        # BO's rejection sampling and acquisition ask this for every candidate batch: the place to
+        # see a cancel between evaluations (PlanningCancelled leaves bo.optimize)
+        obj.check_stop()
         return space.feasible(U)
 
     def bo_callback(done: int, total: int, best: float, weights: Optional[list]) -> bool:
@@ -396,6 +477,7 @@ def plan_views(
     theta_match: float = DEFAULT_THETA_MATCH,
     callback: Optional[Callback] = None,
     *,
+    should_stop: Optional[StopCheck] = None,
     shell_depth: Optional[float] = None,
     structured_init: int = 20,
     dtype: torch.dtype = torch.float64,
@@ -418,6 +500,9 @@ def plan_views(
         callback: ``callback(done, total, best, weights) -> bool`` after every evaluation
             (``weights``: latest ensemble weights for egp, else None); returning False stops
             the run within one evaluation and returns the best plan so far (``stopped=True``).
+        should_stop: ``should_stop() -> bool``, asked between evaluations and inside the
+            feasible-plan searches (rejection sampling, BO candidate batches, SA's start); True
+            stops the run as a callback returning False does (a cancel, a node shutting down).
         shell_depth: outer bound of camera distances (see ViewSpace).
         structured_init: number of structured plans in the egp/gp initial design.
         dtype: reward precision (torch.float64 or torch.float32).
@@ -429,8 +514,9 @@ def plan_views(
 
     Raises:
         UnknownMethodError, InvalidNumCamerasError, InvalidBudgetError, InvalidSceneError (all
-        ValueError) for bad arguments; NoFeasiblePlanError (ValueError) when no feasible plan
-        was found.
+        ValueError) for bad arguments (InvalidNumCamerasError also for a plan the memory cannot
+        hold, :func:`check_memory`); NoFeasiblePlanError (ValueError) when no feasible plan was
+        found.
     """
     validate_request(method, num_cameras, evaluations, initial_evaluations)
     check_reward_model(reward)
@@ -440,11 +526,12 @@ def plan_views(
         R = check_realizations(realizations)
     except ValueError as exc:
         raise InvalidSceneError(str(exc)) from None
+    check_memory(num_cameras, R.shape, reward)
     start = time.perf_counter()
     space = ViewSpace(R, num_cameras, min_standoff=min_standoff, min_altitude=min_altitude,
                       min_separation=min_separation, fov=fov, theta_match=theta_match, shell_depth=shell_depth,
                       reward_model=reward, image_size=image_size)
-    obj = Objective(space, evaluations, callback=callback, dtype=dtype)
+    obj = Objective(space, evaluations, callback=callback, dtype=dtype, should_stop=should_stop)
     rng = np.random.default_rng(seed)
     torch.manual_seed(seed)
     info: dict = {}

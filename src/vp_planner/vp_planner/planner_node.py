@@ -1,14 +1,19 @@
 """The planner node: a thin ROS 2 adapter around :func:`vp_planner.optimizers.plan_views`.
 
-Subscribes ``/scene/noisy_points`` (all K wind realizations in one PointCloud2), serves the
-``vp_interfaces/action/PlanViews`` action on ``/plan_views`` and publishes the best plan on
-``/camera_plan`` (``geometry_msgs/PoseArray``, frame ``map``, +x of each pose = optical axis)
-and camera frustums on ``/camera_plan/markers`` for RViz. With ``autostart`` it plans with its
-parameters as soon as a scene arrives.
+Subscribes ``/scene/noisy_points`` (all K wind realizations in one PointCloud2, in the node's
+``frame_id``: a cloud in another frame is refused, no transform is applied), serves the
+``vp_interfaces/action/PlanViews`` action on ``/plan_views`` and publishes the best plan,
+latched, on ``/camera_plan`` (``geometry_msgs/PoseArray``, +x of each pose = optical axis), on
+``/camera_plan/info`` (``vp_interfaces/CameraPlan``: the same header and poses with the plan's
+reward, reward model and method, for the recon node) and camera frustums on
+``/camera_plan/markers`` for RViz. With ``autostart`` it plans with its parameters as soon as a
+scene arrives.
 
 Goals are validated in the execute callback and aborted with a named ``error_code`` and an
 ``error_msg`` (as nav2's planner servers do); one goal runs at a time, a second one while
-planning is rejected. Cancel is honoured within one reward evaluation.
+planning is rejected. Cancel is honoured within one reward evaluation, and inside the
+feasible-plan search. On SIGINT/SIGTERM a running goal is aborted once (``CANCELED``, "shutting
+down") and its client answered before the node exits (:mod:`vp_scene.node_runtime`).
 """
 from __future__ import annotations
 
@@ -18,13 +23,11 @@ import time
 from typing import Optional
 
 import numpy as np
-import rclpy
 import torch
 from geometry_msgs.msg import Point, Pose, PoseArray
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
@@ -32,20 +35,80 @@ from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
 from vp_interfaces.action import PlanViews
+from vp_interfaces.msg import CameraPlan
 from vp_planner.gp import MODEL_NAMES
-from vp_planner.optimizers import (METHODS, InvalidBudgetError, InvalidNumCamerasError, InvalidSceneError,
-                                   NoFeasiblePlanError, PlanResult, UnknownMethodError, plan_views,
-                                   validate_request)
+from vp_planner.optimizers import (MAX_CAMERAS, METHODS, InvalidBudgetError, InvalidNumCamerasError,
+                                   InvalidSceneError, NoFeasiblePlanError, PlanResult, UnknownMethodError,
+                                   plan_views, validate_request)
 from vp_planner.reward_models import DEFAULT_REWARD_MODEL, REWARD_MODELS, check_reward_model
 from vp_scene.camera import cameras_to_poses, rotation_matrix
 from vp_scene.cloud import realizations_from_cloud
+from vp_scene.node_runtime import declare_typed, run_node, typed_values
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
-class Cancelled(Exception):
-    """Raised inside the progress callback when the goal was cancelled."""
+#: The node's parameters: name -> (default, description); the default's type is enforced.
+PARAMS = {
+    'num_cameras': (4, f'N, 2..{MAX_CAMERAS} (autostart, and goals that leave it 0)'),
+    'method': ('egp', ' | '.join(METHODS)),
+    'evaluations': (100, 'reward evaluations (goals that leave it 0)'),
+    'initial_evaluations': (50, 'initial design of egp/gp (goals that leave it 0)'),
+    'seed': (0, 'random seed (goals with seed -1)'),
+    'reward': (DEFAULT_REWARD_MODEL, ' | '.join(REWARD_MODELS)),
+    'image_width': (2000, 'image width of the cameras, pixels (the coverage reward)'),
+    'image_height': (1500, 'image height of the cameras, pixels'),
+    'bo_mode': ('trust_region', 'egp/gp: trust_region | global'),
+    'structured_init': (20, 'structured plans in the egp/gp initial design (0: random, as the paper)'),
+    'arc_spacing': (math.radians(30.0), 'arc: rad between neighbouring cameras'),
+    'num_threads': (1, 'torch threads'),
+    'autostart': (False, 'plan with the parameters as soon as a scene arrives'),
+    'min_standoff': (0.5, 'm from every scene point'),
+    'min_altitude': (0.3, 'm above the ground'),
+    'min_separation': (0.5, 'm between cameras'),
+    'fov': (math.pi / 2, 'horizontal field of view, rad'),
+    'theta_match': (math.pi / 4, 'matching angle of the reward, rad'),
+    'frame_id': ('map', 'frame of the plans; the scene cloud must be in it'),
+    'scene_timeout': (10.0, 's a goal that arrives before the scene waits for it'),
+}
+
+
+def check_parameters(values: dict) -> dict:
+    """The parameter values ({name: value}, any subset of :data:`PARAMS`) typed and checked;
+    ValueError naming the first bad one."""
+    v = typed_values(PARAMS, values)
+    if 'num_cameras' in v and not 2 <= v['num_cameras'] <= MAX_CAMERAS:
+        raise ValueError(f'num_cameras must be from 2 to {MAX_CAMERAS}, got {v["num_cameras"]}')
+    if v.get('method', 'egp') not in METHODS:
+        raise ValueError(f'unknown method {v["method"]!r}; one of {", ".join(METHODS)}')
+    if v.get('reward', DEFAULT_REWARD_MODEL) not in REWARD_MODELS:
+        raise ValueError(f'unknown reward model {v["reward"]!r}; one of {", ".join(REWARD_MODELS)}')
+    if v.get('bo_mode', 'global') not in ('trust_region', 'global'):
+        raise ValueError("bo_mode must be 'trust_region' or 'global'")
+    if v.get('structured_init', 0) < 0:
+        raise ValueError('structured_init must be >= 0')
+    if not 0.0 < v.get('arc_spacing', 1.0) < 2 * math.pi:
+        raise ValueError('arc_spacing must be in (0, 2 pi) rad')
+    if v.get('num_threads', 1) < 1:
+        raise ValueError('num_threads must be >= 1')
+    for name in ('image_width', 'image_height'):
+        if v.get(name, 16) < 16:
+            raise ValueError(f'{name} must be >= 16 pixels')
+    for name in ('evaluations', 'initial_evaluations'):
+        if v.get(name, 1) < 1:
+            raise ValueError(f'{name} must be >= 1')
+    if v.get('seed', 0) < 0:
+        raise ValueError('seed must be >= 0')
+    for name in ('fov', 'theta_match'):
+        if not 0.0 < v.get(name, 1.0) < math.pi:
+            raise ValueError(f'{name} must be in (0, pi) rad')
+    for name in ('min_standoff', 'min_altitude', 'min_separation', 'scene_timeout'):
+        if v.get(name, 0.0) < 0.0:
+            raise ValueError(f'{name} must be >= 0')
+    if v.get('frame_id', 'map') == '':
+        raise ValueError('frame_id must not be empty')
+    return v
 
 
 def frustum_markers(cameras: np.ndarray, frame_id: str, stamp, fov: float,
@@ -98,40 +161,21 @@ class PlannerNode(Node):
 
     def __init__(self) -> None:
         super().__init__('planner')
-        self.declare_parameter('num_cameras', 4)
-        self.declare_parameter('method', 'egp')
-        self.declare_parameter('evaluations', 100)
-        self.declare_parameter('initial_evaluations', 50)
-        self.declare_parameter('seed', 0)
-        self.declare_parameter('reward', DEFAULT_REWARD_MODEL)
-        self.declare_parameter('image_width', 2000)
-        self.declare_parameter('image_height', 1500)
-        self.declare_parameter('bo_mode', 'trust_region')
-        self.declare_parameter('structured_init', 20)
-        self.declare_parameter('arc_spacing', math.radians(30.0))
-        self.declare_parameter('num_threads', 1)
-        self.declare_parameter('autostart', False)
-        self.declare_parameter('min_standoff', 0.5)
-        self.declare_parameter('min_altitude', 0.3)
-        self.declare_parameter('min_separation', 0.5)
-        self.declare_parameter('fov', math.pi / 2)
-        self.declare_parameter('theta_match', math.pi / 4)
-        self.declare_parameter('frame_id', 'map')
-        self.declare_parameter('scene_timeout', 10.0)
-        self.add_on_set_parameters_callback(self._check_parameters)
-        bad = self._check_parameters([self.get_parameter(n) for n in (
-            'num_cameras', 'method', 'evaluations', 'initial_evaluations', 'fov', 'theta_match',
-            'min_standoff', 'min_altitude', 'min_separation', 'reward', 'image_width', 'image_height',
-            'bo_mode', 'structured_init', 'arc_spacing', 'num_threads')])
-        if not bad.successful:
-            raise ValueError(bad.reason)
-        torch.set_num_threads(int(self._param('num_threads')))  # leave the other cores to the recon
+        declare_typed(self, PARAMS)
+        check_parameters({n: self.get_parameter(n).value for n in PARAMS})  # ValueError: exit 2
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        torch.set_num_threads(self._param('num_threads'))  # leave the other cores to the recon
 
         self._realizations: Optional[np.ndarray] = None
+        self._scene_problem = ''  # why the last cloud was refused
         self._scene_arrived = threading.Event()
         self._busy = threading.Lock()
+        self._shutting_down = threading.Event()
+        self._running = 0  # goals inside the execute callback (+ an autostart plan)
+        self._running_lock = threading.Lock()
         self._cb = ReentrantCallbackGroup()
         self.plan_pub = self.create_publisher(PoseArray, '/camera_plan', LATCHED)
+        self.info_pub = self.create_publisher(CameraPlan, '/camera_plan/info', LATCHED)
         self.marker_pub = self.create_publisher(MarkerArray, '/camera_plan/markers', LATCHED)
         self.create_subscription(PointCloud2, '/scene/noisy_points', self._on_scene, LATCHED,
                                  callback_group=MutuallyExclusiveCallbackGroup())
@@ -142,46 +186,59 @@ class PlannerNode(Node):
         self.get_logger().info('planner ready: waiting for /scene/noisy_points, serving /plan_views')
 
     # ---------------------------------------------------------------- parameters
-    def _check_parameters(self, params) -> SetParametersResult:
-        for p in params:
-            v = p.value
-            if p.name == 'num_cameras' and v < 2:
-                return SetParametersResult(successful=False, reason='num_cameras must be >= 2')
-            if p.name == 'method' and v not in METHODS:
-                return SetParametersResult(
-                    successful=False, reason=f'unknown method {v!r}; one of {", ".join(METHODS)}')
-            if p.name == 'reward' and v not in REWARD_MODELS:
-                return SetParametersResult(
-                    successful=False, reason=f'unknown reward model {v!r}; one of {", ".join(REWARD_MODELS)}')
-            if p.name == 'bo_mode' and v not in ('trust_region', 'global'):
-                return SetParametersResult(successful=False, reason="bo_mode must be 'trust_region' or 'global'")
-            if p.name == 'structured_init' and v < 0:
-                return SetParametersResult(successful=False, reason='structured_init must be >= 0')
-            if p.name == 'arc_spacing' and not 0.0 < v < 2 * math.pi:
-                return SetParametersResult(successful=False, reason='arc_spacing must be in (0, 2 pi) rad')
-            if p.name == 'num_threads' and v < 1:
-                return SetParametersResult(successful=False, reason='num_threads must be >= 1')
-            if p.name in ('image_width', 'image_height') and v < 16:
-                return SetParametersResult(successful=False, reason=f'{p.name} must be >= 16 pixels')
-            if p.name in ('evaluations', 'initial_evaluations') and v < 1:
-                return SetParametersResult(successful=False, reason=f'{p.name} must be >= 1')
-            if p.name in ('fov', 'theta_match') and not 0.0 < v < math.pi:
-                return SetParametersResult(successful=False, reason=f'{p.name} must be in (0, pi)')
-            if p.name in ('min_standoff', 'min_altitude', 'min_separation') and v < 0.0:
-                return SetParametersResult(successful=False, reason=f'{p.name} must be >= 0')
+    def _on_set_parameters(self, params) -> SetParametersResult:
+        try:
+            check_parameters({p.name: p.value for p in params})
+        except ValueError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
 
     def _param(self, name: str):
-        return self.get_parameter(name).value
+        """The parameter's value with the type of its default (an integer fov is a float)."""
+        return typed_values(PARAMS, {name: self.get_parameter(name).value})[name]
+
+    # ---------------------------------------------------------------- life cycle
+    def _enter(self) -> None:
+        with self._running_lock:
+            self._running += 1
+
+    def _leave(self) -> None:
+        with self._running_lock:
+            self._running -= 1
+
+    def on_shutdown(self, timeout: float) -> bool:
+        """SIGINT/SIGTERM: stop planning, let a running goal be aborted and its client answered;
+        True when that happened within ``timeout`` seconds (node_runtime then tears down)."""
+        self._shutting_down.set()
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            with self._running_lock:
+                if self._running == 0:
+                    break
+            time.sleep(0.02)
+        else:
+            return False
+        time.sleep(0.3)  # the executor sends the result response to the waiting client
+        return True
+
+    def _stopping(self) -> bool:
+        return self._shutting_down.is_set()
 
     # ---------------------------------------------------------------- scene
     def _on_scene(self, msg: PointCloud2) -> None:
+        frame = self._param('frame_id')
+        if msg.header.frame_id != frame:
+            self._scene_problem = (f'the cloud on /scene/noisy_points is in frame {msg.header.frame_id!r}, '
+                                   f'the planner plans in {frame!r} (frame_id); no transform is applied')
+            self.get_logger().error(f'ignoring /scene/noisy_points: {self._scene_problem}')
+            return
         try:
             realizations = realizations_from_cloud(msg)
         except Exception as exc:  # a bad cloud must not take the node down
+            self._scene_problem = f'the cloud on /scene/noisy_points is unusable: {exc}'
             self.get_logger().error(f'ignoring /scene/noisy_points: {exc}')
             return
-        self._realizations = realizations
+        self._realizations, self._scene_problem = realizations, ''
         self._scene_arrived.set()
         k, p, _ = realizations.shape
         self.get_logger().info(f'scene received: {k} realizations x {p} points')
@@ -192,32 +249,38 @@ class PlannerNode(Node):
         if not self._busy.acquire(blocking=False):
             self.get_logger().warn('autostart skipped: a plan is already being computed')
             return
+        self._enter()
         try:
             result = self._plan(self._param('method'), self._param('num_cameras'),
                                 self._param('evaluations'), self._param('initial_evaluations'),
-                                self._param('seed'), self._param('reward'), progress=self._log_progress)
-            self._publish_plan(result)
+                                self._param('seed'), self._param('reward'), progress=self._log_progress,
+                                should_stop=self._stopping)
+            if result.stopped:
+                self.get_logger().info(f'autostart planning stopped after {result.evaluations} evaluations')
+            else:
+                self._publish_plan(result)
         except Exception as exc:
             self.get_logger().error(f'autostart planning failed: {exc}')
         finally:
+            self._leave()
             self._busy.release()
 
     def _log_progress(self, done: int, total: int, best: float, weights) -> bool:
         if done == total or done % max(1, total // 10) == 0:
             extra = '' if not weights else ' weights ' + ' '.join(f'{w:.2f}' for w in weights)
             self.get_logger().info(f'planning {done}/{total} best reward {best:.4f}{extra}')
-        return rclpy.ok()
+        return not self._stopping()
 
     # ---------------------------------------------------------------- planning
     def _plan(self, method: str, num_cameras: int, evaluations: int, initial: int, seed: int, reward: str,
-              progress) -> PlanResult:
+              progress, should_stop) -> PlanResult:
         realizations = self._realizations
         assert realizations is not None
         self.get_logger().info(f'planning {num_cameras} cameras with {method} ({reward} reward): '
                                f'{evaluations} evaluations, seed {seed}')
         return plan_views(
             method, realizations, num_cameras, evaluations=evaluations,
-            initial_evaluations=initial, seed=seed, callback=progress,
+            initial_evaluations=initial, seed=seed, callback=progress, should_stop=should_stop,
             min_standoff=self._param('min_standoff'), min_altitude=self._param('min_altitude'),
             min_separation=self._param('min_separation'), fov=self._param('fov'),
             theta_match=self._param('theta_match'), reward=reward,
@@ -225,20 +288,28 @@ class PlannerNode(Node):
             bo_mode=self._param('bo_mode'), structured_init=self._param('structured_init'),
             arc_spacing=self._param('arc_spacing'))
 
-    def _pose_array(self, cameras: np.ndarray) -> PoseArray:
-        msg = PoseArray()
-        msg.header.frame_id = self._param('frame_id')
-        msg.header.stamp = self.get_clock().now().to_msg()
+    def _poses(self, cameras: np.ndarray) -> list:
+        out = []
         for x, y, z, qx, qy, qz, qw in cameras_to_poses(cameras):
             pose = Pose()
             pose.position.x, pose.position.y, pose.position.z = float(x), float(y), float(z)
             pose.orientation.x, pose.orientation.y = float(qx), float(qy)
             pose.orientation.z, pose.orientation.w = float(qz), float(qw)
-            msg.poses.append(pose)
-        return msg
+            out.append(pose)
+        return out
 
     def _publish_plan(self, result: PlanResult) -> PoseArray:
-        msg = self._pose_array(result.cameras)
+        """/camera_plan/info first (so that a recon has the reward when the plan arrives), then
+        /camera_plan and the markers: one header, one set of poses."""
+        msg = PoseArray()
+        msg.header.frame_id = self._param('frame_id')
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.poses = self._poses(result.cameras)
+        info = CameraPlan()
+        info.header, info.poses = msg.header, msg.poses
+        info.reward, info.reward_model, info.method = float(result.reward), result.reward_model, result.method
+        info.evaluations, info.planning_time = int(result.evaluations), float(result.seconds)
+        self.info_pub.publish(info)
         self.plan_pub.publish(msg)
         self.marker_pub.publish(frustum_markers(result.cameras, msg.header.frame_id,
                                                 msg.header.stamp, self._param('fov')))
@@ -249,28 +320,60 @@ class PlannerNode(Node):
 
     # ---------------------------------------------------------------- action
     def _on_goal(self, goal: PlanViews.Goal) -> GoalResponse:
+        if self._stopping():
+            self.get_logger().warn('rejecting goal: shutting down')
+            return GoalResponse.REJECT
         if self._busy.locked():
             self.get_logger().warn('rejecting goal: a plan is already being computed')
             return GoalResponse.REJECT
         return GoalResponse.ACCEPT
 
+    def _wait_for_scene(self) -> bool:
+        """Latched topics from several nodes arrive in any order at start-up: give the scene
+        ``scene_timeout`` seconds (less when the node shuts down)."""
+        deadline = time.monotonic() + self._param('scene_timeout')
+        while self._realizations is None and not self._stopping():
+            left = deadline - time.monotonic()
+            if left <= 0:
+                break
+            self._scene_arrived.wait(min(0.1, left))
+        return self._realizations is not None
+
     def _execute(self, goal_handle) -> PlanViews.Result:
+        self._enter()
+        try:
+            return self._execute_goal(goal_handle)
+        finally:
+            self._leave()
+
+    def _execute_goal(self, goal_handle) -> PlanViews.Result:
         goal = goal_handle.request
         result = PlanViews.Result()
+        num_cameras = int(goal.num_cameras) or self._param('num_cameras')
         method = goal.method or self._param('method')
         evaluations = goal.evaluations or self._param('evaluations')
         initial = goal.initial_evaluations or self._param('initial_evaluations')
         seed = goal.seed if goal.seed >= 0 else self._param('seed')
         reward = goal.reward or self._param('reward')
 
-        def abort(code: int, text: str) -> PlanViews.Result:
-            self.get_logger().error(f'goal aborted: {text}')
+        def finish(code: int, text: str, succeed: bool = False) -> PlanViews.Result:
+            """The one terminal transition of this goal (never a second one)."""
             result.error_code, result.error_msg = code, text
-            goal_handle.abort()
+            if goal_handle.is_active:
+                if succeed:
+                    goal_handle.succeed()
+                elif goal_handle.is_cancel_requested:
+                    goal_handle.canceled()
+                else:
+                    goal_handle.abort()
             return result
 
+        def abort(code: int, text: str) -> PlanViews.Result:
+            self.get_logger().error(f'goal aborted: {text}')
+            return finish(code, text)
+
         try:  # the library's own checks, mapped to the action's error codes
-            validate_request(method, int(goal.num_cameras), int(evaluations), int(initial))
+            validate_request(method, num_cameras, int(evaluations), int(initial))
         except InvalidNumCamerasError as exc:
             return abort(PlanViews.Result.INVALID_NUM_CAMERAS, str(exc))
         except UnknownMethodError as exc:
@@ -281,15 +384,19 @@ class PlannerNode(Node):
             check_reward_model(reward)
         except ValueError as exc:
             return abort(PlanViews.Result.UNKNOWN_REWARD_MODEL, str(exc))
-        # latched topics from several nodes arrive in any order at start-up: give the scene a moment
-        if self._realizations is None and not self._scene_arrived.wait(max(0.0, self._param('scene_timeout'))):
-            return abort(PlanViews.Result.NO_SCENE,
-                         'no scene yet: nothing received on /scene/noisy_points')
+        if not self._wait_for_scene():
+            if self._stopping():
+                return abort(PlanViews.Result.CANCELED, 'the planner is shutting down')
+            return abort(PlanViews.Result.NO_SCENE, self._scene_problem
+                         or 'no scene yet: nothing received on /scene/noisy_points')
         if not self._busy.acquire(blocking=False):
             return abort(PlanViews.Result.UNKNOWN, 'a plan is already being computed')
 
+        def should_stop() -> bool:
+            return goal_handle.is_cancel_requested or self._stopping()
+
         def progress(done: int, total: int, best: float, weights) -> bool:
-            if goal_handle.is_cancel_requested or not rclpy.ok():
+            if should_stop():
                 return False
             fb = PlanViews.Feedback()
             fb.evaluations_done, fb.evaluations_total, fb.best_reward = done, total, float(best)
@@ -301,17 +408,13 @@ class PlannerNode(Node):
 
         try:
             start = time.monotonic()
-            plan = self._plan(method, goal.num_cameras, evaluations, initial, seed, reward, progress)
+            plan = self._plan(method, num_cameras, evaluations, initial, seed, reward, progress, should_stop)
             if plan.stopped:
-                text = f'cancelled after {plan.evaluations} evaluations'
-                if goal_handle.is_cancel_requested:
-                    goal_handle.canceled()
-                else:  # the node is shutting down
-                    goal_handle.abort()
-                result.error_code, result.error_msg = PlanViews.Result.CANCELED, text
+                why = 'cancelled' if goal_handle.is_cancel_requested else 'the planner is shutting down'
+                text = f'{why} after {plan.evaluations} evaluations'
                 result.evaluations = int(plan.evaluations)
                 self.get_logger().info(text)
-                return result
+                return finish(PlanViews.Result.CANCELED, text)
             msg = self._publish_plan(plan)
             result.plan = msg
             result.cameras = [float(x) for x in np.asarray(plan.cameras).ravel()]
@@ -320,8 +423,9 @@ class PlannerNode(Node):
             result.trace = [float(x) for x in plan.trace]
             result.planning_time = time.monotonic() - start
             result.evaluations = int(plan.evaluations)
-            goal_handle.succeed()
-            return result
+            return finish(PlanViews.Result.NONE, '', succeed=True)
+        except InvalidNumCamerasError as exc:  # more cameras than the memory holds
+            return abort(PlanViews.Result.INVALID_NUM_CAMERAS, str(exc))
         except NoFeasiblePlanError as exc:
             return abort(PlanViews.Result.NO_FEASIBLE_PLAN, str(exc))
         except InvalidSceneError as exc:
@@ -333,26 +437,8 @@ class PlannerNode(Node):
 
 
 def main(args=None) -> int:
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = PlannerNode()
-        executor = MultiThreadedExecutor(num_threads=4)
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except ValueError as exc:
-        if node is None:
-            print(f'[planner] error: {exc}', flush=True)
-            return 2
-        raise
-    finally:
-        if node is not None:
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.try_shutdown()
-    return 0
+    """Entry point ``planner``: exit 2 with one line for a bad parameter, 0 after SIGINT/SIGTERM."""
+    return run_node('planner', PlannerNode, args, num_threads=4)
 
 
 if __name__ == '__main__':

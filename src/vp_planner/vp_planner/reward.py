@@ -33,7 +33,8 @@ Degenerate inputs never produce NaN or inf: a camera exactly on a point does not
 a zero (or non-finite) viewing vector sees nothing, and coincident cameras give f = 0.
 
 Implementation (memory traffic dominates, so the layout matters). Every quantity the reward
-needs is an affine function of (p, |p|^2), so one matrix product per chunk produces them all::
+needs is an affine function of (p, |p|^2), so matrix products of coefficient rows with
+[p, |p|^2, 1] produce them all::
 
     |p - c_i|^2          = |p|^2 - 2 p.c_i + |c_i|^2
     (p - c_i).v_i        = p.v_i - c_i.v_i
@@ -43,8 +44,10 @@ Coordinates are first centred on the point cloud's centroid to limit cancellatio
 camera, 1/|p - c_i| and the visibility mask; per pair, cos(phi_2) = (p - c_i).(p - c_j) /
 (|p - c_i| |p - c_j|) and f = sqrt(max(0, 1 - cos^2)). An invisible point gets a zero inverse
 distance, so that its cos(phi_2) is 0 and fails cond_2 without a separate mask (when
-theta_match < pi/2). Plans are processed in chunks of plans x blocks of points so that the
-intermediate arrays stay bounded (``max_elements``, about 8 MB in float64 by default).
+theta_match < pi/2). The work is split into chunks of plans, blocks of points and blocks of
+camera pairs so that no intermediate array exceeds about ``max_elements`` elements (8 MB in
+float64 by default) whatever N: the memory of one call is that bound plus O(S) for the pairs'
+indices and accumulators (N = 1000 cameras would otherwise need 80 GB at once).
 """
 from __future__ import annotations
 
@@ -156,23 +159,23 @@ def _reward_core(
     scale2 = max(prep.scale2, float((c * c).sum(-1).max()), 1e-300)
     tol_r2 = 64.0 * eps * scale2
 
-    # Coefficient matrix rows (per plan): N rows for |p - c_i|^2, N rows for (p - c_i).v_i,
-    # S rows for (p - c_i).(p - c_j); columns match p_aug's rows [x, y, z, |p|^2, 1].
+    # Coefficient rows (per plan), columns matching p_aug's rows [x, y, z, |p|^2, 1]: N rows for
+    # |p - c_i|^2 and N rows for (p - c_i).v_i here; the S pair rows for (p - c_i).(p - c_j) are
+    # built per block of pairs below.
     cc = (c * c).sum(-1)  # (B, N)
     cv = (c * v).sum(-1)  # (B, N)
     one = torch.ones(B, N, 1, dtype=dtype)
     zero = torch.zeros(B, N, 1, dtype=dtype)
     rows_r2 = torch.cat([-2.0 * c, one, cc[..., None]], dim=-1)  # (B, N, 5)
     rows_dv = torch.cat([v, zero, -cv[..., None]], dim=-1)  # (B, N, 5)
-    csum = c[:, ii] + c[:, jj]  # (B, S, 3)
-    cdot = (c[:, ii] * c[:, jj]).sum(-1)  # (B, S)
-    rows_dd = torch.cat([-csum, torch.ones(B, S, 1, dtype=dtype), cdot[..., None]], dim=-1)  # (B, S, 5)
-    coeff = torch.cat([rows_r2, rows_dv, rows_dd], dim=1)  # (B, 2N+S, 5)
-    distinct = (c[:, ii] != c[:, jj]).any(dim=-1).to(dtype)  # (B, S)
+    cam_coeff = torch.cat([rows_r2, rows_dv], dim=1)  # (B, 2N, 5)
 
-    R = 2 * N + S
-    pb = min(P, int(point_block))
-    chunk = max(1, int(max_elements // max(1, R * pb)))
+    # Block sizes: every intermediate array holds at most about max_elements elements: per block
+    # of pb points, the camera terms (2N x pb) and one block of sb pairs (sb x pb) at a time.
+    # Several plans share a chunk only when all their rows fit at once (small N).
+    pb = max(1, min(P, int(point_block), max_elements // (2 * N)))
+    sb = max(1, min(S, max_elements // pb))
+    chunk = max(1, int(max_elements // max(1, (2 * N + S) * pb))) if sb >= S else 1
     zero = torch.zeros((), dtype=dtype)
     # With cos(theta_match) > 0 an invisible point can be encoded as a zero inverse distance:
     # then cos(phi_2) = 0 < cos(theta_match) and the pair drops out of eq. 5 without a mask.
@@ -180,15 +183,25 @@ def _reward_core(
     for b0 in range(0, B, chunk):
         b1 = min(B, b0 + chunk)
         nb = b1 - b0
-        cf = coeff[b0:b1].reshape(nb * R, 5)
+        cb = c[b0:b1]
+        cf = cam_coeff[b0:b1].reshape(nb * 2 * N, 5)
         ivn = inv_vn[b0:b1, :, None]
         th = thr[b0:b1, :, None]
+        pair_blocks = []  # (first pair, i indices, j indices, coefficient rows (k nb, 5))
+        distinct = torch.empty(nb, S, dtype=dtype)  # coincident cameras: f = 0 exactly
+        for s0 in range(0, S, sb):
+            a, b = ii[s0:s0 + sb], jj[s0:s0 + sb]
+            csum = cb[:, a] + cb[:, b]  # (nb, k, 3)
+            cdot = (cb[:, a] * cb[:, b]).sum(-1)  # (nb, k)
+            rows = torch.cat([-csum, torch.ones(nb, len(a), 1, dtype=dtype), cdot[..., None]], dim=-1)
+            pair_blocks.append((s0, a, b, rows.reshape(nb * len(a), 5)))
+            distinct[:, s0:s0 + len(a)] = (cb[:, a] != cb[:, b]).any(dim=-1).to(dtype)
         acc = torch.zeros(nb, S, dtype=dtype)
         for p0 in range(0, P, pb):
-            q = torch.mm(cf, p_aug[:, p0 : p0 + pb]).view(nb, R, -1)
+            pts = p_aug[:, p0 : p0 + pb]
+            q = torch.mm(cf, pts).view(nb, 2 * N, -1)
             r2 = q[:, :N]  # |p - c_i|^2
-            cos1 = q[:, N : 2 * N]  # (p - c_i).v_i, turned into cos(phi_1^i) in place
-            dd = q[:, 2 * N :]  # (p - c_i).(p - c_j)
+            cos1 = q[:, N:]  # (p - c_i).v_i, turned into cos(phi_1^i) in place
             inv_r = torch.rsqrt(r2.clamp_min(tol_r2))  # 1 / |p - c_i|, finite everywhere
             cos1 *= inv_r
             cos1 *= ivn
@@ -197,21 +210,25 @@ def _reward_core(
             vis = (cos1 >= th) & (r2 > tol_r2)  # (nb, N, pb)
             if fold_visibility:
                 w = torch.where(vis, inv_r, zero)
-                cos2 = w[:, ii]
-                cos2 *= w[:, jj]
-                cos2 *= dd  # cos(phi_2^{ij}); 0 where either camera does not see p
-                g = cos2 >= cos_match  # eq. 5: cond_1^i cond_1^j cond_2^{ij}
             else:
                 vis &= inv_r > 0  # |p - c_i|^2 overflowed: no direction
-                cos2 = inv_r[:, ii]
-                cos2 *= inv_r[:, jj]
-                cos2 *= dd
-                g = vis[:, ii] & vis[:, jj] & (cos2 >= cos_match)
-            # eq. 4: f = |a x b| / (|a||b|) = sin(phi_2) = sqrt(1 - cos^2(phi_2))
-            f = cos2.square_().neg_().add_(1.0).clamp_min_(0.0).sqrt_()
-            acc += torch.where(g, f, zero).sum(dim=2)
+            for s0, a, b, rows in pair_blocks:
+                dd = torch.mm(rows, pts).view(nb, len(a), -1)  # (p - c_i).(p - c_j)
+                if fold_visibility:
+                    cos2 = w[:, a]
+                    cos2 *= w[:, b]
+                    cos2 *= dd  # cos(phi_2^{ij}); 0 where either camera does not see p
+                    g = cos2 >= cos_match  # eq. 5: cond_1^i cond_1^j cond_2^{ij}
+                else:
+                    cos2 = inv_r[:, a]
+                    cos2 *= inv_r[:, b]
+                    cos2 *= dd
+                    g = vis[:, a] & vis[:, b] & (cos2 >= cos_match)
+                # eq. 4: f = |a x b| / (|a||b|) = sin(phi_2) = sqrt(1 - cos^2(phi_2))
+                f = cos2.square_().neg_().add_(1.0).clamp_min_(0.0).sqrt_()
+                acc[:, s0:s0 + len(a)] += torch.where(g, f, zero).sum(dim=2)
         # Coincident cameras: f = 0 exactly (sqrt(1 - cos^2) would leave ~1e-8 of round-off).
-        out[b0:b1] = (acc * distinct[b0:b1]).sum(dim=1) / denom  # eq. 2: 1 / (P S) sum_p sum_{i<j} f g
+        out[b0:b1] = (acc * distinct).sum(dim=1) / denom  # eq. 2: 1 / (P S) sum_p sum_{i<j} f g
     return out
 
 

@@ -65,6 +65,9 @@ __all__ = [
 
 Callback = Callable[[int, int, float, Optional[list]], bool]
 
+#: Bound on the elements of the pairwise-distance array of one feasibility chunk.
+_SEPARATION_ELEMENTS = 1 << 20
+
 
 class NoFeasiblePlanError(ValueError):
     """No feasible plan could be found or was evaluated."""
@@ -334,10 +337,14 @@ class ViewSpace:
         ok &= (np.linalg.norm(v, axis=-1) > 0).all(axis=1)
         ok &= (c[..., 2] >= self.min_altitude - 1e-9).all(axis=1)
         if self.min_separation > 0 and B:
-            diff = c[:, :, None, :] - c[:, None, :, :]
-            dist = np.linalg.norm(diff, axis=-1)
-            iu = np.triu_indices(self.num_cameras, 1)
-            ok &= (dist[:, iu[0], iu[1]] >= self.min_separation - 1e-9).all(axis=1)
+            # pairwise distances of a chunk of plans at a time: (chunk, N, N) stays bounded
+            N = self.num_cameras
+            iu = np.triu_indices(N, 1)
+            step = max(1, _SEPARATION_ELEMENTS // (N * N))
+            for b0 in range(0, B, step):
+                cb = c[b0:b0 + step]
+                dist = np.linalg.norm(cb[:, :, None, :] - cb[:, None, :, :], axis=-1)
+                ok[b0:b0 + step] &= (dist[:, iu[0], iu[1]] >= self.min_separation - 1e-9).all(axis=1)
         if self.min_standoff > 0 and B:
             flat = np.where(np.isfinite(c), c, 0.0).reshape(-1, 3)
             dist, _ = self.tree.query(flat, k=1, distance_upper_bound=self.min_standoff)
@@ -345,10 +352,13 @@ class ViewSpace:
         return ok
 
     # ------------------------------------------------------------------ sampling
-    def sample(self, n: int, rng: Any = None, max_tries: int = 1000) -> NDArray[np.float64]:
+    def sample(self, n: int, rng: Any = None, max_tries: int = 1000,
+               should_stop: Optional[Callable[[], bool]] = None) -> NDArray[np.float64]:
         """n feasible plans U (n, 6N) drawn uniformly from the cube, by rejection.
 
-        Raises NoFeasiblePlanError when fewer than n were found in ``max_tries`` rounds.
+        Raises NoFeasiblePlanError when fewer than n were found in ``max_tries`` rounds, and
+        PlanningCancelled as soon as ``should_stop()`` is True (asked every round: for large N
+        the search can take minutes).
         """
         rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
         out: list[NDArray[np.float64]] = []
@@ -357,6 +367,8 @@ class ViewSpace:
         for _ in range(max_tries):
             if have >= n:
                 break
+            if should_stop is not None and should_stop():
+                raise PlanningCancelled()
             U = rng.random((batch, self.dim))
             U = U[self.feasible(U)]
             out.append(U)
@@ -448,6 +460,8 @@ class Objective:
     Every row counts as one evaluation; after each one ``callback(done, total, best, weights)``
     is called (``weights`` = :attr:`weights`, the latest ensemble weights an optimizer stored);
     when it returns False the objective records that row and raises :class:`PlanningCancelled`.
+    ``should_stop()`` is asked before every batch and by :meth:`check_stop` (which optimizers
+    call in their feasible-plan searches); True raises :class:`PlanningCancelled` too.
     Evaluations beyond ``total`` raise RuntimeError.
     """
 
@@ -464,10 +478,17 @@ class Objective:
     best_value: float = 0.0
     best_index: int = -1
     cancelled: bool = False
+    should_stop: Optional[Callable[[], bool]] = None
 
     @property
     def count(self) -> int:
         return len(self.values)
+
+    def check_stop(self) -> None:
+        """Raise :class:`PlanningCancelled` (and mark the run cancelled) when ``should_stop()``."""
+        if self.cancelled or (self.should_stop is not None and self.should_stop()):
+            self.cancelled = True
+            raise PlanningCancelled()
 
     def trace(self) -> NDArray[np.float64]:
         """Best-so-far reward of a feasible candidate plan after each evaluation (0 before the first)."""
@@ -496,8 +517,7 @@ class Objective:
         ``candidate=False`` marks evaluations a method spends on something it will not return
         (the ``arc`` baseline tuning its circle): they count against the budget but never
         become the best plan."""
-        if self.cancelled:
-            raise PlanningCancelled()
+        self.check_stop()
         ok = self.space._feasible_cameras(cams) if feasible is None else np.asarray(feasible, bool)
         vals = np.zeros(len(cams))
         if ok.any():

@@ -7,8 +7,6 @@ import pytest
 
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 
-pytest.importorskip("vp_scene.build", reason="vp_scene is not importable")
-
 
 @pytest.fixture(scope="session")
 def noisy_scene():

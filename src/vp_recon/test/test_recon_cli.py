@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from vp_recon.cli import main
-from vp_recon.outputs import read_ply_points
+from vp_scene.plants import load_ply
 
 SCENE = {"scenario": "one_plant", "models": None, "seed": 0, "points_per_plant": 2000, "plant_spacing": 0.6,
          "row_spacing": 0.76, "levels": 10, "realizations": 2, "wind_variance": 0.002, "wind_direction": 0.0}
@@ -41,7 +41,7 @@ def test_cli_writes_outputs(tmp_path: Path) -> None:
     assert data["chamfer_mean"] == pytest.approx(r["chamfer"]) and data["chamfer_std"] == 0.0
     assert 0.1 < r["chamfer"] < 5.0                      # x 100: centimetres, a good plan scores ~1-2
     assert r["chamfer"] == pytest.approx(r["accuracy"] + r["completeness"])
-    assert len(read_ply_points(out / "recon_1.ply")) == r["points"]
+    assert len(load_ply(out / "recon_1.ply").points) == r["points"]
     assert (out / "views.png").stat().st_size > 1000
 
 
@@ -71,7 +71,9 @@ def test_cli_bad_plan_contents(tmp_path: Path, capsys) -> None:
     d = json.loads(p.read_text())
     d["scene"]["scenario"] = "moon"
     p.write_text(json.dumps(d))
-    _fails(tmp_path, capsys, ["--plan", str(p), "--out", str(tmp_path)], "moon")
+    out = tmp_path / "new_out"
+    _fails(tmp_path, capsys, ["--plan", str(p), "--out", str(out)], "moon")
+    assert not out.exists()  # issue 10, item 12: a bad scene left an empty output folder
 
 
 def test_cli_unwritable_out_and_bad_args(tmp_path: Path, capsys) -> None:

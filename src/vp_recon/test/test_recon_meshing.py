@@ -2,12 +2,9 @@
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
-pytest.importorskip("open3d", reason="open3d is not installed")
-
-from vp_recon import meshing  # noqa: E402
-from vp_scene.plants import PlantModel  # noqa: E402
+from vp_recon import meshing
+from vp_scene.plants import PlantModel
 
 
 def test_poisson_mesh_is_cached(tmp_path) -> None:

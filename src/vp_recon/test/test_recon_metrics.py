@@ -8,7 +8,8 @@ from scipy.spatial.distance import cdist
 
 from vp_recon.dense import neighbour_pairs, silhouette_filter, voxel_downsample
 from vp_recon.metrics import EmptyCloudError, chamfer
-from vp_recon.outputs import read_ply_points, write_ply
+from vp_recon.outputs import write_ply
+from vp_scene.plants import load_ply
 from vp_scene.camera import intrinsics
 
 
@@ -51,9 +52,16 @@ def test_chamfer_errors() -> None:
 
 
 def test_ply_round_trip(tmp_path) -> None:
+    """The suite's one PLY writer and its one PLY reader agree (points float32, colours uchar)."""
     p = np.random.default_rng(0).random((100, 3))
-    write_ply(tmp_path / "a.ply", p, (p * 255).astype(np.uint8))
-    assert np.allclose(read_ply_points(tmp_path / "a.ply"), p, atol=1e-6)
+    c = (p * 255).astype(np.uint8)
+    write_ply(tmp_path / "a.ply", p, c)
+    back = load_ply(tmp_path / "a.ply")
+    assert np.allclose(back.points, p, atol=1e-6)
+    np.testing.assert_array_equal(back.colors, c)
+    assert not list(tmp_path.glob("*.tmp"))
+    with pytest.raises(ValueError, match="colours"):
+        write_ply(tmp_path / "b.ply", p, c[:5])
 
 
 def test_voxel_downsample() -> None:

@@ -128,6 +128,27 @@ def test_unwritable_output(noisy_scene, tmp_path) -> None:
     assert ei.value.code == OUTPUT_NOT_WRITABLE
 
 
+def test_one_loop_stops_at_the_first_failing_realization(noisy_scene) -> None:
+    """The failure rule of reconstruct_plan (CLI, node and Table I alike): a realization that
+    fails stops the plan, and the error says which realization it was."""
+    away = ring(4, 30.0)
+    away[:, 3:] *= -1.0  # every camera looks away from the plant
+    seen = []
+    with pytest.raises(ReconError) as ei:
+        reconstruct_plan(noisy_scene, away, CFG, realizations=[1, 0], on_realization=seen.append)
+    assert ei.value.code == NOTHING_VISIBLE and ei.value.realization == 1 and seen == []
+
+
+def test_on_realization_sees_each_result_with_its_images(noisy_scene) -> None:
+    cfg = ReconConfig(width=640, height=480, dense=False)
+    seen = []
+    res = reconstruct_plan(noisy_scene, ring(6, 30.0), cfg, realizations=[1, 0],
+                           on_realization=lambda r: seen.append((r.realization, len(r.rendered))))
+    assert seen == [(1, 6), (0, 6)]  # in order, images attached while the callback runs
+    assert [r.realization for r in res.realizations] == [1, 0]
+    assert len(res.realizations[0].rendered) == 6 and res.realizations[1].rendered == []  # memory
+
+
 def test_cancel(noisy_scene) -> None:
     with pytest.raises(ReconCancelled):
         reconstruct_plan(noisy_scene, ring(4, 30.0), CFG, progress=lambda s, k: s != "render")

@@ -91,11 +91,11 @@ def run(args: argparse.Namespace) -> dict:
                              ground=args.ground, num_threads=args.threads).validate()
     except ValueError as exc:
         raise CliError(str(exc)) from None
-    out = ensure_writable_dir(args.out)
-    try:
+    try:  # before the output folder is made: a bad scene leaves nothing behind
         noisy, _ = build_noisy_scene(**plan.scene)
     except (TypeError, ValueError, OSError) as exc:
         raise CliError(f"cannot rebuild the scene of {args.plan}: {exc}") from None
+    out = ensure_writable_dir(args.out)
     K = noisy.points.shape[0]
     n_real = K if ks is None else len(ks)
 

@@ -1,4 +1,4 @@
-"""Writers: coloured PLY clouds, a contact sheet of views, and the recon.json summary.
+"""Writers: coloured PLY clouds, a contact sheet of views, the recon.json summary, run folders.
 
 recon.json reports distances x 100 (metres x 100, as paper Table I); the library's results are
 in metres and are scaled here, in :func:`summary`, only.
@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import time
 from pathlib import Path
 from typing import Any, Optional, Sequence, Union
 
@@ -15,7 +16,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["TABLE_SCALE", "write_ply", "read_ply_points", "contact_sheet", "write_image", "summary", "write_json"]
+__all__ = ["TABLE_SCALE", "write_ply", "new_run_folder", "contact_sheet", "write_image", "summary", "write_json"]
 
 #: Table I reports distances in metres x 100.
 TABLE_SCALE = 100.0
@@ -24,39 +25,44 @@ PathLike = Union[str, os.PathLike]
 
 
 def write_ply(path: PathLike, points: NDArray[np.float64], colors: Optional[NDArray[np.uint8]] = None) -> None:
-    """Binary little-endian PLY with float32 x, y, z and (optional) uchar red, green, blue."""
+    """Binary PLY (trimesh's writer: float32 x, y, z; uchar red, green, blue, alpha when coloured),
+    written atomically (a temporary file renamed over ``path``). Read it back with
+    ``vp_scene.plants.load_ply`` or ``trimesh.load``."""
+    import trimesh
+
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    props = [("x", "<f4"), ("y", "<f4"), ("z", "<f4")]
-    if colors is not None:
-        props += [("red", "u1"), ("green", "u1"), ("blue", "u1")]
-    rec = np.empty(len(p), dtype=props)
-    rec["x"], rec["y"], rec["z"] = p[:, 0], p[:, 1], p[:, 2]
+    if len(p) == 0:
+        raise ValueError(f"no points to write to {path}")
     if colors is not None:
         c = np.asarray(colors, dtype=np.uint8).reshape(-1, 3)
         if len(c) != len(p):
             raise ValueError(f"{len(c)} colours for {len(p)} points")
-        rec["red"], rec["green"], rec["blue"] = c[:, 0], c[:, 1], c[:, 2]
-    header = ["ply", "format binary_little_endian 1.0", f"element vertex {len(p)}"]
-    header += [f"property {'float' if t == '<f4' else 'uchar'} {n}" for n, t in props]
-    header += ["end_header"]
+        cloud = trimesh.PointCloud(p, colors=c)
+    else:
+        cloud = trimesh.PointCloud(p)
+    data = trimesh.exchange.ply.export_ply(cloud, encoding="binary")
     path = Path(path)
     tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "wb") as f:
-        f.write(("\n".join(header) + "\n").encode("ascii"))
-        f.write(rec.tobytes())
+    tmp.write_bytes(data)
     tmp.replace(path)
 
 
-def read_ply_points(path: PathLike) -> NDArray[np.float64]:
-    """Points of a PLY written by :func:`write_ply` (for tests and quick checks)."""
-    raw = Path(path).read_bytes()
-    end = raw.index(b"end_header\n") + len(b"end_header\n")
-    header = raw[:end].decode("ascii").splitlines()
-    n = int(next(h for h in header if h.startswith("element vertex")).split()[-1])
-    has_color = any(h.endswith(" red") for h in header)
-    dt = [("x", "<f4"), ("y", "<f4"), ("z", "<f4")] + ([("r", "u1"), ("g", "u1"), ("b", "u1")] if has_color else [])
-    rec = np.frombuffer(raw[end:], dtype=dt, count=n)
-    return np.stack([rec["x"], rec["y"], rec["z"]], axis=1).astype(np.float64)
+def new_run_folder(root: PathLike, prefix: str = "plan", now: Optional[float] = None) -> Path:
+    """A new, empty folder ``root/<prefix>-<YYYYmmdd-HHMMSS>`` for one plan's outputs, never one
+    that exists: a second plan in the same second gets ``-2``, then ``-3``, ... (the folder is
+    created here, atomically, so two callers cannot get the same one). OSError when ``root``
+    cannot hold it."""
+    root = Path(root)
+    root.mkdir(parents=True, exist_ok=True)
+    stamp = time.strftime("%Y%m%d-%H%M%S", time.localtime(now))
+    for n in range(1, 10000):
+        folder = root / (f"{prefix}-{stamp}" if n == 1 else f"{prefix}-{stamp}-{n}")
+        try:
+            folder.mkdir()
+        except FileExistsError:
+            continue
+        return folder
+    raise FileExistsError(f"no free {prefix}-{stamp}-<n> folder in {root}")
 
 
 def contact_sheet(images: Sequence[NDArray[np.uint8]], thumb_width: int = 480, columns: int = 0,

@@ -14,6 +14,12 @@ For each wind realization k of a :class:`vp_scene.wind.NoisyScene`:
 All distances in this module are metres; x100 (Table I) is applied by writers (cli, ROS node).
 Errors are :class:`ReconError` with a ``code`` equal to the ``vp_interfaces/ReconstructionScore``
 constants.
+
+One loop over the realizations of a plan, :func:`reconstruct_plan`, used by the CLI, the recon
+node and Table I alike, with one failure rule: **a plan is reconstructed only if every one of
+its wind realizations is**; the first realization that fails stops the plan with its
+:class:`ReconError` (``.realization`` says which). A mean Chamfer distance over the
+realizations that happened to work would hide exactly the plans that reconstruct badly.
 """
 from __future__ import annotations
 
@@ -33,7 +39,7 @@ from .metrics import DEFAULT_FSCORE_THRESHOLD, CloudScore, EmptyCloudError, cham
 
 __all__ = [
     "NONE", "UNKNOWN", "EMPTY_PLAN", "NO_SCENE", "NOTHING_VISIBLE", "RECONSTRUCTION_FAILED",
-    "OUTPUT_NOT_WRITABLE", "ERROR_NAMES", "STAGES", "ReconError", "ReconCancelled", "ReconConfig",
+    "OUTPUT_NOT_WRITABLE", "WRONG_FRAME", "ERROR_NAMES", "STAGES", "ReconError", "ReconCancelled", "ReconConfig",
     "RealizationResult", "PlanReconResult", "validate_cameras", "ensure_writable_dir", "crop_box",
     "reconstruct_realization", "reconstruct_plan",
 ]
@@ -46,25 +52,30 @@ NO_SCENE = 3
 NOTHING_VISIBLE = 4
 RECONSTRUCTION_FAILED = 5
 OUTPUT_NOT_WRITABLE = 6
+WRONG_FRAME = 7
 ERROR_NAMES = {NONE: "NONE", UNKNOWN: "UNKNOWN", EMPTY_PLAN: "EMPTY_PLAN", NO_SCENE: "NO_SCENE",
                NOTHING_VISIBLE: "NOTHING_VISIBLE", RECONSTRUCTION_FAILED: "RECONSTRUCTION_FAILED",
-               OUTPUT_NOT_WRITABLE: "OUTPUT_NOT_WRITABLE"}
+               OUTPUT_NOT_WRITABLE: "OUTPUT_NOT_WRITABLE", WRONG_FRAME: "WRONG_FRAME"}
 
 #: Stages reported to the progress callback, in order.
 STAGES = ("render", "sparse", "dense", "score")
 
 #: progress(stage, realization) after each stage of each realization; returning False cancels.
 ProgressFn = Callable[[str, int], Optional[bool]]
+#: on_realization(result) as soon as a realization is reconstructed (e.g. to publish it).
+RealizationFn = Callable[["RealizationResult"], None]
 PathLike = Union[str, os.PathLike]
 
 
 class ReconError(Exception):
-    """A reconstruction failure with a ``ReconstructionScore`` error code (``.code``) and message."""
+    """A reconstruction failure with a ``ReconstructionScore`` error code (``.code``) and message;
+    ``.realization`` is the wind realization that failed (None: the plan as a whole)."""
 
-    def __init__(self, code: int, message: str) -> None:
+    def __init__(self, code: int, message: str, realization: Optional[int] = None) -> None:
         super().__init__(message)
         self.code = int(code)
         self.message = message
+        self.realization = realization
 
     @property
     def name(self) -> str:
@@ -373,21 +384,29 @@ def reconstruct_realization(noisy_scene: object, k: int, cameras: ArrayLike, con
 
 def reconstruct_plan(noisy_scene: object, cameras: ArrayLike, config: Optional[ReconConfig] = None,
                      out_dir: Optional[PathLike] = None, realizations: Optional[Sequence[int]] = None,
-                     progress: Optional[ProgressFn] = None) -> PlanReconResult:
-    """Reconstruct and score a plan on every (or the listed) wind realization(s).
+                     progress: Optional[ProgressFn] = None,
+                     on_realization: Optional[RealizationFn] = None) -> PlanReconResult:
+    """Reconstruct and score a plan on every (or the listed) wind realization(s), in order.
+
+    The failure rule (module docstring): the first realization that fails stops the plan.
 
     Args:
         out_dir: output folder, checked writable (created); the COLMAP workspaces go to
             ``out_dir/work`` when ``config.keep_workdir``. None: temporary workspaces only.
         realizations: indices k to run (default: all K of the scene), in order, no duplicates.
         progress: ``progress(stage, k)`` after every stage; returning False cancels.
+        on_realization: ``on_realization(result)`` after each realization that succeeded, while
+            its rendered images are still attached (when ``config.keep_images``).
 
     Returns:
         PlanReconResult with chamfer_mean and the population std over the realizations (metres).
-        The first realization keeps its rendered images when ``config.keep_images``.
+        The first realization keeps its rendered images when ``config.keep_images`` (the others
+        drop theirs after ``on_realization``: memory).
 
     Raises:
-        ReconError as :func:`reconstruct_realization` (the first failing realization stops the plan).
+        ReconError as :func:`reconstruct_realization`, with ``.realization`` set to the failing
+        realization's k (plan-level problems, such as an unknown realization, have None).
+        ReconCancelled: ``progress`` returned False.
     """
     cfg = (config or ReconConfig()).validate()
     cams = validate_cameras(cameras)
@@ -409,8 +428,18 @@ def reconstruct_plan(noisy_scene: object, cameras: ArrayLike, config: Optional[R
     results = []
     t_all = time.perf_counter()
     for n, k in enumerate(ks):
-        sub = ReconConfig(**{**cfg.__dict__, "keep_images": cfg.keep_images and n == 0})
-        results.append(reconstruct_realization(noisy_scene, k, cams, sub, workdir=work_root, progress=progress))
+        keep = cfg.keep_images and (n == 0 or on_realization is not None)
+        sub = ReconConfig(**{**cfg.__dict__, "keep_images": keep})
+        try:
+            res = reconstruct_realization(noisy_scene, k, cams, sub, workdir=work_root, progress=progress)
+        except ReconError as exc:
+            exc.realization = k
+            raise
+        if on_realization is not None:
+            on_realization(res)
+        if n > 0:
+            res.rendered = []
+        results.append(res)
     ch = np.array([r.chamfer for r in results])
     seconds = {s: float(sum(r.seconds.get(s, 0.0) for r in results)) for s in ("mesh",) + STAGES}
     seconds["total"] = time.perf_counter() - t_all

@@ -1,4 +1,4 @@
-"""The recon node: a thin ROS 2 adapter around :mod:`vp_recon.pipeline`.
+"""The recon node: a thin ROS 2 adapter around :func:`vp_recon.pipeline.reconstruct_plan`.
 
 Subscribes (all reliable, TRANSIENT_LOCAL, as the scene and planner nodes publish them)
 
@@ -6,20 +6,35 @@ Subscribes (all reliable, TRANSIENT_LOCAL, as the scene and planner nodes publis
   rebuilds the identical scene, with its plant meshes, to render it;
 * ``/scene/noisy_points`` (sensor_msgs/PointCloud2): the K wind realizations, the ground truth
   the reconstructions are scored against (checked against the rebuilt scene);
-* ``/camera_plan`` (geometry_msgs/PoseArray): the plan, one pose per camera, +x = optical axis.
+* ``/camera_plan`` (geometry_msgs/PoseArray): the plan, one pose per camera, +x = optical axis,
+  in the node's ``frame_id`` (a plan in another frame is refused with ``WRONG_FRAME``: no
+  transform is applied);
+* ``/camera_plan/info`` (vp_interfaces/CameraPlan): what the planner knows about its plan (the
+  same header and poses): the reward and reward model copied into the scores (NaN and '' for a
+  plan that came without it). The node has no reward code of its own.
 
-For every plan it renders, reconstructs and scores each wind realization and publishes
-``/reconstruction/score`` (vp_interfaces/ReconstructionScore, one per realization, then the
-aggregate with ``realization = AGGREGATE``) and ``/reconstruction/points`` (PointCloud2, the
-reconstructed cloud of each realization, field ``realization``). Images and PLY files go to the
-``output_folder`` parameter.
+For every plan it renders, reconstructs and scores each wind realization (one loop, one failure
+rule: :func:`vp_recon.pipeline.reconstruct_plan`, the first failing realization stops the plan)
+and publishes
+
+* ``/reconstruction/score`` (vp_interfaces/ReconstructionScore): one per realization as it is
+  done, then the aggregate (``realization = AGGREGATE``); on a failure, the failing
+  realization's error and an aggregate with the same error code;
+* ``/reconstruction/points`` (PointCloud2, field ``realization``, latched with depth 1): after
+  each realization, the reconstructed clouds of *all* realizations of the plan done so far, so
+  that a late subscriber gets every finished realization in the one message it receives.
+
+Images and PLY files go to a new folder ``<output_folder>/plan-<time>[-n]`` per plan (never one
+that exists). The rendering and scoring parameters are read anew for every plan; a change to a
+bad value is refused with the reason.
 
 The work runs on a worker thread, so the node's callbacks keep running. Queueing policy: the
 plan in progress is finished; of the plans that arrive meanwhile only the newest is kept
 (it replaces an older queued one, which is logged), because a newer plan supersedes older ones.
 Bad input (an empty plan, cameras that see no plant, nothing reconstructed, an unwritable output
-folder, no scene yet) gives a score message with an error code and message and a log line; the
-node keeps running.
+folder, no scene yet, a wrong frame) gives a score message with an error code and message and a
+log line; the node keeps running. Signals, exit codes and parameter types follow
+:mod:`vp_scene.node_runtime`.
 """
 from __future__ import annotations
 
@@ -27,55 +42,96 @@ import math
 import os
 import threading
 import time
+from collections import OrderedDict
 from pathlib import Path
 from typing import Optional
 
 import numpy as np
-import rclpy
 from geometry_msgs.msg import PoseArray
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
 
-from vp_interfaces.msg import ReconstructionScore, SceneDescription
-from vp_scene.camera import poses_to_cameras
-from vp_planner.reward import noisy_reward
+from vp_interfaces.msg import CameraPlan, ReconstructionScore, SceneDescription
 from vp_recon.metrics import DEFAULT_FSCORE_THRESHOLD
-from vp_recon.outputs import contact_sheet, write_image, write_ply
-from vp_recon.pipeline import ReconCancelled, ReconConfig, ReconError, ensure_writable_dir, reconstruct_realization
+from vp_recon.outputs import contact_sheet, new_run_folder, write_image, write_ply
+from vp_recon.pipeline import (ReconCancelled, ReconConfig, ReconError, RealizationResult, ensure_writable_dir,
+                               reconstruct_plan)
 from vp_scene.build import build_noisy_scene
+from vp_scene.camera import poses_to_cameras
 from vp_scene.cloud import numpy_to_pointcloud2, realizations_from_cloud
+from vp_scene.node_runtime import declare_typed, run_node, typed_values
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 Score = ReconstructionScore
 
+#: The node's parameters: name -> (default, description); the default's type is enforced.
+PARAMS = {
+    'output_folder': (str(Path.home() / '.ros' / 'vp_recon'), 'a plan-<time> folder per plan goes here'),
+    'width': (2000, 'rendered image width, pixels'),
+    'height': (1500, 'rendered image height, pixels'),
+    'fov': (math.pi / 2, 'horizontal field of view, rad (the planner\'s)'),
+    'sparse_mode': ('known_poses', 'known_poses | incremental'),
+    'dense': (True, 'CPU dense stereo (else the sparse cloud is scored)'),
+    'fscore_threshold': (DEFAULT_FSCORE_THRESHOLD, 'F-score distance threshold, m'),
+    'method': ('', 'label of the scores (default: the method from /camera_plan/info)'),
+    'max_realizations': (0, 'reconstruct only the first n realizations (0: all)'),
+    'scene_timeout': (10.0, 's a plan that arrives before the scene waits for it'),
+    'frame_id': ('map', 'frame of the plans and of the published clouds'),
+    # beside the planner (1 thread by default) the reconstruction takes the other cores
+    'num_threads': (max(1, (os.cpu_count() or 2) - 1), 'threads of COLMAP, OpenCV and the renderer'),
+}
+
+#: /camera_plan/info messages remembered to find the one of a plan.
+_INFO_MEMORY = 16
+
+
+def check_parameters(values: dict) -> dict:
+    """The parameter values ({name: value}, any subset of :data:`PARAMS`) typed and checked;
+    ValueError naming the first bad one."""
+    v = typed_values(PARAMS, values)
+    if v.get('max_realizations', 0) < 0:
+        raise ValueError(f'max_realizations must be >= 0 (0: all), got {v["max_realizations"]}')
+    if v.get('scene_timeout', 0.0) < 0.0:
+        raise ValueError(f'scene_timeout must be >= 0 s, got {v["scene_timeout"]}')
+    if v.get('num_threads', 1) < 1:
+        raise ValueError(f'num_threads must be >= 1, got {v["num_threads"]}')
+    if v.get('output_folder', 'x') == '' or v.get('frame_id', 'x') == '':
+        raise ValueError('output_folder and frame_id must not be empty')
+    config_keys = ('width', 'height', 'fov', 'sparse_mode', 'dense', 'fscore_threshold')
+    if any(k in v for k in config_keys):  # the rendering settings: ReconConfig's own checks
+        defaults = {k: PARAMS[k][0] for k in config_keys}
+        ReconConfig(**{**defaults, **{k: v[k] for k in config_keys if k in v}}).validate()
+    return v
+
+
+def _plan_key(header, poses) -> tuple:
+    """What identifies a plan across /camera_plan and /camera_plan/info: stamp, frame, poses."""
+    return (header.stamp.sec, header.stamp.nanosec, header.frame_id,
+            tuple(round(x, 9) for p in poses for x in (p.position.x, p.position.y, p.position.z,
+                                                       p.orientation.x, p.orientation.y, p.orientation.z,
+                                                       p.orientation.w)))
+
 
 class ReconNode(Node):
-    """ROS 2 adapter: plans and scenes in, :func:`reconstruct_realization` calls, scores out."""
+    """ROS 2 adapter: plans and scenes in, :func:`reconstruct_plan` calls, scores out."""
 
     def __init__(self) -> None:
         super().__init__('recon')
-        self.declare_parameter('output_folder', str(Path.home() / '.ros' / 'vp_recon'))
-        self.declare_parameter('width', 2000)
-        self.declare_parameter('height', 1500)
-        self.declare_parameter('fov', math.pi / 2)
-        self.declare_parameter('theta_match', math.pi / 4)
-        self.declare_parameter('sparse_mode', 'known_poses')
-        self.declare_parameter('dense', True)
-        self.declare_parameter('fscore_threshold', DEFAULT_FSCORE_THRESHOLD)
-        self.declare_parameter('method', '')
-        self.declare_parameter('max_realizations', 0)
-        self.declare_parameter('scene_timeout', 10.0)
-        # beside the planner (1 thread by default) the reconstruction takes the other cores
-        self.declare_parameter('num_threads', max(1, (os.cpu_count() or 2) - 1))
-        self.config = self._config()  # raises ValueError naming a bad parameter
+        declare_typed(self, PARAMS)
+        check_parameters({n: self.get_parameter(n).value for n in PARAMS})  # ValueError: exit 2
+        self.add_on_set_parameters_callback(self._on_set_parameters)
         # Mesa's llvmpipe renderer reads its thread count when the first context is created
-        os.environ.setdefault('LP_NUM_THREADS', str(self.config.num_threads))
+        os.environ.setdefault('LP_NUM_THREADS', str(self._param('num_threads')))
+        # Importing pycolmap installs glog's SIGTERM handler (a stack trace, then death by the
+        # signal); imported here, in the constructor, node_runtime puts its own handler back.
+        import pycolmap  # noqa: F401
 
         self._lock = threading.Condition()
         self._pending: Optional[PoseArray] = None
+        self._infos: OrderedDict = OrderedDict()  # plan key -> CameraPlan
         self._description: Optional[SceneDescription] = None
         self._truth: Optional[np.ndarray] = None
         self._scene = None  # rebuilt NoisyScene matching _description
@@ -84,23 +140,41 @@ class ReconNode(Node):
         self.points_pub = self.create_publisher(PointCloud2, '/reconstruction/points', LATCHED)
         self.create_subscription(SceneDescription, '/scene/description', self._on_description, LATCHED)
         self.create_subscription(PointCloud2, '/scene/noisy_points', self._on_truth, LATCHED)
+        self.create_subscription(CameraPlan, '/camera_plan/info', self._on_info, LATCHED)
         self.create_subscription(PoseArray, '/camera_plan', self._on_plan, LATCHED)
         self._worker = threading.Thread(target=self._work, name='recon-worker', daemon=True)
         self._worker.start()
         self.get_logger().info(
-            f'recon ready ({self.config.width}x{self.config.height}, output {self._param("output_folder")}): '
+            f'recon ready ({self._param("width")}x{self._param("height")}, output {self._param("output_folder")}): '
             'waiting for /scene/description, /scene/noisy_points and /camera_plan')
 
     # ---------------------------------------------------------------- parameters
     def _param(self, name: str):
-        return self.get_parameter(name).value
+        """The parameter's value with the type of its default."""
+        return typed_values(PARAMS, {name: self.get_parameter(name).value})[name]
+
+    def _on_set_parameters(self, params) -> SetParametersResult:
+        current = {n: self.get_parameter(n).value for n in PARAMS}
+        try:
+            check_parameters({**current, **{p.name: p.value for p in params}})
+        except ValueError as exc:
+            self.get_logger().warn(f'parameter change refused: {exc}')
+            return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
 
     def _config(self) -> ReconConfig:
-        fov = float(self._param('fov'))
-        return ReconConfig(width=int(self._param('width')), height=int(self._param('height')), fov=fov,
-                           sparse_mode=self._param('sparse_mode'), dense=bool(self._param('dense')),
-                           fscore_threshold=float(self._param('fscore_threshold')), keep_images=True,
-                           num_threads=int(self._param('num_threads'))).validate()
+        """The reconstruction settings of the parameters now (read for every plan)."""
+        return ReconConfig(width=self._param('width'), height=self._param('height'), fov=self._param('fov'),
+                           sparse_mode=self._param('sparse_mode'), dense=self._param('dense'),
+                           fscore_threshold=self._param('fscore_threshold'), keep_images=True,
+                           num_threads=self._param('num_threads')).validate()
+
+    def on_shutdown(self, timeout: float) -> bool:
+        """SIGINT/SIGTERM: the worker abandons its plan at the next stage; nothing to wait for."""
+        with self._lock:
+            self._stop = True
+            self._lock.notify_all()
+        return True
 
     # ---------------------------------------------------------------- inputs
     def _on_description(self, msg: SceneDescription) -> None:
@@ -121,6 +195,16 @@ class ReconNode(Node):
             self._lock.notify_all()
         self.get_logger().info(f'ground truth: {truth.shape[0]} realizations x {truth.shape[1]} points')
 
+    def _on_info(self, msg: CameraPlan) -> None:
+        with self._lock:
+            self._infos[_plan_key(msg.header, msg.poses)] = msg
+            while len(self._infos) > _INFO_MEMORY:
+                self._infos.popitem(last=False)
+
+    def _info_of(self, plan: PoseArray) -> Optional[CameraPlan]:
+        with self._lock:
+            return self._infos.get(_plan_key(plan.header, plan.poses))
+
     def _on_plan(self, msg: PoseArray) -> None:
         with self._lock:
             if self._pending is not None:
@@ -140,9 +224,14 @@ class ReconNode(Node):
                 plan, self._pending = self._pending, None
             try:
                 self._reconstruct(plan)
+            except ReconCancelled:
+                self.get_logger().info('shutting down: reconstruction abandoned')
+                return
             except Exception as exc:  # never let one plan kill the worker
+                if self._stop:  # the node is being torn down under the worker: nothing to report
+                    return
                 self.get_logger().error(f'reconstruction crashed: {type(exc).__name__}: {exc}')
-                self._publish_error(Score.UNKNOWN, f'{type(exc).__name__}: {exc}', Score.AGGREGATE, 0)
+                self._publish_error(Score.UNKNOWN, f'{type(exc).__name__}: {exc}', Score.AGGREGATE, 0, plan)
 
     def _scene_now(self):
         """The rebuilt NoisyScene (cached), checked against the received ground truth.
@@ -151,7 +240,7 @@ class ReconNode(Node):
         topics from several nodes arrive in any order at start-up)."""
         with self._lock:
             self._lock.wait_for(lambda: (self._description is not None and self._truth is not None) or self._stop,
-                                timeout=max(0.0, float(self._param('scene_timeout'))))
+                                timeout=self._param('scene_timeout'))
             desc, truth, scene = self._description, self._truth, self._scene
         if desc is None or truth is None:
             missing = [n for n, v in (('/scene/description', desc), ('/scene/noisy_points', truth)) if v is None]
@@ -175,96 +264,112 @@ class ReconNode(Node):
         return scene
 
     def _reconstruct(self, plan: PoseArray) -> None:
-        method = self._param('method')
-        out_root = Path(self._param('output_folder')).expanduser()
+        n_cams = len(plan.poses)
+        frame = self._param('frame_id')
         if not plan.poses:
-            self._publish_error(Score.EMPTY_PLAN, 'the plan on /camera_plan has no poses', Score.AGGREGATE, 0)
+            self._publish_error(Score.EMPTY_PLAN, 'the plan on /camera_plan has no poses', Score.AGGREGATE, 0, plan)
+            return
+        if plan.header.frame_id != frame:
+            self._publish_error(Score.WRONG_FRAME, f'the plan is in frame {plan.header.frame_id!r}, the recon '
+                                f'works in {frame!r} (frame_id); no transform is applied', Score.AGGREGATE,
+                                n_cams, plan)
             return
         try:
-            scene = self._scene_now()
-            cameras = poses_to_cameras([[p.position.x, p.position.y, p.position.z, p.orientation.x,
-                                         p.orientation.y, p.orientation.z, p.orientation.w] for p in plan.poses])
+            config = self._config()  # the parameters as they are now
+            try:
+                cameras = poses_to_cameras([[p.position.x, p.position.y, p.position.z, p.orientation.x,
+                                             p.orientation.y, p.orientation.z, p.orientation.w] for p in plan.poses])
+            except ValueError as exc:
+                raise ReconError(Score.EMPTY_PLAN, f'the plan has unusable poses: {exc}')
             if not np.all(np.isfinite(cameras)):
                 raise ReconError(Score.EMPTY_PLAN, 'the plan has non-finite poses')
-            run_dir = out_root / time.strftime('plan-%Y%m%d-%H%M%S')
-            ensure_writable_dir(run_dir)
-        except ReconError as exc:
-            self._publish_error(exc.code, str(exc), Score.AGGREGATE, len(plan.poses))
+            scene = self._scene_now()
+            root = ensure_writable_dir(Path(self._param('output_folder')).expanduser())
+            try:
+                run_dir = new_run_folder(root)
+            except OSError as exc:
+                raise ReconError(Score.OUTPUT_NOT_WRITABLE, f'cannot create a plan folder in {root}: {exc}')
+        except (ReconError, ValueError) as exc:
+            code = exc.code if isinstance(exc, ReconError) else Score.UNKNOWN
+            self._publish_error(code, str(exc), Score.AGGREGATE, n_cams, plan)
             return
         K = scene.points.shape[0]
         if self._param('max_realizations') > 0:
-            K = min(K, int(self._param('max_realizations')))
-        reward = float(noisy_reward(cameras, scene.points[:K], self.config.fov, self._param('theta_match'))) \
-            if len(cameras) >= 2 else 0.0
-        self.get_logger().info(f'reconstructing {K} realizations of a {len(cameras)}-camera plan '
-                               f'(reward {reward:.4f}) into {run_dir}')
-        results, errors = [], []
-        for k in range(K):
-            start = time.monotonic()
+            K = min(K, self._param('max_realizations'))
+        self.get_logger().info(f'reconstructing {K} realizations of a {n_cams}-camera plan into {run_dir}')
+        done: list[RealizationResult] = []
+        started = [time.monotonic()]
 
-            def progress(stage: str, *_args) -> bool:
-                self.get_logger().info(f'realization {k + 1}/{K}: {stage} done')
-                return rclpy.ok()
-            try:
-                res = reconstruct_realization(scene, k, cameras, self.config, run_dir,
-                                              progress=progress)
-            except ReconCancelled:
-                self.get_logger().info('shutting down: reconstruction abandoned')
-                return
-            except ReconError as exc:
-                errors.append(exc)
-                self._publish_error(exc.code, str(exc), k, len(cameras), reward)
-                continue
-            results.append(res)
+        def progress(stage: str, k: int) -> bool:
+            self.get_logger().info(f'realization {k + 1}/{K}: {stage} done')
+            return not self._stop
+
+        def on_realization(res: RealizationResult) -> None:
+            k = res.realization
             try:
                 write_ply(run_dir / f'recon_{k}.ply', res.points, res.colors)
                 if res.rendered:
                     write_image(run_dir / f'views_{k}.png', contact_sheet(res.rendered))
-            except OSError as exc:
+            except (OSError, ValueError) as exc:
                 self.get_logger().error(f'could not write the outputs of realization {k}: {exc}')
-            res.rendered = []
-            msg = self._score(k, K, len(cameras), reward, method)
+            done.append(res)
+            msg = self._score(k, K, n_cams, plan)
             msg.chamfer, msg.accuracy, msg.completeness = (100 * res.chamfer, 100 * res.accuracy,
                                                            100 * res.completeness)
             msg.fscore, msg.num_points = float(res.fscore), int(len(res.points))
             self.score_pub.publish(msg)
-            self.points_pub.publish(numpy_to_pointcloud2(
-                res.points, res.colors, realization=np.full(len(res.points), k, dtype=np.uint16),
-                frame_id='map', stamp=self.get_clock().now().to_msg()))
+            self._publish_clouds(done, frame)
             self.get_logger().info(f'realization {k}: Chamfer x100 {msg.chamfer:.3f}, {msg.num_points} points '
-                                   f'({time.monotonic() - start:.1f} s)')
-        agg = self._score(Score.AGGREGATE, K, len(cameras), reward, method)
-        if results:
-            ch = np.array([100 * r.chamfer for r in results])
-            agg.chamfer, agg.chamfer_std = float(ch.mean()), float(ch.std())
-            agg.accuracy = float(np.mean([100 * r.accuracy for r in results]))
-            agg.completeness = float(np.mean([100 * r.completeness for r in results]))
-            agg.fscore = float(np.mean([r.fscore for r in results]))
-            agg.num_points = int(np.mean([len(r.points) for r in results]))
-            agg.realizations = len(results)
-            if errors:
-                agg.error_msg = f'{len(errors)} of {K} realizations failed: {errors[0]}'
-            self.get_logger().info(f'aggregate: Chamfer x100 {agg.chamfer:.3f} +- {agg.chamfer_std:.3f} '
-                                   f'over {len(results)} realizations')
-        else:
-            agg.error_code, agg.error_msg = errors[0].code, f'every realization failed: {errors[0]}'
-            agg.chamfer = agg.chamfer_std = float('nan')
-            self.get_logger().error(agg.error_msg)
+                                   f'({time.monotonic() - started[0]:.1f} s)')
+            started[0] = time.monotonic()
+
+        try:
+            result = reconstruct_plan(scene, cameras, config, out_dir=run_dir, realizations=range(K),
+                                      progress=progress, on_realization=on_realization)
+        except ReconError as exc:
+            if exc.realization is not None:
+                self._publish_error(exc.code, str(exc), exc.realization, n_cams, plan)
+            text = (f'realization {exc.realization} of {K} failed: {exc}' if exc.realization is not None
+                    else str(exc))
+            self._publish_error(exc.code, text, Score.AGGREGATE, n_cams, plan, realizations=len(done))
+            return
+        agg = self._score(Score.AGGREGATE, K, n_cams, plan)
+        per = result.realizations
+        agg.chamfer, agg.chamfer_std = 100 * result.chamfer_mean, 100 * result.chamfer_std
+        agg.accuracy = float(np.mean([100 * r.accuracy for r in per]))
+        agg.completeness = float(np.mean([100 * r.completeness for r in per]))
+        agg.fscore = float(np.mean([r.fscore for r in per]))
+        agg.num_points = int(np.mean([len(r.points) for r in per]))
+        self.get_logger().info(f'aggregate: Chamfer x100 {agg.chamfer:.3f} +- {agg.chamfer_std:.3f} '
+                               f'over {len(per)} realizations')
         self.score_pub.publish(agg)
 
     # ---------------------------------------------------------------- outputs
-    def _score(self, realization: int, K: int, images: int, reward: float, method: str) -> Score:
+    def _publish_clouds(self, done: list, frame: str) -> None:
+        """The clouds of every realization of the plan done so far, in one latched message."""
+        pts = np.concatenate([r.points for r in done])
+        cols = np.concatenate([r.colors for r in done])
+        real = np.concatenate([np.full(len(r.points), r.realization, dtype=np.uint16) for r in done])
+        self.points_pub.publish(numpy_to_pointcloud2(pts, cols, realization=real, frame_id=frame,
+                                                     stamp=self.get_clock().now().to_msg()))
+
+    def _score(self, realization: int, K: int, images: int, plan: Optional[PoseArray]) -> Score:
+        info = self._info_of(plan) if plan is not None else None
         msg = Score()
-        msg.header.frame_id = 'map'
+        msg.header.frame_id = self._param('frame_id')
         msg.header.stamp = self.get_clock().now().to_msg()
-        msg.method, msg.realization, msg.realizations = method, int(realization), int(K)
-        msg.num_images, msg.reward = int(images), float(reward)
-        msg.fscore_threshold = float(self.config.fscore_threshold)
+        msg.method = self._param('method') or (info.method if info is not None else '')
+        msg.realization, msg.realizations = int(realization), int(K)
+        msg.num_images = int(images)
+        msg.reward = float(info.reward) if info is not None else math.nan
+        msg.reward_model = info.reward_model if info is not None else ''
+        msg.fscore_threshold = float(self._param('fscore_threshold'))
         return msg
 
-    def _publish_error(self, code: int, text: str, realization: int, images: int, reward: float = 0.0) -> None:
-        msg = self._score(realization, 0 if realization == Score.AGGREGATE else 1, images, reward,
-                          self._param('method'))
+    def _publish_error(self, code: int, text: str, realization: int, images: int, plan: Optional[PoseArray],
+                       realizations: int = 0) -> None:
+        K = realizations if realization == Score.AGGREGATE else 1
+        msg = self._score(realization, K, images, plan)
         msg.error_code, msg.error_msg = int(code), text
         msg.chamfer = msg.accuracy = msg.completeness = float('nan')
         where = 'plan' if realization == Score.AGGREGATE else f'realization {realization}'
@@ -274,31 +379,13 @@ class ReconNode(Node):
     def destroy_node(self) -> None:
         with self._lock:
             self._stop = True
-            self._lock.notify()
+            self._lock.notify_all()
         super().destroy_node()
 
 
 def main(args=None) -> int:
-    rclpy.init(args=args)
-    node = None
-    rc = 0
-    try:
-        try:
-            node = ReconNode()
-        except ValueError as exc:
-            rclpy.logging.get_logger('recon').error(f'bad parameters: {exc}')
-            rc = 2
-        else:
-            executor = MultiThreadedExecutor(num_threads=2)
-            executor.add_node(node)
-            executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return rc
+    """Entry point ``recon``: exit 2 with one line for a bad parameter, 0 after SIGINT/SIGTERM."""
+    return run_node('recon', ReconNode, args, num_threads=2)
 
 
 if __name__ == '__main__':

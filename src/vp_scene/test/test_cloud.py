@@ -4,11 +4,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-pytest.importorskip("sensor_msgs.msg", reason="sensor_msgs is not importable: source install/setup.bash")
+from sensor_msgs.msg import PointCloud2, PointField
 
-from sensor_msgs.msg import PointCloud2, PointField  # noqa: E402
-
-from vp_scene.cloud import numpy_to_pointcloud2, pack_rgb, pointcloud2_to_numpy, unpack_rgb  # noqa: E402
+from vp_scene.cloud import numpy_to_pointcloud2, pack_rgb, pointcloud2_to_numpy, unpack_rgb
 
 
 def test_round_trip_with_realization() -> None:

@@ -114,6 +114,10 @@ def test_load_models_sorted_and_ply_only(tmp_path: Path) -> None:
     ("bad_header_line", "corrupt PLY header"),
     ("ascii_short", "truncated"),
     ("ascii_text", "corrupt PLY"),
+    ("absurd_coordinates", "implausible plant size"),
+    ("millimetres", "implausible plant size"),
+    ("flat", "implausible plant size"),
+    ("ushort_colour", "colour channels must be uchar"),
 ])
 def test_bad_ply_raises_naming_file_and_problem(tmp_path: Path, case: str, expected: str) -> None:
     pts, cols = _cloud()
@@ -133,6 +137,17 @@ def test_bad_ply_raises_naming_file_and_problem(tmp_path: Path, case: str, expec
         path.write_bytes(b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n")
     elif case == "bad_header_line":
         path.write_bytes(b"ply\nformat ascii 1.0\nelement vertex many\nend_header\n")
+    elif case == "absurd_coordinates":  # issue 10, item 9: was accepted, planned with cameras at 3e9 m
+        write_ply(path, pts + 1e9, cols)
+    elif case == "millimetres":
+        write_ply(path, pts * 1000.0, cols)
+    elif case == "flat":
+        pts[:, 2] = 0.0
+        write_ply(path, pts, cols)
+    elif case == "ushort_colour":  # trimesh would keep only the low byte of each channel
+        path.write_bytes(b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n"
+                         b"property float z\nproperty ushort red\nproperty ushort green\nproperty ushort blue\n"
+                         b"end_header\n0 0 0 65535 32768 0\n")
     elif case == "ascii_short":
         write_ply(path, pts, cols, fmt="ascii", declared=len(pts) + 5)
     elif case == "ascii_text":

@@ -10,6 +10,7 @@ ROS-free: numpy and trimesh only.
 """
 from __future__ import annotations
 
+import io
 import math
 import re
 from dataclasses import dataclass, field
@@ -24,6 +25,7 @@ __all__ = [
     "PlantModel",
     "load_ply",
     "load_models",
+    "check_plant_size",
     "procedural_corn",
     "procedural_seed",
     "sample_surface",
@@ -88,13 +90,20 @@ class PlantModel:
 # PLY loading
 # --------------------------------------------------------------------------------------------
 
+#: A loaded model must look like a plant in the Corn50 model frame (metres, stalk through the
+#: origin, about 2 m tall): every coordinate within this many metres of the origin ...
+MAX_MODEL_COORDINATE = 10.0
+#: ... and a height (z extent) of at least this many metres.
+MIN_PLANT_HEIGHT = 0.01
+
 _PLY_TYPES = {
     "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
     "short": "i2", "int16": "i2", "ushort": "u2", "uint16": "u2",
     "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
     "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
 }
-_COLOR_NAMES = (("red", "green", "blue"), ("r", "g", "b"), ("diffuse_red", "diffuse_green", "diffuse_blue"))
+#: Colour channel types that trimesh decodes right (it truncates wider integers to their low byte).
+_COLOUR_TYPES = ("u1", "f4", "f8")
 
 
 @dataclass
@@ -103,13 +112,9 @@ class _Element:
     count: int
     props: list  # [(name, type)] scalar, or (name, ("list", count_type, item_type))
 
-    @property
-    def has_list(self) -> bool:
-        return any(isinstance(t, tuple) for _n, t in self.props)
 
-
-def _parse_header(raw: bytes, path: Path) -> tuple[str, list[_Element], int]:
-    """Parse a PLY header: (format, elements, byte offset of the data)."""
+def _parse_header(raw: bytes, path: Path) -> list[_Element]:
+    """The elements of a PLY header; PlantModelError naming the problem."""
     if not raw.startswith(b"ply"):
         raise PlantModelError(f"{path}: not a PLY file (it does not start with 'ply')")
     m = re.search(rb"end_header[ \t]*\r?\n", raw[:1 << 20])
@@ -148,42 +153,68 @@ def _parse_header(raw: bytes, path: Path) -> tuple[str, list[_Element], int]:
             raise PlantModelError(f"{path}: corrupt PLY header, line {lineno}: {line.strip()!r}") from None
     if not fmt:
         raise PlantModelError(f"{path}: corrupt PLY header (no 'format' line)")
-    return fmt, elements, m.end()
+    return elements
 
 
-def _color_names(names: list[str], path: Path) -> tuple[str, str, str]:
-    for cand in _COLOR_NAMES:
-        if all(c in names for c in cand):
-            return cand
-    raise PlantModelError(
-        f"{path}: the PLY has no per-vertex colour (needs red, green, blue properties; has {', '.join(names)})")
+def _vertex_element(raw: bytes, path: Path) -> _Element:
+    """The checked vertex element of a PLY header.
+
+    trimesh decodes the data (:func:`load_ply`); this strict look at the header is what it does
+    not do: name the problem (not a PLY, no end_header, a corrupt line, no x/y/z, no colour, no
+    vertices), refuse colour channels it would decode wrongly (16- and 32-bit integers lose all
+    but their low byte) and give the declared vertex count (trimesh reads fewer ASCII rows than
+    declared without a word).
+    """
+    elements = _parse_header(raw, path)
+    vertex = next((e for e in elements if e.name == "vertex"), None)
+    if vertex is None:
+        raise PlantModelError(f"{path}: the PLY has no 'vertex' element")
+    types = dict(vertex.props)
+    for axis in ("x", "y", "z"):
+        if axis not in types:
+            raise PlantModelError(f"{path}: the PLY vertex element has no '{axis}' property")
+    colour = ("red", "green", "blue")
+    if not all(c in types for c in colour):
+        raise PlantModelError(f"{path}: the PLY has no per-vertex colour (needs red, green, blue properties; "
+                              f"has {', '.join(types)})")
+    if any(isinstance(t, tuple) for t in types.values()):
+        raise PlantModelError(f"{path}: list properties in the vertex element are not supported")
+    bad = [f"{c} ({types[c]})" for c in colour if types[c] not in _COLOUR_TYPES]
+    if bad:
+        raise PlantModelError(f"{path}: colour channels must be uchar, float or double, got {', '.join(bad)}")
+    if vertex.count == 0:
+        raise PlantModelError(f"{path}: the point cloud is empty (0 vertices)")
+    return vertex
 
 
-def _to_uint8(values: np.ndarray, kind: str, path: Path) -> np.ndarray:
-    """Colour channels to uint8: integers as they are (16-bit scaled down), floats in [0, 1] x 255."""
-    if values.dtype == np.uint8:
-        return values.astype(np.uint8)
-    v = values.astype(np.float64)
-    if not np.all(np.isfinite(v)):
-        raise PlantModelError(f"{path}: the colours contain NaN or infinite values")
-    if kind.startswith("f"):
-        if v.size and v.max() <= 1.0:
-            v = v * 255.0
-    elif kind in ("u2", "i2", "u4", "i4") and v.size and v.max() > 255:
-        v = v / 257.0
-    return np.clip(np.rint(v), 0, 255).astype(np.uint8)
+def check_plant_size(points: np.ndarray, where: object) -> None:
+    """PlantModelError (naming ``where``) unless the points look like a plant in the model frame:
+    every coordinate within :data:`MAX_MODEL_COORDINATE` m of the origin and at least
+    :data:`MIN_PLANT_HEIGHT` m tall (a file in millimetres, or with absurd coordinates, would
+    put cameras kilometres away and fail much later in meshing)."""
+    far = float(np.abs(points).max())
+    height = float(np.ptp(points[:, 2]))
+    if far > MAX_MODEL_COORDINATE or height < MIN_PLANT_HEIGHT:
+        lo, hi = points.min(axis=0), points.max(axis=0)
+        raise PlantModelError(
+            f"{where}: implausible plant size: the points span {np.round(lo, 3).tolist()} to "
+            f"{np.round(hi, 3).tolist()} m; a plant model is expected in metres, stalk through the origin, "
+            f"within {MAX_MODEL_COORDINATE:g} m of it and at least {MIN_PLANT_HEIGHT:g} m tall")
 
 
 def load_ply(path: PathLike) -> PlantModel:
     """Load a coloured PLY point cloud (binary little/big endian or ASCII) as a :class:`PlantModel`.
 
-    The vertex element needs ``x, y, z`` (float or double) and ``red, green, blue``
-    (uchar, or float in [0, 1]). Other elements (faces) are ignored. The model keeps the file's
-    frame (Corn50: stalk along +z through the origin, centroid z = 0).
+    The vertex element needs ``x, y, z`` and ``red, green, blue`` (uchar, or float in [0, 1]).
+    Other elements (faces) are ignored. The model keeps the file's frame (Corn50: stalk along +z
+    through the origin, centroid z = 0), which is checked for a plausible plant size
+    (:func:`check_plant_size`). The data are decoded by trimesh; the header is checked here
+    first (:func:`_vertex_element` says what trimesh does not check).
 
     Raises:
         PlantModelError: missing file, not a PLY, corrupt or truncated data, no colour, no
-            vertices, or NaN / infinite coordinates; the message names the file and the problem.
+            vertices, NaN / infinite coordinates or an implausible size; the message names the
+            file and the problem.
     """
     path = Path(path)
     if not path.is_file():
@@ -192,59 +223,30 @@ def load_ply(path: PathLike) -> PlantModel:
         raw = path.read_bytes()
     except OSError as exc:
         raise PlantModelError(f"{path}: cannot read the PLY file ({exc.strerror or exc})") from None
-    fmt, elements, offset = _parse_header(raw, path)
-    index = next((i for i, e in enumerate(elements) if e.name == "vertex"), None)
-    if index is None:
-        raise PlantModelError(f"{path}: the PLY has no 'vertex' element")
-    vertex = elements[index]
-    names = [n for n, _t in vertex.props]
-    for axis in ("x", "y", "z"):
-        if axis not in names:
-            raise PlantModelError(f"{path}: the PLY vertex element has no '{axis}' property")
-    cnames = _color_names(names, path)
-    if vertex.count == 0:
-        raise PlantModelError(f"{path}: the point cloud is empty (0 vertices)")
-    if vertex.has_list:
-        raise PlantModelError(f"{path}: list properties in the vertex element are not supported")
-    types = dict(vertex.props)
-
-    if fmt == "ascii":
-        lines = raw[offset:].decode("ascii", errors="replace").splitlines()
-        skip = sum(e.count for e in elements[:index])
-        rows = lines[skip:skip + vertex.count]
-        if len(rows) < vertex.count:
-            raise PlantModelError(f"{path}: truncated PLY: the header declares {vertex.count} vertices, "
-                                  f"the file has {max(len(rows), 0)}")
-        n_props = len(vertex.props)
-        try:
-            table = np.array([r.split()[:n_props] for r in rows], dtype=np.float64)
-        except ValueError:
-            raise PlantModelError(f"{path}: corrupt PLY: a vertex line is not {n_props} numbers") from None
-        if table.ndim != 2 or table.shape[1] != n_props:
-            raise PlantModelError(f"{path}: corrupt PLY: a vertex line is not {n_props} numbers")
-        cols = {n: table[:, i] for i, n in enumerate(names)}
+    vertex = _vertex_element(raw, path)
+    try:
+        loaded = trimesh.load(io.BytesIO(raw), file_type="ply", process=False)
+    except Exception as exc:  # noqa: BLE001 - whatever the parser says, name the file
+        text = " ".join(str(exc).split())
+        if "unexpected length" in text:
+            raise PlantModelError(f"{path}: truncated PLY: the data are shorter than the header declares "
+                                  f"({vertex.count} vertices)") from None
+        raise PlantModelError(f"{path}: corrupt PLY data ({type(exc).__name__}: {text})") from None
+    points = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))), dtype=np.float64)
+    if isinstance(loaded, trimesh.Trimesh):
+        colors = np.asarray(loaded.visual.vertex_colors)
     else:
-        endian = "<" if fmt == "binary_little_endian" else ">"
-        for e in elements[:index]:
-            if e.has_list:
-                raise PlantModelError(f"{path}: element '{e.name}' with list properties before 'vertex' "
-                                      "is not supported")
-            offset += e.count * np.dtype([(n, endian + t) for n, t in e.props]).itemsize
-        dtype = np.dtype([(n, endian + t) for n, t in vertex.props])
-        need = vertex.count * dtype.itemsize
-        have = len(raw) - offset
-        if have < need:
-            raise PlantModelError(f"{path}: truncated PLY: the header declares {vertex.count} vertices "
-                                  f"({need} bytes), only {max(have, 0)} bytes follow")
-        table = np.frombuffer(raw, dtype=dtype, count=vertex.count, offset=offset)
-        cols = {n: table[n] for n in names}
-
-    points = np.stack([cols["x"], cols["y"], cols["z"]], axis=1).astype(np.float64)
+        colors = np.asarray(getattr(loaded, "colors", np.zeros((0, 4))))
+    if len(points) != vertex.count:
+        raise PlantModelError(f"{path}: truncated PLY: the header declares {vertex.count} vertices, "
+                              f"the file has {len(points)}")
     bad = int(np.count_nonzero(~np.isfinite(points).all(axis=1)))
     if bad:
         raise PlantModelError(f"{path}: {bad} of {len(points)} points have NaN or infinite coordinates")
-    colors = np.stack([_to_uint8(np.asarray(cols[c]), types[c], path) for c in cnames], axis=1)
-    return PlantModel(name=path.stem, points=points, colors=colors, mesh=None)
+    if colors.shape[0] != len(points):
+        raise PlantModelError(f"{path}: the PLY colours could not be read")
+    check_plant_size(points, path)
+    return PlantModel(name=path.stem, points=points, colors=colors[:, :3].astype(np.uint8), mesh=None)
 
 
 def load_models(folder: PathLike) -> list[PlantModel]:

@@ -5,21 +5,21 @@ Topics (reliable, TRANSIENT_LOCAL, depth 1):
   /scene/noisy_points  sensor_msgs/PointCloud2  x, y, z, rgb, realization all K wind realizations
   /scene/description   vp_interfaces/SceneDescription                     how it was built
 
-A bad configuration at start logs the problem and exits with status 1 before publishing
-anything; a bad parameter change at run time is refused with the reason, keeping the old scene.
+A bad configuration at start logs the problem in one line and exits with status 2 before
+publishing anything; a bad parameter change at run time is refused with the reason, keeping the
+old scene. A valid change is validated by building the new scene (in the set-parameters
+callback) and published once the parameters are set (in the post-set callback). Signals, exit
+codes and parameter types follow :mod:`vp_scene.node_runtime`.
 """
 from __future__ import annotations
 
-import math
 import sys
 from pathlib import Path
 from typing import Any, Optional
 
 import numpy as np
-import rclpy
 from geometry_msgs.msg import Point
-from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
-from rclpy.executors import ExternalShutdownException
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -28,6 +28,7 @@ from vp_interfaces.msg import PlantPlacement, SceneDescription
 
 from .build import build_noisy_scene
 from .cloud import numpy_to_pointcloud2
+from .node_runtime import declare_typed, run_node, typed_values
 from .wind import NoisyScene
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
@@ -59,26 +60,12 @@ _DESCRIPTIONS = {
     "row_spacing": "m between rows",
     "frame_id": "frame of the published clouds",
 }
-_INTS = ("seed", "levels", "realizations", "points_per_plant")
-_FLOATS = ("wind_variance", "wind_direction", "plant_spacing", "row_spacing")
-_STRINGS = ("scenario", "models_folder", "frame_id")
+SPECS = {name: (default, _DESCRIPTIONS[name]) for name, default in DEFAULTS.items()}
 
 
 def check_params(values: dict[str, Any]) -> dict[str, Any]:
     """Type-check and normalize the node's parameter values (ints as int, numbers as float)."""
-    out = dict(values)
-    for k in _INTS:
-        v = out[k]
-        if isinstance(v, bool) or not isinstance(v, int):
-            raise ValueError(f"parameter '{k}' must be an integer, got {v!r}")
-    for k in _FLOATS:
-        v = out[k]
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            raise ValueError(f"parameter '{k}' must be a finite number, got {v!r}")
-        out[k] = float(v)
-    for k in _STRINGS:
-        if not isinstance(out[k], str):
-            raise ValueError(f"parameter '{k}' must be a string, got {out[k]!r}")
+    out = {**dict(values), **typed_values(SPECS, values)}
     if out["seed"] < 0:
         raise ValueError(f"parameter 'seed' must be >= 0, got {out['seed']}")
     if not out["frame_id"]:
@@ -113,15 +100,15 @@ class SceneNode(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("scene", **kwargs)
-        for name, default in DEFAULTS.items():
-            self.declare_parameter(name, default, ParameterDescriptor(
-                description=_DESCRIPTIONS[name], dynamic_typing=True))
+        declare_typed(self, SPECS)
         self._values = check_params({n: self.get_parameter(n).value for n in DEFAULTS})
         self._noisy = build_from_params(self._values)          # raises before anything is published
+        self._candidate: Optional[tuple[dict, NoisyScene]] = None  # validated, not yet set
         self._pub_points = self.create_publisher(PointCloud2, "/scene/points", LATCHED)
         self._pub_noisy = self.create_publisher(PointCloud2, "/scene/noisy_points", LATCHED)
         self._pub_desc = self.create_publisher(SceneDescription, "/scene/description", LATCHED)
         self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.add_post_set_parameters_callback(self._after_set_parameters)
         self.publish()
 
     @property
@@ -129,7 +116,8 @@ class SceneNode(Node):
         return self._noisy
 
     def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
-        """Validate a change by building the new scene first; refuse it (old scene kept) when invalid."""
+        """Validate a change by building the new scene first; refuse it (old scene kept) when
+        invalid. No side effect: the scene is adopted and published by the post-set callback."""
         values = dict(self._values)
         for prm in params:
             if prm.name not in DEFAULTS:
@@ -144,9 +132,21 @@ class SceneNode(Node):
             reason = f"refused: {exc}"
             self.get_logger().warning(f"parameter change {[p.name for p in params]} {reason}; keeping the old scene")
             return SetParametersResult(successful=False, reason=reason)
+        self._candidate = (values, noisy)
+        return SetParametersResult(successful=True)
+
+    def _after_set_parameters(self, params: list[Parameter]) -> None:
+        """The parameters are set: adopt the scene validated for them and publish it."""
+        if not any(p.name in DEFAULTS for p in params):
+            return
+        values = check_params({n: self.get_parameter(n).value for n in DEFAULTS})
+        if self._candidate is not None and self._candidate[0] == values:
+            noisy = self._candidate[1]
+        else:  # not validated through _on_set_parameters (cannot happen with rclpy): build it now
+            noisy = build_from_params(values)
+        self._candidate = None
         self._values, self._noisy = values, noisy
         self.publish()
-        return SetParametersResult(successful=True)
 
     def publish(self) -> None:
         """Publish the three latched topics for the current scene."""
@@ -178,25 +178,9 @@ class SceneNode(Node):
 
 
 def main(args: Optional[list[str]] = None) -> int:
-    """Entry point ``scene``: returns 1 (nothing published) when the scene cannot be built."""
-    rclpy.init(args=args)
-    node: Optional[SceneNode] = None
-    rc = 0
-    try:
-        try:
-            node = SceneNode()
-        except (ValueError, OSError) as exc:
-            rclpy.logging.get_logger("scene").error(f"cannot build the scene: {exc}")
-            rc = 1
-        else:
-            rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return rc
+    """Entry point ``scene``: exit 2 (nothing published) when the scene cannot be built, 0 after
+    SIGINT/SIGTERM (see :mod:`vp_scene.node_runtime`)."""
+    return run_node("scene", SceneNode, args, error_prefix="cannot build the scene")
 
 
 if __name__ == "__main__":

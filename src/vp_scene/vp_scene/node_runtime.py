@@ -1,0 +1,190 @@
+"""How every node of the suite runs: typed parameters, signals and exit codes (one home for all three).
+
+Process contract of ``scene``, ``planner`` and ``recon``:
+
+* SIGINT or SIGTERM: the node winds down and exits 0, quietly (no traceback), within
+  :data:`SHUTDOWN_DEADLINE` seconds, always; a second signal exits at once. A signal that arrives
+  while Python is still importing the node's modules ends the process by the signal's default
+  action (no handler is installed yet), which is just as quiet.
+* A bad parameter at start (wrong type, or a value out of range): one log line naming it, exit 2.
+* A crash of the executor: the traceback, exit 1.
+
+Why not rclpy's own signal handlers: they shut the context down the moment the signal arrives, so
+whatever the node is still doing (answering an action client, publishing, finishing its
+constructor) fails with RCLError tracebacks, and a main thread blocked in a
+MultiThreadedExecutor's wait was seen to miss the shutdown (issue 10, items 4, 6 and 10). Here
+the handler only sets an event (or, while the node is being constructed, aborts the
+constructor); the executor spins in a thread of its own; the main thread waits for the event,
+lets the node wind down (``node.on_shutdown(timeout)``, optional: e.g. abort an action goal and
+answer its client), shuts the executor and the context down and ends the process with
+``os._exit`` (worker threads inside C++ libraries cannot block the exit). A watchdog ends the
+process at the deadline whatever happens.
+
+Typed parameters: every parameter is declared with ``dynamic_typing=True`` and checked here,
+so that a wrong type is a one-line error like any other bad value (rclpy would raise
+InvalidParameterTypeException with a traceback), and an integer where a float is expected
+(``-p fov:=2``) is simply accepted.
+"""
+from __future__ import annotations
+
+import math
+import os
+import signal
+import sys
+import threading
+import traceback
+from typing import Any, Callable, Optional
+
+__all__ = ["SHUTDOWN_DEADLINE", "EXIT_OK", "EXIT_CRASHED", "EXIT_BAD_PARAMETERS", "coerce",
+           "declare_typed", "typed_values", "run_node"]
+
+#: Seconds from the first SIGINT/SIGTERM to the end of the process, at most.
+SHUTDOWN_DEADLINE = 5.0
+#: Seconds a node gets to wind down (``on_shutdown``) within the deadline.
+SHUTDOWN_GRACE = 3.0
+
+EXIT_OK, EXIT_CRASHED, EXIT_BAD_PARAMETERS = 0, 1, 2
+
+_KINDS = {bool: "a boolean", int: "an integer", float: "a number", str: "a string"}
+
+
+def coerce(name: str, value: Any, kind: type) -> Any:
+    """``value`` as a parameter of type ``kind`` (bool, int, float or str), else ValueError naming
+    the parameter. An integer is accepted where a float is expected; nothing else is converted."""
+    if kind is float and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    if kind is int and (isinstance(value, bool) or not isinstance(value, int)):
+        raise ValueError(f"parameter '{name}' must be an integer, got {value!r}")
+    if not isinstance(value, kind) or (kind is not bool and isinstance(value, bool)):
+        raise ValueError(f"parameter '{name}' must be {_KINDS[kind]}, got {value!r}")
+    return value
+
+
+def declare_typed(node: Any, specs: dict) -> None:
+    """Declare ``specs`` = {name: (default, description)} on ``node``, dynamically typed (the
+    type of the default is enforced by :func:`typed_values` instead)."""
+    from rcl_interfaces.msg import ParameterDescriptor
+
+    for name, (default, description) in specs.items():
+        node.declare_parameter(name, default, ParameterDescriptor(description=description, dynamic_typing=True))
+
+
+def typed_values(specs: dict, values: dict) -> dict:
+    """{name: value} of ``values`` (names of ``specs`` only) coerced to the type of each default;
+    ValueError naming the first bad one. Floats must be finite."""
+    out = {}
+    for name, value in values.items():
+        if name not in specs:
+            continue
+        kind = type(specs[name][0])
+        v = coerce(name, value, kind)
+        if kind is float and not math.isfinite(v):
+            raise ValueError(f"parameter '{name}' must be a finite number, got {v!r}")
+        out[name] = v
+    return out
+
+
+class _Interrupted(BaseException):
+    """A signal arrived while the node was being constructed (not an Exception: no handler in
+    the node's code may swallow it)."""
+
+
+def _exit(code: int) -> None:
+    """End the process now (after flushing): no interpreter finalization that could wait on
+    threads still inside C++ code (COLMAP, Open3D, the DDS middleware)."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except Exception:  # noqa: BLE001 - exiting anyway
+            pass
+    os._exit(code)
+
+
+def run_node(name: str, make_node: Callable[[], Any], args: Optional[list] = None, num_threads: int = 1,
+             grace: float = SHUTDOWN_GRACE, deadline: float = SHUTDOWN_DEADLINE,
+             error_prefix: str = "bad parameters") -> int:
+    """Run the node built by ``make_node()`` until SIGINT/SIGTERM; never returns (ends the process).
+
+    ``make_node`` raises ValueError (or OSError) naming a bad parameter or configuration: that
+    is logged as one line (``<error_prefix>: <message>``) and the exit code is 2.
+    ``num_threads`` > 1 spins a MultiThreadedExecutor. A node may define
+    ``on_shutdown(timeout) -> bool`` (True: it wound down within ``timeout`` seconds); it is
+    called after the signal, before the executor stops.
+    """
+    import rclpy
+    from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+
+    stop = threading.Event()
+    constructing = [True]
+    watchdog = threading.Timer(deadline, _exit, args=(EXIT_OK,))
+    watchdog.daemon = True
+
+    def on_signal(signum: int, _frame: Any) -> None:
+        if stop.is_set():  # a second signal: no more waiting
+            _exit(EXIT_OK)
+        stop.set()
+        watchdog.start()
+        if constructing[0]:
+            raise _Interrupted()
+
+    def install() -> None:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, on_signal)
+
+    install()
+    logger = rclpy.logging.get_logger(name)
+    node = None
+    try:
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+        node = make_node()
+        # Again: a library the node loaded may have replaced them. glog, which pycolmap loads,
+        # installs a SIGTERM handler at import that prints a stack trace and kills the process,
+        # so a node using it imports it in its constructor, before this line.
+        install()
+        constructing[0] = False
+    except _Interrupted:
+        _exit(EXIT_OK)
+    except (ValueError, OSError) as exc:
+        constructing[0] = False
+        logger.error(f"{error_prefix}: {' '.join(str(exc).split())}")
+        _exit(EXIT_BAD_PARAMETERS)
+    if stop.is_set():  # the signal came right after the constructor
+        _exit(EXIT_OK)
+
+    executor = MultiThreadedExecutor(num_threads=num_threads) if num_threads > 1 else SingleThreadedExecutor()
+    executor.add_node(node)
+    crashed: list = []
+
+    def spin() -> None:
+        try:
+            executor.spin()
+        except Exception:  # noqa: BLE001 - reported below, exit 1
+            crashed.append(traceback.format_exc())
+            stop.set()
+
+    threading.Thread(target=spin, name=f"{name}-executor", daemon=True).start()
+    while not stop.wait(0.25):
+        pass
+    if crashed:
+        sys.stderr.write(crashed[0])
+        logger.error("the executor crashed; exiting")
+        _exit(EXIT_CRASHED)
+    wound_down = True
+    on_shutdown = getattr(node, "on_shutdown", None)
+    if on_shutdown is not None:
+        try:
+            wound_down = bool(on_shutdown(grace))
+        except Exception:  # noqa: BLE001 - exiting anyway
+            wound_down = False
+    if not wound_down:  # work still running in a callback: tearing down under it would only add noise
+        logger.warn("shutting down without waiting for the running work")
+        _exit(EXIT_OK)
+    executor.shutdown(timeout_sec=1.0)
+    try:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    except Exception:  # noqa: BLE001 - the process ends now anyway
+        pass
+    _exit(EXIT_OK)
+    return EXIT_OK  # pragma: no cover
