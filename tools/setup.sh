@@ -11,9 +11,12 @@ export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-42}
 
 # System libraries: headless EGL rendering needs Mesa's libEGL (Debian: libegl1 libgl1-mesa-dri);
 # open3d (Poisson meshing of real plant clouds) needs libusb-1.0.
+# (grep reads the whole list: `grep -q` would stop early, ldconfig would die of SIGPIPE and
+# pipefail would report the library missing)
 missing=()
-ldconfig -p 2>/dev/null | grep -q 'libEGL.so.1' || missing+=(libegl1 libgl1-mesa-dri libgles2)
-ldconfig -p 2>/dev/null | grep -q 'libusb-1.0.so.0' || missing+=(libusb-1.0-0)
+libs=$(ldconfig -p 2>/dev/null || true)
+grep 'libEGL.so.1' >/dev/null <<<"$libs" || missing+=(libegl1 libgl1-mesa-dri libgles2)
+grep 'libusb-1.0.so.0' >/dev/null <<<"$libs" || missing+=(libusb-1.0-0)
 if [ ${#missing[@]} -gt 0 ]; then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
     echo "[setup] installing system libraries: ${missing[*]}"

@@ -93,3 +93,34 @@ def test_cli_nothing_visible_records_error(tmp_path: Path, capsys) -> None:
     assert rc == 1 and "[NOTHING_VISIBLE]" in err
     data = json.loads((tmp_path / "o" / "recon.json").read_text())
     assert data["error"]["code"] == 4 and data["error"]["name"] == "NOTHING_VISIBLE"
+
+
+def test_sigterm_after_colmap_ran_exits_quietly(tmp_path: Path) -> None:
+    """pycolmap loads glog, whose handler turns SIGTERM into an abort with a stack trace; the CLI
+    ends a terminated run as an interrupted one (exit 130, one line)."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    plan = _plan(tmp_path)
+    proc = subprocess.Popen([sys.executable, "-m", "vp_recon.cli", "--plan", str(plan), "--out", str(tmp_path / "o"),
+                             "--width", "640", "--height", "480"], stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    err = ""
+    deadline = time.monotonic() + 120
+    try:
+        while "sparse" not in err or "1/2" not in err.split("sparse")[-1]:  # COLMAP has run once
+            assert time.monotonic() < deadline, err
+            ch = proc.stderr.read(1)
+            assert ch or proc.poll() is None, err
+            err += ch
+        proc.send_signal(signal.SIGTERM)
+        _, rest = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    err += rest
+    assert proc.returncode == 130, err[-2000:]
+    assert "Aborted" not in err and "Traceback" not in err and err.rstrip().endswith("recon: interrupted")

@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import signal
 import sys
 from pathlib import Path
 from typing import Any, Optional, Sequence
@@ -137,10 +138,17 @@ def run(args: argparse.Namespace) -> dict:
     return data
 
 
+def _terminate(signum: int, _frame: object) -> None:
+    raise KeyboardInterrupt
+
+
 def main(argv: Optional[Sequence[str]] = None) -> int:
     args = parse_args(argv)
+    import pycolmap  # noqa: F401  (first: it installs glog's SIGTERM handler, replaced below)
+
     from .pipeline import EMPTY_PLAN, NO_SCENE, OUTPUT_NOT_WRITABLE, ReconError
 
+    signal.signal(signal.SIGTERM, _terminate)  # SIGTERM ends the run as Ctrl-C does: exit 130
     try:
         data = run(args)
     except KeyboardInterrupt:
