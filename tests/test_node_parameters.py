@@ -1,12 +1,12 @@
-"""Start parameters of the planner and recon nodes (real processes): a wrong type or a bad value
-is one log line and exit 2, an integer where a float is expected is simply a float (issue 10,
-items 7 and 12)."""
+"""Start parameters of the planner, recon and dispatcher nodes (real processes): a wrong type or a
+bad value is one log line and exit 2, an integer where a float is expected is simply a float
+(issue 10, items 7 and 12; issue 11 for the dispatcher)."""
 from __future__ import annotations
 
 import pytest
 
-READY = {"planner": "planner ready", "recon": "recon ready"}
-PKG = {"planner": "vp_planner", "recon": "vp_recon"}
+READY = {"planner": "planner ready", "recon": "recon ready", "dispatcher": "dispatcher ready"}
+PKG = {"planner": "vp_planner", "recon": "vp_recon", "dispatcher": "vp_planner"}
 
 
 @pytest.mark.parametrize("exe, params, text", [
@@ -18,6 +18,14 @@ PKG = {"planner": "vp_planner", "recon": "vp_recon"}
     ("recon", {"dense": 1}, "'dense' must be a boolean"),
     ("recon", {"max_realizations": -1}, "max_realizations must be >= 0"),
     ("recon", {"fov": 4}, "fov must be in (0, pi)"),
+    ("dispatcher", {}, 'drones must name at least one drone, e.g. -p "drones:=[d0, d1, d2, d3]"'),
+    ("dispatcher", {"drones": "d0"}, "'drones' must be a list of strings"),
+    ("dispatcher", {"drones": ["d0", "d1", "d0"]}, "drones names a drone twice: ['d0']"),
+    ("dispatcher", {"drones": ["d0", "drone-1"]}, "drone names must start with a letter"),
+    ("dispatcher", {"drones": ["d0"], "assignment": "fastest"}, "assignment must be one of min_total, min_max"),
+    ("dispatcher", {"drones": ["d0"], "goal_topic": "/goal"}, "goal_topic must contain {drone}"),
+    ("dispatcher", {"drones": ["d0"], "pose_timeout": 0}, "pose_timeout must be > 0"),
+    ("dispatcher", {"drones": ["d0"], "fleet_yaw": 0.5}, "fleet_frame is frame_id ('map')"),
 ])
 def test_bad_parameter_is_one_line_and_exit_2(exe, params, text, ros_env, start_node) -> None:
     node = start_node(PKG[exe], exe, params, ros_env)
@@ -30,6 +38,7 @@ def test_bad_parameter_is_one_line_and_exit_2(exe, params, text, ros_env, start_
 @pytest.mark.parametrize("exe, params", [
     ("planner", {"fov": 2, "theta_match": 1, "min_separation": 0}),
     ("recon", {"fov": 2, "fscore_threshold": 1}),
+    ("dispatcher", {"drones": ["d0"], "pose_timeout": 1, "fleet_frame": "plot", "fleet_x": 3}),
 ])
 def test_integers_where_floats_are_expected_are_accepted(exe, params, ros_env, start_node) -> None:
     node = start_node(PKG[exe], exe, params, ros_env)

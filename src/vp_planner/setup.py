@@ -14,11 +14,13 @@ setup(
     zip_safe=True,
     maintainer='vp-suite maintainers',
     maintainer_email='maintainers@vp-suite.invalid',
-    description='EGP-VP view planning: the paper reward, ensemble-GP Bayesian optimization, baselines, and the planner node.',
+    description='EGP-VP view planning: the paper reward, ensemble-GP Bayesian optimization, baselines, the planner node, and the dispatcher that sends each drone of a fleet its pose.',
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
             'planner = vp_planner.planner_node:main',
+            'dispatcher = vp_planner.dispatcher_node:main',
+            'sim_drone = vp_planner.sim_drone_node:main',
             'plan = vp_planner.cli:main',
         ],
     },

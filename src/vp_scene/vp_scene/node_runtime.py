@@ -49,8 +49,17 @@ _KINDS = {bool: "a boolean", int: "an integer", float: "a number", str: "a strin
 
 
 def coerce(name: str, value: Any, kind: type) -> Any:
-    """``value`` as a parameter of type ``kind`` (bool, int, float or str), else ValueError naming
-    the parameter. An integer is accepted where a float is expected; nothing else is converted."""
+    """``value`` as a parameter of type ``kind`` (bool, int, float, str, or list: a list of
+    strings), else ValueError naming the parameter. An integer is accepted where a float is
+    expected, and an empty list (``-p names:=[]`` arrives unset) where a list is; nothing else
+    is converted."""
+    if kind is list:
+        if value is None:
+            return []
+        if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) for v in value):
+            raise ValueError(f"parameter '{name}' must be a list of strings (e.g. \"{name}:=[a, b]\"), "
+                             f"got {value!r}")
+        return list(value)
     if kind is float and isinstance(value, int) and not isinstance(value, bool):
         return float(value)
     if kind is int and (isinstance(value, bool) or not isinstance(value, int)):

@@ -1,0 +1,172 @@
+"""vp_planner.fleet: assignments against brute force, the map -> fleet transform, goal
+orientations, the feasibility check (ViewSpace's rules, explained) and the simulated flight."""
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from vp_planner.fleet import (AssignmentError, FleetTransform, assign, bottleneck_assignment, distance_matrix,
+                              fly_toward, goal_orientations, min_total_assignment, plan_problems)
+from vp_planner.space import ViewSpace
+from vp_scene.camera import OPTICAL_IN_BODY, cameras_to_poses, look_at, rotation_matrix
+
+
+def brute_force(cost: np.ndarray) -> tuple[float, float, float]:
+    """(min total, min max, min total among the min-max assignments) over every injective map
+    poses -> drones (itertools.permutations)."""
+    d, m = cost.shape
+    best_total, best_max, best_total_at_max = math.inf, math.inf, math.inf
+    rows = np.arange(m)
+    for perm in itertools.permutations(range(d), m):
+        flights = cost[list(perm), rows]
+        total, longest = flights.sum(), flights.max()
+        best_total = min(best_total, total)
+        if longest < best_max:
+            best_max, best_total_at_max = longest, total
+        elif longest == best_max:
+            best_total_at_max = min(best_total_at_max, total)
+    return best_total, best_max, best_total_at_max
+
+
+def random_fleet(rng, d: int, m: int) -> tuple[np.ndarray, np.ndarray]:
+    return rng.uniform(-5, 5, (d, 3)), rng.uniform(-3, 3, (m, 3))
+
+
+@pytest.mark.parametrize("d, m", [(1, 1), (2, 2), (3, 2), (4, 4), (5, 3), (6, 6), (7, 4)])
+def test_assignments_equal_brute_force(d: int, m: int) -> None:
+    rng = np.random.default_rng(10 * d + m)
+    for _ in range(15):
+        drones, goals = random_fleet(rng, d, m)
+        cost = distance_matrix(drones, goals)
+        total, longest, total_at_longest = brute_force(cost)
+        a = assign(drones, goals, "min_total")
+        b = assign(drones, goals, "min_max")
+        for res in (a, b):
+            assert len(set(res.drone_of_pose.tolist())) == m  # no drone gets two poses
+            np.testing.assert_allclose(res.distances, cost[res.drone_of_pose, np.arange(m)])
+        assert a.total == pytest.approx(total, rel=1e-12, abs=1e-12)
+        assert b.max_distance == longest  # an entry of the matrix: exact
+        assert b.total == pytest.approx(total_at_longest, rel=1e-12, abs=1e-12)
+        assert b.max_distance <= a.max_distance and a.total <= b.total + 1e-12
+        assert sorted(a.spare(d) + a.drone_of_pose.tolist()) == list(range(d))
+
+
+def test_min_max_picks_the_cheapest_of_its_optima() -> None:
+    """Drones on a line at 0 and 2, poses at 1 and 3: both assignments cost 4 m in total, but
+    only one keeps every flight at 1 m; min_max must return it (the tie-break by total)."""
+    b = assign(np.array([[0.0, 0, 0], [2.0, 0, 0]]), np.array([[1.0, 0, 0], [3.0, 0, 0]]), "min_max")
+    assert b.drone_of_pose.tolist() == [0, 1] and b.max_distance == 1.0 and b.total == 2.0
+    # three drones, the bottleneck 5 is reached by several assignments; the cheapest is 1 + 5 + 0
+    cost = np.array([[1.0, 5.0, 9.0], [2.0, 5.0, 0.0], [0.0, 5.0, 8.0]])
+    sol = bottleneck_assignment(cost)
+    assert cost[sol, np.arange(3)].max() == 5.0 and cost[sol, np.arange(3)].sum() == pytest.approx(5.0)
+
+
+def test_bottleneck_beats_min_total_on_the_longest_flight() -> None:
+    """min_total: 0 + 10 = 10, longest 10; min_max: 6 + 6 = 12, longest 6."""
+    cost = np.array([[0.0, 6.0], [6.0, 10.0]])
+    assert min_total_assignment(cost).tolist() == [0, 1]
+    assert bottleneck_assignment(cost).tolist() == [1, 0]
+
+
+def test_ties_and_identical_drones() -> None:
+    drones = np.zeros((4, 3))
+    goals = np.array([[1.0, 0, 0], [0, 2.0, 0], [0, 0, 3.0]])
+    for objective in ("min_total", "min_max"):
+        res = assign(drones, goals, objective)
+        assert len(set(res.drone_of_pose.tolist())) == 3
+        assert res.total == pytest.approx(6.0) and res.max_distance == 3.0
+
+
+def test_assignment_errors() -> None:
+    with pytest.raises(AssignmentError, match="3 poses but only 2 drones"):
+        assign(np.zeros((2, 3)), np.ones((3, 3)))
+    with pytest.raises(AssignmentError, match="unknown assignment"):
+        assign(np.zeros((2, 3)), np.ones((1, 3)), "fastest")
+    with pytest.raises(AssignmentError, match="NaN"):
+        assign(np.array([[0.0, np.nan, 0]]), np.ones((1, 3)))
+    assert assign(np.zeros((2, 3)), np.zeros((0, 3))).drone_of_pose.size == 0
+
+
+def test_fleet_transform() -> None:
+    t = FleetTransform(x=2.0, y=-1.0, z=0.5, yaw=math.pi / 2)
+    # the fleet frame's origin is (2, -1, 0.5) in map, its x axis along map's +y
+    np.testing.assert_allclose(t.points_to_fleet([2.0, -1.0, 0.5]), [0, 0, 0], atol=1e-12)
+    np.testing.assert_allclose(t.points_to_fleet([2.0, 0.0, 0.5]), [1, 0, 0], atol=1e-12)
+    np.testing.assert_allclose(t.points_to_map([0.0, 1.0, 0.0]), [1.0, -1.0, 0.5], atol=1e-12)
+    rng = np.random.default_rng(0)
+    p = rng.normal(size=(20, 3))
+    np.testing.assert_allclose(t.points_to_map(t.points_to_fleet(p)), p, atol=1e-12)
+    # a camera looking along map +y looks along fleet +x after the 90 degree yaw
+    cams = look_at([[3.0, 0.0, 1.0]], [[3.0, 5.0, 1.0]])
+    fleet = t.poses_to_fleet(cameras_to_poses(cams))
+    x_axis = Rotation.from_quat(fleet[0, 3:]).as_matrix()[:, 0]
+    np.testing.assert_allclose(x_axis, [1, 0, 0], atol=1e-12)
+    np.testing.assert_allclose(fleet[0, :3], t.points_to_fleet(cams[0, :3]), atol=1e-12)
+    assert fleet[0, 6] >= 0
+    assert FleetTransform().is_identity and FleetTransform(yaw=2 * math.pi).is_identity
+    assert not t.is_identity
+    np.testing.assert_allclose(FleetTransform().poses_to_fleet(cameras_to_poses(cams)), cameras_to_poses(cams))
+    with pytest.raises(ValueError, match="finite"):
+        FleetTransform(x=math.nan)
+
+
+def test_goal_orientations() -> None:
+    cams = look_at([[1.0, 2.0, 3.0], [0.0, -2.0, 1.0]], [[0.0, 0.0, 0.5], [0.0, 0.0, 1.0]])
+    q = cameras_to_poses(cams)[:, 3:]
+    np.testing.assert_allclose(goal_orientations(q, "body"), q)
+    opt = goal_orientations(q, "optical")
+    for k in range(2):
+        R = Rotation.from_quat(opt[k]).as_matrix()
+        body = rotation_matrix(cams[k, 3:])
+        np.testing.assert_allclose(R[:, 2], body[:, 0], atol=1e-12)   # optical z = viewing direction
+        np.testing.assert_allclose(R[:, 0], -body[:, 1], atol=1e-12)  # x right
+        np.testing.assert_allclose(R[:, 1], -body[:, 2], atol=1e-12)  # y down
+    np.testing.assert_allclose(goal_orientations([[0, 0, 0, 1.0]], "optical")[0], OPTICAL_IN_BODY)
+    with pytest.raises(ValueError, match="unknown orientation"):
+        goal_orientations(q, "gimbal")
+
+
+def ring(n: int, radius: float, height: float) -> np.ndarray:
+    az = np.linspace(0, 2 * math.pi, n, endpoint=False)
+    c = np.stack([radius * np.cos(az), radius * np.sin(az), np.full(n, height)], axis=1)
+    return look_at(c, np.tile([0.0, 0.0, 1.0], (n, 1)))
+
+
+def test_plan_problems_agree_with_the_view_space(realizations) -> None:
+    """The verdict is ViewSpace.feasible's; the explanation names the broken rule."""
+    ok = ring(4, 2.5, 1.2)
+    assert plan_problems(ok, realizations) == []
+    low = ok.copy()
+    low[1, 2] = 0.1
+    (text,) = plan_problems(low, realizations)
+    assert "camera 1" in text and "min_altitude" in text
+    close = ok.copy()
+    close[2, :3] = [0.05, 0.0, 1.0]  # inside the plant
+    (text,) = plan_problems(close, realizations)
+    assert "camera 2" in text and "min_standoff" in text
+    pair = ok.copy()
+    pair[3, :3] = pair[0, :3] + [0.0, 0.2, 0.0]
+    (text,) = plan_problems(pair, realizations)
+    assert "cameras 0 and 3" in text and "0.200 m apart" in text and "min_separation" in text
+    # without a scene the stand-off rule is left out, the others stay
+    assert plan_problems(close, None) == []
+    assert "min_altitude" in plan_problems(low, None)[0]
+    # a single camera: altitude and stand-off only
+    assert plan_problems(ok[:1], realizations) == [] and "min_altitude" in plan_problems(low[1:2], realizations)[0]
+    # the same verdict as the planner's view space on random plans
+    rng = np.random.default_rng(1)
+    space = ViewSpace(realizations, 3)
+    for _ in range(40):
+        cams = look_at(rng.uniform([-1.5, -1.5, 0.0], [1.5, 1.5, 2.5], (3, 3)), np.tile([0.0, 0.0, 1.0], (3, 1)))
+        assert (plan_problems(cams, realizations) == []) == bool(space.feasible(cams))
+
+
+def test_fly_toward() -> None:
+    p = fly_toward([0.0, 0.0, 0.0], [3.0, 4.0, 0.0], speed=2.0, dt=0.5)
+    np.testing.assert_allclose(p, [0.6, 0.8, 0.0])
+    np.testing.assert_array_equal(fly_toward([2.9, 3.9, 0.0], [3.0, 4.0, 0.0], 2.0, 0.5), [3.0, 4.0, 0.0])
