@@ -11,6 +11,7 @@ export PYOPENGL_PLATFORM ?= egl
 SCENARIO ?= one_plant
 METHOD   ?= egp
 CAMERAS  ?= 4
+DRONES   ?= $(CAMERAS)
 EVALS    ?= 100
 SEED     ?= 0
 REWARD   ?=
@@ -33,7 +34,8 @@ test: setup
 
 run: setup
 	@$(ENV) python tools/run_suite.py --scenario $(SCENARIO) --method $(METHOD) --cameras $(CAMERAS) \
-	  --evals $(EVALS) --seed $(SEED) --out $(OUT) $(if $(MODELS),--models $(MODELS)) $(if $(REWARD),--reward $(REWARD))
+	  --evals $(EVALS) --seed $(SEED) --out $(OUT) --drones $(DRONES) $(if $(MODELS),--models $(MODELS)) \
+	  $(if $(REWARD),--reward $(REWARD))
 
 plan: setup
 	@$(ENV) python -m vp_planner.cli --scenario $(SCENARIO) --method $(METHOD) --cameras $(CAMERAS) \

@@ -1,6 +1,7 @@
 """The entry script (tools/run_suite.py): the three real nodes as processes, one mission, over DDS.
 
-End-to-end on a small configuration, with a separate subscriber process on /camera_plan; and the
+End-to-end on a small configuration, with a separate subscriber process on /camera_plan and a
+fleet of simulated drones that the dispatcher sends to the plan's poses; and the
 fault cases: the planner killed mid-run makes the script stop the others and exit non-zero; a
 node that exits with a one-line error gets that line reported last, without tracebacks from the
 nodes the script stops; the script killed with SIGKILL takes its nodes with it. Every wait has a
@@ -50,7 +51,7 @@ def test_end_to_end_small_mission(ros_env, tmp_path) -> None:
     echo = NodeProcess([sys.executable, str(ECHO), str(echo_out), "600"], ros_env, tmp_path / "echo.log")
     try:
         proc = subprocess.run([sys.executable, str(SCRIPT), *SMALL, "--method", "egp", "--evals", "16",
-                               "--init", "10", "--out", str(out), "--timeout", "500"],
+                               "--init", "10", "--drones", "5", "--out", str(out), "--timeout", "500"],
                               env=ros_env, capture_output=True, text=True, timeout=560)
         log = proc.stdout + proc.stderr
         assert proc.returncode == 0, log[-6000:]
@@ -68,7 +69,17 @@ def test_end_to_end_small_mission(ros_env, tmp_path) -> None:
     echoed = json.loads(echo_out.read_text())
     assert echoed["frame_id"] == "map"
     np.testing.assert_allclose(echoed["poses"], summary["poses"], atol=1e-9)
-    for pid in started_pids(proc.stdout).values():
+    # the fleet: which drone goes where is printed, one pose per drone, one drone spare
+    assert "fleet (min_total): 4 drones to 4 poses" in proc.stdout, proc.stdout[-3000:]
+    lines = re.findall(r"^  (d\d) -> cam (\d): ", proc.stdout, re.M)
+    assert sorted(int(c) for _, c in lines) == [0, 1, 2, 3] and len({d for d, _ in lines}) == 4, lines
+    assert re.search(r"^  spare: d\d$", proc.stdout, re.M), proc.stdout[-3000:]
+    fleet = summary["fleet"]
+    for entry in fleet["drones"]:  # fleet frame = map here: the goals are the plan's poses
+        np.testing.assert_allclose(entry["goal"], summary["poses"][entry["pose_index"]], atol=1e-9)
+    pids = started_pids(proc.stdout)
+    assert {"dispatcher", "sim_d0", "sim_d4"} <= set(pids), pids
+    for pid in pids.values():
         assert not alive(pid)
 
 

@@ -4,7 +4,9 @@
 Starts the three nodes as separate processes (real ROS 2 nodes, DDS on loopback only), prefixes
 and streams their logs, asks the planner for a plan through the ``/plan_views`` action (with a
 progress bar from its feedback), waits for the recon node's aggregate score on
-``/reconstruction/score`` and writes ``<out>/summary.json``. Everything is shut down on success,
+``/reconstruction/score`` and writes ``<out>/summary.json``. With ``--drones N`` it also starts
+the dispatcher with drones d0..d<N-1> and N simulated drones (``vp_planner sim_drone``, on a
+launch row 5 m south of the plot) and prints which drone goes where (``/fleet/assignment``). Everything is shut down on success,
 on Ctrl-C and when any node dies; the nodes die with this script even when it is killed with
 SIGKILL (parent-death signal, tools/node_process.py). While the nodes are stopped their output
 goes to ``<out>/<node>.log`` only, so the outcome (or the error, with the dead node's last line)
@@ -53,6 +55,10 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
     ap.add_argument('--width', type=int, default=2000, help='rendered image width')
     ap.add_argument('--height', type=int, default=1500, help='rendered image height')
     ap.add_argument('--out', default='out/run', help='output folder')
+    ap.add_argument('--drones', type=int, default=0,
+                    help='start the dispatcher and this many simulated drones (0: none; else at least --cameras)')
+    ap.add_argument('--assignment', default='min_total', choices=['min_total', 'min_max'],
+                    help="the dispatcher's assignment objective")
     ap.add_argument('--timeout', type=float, default=3600.0, help='seconds for the whole mission')
     ap.add_argument('--domain-id', type=int, default=None,
                     help='ROS_DOMAIN_ID of this run (default: $ROS_DOMAIN_ID, else derived from the process id)')
@@ -61,6 +67,10 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
         ap.error('--cameras must be >= 2')
     if args.evals < 1:
         ap.error('--evals must be >= 1')
+    if args.drones and args.drones < args.cameras:
+        ap.error(f'--drones must be 0 or at least --cameras ({args.cameras}): every camera pose needs a drone')
+    if args.drones < 0:
+        ap.error('--drones must be >= 0')
     if args.models:
         if not Path(args.models).is_dir():
             ap.error(f'--models: no such folder: {args.models}')
@@ -78,7 +88,7 @@ class Mission:
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
         from sensor_msgs.msg import PointCloud2
         from vp_interfaces.action import PlanViews
-        from vp_interfaces.msg import ReconstructionScore
+        from vp_interfaces.msg import FleetAssignment, ReconstructionScore
 
         self.rclpy, self.PlanViews, self.Score = rclpy, PlanViews, ReconstructionScore
         self.args = args
@@ -94,6 +104,10 @@ class Mission:
                                       lambda _m: self.scene_ready.set(), latched)
         self.node.create_subscription(ReconstructionScore, '/reconstruction/score',
                                       self._on_score, 10)
+        self.assignments: List[object] = []
+        self.node.create_subscription(FleetAssignment, '/fleet/assignment', self.assignments.append,
+                                      QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                                                 durability=DurabilityPolicy.TRANSIENT_LOCAL))
         self.client = ActionClient(self.node, PlanViews, '/plan_views')
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
@@ -149,6 +163,25 @@ def start_node(name: str, pkg: str, exe: str, params: Dict[str, object], env, lo
     return node
 
 
+def launch_row(n: int, south: float = 5.0, spacing: float = 1.0) -> List[List[float]]:
+    """Start positions of n simulated drones: on the ground, in a row along x, ``south`` m south
+    (-y) of the plot's centre, ``spacing`` m apart."""
+    return [[(k - (n - 1) / 2.0) * spacing, -south, 0.0] for k in range(n)]
+
+
+def assignment_lines(msg) -> List[str]:
+    """What /fleet/assignment says, for the terminal: one line per drone."""
+    lines = [f'fleet ({msg.assignment}): {len(msg.entries)} drones to {msg.num_poses} poses, total '
+             f'{msg.total_distance:.2f} m, longest {msg.max_distance:.2f} m']
+    for e in msg.entries:
+        lines.append(f'  {e.drone} -> cam {e.pose_index}: ({e.goal.position.x:+.2f}, {e.goal.position.y:+.2f}, '
+                     f'{e.goal.position.z:+.2f}) m, {e.distance:.2f} m from ({e.start.x:+.2f}, {e.start.y:+.2f}, '
+                     f'{e.start.z:+.2f})')
+    if msg.spare_drones:
+        lines.append(f'  spare: {", ".join(msg.spare_drones)}')
+    return lines
+
+
 def wait_for(predicate, nodes: List[NodeProcess], deadline: float, what: str) -> None:
     """Poll ``predicate`` while watching the nodes; raise on a dead node or the deadline."""
     while not predicate():
@@ -188,7 +221,8 @@ def run(args: argparse.Namespace) -> int:
     start = time.monotonic()
     deadline = start + args.timeout
     print(f'vp-suite: {args.scenario}, {args.cameras} cameras, {args.method}, {args.evals} evaluations, '
-          f'seed {args.seed}; ROS_DOMAIN_ID={domain} (localhost only); output {out}', flush=True)
+          f'seed {args.seed}{f", {args.drones} drones" if args.drones else ""}; ROS_DOMAIN_ID={domain} '
+          f'(localhost only); output {out}', flush=True)
 
     scene_params = {'scenario': args.scenario, 'models_folder': args.models, 'seed': args.seed,
                     'realizations': args.realizations, 'points_per_plant': args.points_per_plant}
@@ -212,6 +246,13 @@ def run(args: argparse.Namespace) -> int:
             'output_folder': str(out), 'width': args.width, 'height': args.height,
             'method': args.method, 'num_threads': recon_threads},
             {**env, 'OMP_NUM_THREADS': str(recon_threads)}, out))
+        if args.drones:
+            drones = [f'd{k}' for k in range(args.drones)]
+            nodes.append(start_node('dispatcher', 'vp_planner', 'dispatcher', {
+                'drones': drones, 'assignment': args.assignment}, {**env, 'OMP_NUM_THREADS': '1'}, out))
+            for name, (x, y, z) in zip(drones, launch_row(args.drones)):
+                nodes.append(start_node(f'sim_{name}', 'vp_planner', 'sim_drone', {
+                    'drone': name, 'x': x, 'y': y, 'z': z}, {**env, 'OMP_NUM_THREADS': '1'}, out))
         mission = Mission(args)
 
         wait_for(mission.scene_ready.is_set, nodes, deadline, 'the scene on /scene/noisy_points')
@@ -241,6 +282,21 @@ def run(args: argparse.Namespace) -> int:
                   f'quaternion ({pose[3]:+.3f}, {pose[4]:+.3f}, {pose[5]:+.3f}, {pose[6]:+.3f})',
                   flush=True)
 
+        fleet = None
+        if args.drones:
+            stamp = result.plan.header.stamp
+
+            def dispatched():
+                return [a for a in mission.assignments if a.plan_stamp == stamp]
+            wait_for(dispatched, nodes, deadline, 'the dispatcher\'s answer on /fleet/assignment')
+            fleet = dispatched()[-1]
+            if fleet.error_code != 0:
+                outcome.append(f'error: the dispatcher refused the plan (error_code {fleet.error_code}): '
+                               f'{fleet.error_msg}')
+                return EXIT_FAILED
+            for line in assignment_lines(fleet):
+                print(line, flush=True)
+
         wait_for(mission.aggregate.is_set, nodes, deadline, 'the aggregate reconstruction score')
         agg = [s for s in mission.scores if s.realization == mission.Score.AGGREGATE][-1]
         per = [s for s in mission.scores if s.realization != mission.Score.AGGREGATE]
@@ -257,6 +313,15 @@ def run(args: argparse.Namespace) -> int:
                                  'error_code': s.error_code, 'error_msg': s.error_msg}
                                 for s in per],
         }
+        if fleet is not None:
+            summary['fleet'] = {
+                'assignment': fleet.assignment, 'total_distance': fleet.total_distance,
+                'max_distance': fleet.max_distance, 'spare_drones': list(fleet.spare_drones),
+                'drones': [{'drone': e.drone, 'pose_index': e.pose_index, 'distance': e.distance,
+                            'start': [e.start.x, e.start.y, e.start.z],
+                            'goal': [e.goal.position.x, e.goal.position.y, e.goal.position.z,
+                                     e.goal.orientation.x, e.goal.orientation.y, e.goal.orientation.z,
+                                     e.goal.orientation.w]} for e in fleet.entries]}
         (out / 'summary.json').write_text(json.dumps(summary, indent=2))
         if agg.error_code != 0:
             outcome.append(f'error: reconstruction failed (error_code {agg.error_code}): {agg.error_msg}')
