@@ -10,13 +10,16 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-42}
 
 # System libraries: headless EGL rendering needs Mesa's libEGL (Debian: libegl1 libgl1-mesa-dri);
-# open3d (Poisson meshing of real plant clouds) needs libusb-1.0.
+# open3d (Poisson meshing of real plant clouds) needs libusb-1.0; iproute2 for the cross-host test.
 # (grep reads the whole list: `grep -q` would stop early, ldconfig would die of SIGPIPE and
 # pipefail would report the library missing)
 missing=()
 libs=$(ldconfig -p 2>/dev/null || true)
 grep 'libEGL.so.1' >/dev/null <<<"$libs" || missing+=(libegl1 libgl1-mesa-dri libgles2)
 grep 'libusb-1.0.so.0' >/dev/null <<<"$libs" || missing+=(libusb-1.0-0)
+# the cross-host test (tests/test_across_hosts.py) builds network namespaces with iproute2 as root
+# (it skips for other users, so only root is asked to install it)
+if [ "$(id -u)" = 0 ] && ! command -v ip >/dev/null; then missing+=(iproute2); fi
 if [ ${#missing[@]} -gt 0 ]; then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
     echo "[setup] installing system libraries: ${missing[*]}"
