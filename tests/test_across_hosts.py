@@ -176,7 +176,8 @@ def lab(tmp_path):
         yield made
     finally:
         made.down()
-        left = [ns for ns in made.ns.values() if ns in ip("netns", "list", check=False).stdout]
+        listing = ip("netns", "list", check=False).stdout.split()
+        left = [ns for ns in (made.bridge, *made.ns.values()) if ns in listing]
         assert not left, f"namespaces left behind: {left}"
 
 

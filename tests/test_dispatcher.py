@@ -205,7 +205,7 @@ def test_a_silent_drone_is_named_and_nothing_is_dispatched(ros_env, start_node, 
     assert len(ans.spare_drones) == 1
     wait_at_goals(fleet, ans)
 
-    sims["d1"].stop()
+    assert sims["d1"].stop() == 0, sims["d1"].output()[-2000:]  # SIGTERM: a quiet exit 0
     fleet.client.spin_until(lambda: False, 1.5)
     ans = fleet.send(ring(2, phase=1.0), stamp=203)
     assert ans.error_code == FleetAssignment.DRONE_SILENT and list(ans.silent_drones) == ["d1"], ans.error_msg
@@ -217,7 +217,7 @@ def test_refused_plans_and_the_missing_scene(ros_env, start_node, ros_node) -> N
     """No scene: refused (stand-off could not be checked), or dispatched with a warning once
     require_scene is false. With the scene: too many poses, a pose inside the plant, too low,
     too close to another, in another frame, no poses: each refused with its error code and
-    nothing sent; then a good plan goes out."""
+    nothing sent; then a good plan goes out. SIGTERM ends the node with exit 0."""
     drones = ["d0", "d1"]
     dispatcher = start_node("vp_planner", "dispatcher", {"drones": drones, "scene_timeout": 0.5}, ros_env)
     start_drones(start_node, ros_env, {"d0": [0.0, -4.0, 0.0], "d1": [1.0, -4.0, 0.0]})
@@ -262,4 +262,5 @@ def test_refused_plans_and_the_missing_scene(ros_env, start_node, ros_node) -> N
     ans = fleet.send(ring(2, phase=0.5), stamp=330)
     check_dispatch(fleet, ans, ring(2, phase=0.5), FleetTransform(), "body")
     assert ans.standoff_checked
-    assert dispatcher.alive() and "Traceback" not in dispatcher.output()
+    assert dispatcher.alive()
+    assert dispatcher.stop() == 0 and "Traceback" not in dispatcher.output(), dispatcher.output()[-3000:]
