@@ -50,6 +50,9 @@ def parse_args(argv=None) -> argparse.Namespace:
                     help='analyze: variants to report (default: every one found in the cache)')
     ap.add_argument('--out', default=str(ROOT / 'results'))
     ap.add_argument('--limit', type=int, default=0, help='reconstruct only the first n plans (0: all)')
+    ap.add_argument('--stride', type=int, default=1,
+                    help='reconstruct every n-th plan (a subset that keeps every family, for the '
+                         'ground and held-out checks)')
     return ap.parse_args(argv)
 
 
@@ -179,6 +182,7 @@ def run_recon(args) -> None:
     jobs = []
     for s in args.scenarios:
         plans = plans_of(s, args.models)
+        plans = plans[:: max(1, args.stride)]
         if args.limit:
             plans = plans[: args.limit]
         jobs += [(s, p, k) for p in plans for k in ks]
