@@ -50,6 +50,8 @@ def parse_args(argv=None) -> argparse.Namespace:
                     help='analyze: variants to report (default: every one found in the cache)')
     ap.add_argument('--out', default=str(ROOT / 'results'))
     ap.add_argument('--limit', type=int, default=0, help='reconstruct only the first n plans (0: all)')
+    ap.add_argument('--ids', nargs='+', default=None,
+                    help='reconstruct only these plan ids, in this order (e.g. to do the rarer families first)')
     ap.add_argument('--stride', type=int, default=1,
                     help='reconstruct every n-th plan (a subset that keeps every family, for the '
                          'ground and held-out checks)')
@@ -182,6 +184,9 @@ def run_recon(args) -> None:
     jobs = []
     for s in args.scenarios:
         plans = plans_of(s, args.models)
+        if args.ids:
+            by_id = {p['id']: p for p in plans}
+            plans = [by_id[i] for i in args.ids if i in by_id]
         plans = plans[:: max(1, args.stride)]
         if args.limit:
             plans = plans[: args.limit]
