@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import signal
 import sys
 from pathlib import Path
@@ -54,7 +55,10 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     p.add_argument("--keep-workdir", action="store_true", help="keep the COLMAP workspaces in OUT/work")
     p.add_argument("--ground", action="store_true",
                    help="render a textured soil plane under the plants (masks from the known scene)")
-    p.add_argument("--threads", type=int, default=0, help="threads of COLMAP and OpenCV (0: all cores)")
+    # as the recon node: the last core stays with a planner beside it (a planner of 1 thread took
+    # 2.4x its time beside a reconstruction on all cores of 2; README "Results")
+    p.add_argument("--threads", type=int, default=max(1, (os.cpu_count() or 2) - 1),
+                   help="threads of COLMAP and OpenCV (default: cores - 1, leaving one to a planner; 0: all cores)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     return p.parse_args(argv)
 
@@ -144,6 +148,8 @@ def _terminate(signum: int, _frame: object) -> None:
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     args = parse_args(argv)
+    if args.threads > 0:  # Mesa's llvmpipe renderer reads its thread count at its first context
+        os.environ.setdefault("LP_NUM_THREADS", str(args.threads))
     import pycolmap  # noqa: F401  (first: it installs glog's SIGTERM handler, replaced below)
 
     from .pipeline import EMPTY_PLAN, NO_SCENE, OUTPUT_NOT_WRITABLE, ReconError
