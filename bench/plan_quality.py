@@ -43,6 +43,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument('--scenarios', nargs='+', default=['one_plant', 'three_row'], choices=list(SCENARIOS))
     ap.add_argument('--realizations', default='0,1', help='wind realizations to reconstruct (comma-separated)')
     ap.add_argument('--width', type=int, default=2000)
+    ap.add_argument('--threads', type=int, default=0,
+                    help='threads of the reconstruction (0: all cores; 1 when something else runs beside it)')
     ap.add_argument('--height', type=int, default=1500)
     ap.add_argument('--ground', action='store_true', help='render a textured soil plane under the plants')
     ap.add_argument('--phase', default='all', choices=['plans', 'recon', 'analyze', 'all'])
@@ -156,7 +158,8 @@ def recon_cell(scenario: str, models: str, plan: dict, k: int, args) -> dict:
 
     def compute() -> dict:
         noisy, _ = scene(scenario, models)
-        cfg = ReconConfig(width=args.width, height=args.height, ground=args.ground, keep_images=False)
+        cfg = ReconConfig(width=args.width, height=args.height, ground=args.ground, keep_images=False,
+                          num_threads=args.threads)
         t0 = time.perf_counter()
         try:
             r = reconstruct_realization(noisy, k, np.asarray(plan['cameras']), cfg)

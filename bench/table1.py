@@ -52,6 +52,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument('--evals', type=int, default=100)
     ap.add_argument('--init', type=int, default=50)
     ap.add_argument('--width', type=int, default=2000)
+    ap.add_argument('--threads', type=int, default=0,
+                    help='threads of the reconstruction (0: all cores; 1 when something else runs beside it)')
     ap.add_argument('--height', type=int, default=1500)
     ap.add_argument('--realizations', type=int, default=0,
                     help='reconstruct the first n wind realizations of each plan (0: all K)')
@@ -71,7 +73,7 @@ def recon_cell(cache: Path, out: Path, scenario: str, row: str, plan: dict, args
 
     def compute() -> dict:
         noisy, _ = scene(scenario, args.models)
-        cfg = ReconConfig(width=args.width, height=args.height)
+        cfg = ReconConfig(width=args.width, height=args.height, num_threads=args.threads)
         folder = out / 'recon' / tag
         try:
             ks = range(min(args.realizations, len(noisy.points))) if args.realizations else None
