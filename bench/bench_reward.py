@@ -21,22 +21,12 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from vp_planner.reward import noisy_reward, prepare_points
+from vp_planner.reward_models import make_reward
+from vp_planner.space import ViewSpace
+from vp_scene.plants import load_ply
+
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "src" / "vp_planner"))
-
-from vp_planner.reward import noisy_reward, prepare_points  # noqa: E402
-from vp_planner.reward_models import make_reward  # noqa: E402
-from vp_planner.space import ViewSpace  # noqa: E402
-
-
-def load_ply_xyz(path: Path) -> np.ndarray:
-    data = path.read_bytes()
-    end = data.index(b"end_header\n") + len(b"end_header\n")
-    header = data[:end].decode("latin1")
-    n = int(header.split("element vertex ")[1].split()[0])
-    rec = np.dtype([("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("r", "u1"), ("g", "u1"), ("b", "u1")])
-    a = np.frombuffer(data[end:end + n * rec.itemsize], dtype=rec)
-    return np.stack([a["x"], a["y"], a["z"]], axis=1)
 
 
 def synthetic_plant(n: int, rng: np.random.Generator) -> np.ndarray:
@@ -50,7 +40,7 @@ def scene(points: int, K: int, seed: int = 0) -> tuple[np.ndarray, str]:
     rng = np.random.default_rng(seed)
     ply = ROOT.parent / "shared" / "data" / "corn50" / "10.ply"
     if ply.exists():
-        P = load_ply_xyz(ply)
+        P = load_ply(ply).points  # the project's one PLY reader
         P = P[rng.choice(len(P), points, replace=len(P) < points)]
         P[:, 2] -= P[:, 2].min()
         source = str(ply.name)
