@@ -84,8 +84,14 @@ class Fleet:
         p = msg.pose.pose if isinstance(msg, Odometry) else msg.pose
         return pose7(p)
 
-    def wait_for_poses(self, timeout: float = TIMEOUT) -> bool:
-        return self.client.spin_until(lambda: all(self.poses[d] for d in self.drones), timeout)
+    def wait_for_poses(self, dispatcher=None, timeout: float = TIMEOUT) -> bool:
+        """Until this client has every drone's pose and, given the dispatcher's process, until the
+        dispatcher logged each drone's first pose (it discovers a late drone on its own, 0.5-3 s)."""
+        def ready() -> bool:
+            seen = dispatcher.output() if dispatcher is not None else ""
+            return all(self.poses[d] for d in self.drones) and \
+                (dispatcher is None or all(f"drone {d} reporting" in seen for d in self.drones))
+        return self.client.spin_until(ready, timeout)
 
 
 def start_drones(start_node, env, starts: dict, **params) -> dict:
@@ -147,7 +153,7 @@ def test_drones_fly_to_their_poses_and_a_new_plan_redispatches(ros_env, start_no
     starts = {d: [float(k), -6.0 + 0.3 * k * k, 0.0] for k, d in enumerate(drones)}  # a launch row
     start_drones(start_node, ros_env, starts, frame_id="plot", speed=4.0)
     fleet = Fleet(ros_node(ros_env), drones)
-    assert fleet.wait_for_poses(), dispatcher.output()
+    assert fleet.wait_for_poses(dispatcher), dispatcher.output()
 
     first = ring(4)
     ans = fleet.send(first, stamp=101)
@@ -188,7 +194,8 @@ def test_a_silent_drone_is_named_and_nothing_is_dispatched(ros_env, start_node, 
     starts = {"d0": [0.0, -4.0, 0.0], "d1": [1.0, -4.0, 0.0], "d2": [2.0, -4.0, 0.0]}
     sims = start_drones(start_node, ros_env, {d: starts[d] for d in ("d0", "d1")}, pose_type="odometry")
     fleet = Fleet(ros_node(ros_env), drones, odometry=True)
-    assert fleet.client.spin_until(lambda: fleet.poses["d0"] and fleet.poses["d1"], TIMEOUT)
+    assert fleet.client.spin_until(lambda: fleet.poses["d0"] and fleet.poses["d1"] and all(
+        f"drone {d} reporting" in dispatcher.output() for d in ("d0", "d1")), TIMEOUT), dispatcher.output()
 
     ans = fleet.send(ring(2), stamp=201)
     assert ans.error_code == FleetAssignment.DRONE_SILENT, ans.error_msg
@@ -199,7 +206,7 @@ def test_a_silent_drone_is_named_and_nothing_is_dispatched(ros_env, start_node, 
     assert not any(fleet.goals[d] for d in drones)
 
     sims.update(start_drones(start_node, ros_env, {"d2": starts["d2"]}, pose_type="odometry"))
-    assert fleet.wait_for_poses()
+    assert fleet.wait_for_poses(dispatcher), dispatcher.output()
     ans = fleet.send(ring(2), stamp=202)
     check_dispatch(fleet, ans, ring(2), FleetTransform(), "body")
     assert len(ans.spare_drones) == 1
@@ -222,7 +229,7 @@ def test_refused_plans_and_the_missing_scene(ros_env, start_node, ros_node) -> N
     dispatcher = start_node("vp_planner", "dispatcher", {"drones": drones, "scene_timeout": 0.5}, ros_env)
     start_drones(start_node, ros_env, {"d0": [0.0, -4.0, 0.0], "d1": [1.0, -4.0, 0.0]})
     fleet = Fleet(ros_node(ros_env), drones)
-    assert fleet.wait_for_poses()
+    assert fleet.wait_for_poses(dispatcher), dispatcher.output()
 
     ans = fleet.send(ring(2), stamp=301)
     assert ans.error_code == FleetAssignment.NO_SCENE and "stand-off could not be checked" in ans.error_msg

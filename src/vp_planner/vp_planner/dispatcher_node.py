@@ -208,7 +208,11 @@ class DispatcherNode(Node):
                                    throttle_duration_sec=5.0)
             return
         with self._lock:
+            first = drone not in self._reports
             self._reports[drone] = (time.monotonic(), msg.header.frame_id, p)
+        if first:
+            self.get_logger().info(f'drone {drone} reporting: first pose at ({p[0]:+.2f}, {p[1]:+.2f}, {p[2]:+.2f}) '
+                                   f'in {msg.header.frame_id!r}')
 
     def _on_scene(self, msg: PointCloud2) -> None:
         frame = self._values()['frame_id']
