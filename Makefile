@@ -9,13 +9,17 @@ export ROS_DOMAIN_ID ?= $(shell echo $$(( $$$$ % 200 + 10 )))
 export PYOPENGL_PLATFORM ?= egl
 
 SCENARIO ?= one_plant
+# LAYOUT=path/to/field.yaml: a layout file instead of a built-in SCENARIO (README "Your own field")
+LAYOUT   ?=
+SCENE_ARG = $(or $(LAYOUT),$(SCENARIO))
+SCENE_TAG = $(basename $(notdir $(SCENE_ARG)))
 METHOD   ?= egp
 CAMERAS  ?= 4
 DRONES   ?= $(CAMERAS)
 EVALS    ?= 100
 SEED     ?= 0
 REWARD   ?=
-OUT      ?= out/$(SCENARIO)-$(METHOD)-$(CAMERAS)cams-seed$(SEED)
+OUT      ?= out/$(SCENE_TAG)-$(METHOD)-$(CAMERAS)cams-seed$(SEED)
 MODELS   ?=
 PLAN     ?= $(OUT)/plan.json
 RECON_ARGS ?=
@@ -33,12 +37,12 @@ test: setup
 	@$(ENV) python -m pytest -q -p no:cacheprovider tests src/vp_scene/test src/vp_planner/test src/vp_recon/test
 
 run: setup
-	@$(ENV) python tools/run_suite.py --scenario $(SCENARIO) --method $(METHOD) --cameras $(CAMERAS) \
+	@$(ENV) python tools/run_suite.py --scenario $(SCENE_ARG) --method $(METHOD) --cameras $(CAMERAS) \
 	  --evals $(EVALS) --seed $(SEED) --out $(OUT) --drones $(DRONES) $(if $(MODELS),--models $(MODELS)) \
 	  $(if $(REWARD),--reward $(REWARD))
 
 plan: setup
-	@$(ENV) python -m vp_planner.cli --scenario $(SCENARIO) --method $(METHOD) --cameras $(CAMERAS) \
+	@$(ENV) python -m vp_planner.cli --scenario $(SCENE_ARG) --method $(METHOD) --cameras $(CAMERAS) \
 	  --evals $(EVALS) --seed $(SEED) --out $(OUT) $(if $(MODELS),--models $(MODELS)) $(if $(REWARD),--reward $(REWARD))
 
 recon: setup

@@ -150,3 +150,27 @@ def test_a_dead_node_is_reported_last_without_tracebacks(ros_env, tmp_path) -> N
     last = text.strip().splitlines()[-1]
     assert 'node "recon" died (exit code 2)' in last and "width" in last, text[-3000:]
     assert "Traceback" not in text and "KeyboardInterrupt" not in text, text[-6000:]
+
+
+def test_layout_file_goes_to_the_scene_node_as_an_absolute_path(monkeypatch) -> None:
+    """--scenario FILE: read at once; the scene node gets the absolute path (it may run elsewhere),
+    summary.json the layout's name; a built-in name is passed on as it is."""
+    import run_suite
+
+    monkeypatch.chdir(REPO)
+    args = run_suite.parse_args(["--scenario", "examples/field.yaml"])
+    assert args.scenario == args.scenario_file == str(REPO / "examples" / "field.yaml")
+    assert args.scenario_name == "small_field"
+    args = run_suite.parse_args(["--scenario", "row_12"])
+    assert args.scenario == args.scenario_name == "row_12" and args.scenario_file is None
+
+
+def test_bad_layout_file_is_a_usage_error_before_any_node_starts(ros_env, tmp_path) -> None:
+    bad = tmp_path / "field.yaml"
+    bad.write_text("grid: {rows: three, columns: 2}\n")
+    proc = subprocess.run([sys.executable, str(SCRIPT), "--scenario", str(bad), "--out", str(tmp_path / "run")],
+                          env=ros_env, capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    last = proc.stderr.strip().splitlines()[-1]
+    assert f"--scenario: {bad}: grid.rows must be an integer >= 1, got 'three'" in last, proc.stderr
+    assert "started" not in proc.stdout and not (tmp_path / "run").exists()

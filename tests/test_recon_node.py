@@ -19,7 +19,7 @@ from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
-from vp_interfaces.msg import CameraPlan
+from vp_interfaces.msg import CameraPlan, SceneDescription
 from vp_interfaces.msg import ReconstructionScore as Score
 
 from vp_scene.camera import cameras_to_poses
@@ -149,6 +149,34 @@ def test_unwritable_output_folder(recon_system, tmp_path) -> None:
     agg = aggregate(scores)[0]
     assert agg.error_code == Score.OUTPUT_NOT_WRITABLE and str(blocker) in agg.error_msg
     assert recon.alive() and "not writable" in recon.output()
+
+
+def test_scene_of_a_layout_file_is_rebuilt_from_the_description(ros_env, start_node, ros_node, tmp_path) -> None:
+    """The recon rebuilds a layout file's scene (jitter, an explicit yaw, scale and procedural
+    model) from the placements in /scene/description: the file is deleted before the plan comes.
+    The unwritable output folder is checked right after the scene, so OUTPUT_NOT_WRITABLE (not
+    NO_SCENE) says the rebuilt scene matched /scene/noisy_points; no rendering is needed."""
+    field = tmp_path / "recon_field.json"
+    field.write_text('{"name": "recon_field", "jitter": 0.05, "plants": [{"x": -0.4, "y": 0.0}, '
+                     '{"x": 0.4, "y": 0.1, "yaw": 1.0, "scale": 1.2, "model": "procedural-3"}]}')
+    client = ros_node(ros_env)
+    desc = client.subscribe(SceneDescription, "/scene/description", LATCHED)
+    start_node("vp_scene", "scene", {**SCENE, "scenario": str(field), "points_per_plant": 500}, ros_env)
+    assert client.spin_until(lambda: desc, 60), "no /scene/description"
+    assert desc[0].scenario == str(field) and [p.model for p in desc[0].plants][1] == "procedural-3"
+    field.unlink()
+
+    blocker = tmp_path / "a_file"
+    blocker.write_text("not a folder")
+    recon = start_node("vp_recon", "recon", {**RECON, "output_folder": str(blocker / "sub")}, ros_env)
+    scores = client.subscribe(Score, "/reconstruction/score", 10)
+    pub = client.node.create_publisher(PoseArray, "/camera_plan", LATCHED)
+    assert client.spin_until(lambda: client.node.count_subscribers("/camera_plan") >= 1, 60), recon.output()
+    pub.publish(pose_array(ring()))
+    assert client.spin_until(lambda: aggregate(scores), 60), recon.output()[-3000:]
+    agg = aggregate(scores)[0]
+    assert agg.error_code == Score.OUTPUT_NOT_WRITABLE, (agg.error_code, agg.error_msg)
+    assert recon.wait_for_output(f"scene description: {field}, 2 plants", 30), recon.output()[-3000:]
 
 
 def test_bad_parameter_exits_non_zero(ros_env, start_node) -> None:

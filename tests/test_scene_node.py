@@ -16,11 +16,13 @@ from vp_interfaces.msg import SceneDescription
 
 from vp_scene.build import build_noisy_scene
 from vp_scene.cloud import pointcloud2_to_numpy
+from vp_scene.layout import Layout, load_layout
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 TOPICS = (("/scene/points", PointCloud2), ("/scene/noisy_points", PointCloud2),
           ("/scene/description", SceneDescription))
 TIMEOUT = 30.0
+FIELD = Path(__file__).resolve().parents[1] / "examples" / "field.yaml"   # 2 x 4 plants, jitter 0.05 m
 
 
 def subscribe_all(client, node=None) -> dict:
@@ -72,6 +74,42 @@ def test_scene_published_and_latched(ros_env, start_node, ros_node) -> None:
     assert node.stop() == 0, node.output()  # SIGTERM: clean exit
 
 
+def test_scene_from_a_layout_file(ros_env, start_node, ros_node) -> None:
+    """scenario:=<layout file>: the layout's 8 plants in the cloud and in /scene/description,
+    which carries the file as given; the placements alone rebuild the identical scene."""
+    client = ros_node(ros_env)
+    got = subscribe_all(client)
+    node = start_node("vp_scene", "scene", dict(scenario=str(FIELD), points_per_plant=100, realizations=2,
+                                                levels=3, seed=4), ros_env)
+    assert client.spin_until(all_arrived(got), TIMEOUT), f"no scene within {TIMEOUT} s:\n{node.output()}"
+    pts, _, _ = pointcloud2_to_numpy(got["/scene/points"][0])
+    npts, _, nreal = pointcloud2_to_numpy(got["/scene/noisy_points"][0])
+    desc = got["/scene/description"][0]
+    assert pts.shape == (800, 3) and npts.shape == (1600, 3)
+    assert desc.scenario == str(FIELD) and len(desc.plants) == 8
+    assert node.wait_for_output("scene 'small_field': 8 plants", TIMEOUT), node.output()
+    nominal = load_layout(FIELD).positions()
+    placed = np.array([[p.position.x, p.position.y, p.position.z] for p in desc.plants])
+    assert np.abs(placed - nominal).max() <= 0.05 and np.abs(placed - nominal).max() > 0   # jittered
+
+    layout = Layout.from_placements(desc.scenario, [(p.model, p.yaw, p.scale, p.position.x, p.position.y)
+                                                    for p in desc.plants])
+    noisy, _ = build_noisy_scene(scenario=layout, models=desc.models_folder or None, seed=desc.seed,
+                                 points_per_plant=desc.points_per_plant, levels=desc.levels,
+                                 realizations=desc.realizations, wind_variance=desc.wind_variance,
+                                 wind_direction=desc.wind_direction)
+    np.testing.assert_allclose(pts, noisy.scene.points, atol=1e-6)
+    for k in range(2):
+        np.testing.assert_allclose(npts[nreal == k], noisy.points[k], atol=1e-6)
+    assert node.stop() == 0, node.output()
+
+
+def _bad_layout(tmp_path: Path) -> str:
+    path = tmp_path / "bad_field.yaml"
+    path.write_text("grid:\n  rows: three\n  columns: 2\n")
+    return str(path)
+
+
 def _corrupt_folder(tmp_path: Path) -> str:
     folder = tmp_path / "models"
     folder.mkdir()
@@ -97,7 +135,7 @@ def _absurd_folder(tmp_path: Path) -> str:
 
 
 @pytest.mark.parametrize("case", ["unknown_scenario", "zero_realizations", "missing_folder", "corrupt_ply",
-                                  "absurd_plant", "wrong_type"])
+                                  "absurd_plant", "wrong_type", "bad_layout_file", "missing_layout_file"])
 def test_bad_start_parameter_exits_nonzero(case, tmp_path, ros_env, start_node, ros_node) -> None:
     params, expected = {
         "unknown_scenario": ({"scenario": "nine_square"}, ["unknown scenario", "nine_square"]),
@@ -106,6 +144,10 @@ def test_bad_start_parameter_exits_nonzero(case, tmp_path, ros_env, start_node, 
         "corrupt_ply": ({"models_folder": _corrupt_folder(tmp_path)}, ["broken_plant.ply", "truncated"]),
         "absurd_plant": ({"models_folder": _absurd_folder(tmp_path)}, ["far_plant.ply", "implausible plant size"]),
         "wrong_type": ({"realizations": 2.5}, ["realizations", "integer"]),
+        "bad_layout_file": ({"scenario": _bad_layout(tmp_path)},
+                            [f"{tmp_path}/bad_field.yaml: grid.rows must be an integer >= 1, got 'three'"]),
+        "missing_layout_file": ({"scenario": str(tmp_path / "no_field.yaml")},
+                                [f"layout file not found: {tmp_path}/no_field.yaml"]),
     }[case]
     client = ros_node(ros_env)
     got = subscribe_all(client)
@@ -137,7 +179,8 @@ def test_runtime_parameter_change(ros_env, start_node, ros_node, tmp_path) -> No
     bad = [(Parameter("realizations", value=0), "realizations"),
            (Parameter("scenario", value="bogus"), "unknown scenario"),
            (Parameter("models_folder", value=str(tmp_path / "missing")), "not found"),
-           (Parameter("plant_spacing", value=-1.0), "plant_spacing")]
+           (Parameter("plant_spacing", value=-1.0), "plant_spacing"),
+           (Parameter("scenario", value=_bad_layout(tmp_path)), "bad_field.yaml: grid.rows")]
     for prm, reason in bad:
         res = client.spin_future(params.set_parameters([prm]), TIMEOUT).results[0]
         assert not res.successful and reason in res.reason, (prm.name, res.reason)

@@ -19,6 +19,7 @@ Run after ``make setup`` (``make run`` does both)::
 
     . .venv/bin/activate && . install/setup.bash
     python tools/run_suite.py --scenario one_plant --method egp --cameras 4 --out out/demo
+    python tools/run_suite.py --scenario examples/field.yaml --cameras 6 --out out/field   # a layout file
 """
 from __future__ import annotations
 
@@ -42,7 +43,9 @@ EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_NODE_DIED, EXIT_TIMEOUT, EXIT_INTERRUPTED
 def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0],
                                  formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    ap.add_argument('--scenario', default='one_plant', choices=['one_plant', 'three_row', 'six_rect'])
+    ap.add_argument('--scenario', default='one_plant', metavar='NAME_OR_FILE',
+                    help='a layout name (one_plant, three_row, six_rect, grid_3x3, row_12) or a layout file '
+                         "(.yaml, .yml, .json; README 'Your own field')")
     ap.add_argument('--method', default='egp', choices=['egp', 'gp', 'circle', 'sa', 'random'])
     ap.add_argument('--cameras', type=int, default=4)
     ap.add_argument('--evals', type=int, default=100, help='reward evaluations')
@@ -75,7 +78,29 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
         if not Path(args.models).is_dir():
             ap.error(f'--models: no such folder: {args.models}')
         args.models = str(Path(args.models).resolve())
+    args.scenario_name, args.scenario_file = check_scenario(ap, args.scenario)
+    if args.scenario_file is not None:  # the scene node gets the file, wherever it runs from
+        args.scenario = args.scenario_file
     return args
+
+
+def check_scenario(ap: argparse.ArgumentParser, scenario: str) -> tuple:
+    """(the layout's name, its file as an absolute path or None for a built-in layout); a layout
+    file is read and checked now (a bad one is a usage error: exit 2, the file and field named)."""
+    try:
+        from vp_scene.layout import BUILTIN_LAYOUTS, LayoutError, is_layout_file, load_layout
+    except ImportError as exc:
+        ap.error(f'cannot import vp_scene ({exc}): run make setup and source install/setup.bash')
+    if scenario in BUILTIN_LAYOUTS:
+        return scenario, None
+    if not is_layout_file(scenario):
+        ap.error(f"--scenario: {scenario!r} is neither a layout name ({', '.join(BUILTIN_LAYOUTS)}) "
+                 f"nor a layout file (.yaml, .yml, .json)")
+    try:
+        layout = load_layout(scenario)
+    except LayoutError as exc:
+        ap.error(f'--scenario: {exc}')
+    return layout.name, str(Path(scenario).resolve())
 
 
 class Mission:
@@ -220,7 +245,7 @@ def run(args: argparse.Namespace) -> int:
     env['PYTHONUNBUFFERED'] = '1'
     start = time.monotonic()
     deadline = start + args.timeout
-    print(f'vp-suite: {args.scenario}, {args.cameras} cameras, {args.method}, {args.evals} evaluations, '
+    print(f'vp-suite: {args.scenario_name}, {args.cameras} cameras, {args.method}, {args.evals} evaluations, '
           f'seed {args.seed}{f", {args.drones} drones" if args.drones else ""}; ROS_DOMAIN_ID={domain} '
           f'(localhost only); output {out}', flush=True)
 
@@ -301,7 +326,8 @@ def run(args: argparse.Namespace) -> int:
         agg = [s for s in mission.scores if s.realization == mission.Score.AGGREGATE][-1]
         per = [s for s in mission.scores if s.realization != mission.Score.AGGREGATE]
         summary = {
-            'scenario': args.scenario, 'method': args.method, 'cameras': cameras,
+            'scenario': args.scenario_name, 'scenario_file': args.scenario_file,
+            'method': args.method, 'cameras': cameras,
             'reward': result.reward, 'reward_model': result.reward_model,
             'chamfer_mean': agg.chamfer, 'chamfer_std': agg.chamfer_std,
             'poses': poses, 'seconds': time.monotonic() - start,

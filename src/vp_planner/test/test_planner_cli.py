@@ -132,3 +132,57 @@ def test_cli_refuses_more_cameras_than_it_can_plan(tmp_path: Path) -> None:
     assert out.returncode == 2, out.stderr[-3000:]
     assert out.stderr.count("\n") == 1 and "num_cameras" in out.stderr and "100" in out.stderr, out.stderr
     assert time.monotonic() - t0 < 60 and not (tmp_path / "run").exists()
+
+
+EXAMPLES = Path(__file__).resolve().parents[3] / "examples"
+
+
+def test_cli_layout_file_makes_a_self_contained_plan(tmp_path: Path) -> None:
+    """--scenario FILE: plan.json holds the layout itself (scene.scenario) and its name (scenario);
+    `python -m vp_planner.cli score` rebuilds the scene from the plan once the file is gone."""
+    from vp_scene.layout import load_layout
+
+    field = tmp_path / "my_field.yaml"
+    field.write_text((EXAMPLES / "field.yaml").read_text())
+    out = tmp_path / "run"
+    rc = main(["--scenario", str(field), "--method", "random", "--cameras", "3", "--evals", "3", "--seed", "2",
+               "--out", str(out), "--points-per-plant", "150", "--realizations", "2", "--no-progress"])
+    assert rc == 0
+    plan = json.loads((out / "plan.json").read_text())
+    assert plan["scenario"] == "small_field"
+    assert plan["scene"]["scenario"] == load_layout(field).to_dict()
+    assert len(plan["scene"]["scenario"]["plants"]) == 8 and plan["scene"]["scenario"]["jitter"] == 0.05
+    assert np.load(out / "noisy_points.npy").shape == (2, 8 * 150, 3)
+    field.unlink()
+
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(Path(__file__).resolve().parents[1]) + os.pathsep + env.get("PYTHONPATH", "")
+    p = subprocess.run([sys.executable, "-m", "vp_planner.cli", "score", "--plan", str(out / "plan.json")],
+                       capture_output=True, text=True, env=env, cwd=tmp_path, timeout=300)
+    assert p.returncode == 0, p.stderr[-3000:]
+    assert float(p.stdout.split()[-1]) == pytest.approx(plan["reward"], abs=1e-6)
+    assert "small_field" in p.stderr
+
+
+@pytest.mark.parametrize("content, text", [
+    ("grid: {rows: three, columns: 2}", "field.yaml: grid.rows must be an integer >= 1, got 'three'"),
+    (None, "layout file not found: "),
+])
+def test_cli_bad_layout_file_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture, content, text) -> None:
+    field = tmp_path / "field.yaml"
+    if content is not None:
+        field.write_text(content)
+    with pytest.raises(SystemExit) as info:
+        main(["--scenario", str(field), "--out", str(tmp_path / "x"), "--method", "random", "--no-progress"])
+    assert info.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--scenario" in err[0] and text in err[0] and str(field) in err[0], err
+    assert not (tmp_path / "x").exists()
+
+
+def test_cli_unknown_scenario_name(capsys: pytest.CaptureFixture) -> None:
+    with pytest.raises(SystemExit) as info:
+        main(["--scenario", "nine_square", "--out", "x"])
+    assert info.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "'nine_square' is neither a layout name (one_plant" in err[0] and "row_12" in err[0]

@@ -11,6 +11,10 @@ identical scene), fov, theta_match, image_size, simple_regret, ...) and ``OUT/no
 (the K x P x 3 realizations the reward was computed on). A progress bar with the best reward
 goes to stderr.
 
+``--scenario`` is a layout name or a layout file (.yaml, .yml, .json), read at once (a bad file:
+one line, exit 2); plan.json's ``scene.scenario`` then holds the layout itself (its canonical
+dict) and its top-level ``scenario`` the layout's name.
+
 ``score`` rebuilds the scene of a plan file (its ``scene``, or ``--scenario``/``--models``/...
 for a flight plan without one; ``cameras`` or ``poses``) and prints the plan's reward under the
 chosen model as the last number on stdout.
@@ -27,7 +31,9 @@ from typing import Any, Optional, Sequence
 
 import numpy as np
 
-SCENARIO_NAMES = ("one_plant", "three_row", "six_rect")
+from vp_scene.layout import BUILTIN_LAYOUTS, LayoutError, is_layout_file, load_layout, resolve_layout
+
+SCENARIO_NAMES = tuple(BUILTIN_LAYOUTS)
 
 
 class CliError(Exception):
@@ -41,8 +47,25 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
 
 
+def _scenario(text: str) -> Any:
+    """``--scenario``: a built-in name (kept as it is) or a layout file, read at once into its
+    canonical dict (:meth:`vp_scene.layout.Layout.to_dict`), which plan.json stores so that the
+    plan file rebuilds its scene without the layout file."""
+    if text in SCENARIO_NAMES:
+        return text
+    if not is_layout_file(text):
+        raise argparse.ArgumentTypeError(f"{text!r} is neither a layout name ({', '.join(SCENARIO_NAMES)}) "
+                                         f"nor a layout file (.yaml, .yml, .json)")
+    try:
+        return load_layout(text).to_dict()
+    except LayoutError as exc:
+        raise argparse.ArgumentTypeError(" ".join(str(exc).split())) from None
+
+
 def _scene_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--scenario", default="one_plant", choices=SCENARIO_NAMES)
+    p.add_argument("--scenario", default="one_plant", type=_scenario, metavar="NAME_OR_FILE",
+                   help=f"a layout name ({', '.join(SCENARIO_NAMES)}) or a layout file (.yaml, .yml, .json; "
+                        f"README 'Your own field')")
     p.add_argument("--seed", type=int, default=0, help="seed of the scene, the wind and the planner")
     p.add_argument("--models", default=None, help="folder of PLY plant models (default: procedural corn)")
     p.add_argument("--points-per-plant", type=int, default=4000)
@@ -121,7 +144,8 @@ def set_threads(n: int) -> None:
 
 
 def scene_of(args: argparse.Namespace) -> dict:
-    """The scene dict (build_noisy_scene's keyword arguments) of the command line options."""
+    """The scene dict (build_noisy_scene's keyword arguments) of the command line options;
+    ``scenario`` is a layout name or a layout file's canonical dict (see :func:`_scenario`)."""
     models = None
     if args.models:
         folder = Path(args.models)
@@ -192,7 +216,7 @@ def plan(args: argparse.Namespace) -> dict:
             bar.close()
     poses = cameras_to_poses(res.cameras)
     data = {
-        "scenario": args.scenario,
+        "scenario": resolve_layout(scene["scenario"]).name,
         "method": args.method,
         "reward_model": res.reward_model,
         "num_cameras": int(args.cameras),
@@ -245,7 +269,8 @@ def score(args: argparse.Namespace) -> float:
     image = CameraModel(*_image_size(args, pf.image_size or (2000, 1500)), fov)
     realizations = build_scene(scene)
     value = float(np.asarray(make_reward(model, realizations, fov, theta, image)(pf.cameras[None]))[0])
-    print(f"plan score: {model} reward of {args.plan} ({len(pf.cameras)} cameras, {scene['scenario']}):",
+    print(f"plan score: {model} reward of {args.plan} ({len(pf.cameras)} cameras, "
+          f"{resolve_layout(scene['scenario']).name}):",
           file=sys.stderr)
     print(f"{value:.6f}")
     return value

@@ -3,7 +3,9 @@
 Subscribes (all reliable, TRANSIENT_LOCAL, as the scene and planner nodes publish them)
 
 * ``/scene/description`` (vp_interfaces/SceneDescription): how the scene was built; the node
-  rebuilds the identical scene, with its plant meshes, to render it;
+  rebuilds the identical scene, with its plant meshes, to render it, from the plants' placements
+  (model, yaw, scale, position), the models folder, seed and points per plant (a scene from a
+  layout file needs no copy of the file here);
 * ``/scene/noisy_points`` (sensor_msgs/PointCloud2): the K wind realizations, the ground truth
   the reconstructions are scored against (checked against the rebuilt scene);
 * ``/camera_plan`` (geometry_msgs/PoseArray): the plan, one pose per camera, +x = optical axis,
@@ -61,6 +63,7 @@ from vp_recon.pipeline import (ReconCancelled, ReconConfig, ReconError, Realizat
 from vp_scene.build import build_noisy_scene
 from vp_scene.camera import poses_to_cameras
 from vp_scene.cloud import numpy_to_pointcloud2, realizations_from_cloud
+from vp_scene.layout import Layout
 from vp_scene.node_runtime import declare_typed, run_node, typed_values
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
@@ -247,9 +250,12 @@ class ReconNode(Node):
             raise ReconError(Score.NO_SCENE, f'no scene yet: nothing received on {" and ".join(missing)}')
         if scene is None:
             folder = desc.models_folder
-            try:
+            try:  # from the plants' placements, not the scenario: no layout file needed here
+                layout = Layout.from_placements(
+                    desc.scenario or 'scene', [(p.model, p.yaw, p.scale, p.position.x, p.position.y)
+                                               for p in desc.plants], source='/scene/description')
                 scene, _ = build_noisy_scene(
-                    scenario=desc.scenario, models=folder or None, seed=desc.seed,
+                    scenario=layout, models=folder or None, seed=desc.seed,
                     points_per_plant=desc.points_per_plant, plant_spacing=desc.plant_spacing,
                     row_spacing=desc.row_spacing, levels=desc.levels, realizations=desc.realizations,
                     wind_variance=desc.wind_variance, wind_direction=desc.wind_direction)

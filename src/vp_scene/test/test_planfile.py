@@ -45,3 +45,23 @@ def test_bad_fields_name_field_and_file(tmp_path: Path, fields: dict, text: str)
     with pytest.raises(PlanFileError) as err:
         load_plan(path)
     assert text in str(err.value) and str(path) in str(err.value), str(err.value)
+
+
+def test_scene_scenario_may_be_a_layout_object(tmp_path: Path) -> None:
+    """A plan file carries its layout (the planner writes a layout file's canonical dict)."""
+    layout = {"name": "two", "plants": [{"x": 0.0, "y": 0.0}, {"x": 0.5, "y": 0.0, "yaw": 1.0}], "jitter": 0.1}
+    plan = load_plan(write(tmp_path, scene={"scenario": layout, "seed": 3}))
+    assert plan.scene == {"scenario": layout, "seed": 3}
+
+
+@pytest.mark.parametrize("scenario, text", [
+    ({"plants": [{"x": 0.0, "y": None}]}, "scene.scenario.plants[0].y must be a number (metres), got None"),
+    ({"grid": {"rows": 2, "colums": 2}}, "unknown key 'colums' in scene.scenario.grid"),
+    ({"plants": [], "name": "x"}, "scene.scenario.plants must hold at least one plant"),
+    (3, "'scene' must be an object with a 'scenario'"),
+])
+def test_bad_layout_object_names_plan_file_and_field(tmp_path: Path, scenario, text: str) -> None:
+    path = write(tmp_path, scene={"scenario": scenario})
+    with pytest.raises(PlanFileError) as err:
+        load_plan(path)
+    assert str(err.value).startswith(f"{path}: ") and text in str(err.value), str(err.value)

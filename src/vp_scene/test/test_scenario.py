@@ -12,7 +12,7 @@ from vp_scene.plants import PlantModel, load_models
 from vp_scene.scenario import SCENARIOS, PlacedPlant, layout, make_scene, place_mesh, place_points
 
 CORN50 = Path(__file__).resolve().parents[3].parent / "shared" / "data" / "corn50"
-N_PLANTS = {"one_plant": 1, "three_row": 3, "six_rect": 6}
+N_PLANTS = {"one_plant": 1, "three_row": 3, "six_rect": 6, "grid_3x3": 9, "row_12": 12}
 
 
 @pytest.fixture(scope="module")

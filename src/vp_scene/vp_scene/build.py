@@ -4,14 +4,15 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Optional, Sequence, Union
 
+from .layout import Layout, resolve_layout
 from .plants import PlantModel, load_models
-from .scenario import SCENARIOS, make_scene
+from .scenario import make_scene
 from .wind import NoisyScene, WindConfig, make_noisy_scene
 
 __all__ = ["build_noisy_scene"]
 
 
-def build_noisy_scene(scenario: str = "one_plant",
+def build_noisy_scene(scenario: Union[str, dict, Layout] = "one_plant",
                       models: Union[None, str, Path, Sequence[PlantModel]] = None,
                       seed: int = 0, points_per_plant: int = 4000, plant_spacing: float = 0.6,
                       row_spacing: float = 0.76, levels: int = 10, realizations: int = 5,
@@ -20,6 +21,8 @@ def build_noisy_scene(scenario: str = "one_plant",
     """Build the scene and its K wind realizations (paper Sec. V-A).
 
     Args:
+        scenario: a built-in layout name, a layout file (.yaml, .yml, .json), a layout dict or a
+            Layout (:func:`vp_scene.layout.resolve_layout`).
         models: None or '' for procedural corn, a folder of PLY plants, or a list of models.
         (others: see :func:`vp_scene.scenario.make_scene` and :class:`vp_scene.wind.WindConfig`)
 
@@ -27,11 +30,11 @@ def build_noisy_scene(scenario: str = "one_plant",
         (the noisy scene, the plant models that ``PlacedPlant.model_index`` refers to).
 
     Raises:
-        ValueError (PlantModelError for model files) naming the problem. Cheap checks
-        (scenario, wind parameters) come before loading any file.
+        ValueError (PlantModelError for model files, LayoutError for the layout) naming the
+        problem. Cheap checks (the layout, read and checked once here; wind parameters) come
+        before loading any model file.
     """
-    if scenario not in SCENARIOS:
-        raise ValueError(f"unknown scenario {scenario!r}; expected one of {', '.join(SCENARIOS)}")
+    layout = resolve_layout(scenario, plant_spacing, row_spacing)
     config = WindConfig(levels=levels, realizations=realizations, variance=wind_variance,
                         direction=wind_direction)
     loaded: Optional[list] = None
@@ -40,6 +43,6 @@ def build_noisy_scene(scenario: str = "one_plant",
             loaded = load_models(models)
     elif models is not None:
         loaded = list(models)
-    scene = make_scene(scenario, models=loaded, seed=seed, points_per_plant=points_per_plant,
+    scene = make_scene(layout, models=loaded, seed=seed, points_per_plant=points_per_plant,
                        plant_spacing=plant_spacing, row_spacing=row_spacing)
     return make_noisy_scene(scene, config, seed), scene.models

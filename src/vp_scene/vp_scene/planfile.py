@@ -5,7 +5,10 @@ A plan file is a JSON object with (written by ``python -m vp_planner.cli``)
 * ``cameras``: N rows [cx, cy, cz, vx, vy, vz] (:mod:`vp_scene.camera`), or ``poses``: N rows
   [x, y, z, qx, qy, qz, qw] (a flight plan from elsewhere; +x of each pose = optical axis);
 * ``scene``: the arguments of :func:`vp_scene.build.build_noisy_scene` that rebuild the scene
-  the plan was made for (``scenario`` required; the others default as there);
+  the plan was made for (``scenario`` required; the others default as there). ``scenario`` is a
+  built-in layout name or a layout object (:meth:`vp_scene.layout.Layout.to_dict`: the planner
+  writes a layout file's content here, so that the plan file is self-contained), checked here
+  with the layout parser (errors name ``scene.scenario.<field>``);
 * optional ``fov`` and ``theta_match`` (rad), ``image_size`` [W, H], ``method``, ``reward``,
   ``reward_model`` and anything else the planner recorded.
 
@@ -25,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .camera import poses_to_cameras
+from .layout import LayoutError, layout_from_dict
 
 __all__ = ["SCENE_KEYS", "PlanFileError", "PlanFile", "load_plan", "write_plan"]
 
@@ -100,11 +104,17 @@ def _scene(path: Path, plan: dict) -> Optional[dict]:
     scene = plan.get("scene")
     if scene is None:
         return None
-    if not isinstance(scene, dict) or not isinstance(scene.get("scenario"), str):
-        raise PlanFileError(f"{path}: 'scene' must be an object with a 'scenario' name")
+    if not isinstance(scene, dict) or not isinstance(scene.get("scenario"), (str, dict)):
+        raise PlanFileError(f"{path}: 'scene' must be an object with a 'scenario' (a layout name, "
+                            f"a layout file or a layout object)")
     unknown = sorted(set(scene) - set(SCENE_KEYS))
     if unknown:
         raise PlanFileError(f"{path}: unknown 'scene' keys {unknown}; expected some of {list(SCENE_KEYS)}")
+    if isinstance(scene["scenario"], dict):
+        try:
+            layout_from_dict(scene["scenario"], str(path), field_prefix="scene.scenario.")
+        except LayoutError as exc:
+            raise PlanFileError(str(exc)) from None
     return dict(scene)
 
 

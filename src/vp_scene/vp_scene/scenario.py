@@ -1,26 +1,30 @@
-"""Scene layouts of paper Sec. V-A: 1 plant, 3 plants in a row, 6 plants in a 2 x 3 rectangle.
+"""Scenes: plants placed on the ground after a layout (paper Sec. V-A and layout files).
 
-"Each plant was given a random rotation around its vertical axis and a scale within 10% of the
-original size" (Sec. V-A): yaw ~ U[0, 2 pi), scale ~ U[0.9, 1.1]. Plants stand on the ground
-(z = 0, frame ``map``, REP-103), rows run along x, the layout is centred at the origin in x, y.
+The layout (:mod:`vp_scene.layout`: a built-in name, a layout file or dict, or a Layout) says
+where the plants stand. "Each plant was given a random rotation around its vertical axis and a
+scale within 10% of the original size" (Sec. V-A): yaw ~ U[0, 2 pi), scale ~ U[0.9, 1.1], unless
+the layout gives them. Plants stand on the ground (z = 0, frame ``map``, REP-103); the built-in
+layouts are centred at the origin in x, y with rows along x.
 
 ROS-free: numpy (and trimesh for placing meshes).
 """
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
-from typing import Optional, Sequence
+from typing import Optional, Sequence, Union
 
 import numpy as np
 import trimesh
 
+from .layout import BUILTIN_LAYOUTS, Layout, LayoutError, PlantSpec, resolve_layout
 from .plants import PlantModel, procedural_corn, procedural_seed
 
 __all__ = ["SCENARIOS", "PlacedPlant", "Scene", "layout", "make_scene", "place_points", "place_mesh"]
 
-SCENARIOS = ("one_plant", "three_row", "six_rect")
-
+#: The built-in layouts (:data:`vp_scene.layout.BUILTIN_LAYOUTS`).
+SCENARIOS = tuple(BUILTIN_LAYOUTS)
 
 @dataclass(frozen=True)
 class PlacedPlant:
@@ -31,7 +35,7 @@ class PlacedPlant:
             :func:`make_scene`, or the scene's procedural plants).
         model_name: the model's name (PLY stem or ``procedural-<seed>``).
         yaw: rotation about +z, rad, in [0, 2 pi).
-        scale: uniform scale, in [0.9, 1.1].
+        scale: uniform scale, in [0.9, 1.1] (drawn) or as the layout gives it.
         position: (3,) stalk base on the ground (z = 0).
         z_range: (2,) the placed plant's min / max height (min = 0: it stands on the ground).
         base_z: model-frame height of the model's lowest point (moved to the ground).
@@ -51,7 +55,7 @@ class Scene:
     """A noise-free scene.
 
     Attributes:
-        scenario: one of :data:`SCENARIOS`.
+        scenario: the layout's name (one of :data:`SCENARIOS` for a built-in layout).
         plants: the placed plants.
         points: (P, 3) float64 scene points (plant after plant).
         colors: (P, 3) uint8 RGB colours.
@@ -72,16 +76,6 @@ class Scene:
         return np.array([p.z_range for p in self.plants], dtype=np.float64).reshape(-1, 2)
 
 
-def _check_positive(name: str, value: float) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number > 0, got {value!r}") from None
-    if not math.isfinite(v) or v <= 0:
-        raise ValueError(f"{name} must be > 0, got {value!r}")
-    return v
-
-
 def _check_int(name: str, value: object, minimum: int) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
         raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
@@ -90,23 +84,14 @@ def _check_int(name: str, value: object, minimum: int) -> int:
     return int(value)
 
 
-def layout(scenario: str, plant_spacing: float = 0.6, row_spacing: float = 0.76) -> np.ndarray:
-    """Stalk positions (n, 3) of a scenario on the ground, centred at the origin in x, y.
+def layout(scenario: Union[str, dict, Layout], plant_spacing: float = 0.6, row_spacing: float = 0.76) -> np.ndarray:
+    """Stalk positions (n, 3) of a scenario's layout on the ground, before jitter.
 
     one_plant: the origin; three_row: 3 plants along x, ``plant_spacing`` apart; six_rect: two
-    such rows, ``row_spacing`` apart along y.
+    such rows, ``row_spacing`` apart along y; grid_3x3, row_12: 3 x 3 and 1 x 12 grids; a layout
+    file, dict or Layout: its plants (:func:`vp_scene.layout.resolve_layout`).
     """
-    if scenario not in SCENARIOS:
-        raise ValueError(f"unknown scenario {scenario!r}; expected one of {', '.join(SCENARIOS)}")
-    s = _check_positive("plant_spacing", plant_spacing)
-    r = _check_positive("row_spacing", row_spacing)
-    if scenario == "one_plant":
-        xy = [(0.0, 0.0)]
-    elif scenario == "three_row":
-        xy = [(x * s, 0.0) for x in (-1, 0, 1)]
-    else:
-        xy = [(x * s, y * r) for y in (-0.5, 0.5) for x in (-1, 0, 1)]
-    return np.array([(x, y, 0.0) for x, y in xy], dtype=np.float64)
+    return resolve_layout(scenario, plant_spacing, row_spacing).positions()
 
 
 def _rotation(yaw: float) -> np.ndarray:
@@ -134,22 +119,65 @@ def place_mesh(mesh: trimesh.Trimesh, plant: PlacedPlant) -> trimesh.Trimesh:
     return out
 
 
-def make_scene(scenario: str, models: Optional[Sequence[PlantModel]] = None, seed: int = 0,
+_PROCEDURAL_NAME = re.compile(r"procedural-(\d+)")
+_LISTED_NAMES = 20  # model names listed in an error, at most
+
+
+def _named_model(models: Sequence[PlantModel], name: str, where: str) -> int:
+    """Index of the model called ``name``; LayoutError listing the names (``where`` = source and field)."""
+    for k, m in enumerate(models):
+        if m.name == name:
+            return k
+    names = [m.name for m in models]
+    listed = ", ".join(names[:_LISTED_NAMES]) + (f", ... ({len(names)} in all)" if len(names) > _LISTED_NAMES else "")
+    raise LayoutError(f"{where} {name!r} is not one of the models ({listed})")
+
+
+def _procedural_seed_of(name: str, where: str) -> int:
+    """The seed of a procedural plant's name ``procedural-<seed>``; any other name needs a models folder."""
+    m = _PROCEDURAL_NAME.fullmatch(name)
+    if m is None:
+        raise LayoutError(f"{where} {name!r} needs a models folder: without one the plants are procedural "
+                          f"(models procedural-<seed>)")
+    return int(m.group(1))
+
+
+def _wrap(yaw: float) -> float:
+    """yaw in [0, 2 pi) (a value already there is returned unchanged: fmod is exact)."""
+    w = yaw % (2.0 * math.pi)
+    return 0.0 if w >= 2.0 * math.pi else w
+
+
+def make_scene(scenario: Union[str, dict, Layout], models: Optional[Sequence[PlantModel]] = None, seed: int = 0,
                points_per_plant: int = 4000, plant_spacing: float = 0.6, row_spacing: float = 0.76) -> Scene:
-    """Build a scene (paper Sec. V-A).
+    """Build a scene (paper Sec. V-A) after a layout (:func:`vp_scene.layout.resolve_layout`:
+    a built-in name with these spacings, a layout file path, a layout dict or a Layout).
 
     Each plant gets yaw ~ U[0, 2 pi) and scale ~ U[0.9, 1.1]; its model is drawn among
     ``models`` (seeded choice) or, when ``models`` is None, is a distinct procedural corn plant
     (``procedural_corn(procedural_seed(seed, i))``). The plant's points are subsampled to
     ``points_per_plant`` (without replacement when the model has enough points) and placed with
-    the lowest point on the ground. Layout draws use ``default_rng([seed, 0])``, subsampling
-    ``default_rng([seed, 2])`` (the wind uses ``[seed, 1]``): everything is reproducible.
+    the lowest point on the ground.
+
+    What the layout's :class:`~vp_scene.layout.PlantSpec` gives overrides the draw: ``yaw``
+    (wrapped to [0, 2 pi)), ``scale``, ``model`` (a name among ``models``; without models,
+    ``procedural-<seed>`` is that procedural plant). Jitter j adds (dx, dy) ~ U[-j, j]^2 to each
+    position.
+
+    Random streams, all reproducible: plant after plant, ``default_rng([seed, 0])`` draws the
+    model index (with ``models``), then yaw, then scale, *always*, even where the layout
+    overrides them (so an explicit value never shifts the draws of the other plants);
+    ``default_rng([seed, 2])`` subsamples; ``default_rng([seed, 3])`` draws the jitter (only
+    when j > 0); the wind uses ``[seed, 1]``. A layout of a scene's own placements
+    (:meth:`~vp_scene.layout.Layout.from_placements`) with the same seed, models and points
+    per plant therefore rebuilds the identical scene.
 
     Raises:
-        ValueError: unknown scenario, points_per_plant < 1, spacing <= 0, negative seed, or an
-            empty ``models`` list.
+        ValueError (LayoutError for the layout) naming the problem: unknown scenario, a bad
+        layout file, an unknown model name, points_per_plant < 1, spacing <= 0, negative seed,
+        or an empty ``models`` list.
     """
-    positions = layout(scenario, plant_spacing, row_spacing)
+    lay = resolve_layout(scenario, plant_spacing, row_spacing)
     n_pts = _check_int("points_per_plant", points_per_plant, 1)
     seed = _check_int("seed", seed, 0)
     if models is not None:
@@ -158,30 +186,45 @@ def make_scene(scenario: str, models: Optional[Sequence[PlantModel]] = None, see
             raise ValueError("models is empty: give at least one plant model, or None for procedural plants")
     rng = np.random.default_rng([seed, 0])
     rng_sub = np.random.default_rng([seed, 2])
+    rng_jitter = np.random.default_rng([seed, 3])
 
     scene_models: list = list(models) if models is not None else []
     plants, pts, cols, idx = [], [], [], []
-    for i, pos in enumerate(positions):
+    for i, spec in enumerate(lay.plants):
+        where = f"{lay.where}: plants[{i}].model"
         if models is not None:
-            mi = int(rng.integers(len(models)))
+            drawn = int(rng.integers(len(models)))
+            mi = drawn if spec.model is None else _named_model(models, spec.model, where)
             model = models[mi]
             n_model = model.points.shape[0]
             sel = rng_sub.choice(n_model, size=n_pts, replace=n_pts > n_model)
             mp, mc = model.points[sel], model.colors[sel]
         else:
             mi = i
-            model = procedural_corn(procedural_seed(seed, i), n_points=n_pts)
+            pseed = procedural_seed(seed, i) if spec.model is None else _procedural_seed_of(spec.model, where)
+            model = procedural_corn(pseed, n_points=n_pts)
             scene_models.append(model)
             mp, mc = model.points, model.colors
         yaw = float(rng.uniform(0.0, 2.0 * math.pi))
         scale = float(rng.uniform(0.9, 1.1))
-        base_z, top_z = model.z_min, model.z_max
-        plant = PlacedPlant(model_index=mi, model_name=model.name, yaw=yaw, scale=scale,
-                            position=pos.copy(), z_range=np.array([0.0, scale * (top_z - base_z)]),
-                            base_z=base_z)
+        plant = _placed(spec, mi, model, _wrap(spec.yaw) if spec.yaw is not None else yaw,
+                        spec.scale if spec.scale is not None else scale,
+                        rng_jitter.uniform(-lay.jitter, lay.jitter, size=2) if lay.jitter > 0 else None)
         plants.append(plant)
         pts.append(place_points(mp, plant))
         cols.append(mc)
         idx.append(np.full(n_pts, i, dtype=np.int32))
-    return Scene(scenario=scenario, plants=plants, points=np.concatenate(pts), colors=np.concatenate(cols),
+    return Scene(scenario=lay.name, plants=plants, points=np.concatenate(pts), colors=np.concatenate(cols),
                  plant_index=np.concatenate(idx), models=scene_models)
+
+
+def _placed(spec: PlantSpec, model_index: int, model: PlantModel, yaw: float, scale: float,
+            shift: Optional[np.ndarray]) -> PlacedPlant:
+    """The PlacedPlant of a spec: stalk at (x, y) (+ the jitter ``shift``) on the ground, the
+    model's lowest point moved there, z_range = [0, scale (z_max - z_min)]."""
+    position = np.array([spec.x, spec.y, 0.0], dtype=np.float64)
+    if shift is not None:
+        position[:2] += shift
+    base_z, top_z = model.z_min, model.z_max
+    return PlacedPlant(model_index=model_index, model_name=model.name, yaw=float(yaw), scale=float(scale),
+                       position=position, z_range=np.array([0.0, scale * (top_z - base_z)]), base_z=base_z)

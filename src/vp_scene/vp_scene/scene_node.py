@@ -5,6 +5,10 @@ Topics (reliable, TRANSIENT_LOCAL, depth 1):
   /scene/noisy_points  sensor_msgs/PointCloud2  x, y, z, rgb, realization all K wind realizations
   /scene/description   vp_interfaces/SceneDescription                     how it was built
 
+The parameter ``scenario`` is a built-in layout name or a layout file (:mod:`vp_scene.layout`);
+/scene/description carries it as given and, in ``plants``, every plant's model, yaw, scale and
+position, from which another node rebuilds the identical scene without the file.
+
 A bad configuration at start logs the problem in one line and exits with status 2 before
 publishing anything; a bad parameter change at run time is refused with the reason, keeping the
 old scene. A valid change is validated by building the new scene (in the set-parameters
@@ -48,7 +52,7 @@ DEFAULTS: dict[str, Any] = {
     "frame_id": "map",
 }
 _DESCRIPTIONS = {
-    "scenario": "one_plant | three_row | six_rect",
+    "scenario": "one_plant | three_row | six_rect | grid_3x3 | row_12, or a layout file (.yaml, .yml, .json)",
     "models_folder": "folder of PLY plant models; empty: built-in procedural corn",
     "seed": "seed of the layout (yaw, scale, model choice) and of the wind draws",
     "levels": "L, height levels of the wind model",
@@ -161,7 +165,7 @@ class SceneNode(Node):
             realization=np.repeat(np.arange(k, dtype=np.uint16), p), frame_id=frame, stamp=stamp))
         desc = SceneDescription()
         desc.header.stamp, desc.header.frame_id = stamp, frame
-        desc.scenario = scene.scenario
+        desc.scenario = v["scenario"]  # the name or the layout file as given; the plants say where they stand
         desc.models_folder = v["models_folder"]
         desc.seed = v["seed"]
         desc.points_per_plant = v["points_per_plant"]
