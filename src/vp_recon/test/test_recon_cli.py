@@ -45,6 +45,22 @@ def test_cli_writes_outputs(tmp_path: Path) -> None:
     assert (out / "views.png").stat().st_size > 1000
 
 
+def test_cli_matching_option(tmp_path: Path, capsys) -> None:
+    """--matching poses on 4 cameras: pairs from the poses (auto would match all 6), in recon.json."""
+    out = tmp_path / "out"
+    rc = main(["--plan", str(_plan(tmp_path)), "--out", str(out), "--width", "640", "--height", "480",
+               "--realizations", "0", "--sparse-only", "--matching", "poses", "--no-progress"])
+    assert rc == 0, capsys.readouterr().err
+    data = json.loads((out / "recon.json").read_text())
+    (r,) = data["per_realization"]
+    assert data["matching"] == "poses" and r["matching"] == "poses" and 3 <= r["matched_pairs"] < 6
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as ei:                 # argparse refuses an unknown choice
+        main(["--plan", str(_plan(tmp_path)), "--out", str(tmp_path), "--matching", "magic"])
+    err = capsys.readouterr().err
+    assert ei.value.code == 2 and err.startswith("recon: error: argument --matching") and err.count("\n") == 1
+
+
 def _fails(tmp_path: Path, capsys, args: list, match: str) -> None:
     rc = main(args + ["--no-progress"])
     err = capsys.readouterr().err

@@ -61,6 +61,26 @@ def test_sparse_only(noisy_scene) -> None:
     assert res.source == "sparse" and 10 < len(res.points) <= res.sparse_points
     assert res.sparse_score is not None and res.sparse_score.chamfer == pytest.approx(res.chamfer)
     assert res.accuracy < 0.05 and res.rendered == []
+    # 'auto' below MATCH_POSES_FROM cameras: all 6 pairs, as before pose-based pairs existed
+    assert res.matching == "exhaustive" and res.matched_pairs == 6
+
+
+def test_auto_matching_uses_the_poses_from_eight_cameras(noisy_scene) -> None:
+    """8 cameras 20 degrees apart: 'auto' matches only the pairs select_pairs picks from the
+    poses and realization 0's true points, not all 28."""
+    from vp_recon.pairs import select_pairs
+    from vp_recon.pipeline import MATCH_POSES_FROM, matching_method
+    from vp_scene.camera import CameraModel
+
+    assert MATCH_POSES_FROM == 8 and matching_method("auto", 7) == "exhaustive"
+    cams = ring(8, 20.0)
+    cfg = ReconConfig(width=640, height=480, dense=False, keep_images=False)
+    res = reconstruct_realization(noisy_scene, 0, cams, cfg)
+    expected = select_pairs(cams, noisy_scene.points[0], CameraModel(640, 480))
+    assert res.matching == "poses" and res.matched_pairs == len(expected) < 28
+    assert res.pair_inliers and set(res.pair_inliers) <= set(expected)
+    assert set(res.sparse_seconds) == {"pairs", "extract", "match", "triangulate"}
+    assert set(res.seconds) == {"mesh", "render", "sparse", "dense", "score"}
 
 
 def test_meshes_follow_the_wind(noisy_scene) -> None:
@@ -159,6 +179,8 @@ def test_bad_config() -> None:
         ReconConfig(sparse_mode="magic").validate()
     with pytest.raises(ValueError, match="width"):
         ReconConfig(width=0).validate()
+    with pytest.raises(ValueError, match="matching must be one of auto, exhaustive, poses"):
+        ReconConfig(matching="magic").validate()
 
 
 def test_target_is_inside_the_plant(noisy_scene) -> None:

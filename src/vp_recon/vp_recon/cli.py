@@ -2,13 +2,14 @@
 
     python -m vp_recon.cli --plan out/run/plan.json --out out/run [--width 2000 --height 1500]
         [--realizations 0,1] [--sparse-only] [--sparse-mode known_poses|incremental]
+        [--matching auto|exhaustive|poses]
         [--fscore-threshold 0.02] [--mesh-cache DIR] [--keep-workdir] [--ground] [--no-progress]
 
 Rebuilds the scene from plan.json's ``scene`` dict (vp_scene.build.build_noisy_scene) and writes
 
 * ``OUT/recon.json``: chamfer_mean, chamfer_std (metres x 100, as paper Table I),
-  per_realization [{chamfer, accuracy, completeness (x 100), fscore, points, images, ...}],
-  seconds, units, plan, method, reward;
+  per_realization [{chamfer, accuracy, completeness (x 100), fscore, points, images, matching,
+  matched_pairs, ...}], seconds, units, plan, method, reward, matching (as asked);
 * ``OUT/recon_<k>.ply``: the reconstructed coloured cloud of realization k (metres);
 * ``OUT/views.png``: contact sheet of the first realization's rendered views.
 
@@ -41,6 +42,8 @@ class _Parser(argparse.ArgumentParser):
 
 
 def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
+    from .pipeline import MATCH_POSES_FROM, MATCHINGS
+
     p = _Parser(prog=PROG, description="Render, reconstruct (COLMAP on CPU + SGBM) and score a view plan.")
     p.add_argument("--plan", required=True, help="plan.json written by the planner (make plan)")
     p.add_argument("--out", required=True, help="output folder")
@@ -49,6 +52,9 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     p.add_argument("--realizations", default=None, help="comma-separated realization indices (default: all)")
     p.add_argument("--sparse-only", action="store_true", help="score the sparse cloud (no dense stereo)")
     p.add_argument("--sparse-mode", default="known_poses", choices=("known_poses", "incremental"))
+    p.add_argument("--matching", default="auto", choices=MATCHINGS,
+                   help="image pairs SIFT matches: all of them (exhaustive), those chosen from the known poses "
+                        f"and scene (poses), or auto: poses from {MATCH_POSES_FROM} cameras up (default)")
     p.add_argument("--fscore-threshold", type=float, default=0.02, help="F-score threshold, metres")
     p.add_argument("--voxel", type=float, default=0.002, help="dense voxel downsampling, metres (0: none)")
     p.add_argument("--mesh-cache", default=None, help="cache folder of Poisson meshes of PLY plant models")
@@ -93,7 +99,7 @@ def run(args: argparse.Namespace) -> dict:
         config = ReconConfig(width=args.width, height=args.height, fov=plan.fov, dense=not args.sparse_only,
                              sparse_mode=args.sparse_mode, fscore_threshold=args.fscore_threshold,
                              voxel=args.voxel, mesh_cache=args.mesh_cache, keep_workdir=args.keep_workdir,
-                             ground=args.ground, num_threads=args.threads).validate()
+                             ground=args.ground, num_threads=args.threads, matching=args.matching).validate()
     except ValueError as exc:
         raise CliError(str(exc)) from None
     try:  # before the output folder is made: a bad scene leaves nothing behind
@@ -119,10 +125,10 @@ def run(args: argparse.Namespace) -> dict:
     from .pipeline import reconstruct_plan
 
     info = {"plan": str(Path(args.plan).resolve()), "method": plan.data.get("method"),
-            "scenario": plan.scene["scenario"], "reward": plan.data.get("reward"),
+            "scenario": noisy.scene.scenario, "reward": plan.data.get("reward"),
             "reward_model": plan.data.get("reward_model"), "num_cameras": int(len(cams)),
             "width": config.width, "height": config.height, "fov": config.fov, "dense": config.dense, "ground": config.ground,
-            "sparse_mode": config.sparse_mode}
+            "sparse_mode": config.sparse_mode, "matching": config.matching}
     try:
         result = reconstruct_plan(noisy, cams, config, out_dir=out, realizations=ks, progress=progress)
     except ReconError as exc:

@@ -104,6 +104,7 @@ def summary(result: Any, extra: Optional[dict] = None) -> dict:
             "fscore": r.fscore, "precision": r.precision, "recall": r.recall,
             "points": int(len(r.points)), "images": int(r.images), "num_images": int(r.num_images),
             "visible_images": int(r.visible_images), "source": r.source, "sparse_points": int(r.sparse_points),
+            "matching": r.matching, "matched_pairs": int(r.matched_pairs),
             "seconds": {k: float(v) for k, v in r.seconds.items()},
         })
     out = {

@@ -4,7 +4,9 @@ For each wind realization k of a :class:`vp_scene.wind.NoisyScene`:
 
 1. mesh: the plants' meshes displaced by realization k's wind (:mod:`vp_recon.meshing`),
 2. render: one image per camera at ``width x height`` (:mod:`vp_recon.render`),
-3. sparse: COLMAP SIFT + matching + triangulation (:mod:`vp_recon.sparse`),
+3. sparse: COLMAP SIFT + matching + triangulation (:mod:`vp_recon.sparse`); the pairs matched are
+   all of them, or, from :data:`MATCH_POSES_FROM` cameras up (``matching='auto'``), those
+   :func:`vp_recon.pairs.select_pairs` picks from the known poses and realization k's true points,
 4. dense: SGBM on neighbouring pairs (:mod:`vp_recon.dense`; COLMAP PatchMatch needs CUDA),
 5. score: Chamfer distance etc. of the (dense, else sparse) cloud against realization k's true
    points ``noisy_scene.points[k]`` (:mod:`vp_recon.metrics`). The sparse cloud is cleaned
@@ -40,7 +42,8 @@ from .metrics import DEFAULT_FSCORE_THRESHOLD, CloudScore, EmptyCloudError, cham
 __all__ = [
     "NONE", "UNKNOWN", "EMPTY_PLAN", "NO_SCENE", "NOTHING_VISIBLE", "RECONSTRUCTION_FAILED",
     "OUTPUT_NOT_WRITABLE", "WRONG_FRAME", "ERROR_NAMES", "STAGES", "ReconError", "ReconCancelled", "ReconConfig",
-    "RealizationResult", "PlanReconResult", "validate_cameras", "ensure_writable_dir", "crop_box",
+    "RealizationResult", "PlanReconResult", "MATCHINGS", "MATCH_POSES_FROM", "matching_method", "validate_cameras",
+    "ensure_writable_dir", "crop_box",
     "reconstruct_realization", "reconstruct_plan",
 ]
 
@@ -59,6 +62,15 @@ ERROR_NAMES = {NONE: "NONE", UNKNOWN: "UNKNOWN", EMPTY_PLAN: "EMPTY_PLAN", NO_SC
 
 #: Stages reported to the progress callback, in order.
 STAGES = ("render", "sparse", "dense", "score")
+
+#: ``ReconConfig.matching``: which image pairs SIFT matching compares (see :func:`matching_method`).
+MATCHINGS = ("auto", "exhaustive", "poses")
+#: ``'auto'`` matches pairs chosen from the poses from this many cameras up, all pairs below.
+#: Measured (bench/bench_matching.py, three Corn50 plants in a row): from 8 cameras on exhaustive
+#: matching verifies false pairs over 90 degrees apart (2 of 7 at 8 cameras, 16-25 at 12) that
+#: then become dense stereo partners (dense 5x slower, Chamfer worse); at 4-6 cameras both give
+#: about the same, so today's 4-6 camera plans keep exhaustive matching and their results.
+MATCH_POSES_FROM = 8
 
 #: progress(stage, realization) after each stage of each realization; returning False cancels.
 ProgressFn = Callable[[str, int], Optional[bool]]
@@ -110,6 +122,9 @@ class ReconConfig:
         ground: render a textured soil plane under the plants (masks from the known scene,
             see :mod:`vp_recon.render`) instead of a blue screen.
         num_threads: threads of COLMAP and OpenCV (0: all cores).
+        matching: ``'exhaustive'`` (all image pairs), ``'poses'`` (the pairs
+            :func:`vp_recon.pairs.select_pairs` picks from the known poses and scene) or
+            ``'auto'``: poses from :data:`MATCH_POSES_FROM` cameras up, exhaustive below.
     """
 
     width: int = 2000
@@ -129,6 +144,7 @@ class ReconConfig:
     max_features: int = 8192
     ground: bool = False
     num_threads: int = 0
+    matching: str = "auto"
 
     def validate(self) -> "ReconConfig":
         """Raise ValueError naming the first bad field; return self."""
@@ -142,6 +158,8 @@ class ReconConfig:
             raise ValueError(f"fov must be in (0, pi) rad, got {self.fov!r}")
         if self.sparse_mode not in MODES:
             raise ValueError(f"sparse_mode must be one of {', '.join(MODES)}, got {self.sparse_mode!r}")
+        if self.matching not in MATCHINGS:
+            raise ValueError(f"matching must be one of {', '.join(MATCHINGS)}, got {self.matching!r}")
         if not (math.isfinite(self.fscore_threshold) and self.fscore_threshold > 0):
             raise ValueError(f"fscore_threshold must be > 0 metres, got {self.fscore_threshold!r}")
         if not (math.isfinite(self.voxel) and self.voxel >= 0):
@@ -172,6 +190,9 @@ class RealizationResult:
         sparse_points: points of the sparse model (before cleaning).
         sparse_score: the cleaned sparse cloud's CloudScore (None when cleaning left nothing).
         pair_inliers: verified SIFT inlier matches per camera pair (i, j), i < j.
+        matching: the matching that ran, ``'exhaustive'`` or ``'poses'`` (:func:`matching_method`).
+        matched_pairs: camera pairs handed to the SIFT matcher.
+        sparse_seconds: the sparse stage in parts: pairs (choosing them), extract, match, triangulate.
         dense_pairs: (reference, other) camera pairs that gave dense points, and
         dense_pair_points: the raw points each of them gave.
         rendered: the rendered RGB images (empty unless kept).
@@ -195,6 +216,9 @@ class RealizationResult:
     sparse_points: int
     sparse_score: Optional[CloudScore] = None
     pair_inliers: dict = field(default_factory=dict)
+    matching: str = "exhaustive"
+    matched_pairs: int = 0
+    sparse_seconds: dict = field(default_factory=dict)
     dense_pairs: list = field(default_factory=list)
     dense_pair_points: list = field(default_factory=list)
     rendered: list = field(default_factory=list, repr=False)
@@ -214,6 +238,16 @@ class PlanReconResult:
     def num_images(self) -> int:
         """Images per realization (= cameras)."""
         return self.realizations[0].num_images if self.realizations else 0
+
+
+def matching_method(matching: str, num_cameras: int) -> str:
+    """The matching that runs: ``'poses'`` or ``'exhaustive'`` as asked; ``'auto'``: ``'poses'``
+    when ``num_cameras >= MATCH_POSES_FROM``, else ``'exhaustive'``."""
+    if matching not in MATCHINGS:
+        raise ValueError(f"matching must be one of {', '.join(MATCHINGS)}, got {matching!r}")
+    if matching == "auto":
+        return "poses" if num_cameras >= MATCH_POSES_FROM else "exhaustive"
+    return matching
 
 
 def validate_cameras(cameras: object) -> NDArray[np.float64]:
@@ -294,8 +328,11 @@ def reconstruct_realization(noisy_scene: object, k: int, cameras: ArrayLike, con
             OUTPUT_NOT_WRITABLE (workdir), UNKNOWN (rendering or meshing failed).
         ReconCancelled: the progress callback returned False.
     """
+    from vp_scene.camera import CameraModel
+
     from .dense import crop_to_box, dense_reconstruct, silhouette_filter
     from .meshing import scene_meshes
+    from .pairs import select_pairs
     from .render import RenderError, Renderer
     from .sparse import SparseError, sparse_reconstruct
 
@@ -335,10 +372,18 @@ def reconstruct_realization(noisy_scene: object, k: int, cameras: ArrayLike, con
         _tick(progress, "render", k)
 
         t0 = time.perf_counter()
+        matching = matching_method(cfg.matching, len(cams))
+        pairs = None
+        if matching == "poses":
+            pairs = select_pairs(cams, truth_all[k], CameraModel(cfg.width, cfg.height, cfg.fov))
+            if not pairs:
+                raise ReconError(RECONSTRUCTION_FAILED, f"no two of the {len(cams)} cameras see a common part of "
+                                                        "the scene: no image pair to match (matching 'poses')")
+        t_pairs = time.perf_counter() - t0
         try:
             sp = sparse_reconstruct(images, cams, renderer.K, wd / f"realization_{k}", mode=cfg.sparse_mode,
                                     masks=masks if cfg.sift_masks else None, max_features=cfg.max_features,
-                                    num_threads=cfg.num_threads or -1)
+                                    num_threads=cfg.num_threads or -1, pairs=pairs)
         except SparseError as exc:
             raise ReconError(RECONSTRUCTION_FAILED, f"sparse reconstruction failed: {exc}") from exc
         except OSError as exc:
@@ -378,6 +423,7 @@ def reconstruct_realization(noisy_scene: object, k: int, cameras: ArrayLike, con
         fscore=score.fscore, precision=score.precision, recall=score.recall, fscore_threshold=score.threshold,
         points=points, colors=colors, images=sp.registered, num_images=len(cams), visible_images=len(seeing),
         source=source, sparse_points=len(sp.points), sparse_score=sparse_score, pair_inliers=dict(sp.pair_inliers),
+        matching=matching, matched_pairs=sp.matched_pairs, sparse_seconds={"pairs": t_pairs, **sp.seconds},
         dense_pairs=list(dn.pairs) if dn is not None else [], dense_pair_points=list(dn.pair_points) if dn is not None else [],
         rendered=images if cfg.keep_images else [], seconds=seconds)
 

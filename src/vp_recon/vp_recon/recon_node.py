@@ -78,6 +78,7 @@ PARAMS = {
     'fov': (math.pi / 2, 'horizontal field of view, rad (the planner\'s)'),
     'sparse_mode': ('known_poses', 'known_poses | incremental'),
     'dense': (True, 'CPU dense stereo (else the sparse cloud is scored)'),
+    'matching': ('auto', 'image pairs SIFT matches: auto (from the poses from 8 cameras up) | exhaustive | poses'),
     'fscore_threshold': (DEFAULT_FSCORE_THRESHOLD, 'F-score distance threshold, m'),
     'method': ('', 'label of the scores (default: the method from /camera_plan/info)'),
     'max_realizations': (0, 'reconstruct only the first n realizations (0: all)'),
@@ -103,7 +104,7 @@ def check_parameters(values: dict) -> dict:
         raise ValueError(f'num_threads must be >= 1, got {v["num_threads"]}')
     if v.get('output_folder', 'x') == '' or v.get('frame_id', 'x') == '':
         raise ValueError('output_folder and frame_id must not be empty')
-    config_keys = ('width', 'height', 'fov', 'sparse_mode', 'dense', 'fscore_threshold')
+    config_keys = ('width', 'height', 'fov', 'sparse_mode', 'dense', 'matching', 'fscore_threshold')
     if any(k in v for k in config_keys):  # the rendering settings: ReconConfig's own checks
         defaults = {k: PARAMS[k][0] for k in config_keys}
         ReconConfig(**{**defaults, **{k: v[k] for k in config_keys if k in v}}).validate()
@@ -169,7 +170,7 @@ class ReconNode(Node):
         """The reconstruction settings of the parameters now (read for every plan)."""
         return ReconConfig(width=self._param('width'), height=self._param('height'), fov=self._param('fov'),
                            sparse_mode=self._param('sparse_mode'), dense=self._param('dense'),
-                           fscore_threshold=self._param('fscore_threshold'), keep_images=True,
+                           matching=self._param('matching'), fscore_threshold=self._param('fscore_threshold'), keep_images=True,
                            num_threads=self._param('num_threads')).validate()
 
     def on_shutdown(self, timeout: float) -> bool:

@@ -5,7 +5,9 @@ Pipeline (Schönberger & Frahm, "Structure-from-Motion Revisited", CVPR 2016):
 1. write the images (and optional masks) to ``workdir/images`` (``workdir/masks``),
 2. SIFT features (Lowe 2004) on the CPU into ``workdir/database.db``; one PINHOLE camera with the
    known calibration ``f, f, cx, cy`` (COLMAP pixel convention: centres at +0.5),
-3. exhaustive matching with geometric verification,
+3. matching with geometric verification: all N (N - 1) / 2 pairs (``pairs=None``), or only the
+   listed ones (COLMAP's imported pair list, ``workdir/pairs.txt``: ``name1 name2`` per line;
+   :func:`vp_recon.pairs.select_pairs` chooses them from the known poses),
 4. ``mode='known_poses'``: a reconstruction holding the true poses (cam_from_world =
    (R_cw, t) of :func:`vp_scene.camera.world_to_camera`), then ``triangulate_points``;
    ``mode='incremental'``: ``incremental_mapping`` (unknown poses), the largest model
@@ -17,6 +19,7 @@ The 3D points come back in the world frame.
 from __future__ import annotations
 
 import shutil
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Optional, Sequence
@@ -26,6 +29,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vp_scene.camera import check_cameras, principal_point_gl, world_to_camera
+
+from .pairs import check_pairs
 
 __all__ = ["SparseError", "SparseResult", "sparse_reconstruct", "MODES"]
 
@@ -49,6 +54,8 @@ class SparseResult:
         verified_pairs: image pairs with geometrically verified matches.
         mean_track_length: mean number of images observing a point.
         pair_inliers: verified inlier matches per image pair (i, j), i < j (indices of ``images``).
+        matched_pairs: image pairs handed to the matcher (N (N - 1) / 2 when exhaustive).
+        seconds: wall time of ``extract``, ``match`` and ``triangulate`` (the model, either mode).
     """
 
     points: NDArray[np.float64]
@@ -58,6 +65,13 @@ class SparseResult:
     verified_pairs: int
     mean_track_length: float
     pair_inliers: dict = field(default_factory=dict)
+    matched_pairs: int = 0
+    seconds: dict = field(default_factory=dict)
+
+
+def _write_pairs(pairs: Sequence[tuple[int, int]], names: Sequence[str], path: Path) -> None:
+    """COLMAP's image pair list: one ``name1 name2`` line per pair."""
+    path.write_text("".join(f"{names[i]} {names[j]}\n" for i, j in pairs))
 
 
 def _write_images(images: Sequence[NDArray[np.uint8]], masks: Optional[Sequence[NDArray[np.bool_]]],
@@ -99,8 +113,9 @@ def _read_points(rec: object) -> tuple[NDArray[np.float64], NDArray[np.uint8], f
 def sparse_reconstruct(images: Sequence[NDArray[np.uint8]], cameras: NDArray[np.float64], K: NDArray[np.float64],
                        workdir: Path, mode: str = "known_poses",
                        masks: Optional[Sequence[NDArray[np.bool_]]] = None,
-                       max_features: int = 8192, num_threads: int = -1, quiet: bool = True) -> SparseResult:
-    """SIFT + exhaustive matching + triangulation of the rendered ``images`` (N RGB uint8).
+                       max_features: int = 8192, num_threads: int = -1, quiet: bool = True,
+                       pairs: Optional[Sequence[tuple[int, int]]] = None) -> SparseResult:
+    """SIFT + matching (all pairs, or the given ones) + triangulation of the rendered ``images`` (N RGB uint8).
 
     Args:
         images: N rendered RGB images, all of the same size.
@@ -111,10 +126,12 @@ def sparse_reconstruct(images: Sequence[NDArray[np.uint8]], cameras: NDArray[np.
         masks: optional foreground masks; features are then extracted on (dilated) plant pixels only.
         max_features: SIFT features per image; num_threads: -1 = all cores.
         quiet: silence COLMAP's INFO / WARNING log lines (errors still show).
+        pairs: image index pairs (i, j) to match (order and duplicates do not matter); None:
+            exhaustive matching.
 
     Raises:
-        ValueError: bad mode, image count or image sizes.
-        SparseError: no features, no verified pair, or no triangulated point.
+        ValueError: bad mode, image count, image sizes or pairs.
+        SparseError: no features, no pair to match, no verified pair, or no triangulated point.
     """
     import pycolmap
 
@@ -122,14 +139,14 @@ def sparse_reconstruct(images: Sequence[NDArray[np.uint8]], cameras: NDArray[np.
     if quiet:
         pycolmap.logging.minloglevel = 2
     try:
-        return _sparse(pycolmap, images, cameras, K, Path(workdir), mode, masks, max_features, num_threads)
+        return _sparse(pycolmap, images, cameras, K, Path(workdir), mode, masks, max_features, num_threads, pairs)
     finally:
         pycolmap.logging.minloglevel = level
 
 
 def _sparse(pycolmap: object, images: Sequence[NDArray[np.uint8]], cameras: NDArray[np.float64],
             K: NDArray[np.float64], workdir: Path, mode: str, masks: Optional[Sequence[NDArray[np.bool_]]],
-            max_features: int, num_threads: int) -> SparseResult:
+            max_features: int, num_threads: int, pairs: Optional[Sequence[tuple[int, int]]]) -> SparseResult:
     if mode not in MODES:
         raise ValueError(f"unknown sparse mode {mode!r}; expected one of {', '.join(MODES)}")
     cams = check_cameras(cameras)
@@ -140,6 +157,11 @@ def _sparse(pycolmap: object, images: Sequence[NDArray[np.uint8]], cameras: NDAr
     shapes = {np.asarray(i).shape for i in images}
     if len(shapes) != 1:
         raise ValueError(f"images differ in size: {sorted(shapes)}")
+    todo = None if pairs is None else check_pairs(pairs, len(images))
+    if todo is not None and not todo:
+        raise SparseError("no image pair to match (the pair list is empty)")
+    seconds = {}
+    t0 = time.perf_counter()
     workdir.mkdir(parents=True, exist_ok=True)
     img_dir, mask_dir, names = _write_images(images, masks, workdir)
     db_path = workdir / "database.db"
@@ -157,9 +179,21 @@ def _sparse(pycolmap: object, images: Sequence[NDArray[np.uint8]], cameras: NDAr
     device = pycolmap.Device.cpu
     pycolmap.extract_features(db_path, img_dir, image_names=names, camera_mode=pycolmap.CameraMode.SINGLE,
                               reader_options=reader, extraction_options=extraction, device=device)
+    seconds["extract"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
     matching = pycolmap.FeatureMatchingOptions()
     matching.num_threads = num_threads
-    pycolmap.match_exhaustive(db_path, matching_options=matching, device=device)
+    if todo is None:
+        pycolmap.match_exhaustive(db_path, matching_options=matching, device=device)
+        matched = len(names) * (len(names) - 1) // 2
+    else:
+        pair_file = workdir / "pairs.txt"
+        _write_pairs(todo, names, pair_file)
+        pycolmap.match_image_pairs(db_path, matching_options=matching,
+                                   pairing_options=pycolmap.ImportedPairingOptions(match_list_path=str(pair_file)),
+                                   device=device)
+        matched = len(todo)
+    seconds["match"] = time.perf_counter() - t0
 
     with pycolmap.Database.open(db_path) as db:
         db_images = {im.name: im for im in db.read_all_images()}
@@ -175,9 +209,10 @@ def _sparse(pycolmap: object, images: Sequence[NDArray[np.uint8]], cameras: NDAr
     if sum(keypoints) == 0:
         raise SparseError("no SIFT features in any image (is the plant visible?)")
     if verified == 0:
-        raise SparseError(f"no image pair could be matched (keypoints per image: {keypoints}); "
-                          "views too far apart or seeing different sides of the plant")
+        raise SparseError(f"no image pair could be matched ({matched} pairs tried, keypoints per image: "
+                          f"{keypoints}); views too far apart or seeing different sides of the plant")
 
+    t0 = time.perf_counter()
     out_dir = workdir / "sparse"
     out_dir.mkdir(exist_ok=True)
     options = pycolmap.IncrementalPipelineOptions()
@@ -226,5 +261,7 @@ def _sparse(pycolmap: object, images: Sequence[NDArray[np.uint8]], cameras: NDAr
         xyz = xyz @ M[:, :3].T + M[:, 3]
     if len(xyz) == 0:
         raise SparseError(f"no 3D point triangulated ({verified} verified image pairs, keypoints {keypoints})")
+    seconds["triangulate"] = time.perf_counter() - t0
     return SparseResult(points=xyz, colors=rgb, registered=int(seen), keypoints=[int(k) for k in keypoints],
-                        verified_pairs=verified, mean_track_length=track, pair_inliers=pair_inliers)
+                        verified_pairs=verified, mean_track_length=track, pair_inliers=pair_inliers,
+                        matched_pairs=matched, seconds=seconds)
