@@ -174,3 +174,12 @@ def test_bad_layout_file_is_a_usage_error_before_any_node_starts(ros_env, tmp_pa
     last = proc.stderr.strip().splitlines()[-1]
     assert f"--scenario: {bad}: grid.rows must be an integer >= 1, got 'three'" in last, proc.stderr
     assert "started" not in proc.stdout and not (tmp_path / "run").exists()
+
+
+def test_the_script_offers_every_method_of_the_planner() -> None:
+    """run_suite keeps its own list (it does not import torch): it must equal the planner's."""
+    import run_suite
+    from vp_planner.optimizers import METHODS
+
+    assert tuple(run_suite.METHODS) == tuple(METHODS)
+    assert run_suite.parse_args(["--method", "lawnmower"]).method == "lawnmower"

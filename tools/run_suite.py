@@ -35,6 +35,9 @@ from typing import Dict, List, Optional
 
 from node_process import NodeProcess, node_command
 
+#: The planner's methods (vp_planner.optimizers.METHODS, which imports torch; a test keeps them equal).
+METHODS = ('egp', 'gp', 'circle', 'arc', 'sa', 'random', 'lawnmower')
+
 ROOT = Path(__file__).resolve().parent.parent
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_NODE_DIED, EXIT_TIMEOUT, EXIT_INTERRUPTED = 0, 1, 2, 3, 4, 130
@@ -46,7 +49,7 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
     ap.add_argument('--scenario', default='one_plant', metavar='NAME_OR_FILE',
                     help='a layout name (one_plant, three_row, six_rect, grid_3x3, row_12) or a layout file '
                          "(.yaml, .yml, .json; README 'Your own field')")
-    ap.add_argument('--method', default='egp', choices=['egp', 'gp', 'circle', 'sa', 'random'])
+    ap.add_argument('--method', default='egp', choices=METHODS)
     ap.add_argument('--cameras', type=int, default=4)
     ap.add_argument('--evals', type=int, default=100, help='reward evaluations')
     ap.add_argument('--init', type=int, default=50, help='initial random design (egp, gp)')

@@ -51,3 +51,13 @@ def realizations(plant_points: np.ndarray) -> np.ndarray:
 def small_realizations() -> np.ndarray:
     """A 500-point plant in 2 wind realizations: a small, real reward problem for BO tests."""
     return wind_realizations(synthetic_plant(500, seed=1), k=2)
+
+
+@pytest.fixture(scope="session")
+def plant_row():
+    """A factory: realizations (K, P, 3) of synthetic plants standing at x = xs (y = 0), and the
+    plant of every point (P,)."""
+    def make(xs, n: int = 300, k: int = 2) -> tuple[np.ndarray, np.ndarray]:
+        plants = [synthetic_plant(n, seed=i) + np.array([x, 0.0, 0.0]) for i, x in enumerate(xs)]
+        return wind_realizations(np.concatenate(plants), k=k), np.repeat(np.arange(len(xs)), n)
+    return make

@@ -186,3 +186,22 @@ def test_cli_unknown_scenario_name(capsys: pytest.CaptureFixture) -> None:
     assert info.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "'nine_square' is neither a layout name (one_plant" in err[0] and "row_12" in err[0]
+
+
+def test_cli_plans_a_field_by_parts_and_flies_a_lawnmower(tmp_path: Path) -> None:
+    """egp on a row of 4 plants with 4 cameras and --parts 2: plan.json records the two parts and
+    counts their evaluations; --method lawnmower records its survey settings (one evaluation)."""
+    field = tmp_path / "row4.json"
+    field.write_text(json.dumps({"grid": {"rows": 1, "columns": 4, "plant_spacing": 1.2}}))
+    common = ["--scenario", str(field), "--cameras", "4", "--seed", "1", "--points-per-plant", "100",
+              "--realizations", "2", "--no-progress"]
+    out = tmp_path / "egp"
+    assert main(common + ["--method", "egp", "--evals", "8", "--init", "4", "--parts", "2", "--out", str(out)]) == 0
+    plan = json.loads((out / "plan.json").read_text())
+    assert [p["cameras"] for p in plan["parts"]] == [2, 2] and plan["evaluations"] == 2 * 8 + 4
+    assert len(plan["cameras"]) == 4 and len(plan["trace"]) == 20 and plan["lawnmower"] is None
+    out = tmp_path / "lawn"
+    assert main(common + ["--method", "lawnmower", "--lawnmower-tilt", "0.5", "--out", str(out)]) == 0
+    plan = json.loads((out / "plan.json").read_text())
+    assert plan["evaluations"] == 1 and plan["lawnmower"] == {"overlap": 0.7, "tilt": 0.5} and plan["parts"] is None
+    assert main(common + ["--method", "lawnmower", "--lawnmower-overlap", "1.2", "--out", str(out)]) == 2

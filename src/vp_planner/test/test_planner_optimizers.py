@@ -127,7 +127,7 @@ def test_bo_methods(method: str, realizations: np.ndarray) -> None:
 
 
 def test_bad_inputs(realizations: np.ndarray) -> None:
-    assert set(METHODS) == {"egp", "gp", "circle", "arc", "sa", "random"}
+    assert set(METHODS) == {"egp", "gp", "circle", "arc", "sa", "random", "lawnmower"}
     with pytest.raises(InvalidNumCamerasError):
         plan_views("random", realizations, 1)
     with pytest.raises(UnknownMethodError, match="unknown method"):

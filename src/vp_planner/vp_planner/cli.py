@@ -121,6 +121,12 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
                        help="egp/gp: EI in a trust region about the incumbent, or over the whole space (paper)")
         p.add_argument("--arc-spacing", type=float, default=math.radians(30.0),
                        help="arc: rad between neighbouring cameras (default 30 degrees)")
+        p.add_argument("--parts", type=int, default=0,
+                       help="egp/gp: plan the field by this many parts (0: automatic, 1: none)")
+        p.add_argument("--lawnmower-overlap", type=float, default=0.7,
+                       help="lawnmower: image overlap along and across the flight lines (0..0.95)")
+        p.add_argument("--lawnmower-tilt", type=float, default=0.0,
+                       help="lawnmower: camera tilt from nadir, rad (0: nadir; oblique up to 60 degrees)")
         p.add_argument("--threads", type=int, default=1,
                        help="torch threads (default 1: leaves the other cores to a reconstruction beside it)")
         p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -179,13 +185,16 @@ def plan(args: argparse.Namespace) -> dict:
     from vp_scene.camera import cameras_to_poses
     from vp_scene.planfile import write_plan
 
-    from .optimizers import plan_views, validate_request
+    from .optimizers import check_lawnmower, plan_views, validate_request
 
     validate_request(args.method, args.cameras, args.evals, args.init)  # fail before building the scene
     if args.threads < 1:
         raise CliError(f"--threads must be >= 1, got {args.threads}")
     if not 0.0 < args.arc_spacing < 2 * math.pi:
         raise CliError(f"--arc-spacing must be in (0, 2 pi) rad, got {args.arc_spacing}")
+    if args.parts < 0:
+        raise CliError(f"--parts must be >= 0 (0: automatic), got {args.parts}")
+    check_lawnmower(args.lawnmower_overlap, args.lawnmower_tilt)
     set_threads(args.threads)
     out = Path(args.out)
     image_size = _image_size(args)
@@ -210,7 +219,8 @@ def plan(args: argparse.Namespace) -> dict:
                          min_altitude=args.min_altitude, min_separation=args.min_separation, fov=args.fov,
                          theta_match=args.theta_match, callback=progress, structured_init=args.structured_init,
                          reward=args.reward, image_size=image_size, bo_mode=args.bo_mode,
-                         arc_spacing=args.arc_spacing)
+                         arc_spacing=args.arc_spacing, parts=args.parts,
+                         lawnmower_overlap=args.lawnmower_overlap, lawnmower_tilt=args.lawnmower_tilt)
     finally:
         if bar is not None:
             bar.close()
@@ -230,6 +240,9 @@ def plan(args: argparse.Namespace) -> dict:
         "structured_init": int(args.structured_init) if args.method in ("egp", "gp") else None,
         "bo_mode": args.bo_mode if args.method in ("egp", "gp") else None,
         "initial_best": res.initial_best,
+        "parts": res.parts,
+        "lawnmower": ({"overlap": args.lawnmower_overlap, "tilt": args.lawnmower_tilt}
+                      if args.method == "lawnmower" else None),
         "steps": res.steps,
         "seed": int(args.seed),
         "seconds": float(res.seconds),

@@ -20,6 +20,13 @@ the best-so-far reward after every evaluation, and return the best *feasible* pl
   choose N of them by simulated annealing (swap one viewpoint for a nearby candidate,
   Metropolis acceptance, geometric cooling).
 * ``random``: uniformly random feasible plans of the same space.
+* ``lawnmower``: the grid survey farmers fly: flight lines along the field's longer side at the
+  lowest height (at least ``min_standoff`` above the canopy) at which the N images cover the
+  field with a set overlap, nadir or tilted (oblique); one evaluation, no tuning.
+
+Fields (8-16 cameras, 48-96 dimensions): egp/gp plan by parts (:mod:`vp_planner.parts`) when
+``parts`` (or its automatic choice) is above 1: each part of the field gets the budget of a plan,
+then the union is refined jointly.
 
 The initial design of egp/gp is ``initial_evaluations`` plans: a few structured plans
 (:meth:`ViewSpace.structured`, clusters of cameras looking at the scene) followed by random
@@ -73,7 +80,7 @@ __all__ = [
     "NoFeasiblePlanError",
 ]
 
-METHODS: tuple[str, ...] = ("egp", "gp", "circle", "arc", "sa", "random")
+METHODS: tuple[str, ...] = ("egp", "gp", "circle", "arc", "sa", "random", "lawnmower")
 
 #: The largest number of cameras N of a plan (see the module docstring).
 MAX_CAMERAS: int = 100
@@ -127,8 +134,12 @@ class PlanResult:
         stopped: True when the callback cancelled the run.
         rewards: (evaluations,) reward of every evaluated plan (0 for infeasible ones).
         reward_model: the reward model the plan maximizes.
-        steps: egp/gp: one record per BO step (model drawn, weights, improved, trust region).
-        initial_best: egp/gp: the best reward of the initial design.
+        steps: egp/gp: one record per BO step (model drawn, weights, improved, trust region); by
+            parts: the steps of the joint refinement.
+        initial_best: egp/gp: the best reward of the initial design (by parts: of the union of
+            the part plans, before the joint refinement).
+        parts: egp/gp by parts: one record per part (cameras, points, evaluations, the part's own
+            reward and its initial design's best); None otherwise.
     """
 
     method: str
@@ -144,6 +155,7 @@ class PlanResult:
     reward_model: str = DEFAULT_REWARD_MODEL
     steps: Optional[list] = None
     initial_best: Optional[float] = None
+    parts: Optional[list] = None
 
     def simple_regret(self, optimum: float = 1.0) -> NDArray[np.float64]:
         """SR(t) = r~(z*) - max_{tau <= t} r~(z_tau) (paper Sec. V-B), with r~(z*) = ``optimum``."""
@@ -210,6 +222,39 @@ def check_memory(num_cameras: int, realizations_shape: tuple, reward: str,
         raise InvalidNumCamerasError(
             f"num_cameras = {num_cameras} on {K} x {P} points needs about {need / 2**30:.1f} GiB for the "
             f"{reward} reward; {have / 2**30:.1f} GiB are available: use fewer cameras or points")
+
+
+def _check_parts(parts: Any, method: str, realizations: NDArray[np.float64], num_cameras: int) -> int:
+    """The number of parts a run plans by (1 for methods other than egp/gp): ``parts``, or
+    :func:`vp_planner.parts.auto_parts` for 0. ValueError for a negative or non-integer value,
+    InvalidNumCamerasError for more parts than pairs of cameras."""
+    if isinstance(parts, bool) or int(parts) != parts or parts < 0:
+        raise ValueError(f"parts must be an integer >= 0 (0: automatic), got {parts!r}")
+    if method not in ("egp", "gp"):
+        return 1
+    if parts == 0:
+        from .parts import auto_parts
+
+        return auto_parts(realizations, num_cameras)
+    if 2 * int(parts) > num_cameras:
+        raise InvalidNumCamerasError(f"parts = {parts} needs at least {2 * int(parts)} cameras (2 a part), got {num_cameras}")
+    return int(parts)
+
+
+def total_evaluations(method: str, evaluations: int, parts: int) -> int:
+    """Reward evaluations a run makes: ``evaluations``, or for egp/gp by G > 1 parts, G times that
+    (one plan's budget a part) plus ``evaluations // 2`` for the joint refinement."""
+    if method in ("egp", "gp") and parts > 1:
+        return parts * int(evaluations) + max(1, int(evaluations) // 2)
+    return int(evaluations)
+
+
+def check_lawnmower(overlap: float, tilt: float) -> None:
+    """ValueError unless 0 <= overlap <= 0.95 and 0 <= tilt <= 60 degrees (finite)."""
+    if not (math.isfinite(overlap) and 0.0 <= overlap <= 0.95):
+        raise ValueError(f"lawnmower overlap must be in [0, 0.95], got {overlap}")
+    if not (math.isfinite(tilt) and 0.0 <= tilt <= math.radians(60.0) + 1e-12):
+        raise ValueError(f"lawnmower tilt must be in [0, 60 degrees] (rad), got {tilt}")
 
 
 # ---------------------------------------------------------------------- baselines
@@ -312,6 +357,30 @@ def _arc(space: ViewSpace, obj: Objective, evaluations: int, rng: np.random.Gene
     plans = [arc(centre[:2], target, radius, height, space.num_cameras, spacing, 2 * math.pi * k / phases)
              for k in range(phases)]
     _evaluate_plans(obj, np.array(plans))
+
+
+def _lawnmower(space: ViewSpace, obj: Objective, overlap: float, tilt: float) -> None:
+    """The ``lawnmower`` baseline: a grid survey (:func:`vp_planner.patterns.lawnmower`) over the
+    field's bounding box at the lowest height, in 1 cm steps from ``min_standoff`` above the
+    canopy, at which the N images cover the field with ``overlap`` and the plan is feasible.
+    One evaluation: a survey is flown as planned, not tuned to the reward."""
+    from .patterns import lawnmower
+
+    ext = space.extent
+    top = float(ext.hi[2])
+    lo_d = max(space.min_standoff, space.min_altitude - top, 0.01)
+    plan = None
+    for d in lo_d + 0.01 * np.arange(10000):
+        obj.check_stop()
+        cams = lawnmower(ext.lo[:2], ext.hi[:2], top, float(d), space.num_cameras, space.image, overlap, tilt,
+                         min_spacing=space.min_separation * (1 + 1e-6))
+        if cams is not None and space.feasible(cams):
+            plan = cams
+            break
+    if plan is None:
+        raise NoFeasiblePlanError(f"no feasible lawnmower survey of {space.num_cameras} images with overlap "
+                                  f"{overlap} up to {lo_d + 100:.0f} m above the canopy")
+    _evaluate_plans(obj, plan[None])
 
 
 def _random(space: ViewSpace, obj: Objective, evaluations: int, rng: np.random.Generator) -> None:
@@ -462,6 +531,78 @@ def _bo(space: ViewSpace, obj: Objective, evaluations: int, initial_evaluations:
     return info
 
 
+def _bo_by_parts(space: ViewSpace, obj: Objective, evaluations: int, initial_evaluations: int, seed: int,
+                 ensemble: bool, structured_init: int, bo_mode: str, parts: int) -> dict:
+    """EGP-EI (GP-EI) by parts (:mod:`vp_planner.parts`): each of the ``parts`` parts gets the budget
+    of a plan (``evaluations``, ``initial_evaluations``) on its own points, then the union of the
+    part plans is refined on the whole field's reward with ``evaluations // 2`` evaluations.
+
+    ``obj`` is the whole run's objective (the joint space's): it counts the part evaluations too
+    (recorded with reward 0 and ``candidate=False``: a part's reward is not a plan's) so that the
+    budget, the progress callback and cancelling work as for any method."""
+    from . import bo
+    from .parts import JointSpace, allocate_cameras, partition
+
+    R = space.realizations
+    labels = partition(R, parts, seed)
+    counts = allocate_cameras(np.bincount(labels, minlength=parts), space.num_cameras)
+    fixed = np.zeros((0, 3))
+    part_spaces, part_U, records = [], [], []
+    for g in range(parts):
+        sub = ViewSpace(R[:, labels == g], int(counts[g]), min_standoff=space.min_standoff,
+                        min_altitude=space.min_altitude, min_separation=space.min_separation, fov=space.fov,
+                        theta_match=space.theta_match, reward_model=space.reward_model,
+                        image_size=(space.image.width, space.image.height), obstacles=R, fixed_positions=fixed)
+        part_obj = Objective(sub, evaluations, dtype=obj.dtype, should_stop=obj.should_stop,
+                             callback=_forward(obj))
+        info = _bo(sub, part_obj, evaluations, initial_evaluations, seed + g, np.random.default_rng([seed, g]),
+                   ensemble, structured_init, bo_mode)
+        best = part_obj.best_cameras()
+        if best is None:
+            raise NoFeasiblePlanError(f"no feasible plan for part {g + 1} of {parts} ({counts[g]} cameras)")
+        fixed = np.concatenate([fixed, best[:, :3]])
+        part_spaces.append(sub)
+        part_U.append(part_obj.U[part_obj.best_index])
+        records.append({"part": g, "cameras": int(counts[g]), "points": int(sub.realizations.shape[1]),
+                        "evaluations": part_obj.count, "reward": float(part_obj.best_value),
+                        "initial_best": info.get("initial_best")})
+    joint = JointSpace(space, part_spaces)
+    obj.space = joint
+    U0 = np.concatenate(part_U)[None]
+    weights: dict = {"last": None}
+
+    def objective(U: torch.Tensor) -> torch.Tensor:
+        return obj(U).to(U.dtype)
+
+    def feasible(U: torch.Tensor) -> torch.Tensor:
+        obj.check_stop()
+        return joint.feasible(U)
+
+    def bo_callback(done: int, total: int, best: float, w: Optional[list]) -> bool:
+        if w is not None:
+            obj.weights = weights["last"] = [float(x) for x in w]
+        return not obj.cancelled
+
+    res = bo.optimize(objective, joint.dim, max(1, evaluations // 2), 1, seed, ensemble=ensemble,
+                      feasible=feasible, initial_design=torch.as_tensor(U0, dtype=torch.float64),
+                      callback=bo_callback, settings=bo.BOSettings(mode="trust_region"),
+                      periodic=torch.as_tensor(joint.periodic), groups=torch.arange(joint.dim) % 6)
+    return {"weights": weights["last"], "model_names": list(res.model_names),
+            "steps": [st.as_dict(res.model_names) for st in res.steps],
+            "initial_best": float(res.best_initial) if math.isfinite(res.best_initial) else None,
+            "parts": records}
+
+
+def _forward(obj: Objective) -> Callback:
+    """A part objective's callback: count the evaluation in the whole run's objective
+    (:meth:`Objective.record_part_evaluation`), whose callback and cancel then see it."""
+    def callback(done: int, total: int, best: float, weights: Optional[list]) -> bool:
+        if weights is not None:
+            obj.weights = weights
+        return obj.record_part_evaluation()
+    return callback
+
+
 # ---------------------------------------------------------------------- entry point
 def plan_views(
     method: str,
@@ -485,6 +626,9 @@ def plan_views(
     image_size: tuple[int, int] = (2000, 1500),
     bo_mode: str = "trust_region",
     arc_spacing: float = math.radians(30.0),
+    parts: int = 0,
+    lawnmower_overlap: float = 0.7,
+    lawnmower_tilt: float = 0.0,
 ) -> PlanResult:
     """Plan ``num_cameras`` views of the noisy scene with ``method`` (one of :data:`METHODS`).
 
@@ -511,6 +655,11 @@ def plan_views(
         bo_mode: egp/gp: ``'trust_region'`` (EI in a trust region about the incumbent) or
             ``'global'`` (the paper's: EI over the whole space).
         arc_spacing: arc: azimuth between neighbouring cameras, rad.
+        parts: egp/gp: plan the field by this many parts (:mod:`vp_planner.parts`; each part
+            gets ``evaluations``, the joint refinement ``evaluations // 2``, all counted in the
+            result); 0: :func:`vp_planner.parts.auto_parts` (1 for N <= 7); 1: one space.
+        lawnmower_overlap, lawnmower_tilt: lawnmower: image overlap in [0, 0.95] and camera
+            tilt from nadir in [0, 60 degrees] (rad).
 
     Raises:
         UnknownMethodError, InvalidNumCamerasError, InvalidBudgetError, InvalidSceneError (all
@@ -527,11 +676,14 @@ def plan_views(
     except ValueError as exc:
         raise InvalidSceneError(str(exc)) from None
     check_memory(num_cameras, R.shape, reward)
+    n_parts = _check_parts(parts, method, R, num_cameras)
+    check_lawnmower(lawnmower_overlap, lawnmower_tilt)
     start = time.perf_counter()
     space = ViewSpace(R, num_cameras, min_standoff=min_standoff, min_altitude=min_altitude,
                       min_separation=min_separation, fov=fov, theta_match=theta_match, shell_depth=shell_depth,
                       reward_model=reward, image_size=image_size)
-    obj = Objective(space, evaluations, callback=callback, dtype=dtype, should_stop=should_stop)
+    budget = total_evaluations(method, evaluations, n_parts)
+    obj = Objective(space, budget, callback=callback, dtype=dtype, should_stop=should_stop)
     rng = np.random.default_rng(seed)
     torch.manual_seed(seed)
     info: dict = {}
@@ -544,12 +696,17 @@ def plan_views(
             _sa(space, obj, evaluations, rng)
         elif method == "random":
             _random(space, obj, evaluations, rng)
+        elif method == "lawnmower":
+            _lawnmower(space, obj, lawnmower_overlap, lawnmower_tilt)
+        elif n_parts > 1:
+            info = _bo_by_parts(space, obj, evaluations, int(initial_evaluations), seed, method == "egp",
+                                int(structured_init), bo_mode, n_parts)
         else:
             info = _bo(space, obj, evaluations, int(initial_evaluations), seed, rng, method == "egp",
                        int(structured_init), bo_mode)
     except PlanningCancelled:
         pass
-    stopped = obj.cancelled or obj.count < evaluations
+    stopped = obj.cancelled or obj.count < (1 if method == "lawnmower" else budget)
     best = obj.best_cameras()
     if best is None:
         if not stopped:
@@ -575,4 +732,5 @@ def plan_views(
         reward_model=reward,
         steps=info.get("steps"),
         initial_best=info.get("initial_best"),
+        parts=info.get("parts"),
     )

@@ -1,4 +1,4 @@
-"""Fixed camera patterns that drone operators fly anyway: rings, arcs, spherical caps.
+"""Fixed camera patterns that drone operators fly anyway: rings, arcs, spherical caps, surveys.
 
 Each function returns cameras ``[c, v]`` (frame ``map``, :mod:`vp_scene.camera` convention),
 all looking at a target point; they are the building blocks of the ``circle`` and ``arc``
@@ -13,9 +13,9 @@ from typing import Optional
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from vp_scene.camera import look_at
+from vp_scene.camera import CameraModel, look_at
 
-__all__ = ["ring", "arc", "cap", "direction"]
+__all__ = ["ring", "arc", "cap", "direction", "footprint", "lawnmower"]
 
 
 def direction(azimuth: float, elevation: float) -> NDArray[np.float64]:
@@ -75,3 +75,81 @@ def cap(centre: ArrayLike, target: ArrayLike, distance: float, n: int, azimuth: 
         dirs.append(d / np.linalg.norm(d))
     c = np.asarray(centre, dtype=np.float64) + distance * np.array(dirs)
     return look_at(c, np.broadcast_to(np.asarray(target, dtype=np.float64), c.shape))
+
+
+def footprint(distance: float, image: CameraModel, tilt: float = 0.0) -> tuple[float, float]:
+    """(along, across): the extent of an image on a horizontal plane ``distance`` below the
+    camera, for a camera pitched ``tilt`` rad from nadir along the track with its image width
+    across it (a survey camera)::
+
+        along  = d (tan(tilt + b_v) - tan(tilt - b_v)),   b_v = half the vertical FoV
+        across = 2 d tan(b_h) / cos(tilt),                b_h = half the horizontal FoV
+
+    (``across`` at the footprint's centre line; a tilted footprint is a trapezoid). Requires
+    tilt + b_v < pi / 2 (the upper image edge must meet the plane)."""
+    b_h, b_v = 0.5 * image.fov, image.half_fov_vertical
+    if not (0.0 <= tilt and tilt + b_v < 0.5 * math.pi):
+        raise ValueError(f"tilt {tilt:.3f} rad: the image's upper edge does not meet the ground (max "
+                         f"{0.5 * math.pi - b_v:.3f} rad)")
+    along = distance * (math.tan(tilt + b_v) - math.tan(tilt - b_v))
+    return along, 2.0 * distance * math.tan(b_h) / math.cos(tilt)
+
+
+def lawnmower(lo_xy: ArrayLike, hi_xy: ArrayLike, plane_z: float, distance: float, n: int, image: CameraModel,
+              overlap: float, tilt: float = 0.0, min_spacing: float = 0.0) -> Optional[NDArray[np.float64]]:
+    """A grid survey (n, 6) over the box [lo_xy, hi_xy] at ``distance`` above the plane z =
+    ``plane_z`` (the canopy top), or None when n images cannot cover the box with ``overlap``.
+
+    Flight lines run along the box's longer side (the track), ``m`` lines across it; each image
+    covers a :func:`footprint` on the plane. With ``overlap`` o the footprint centres are at most
+    (1 - o) footprint apart along and across the track, and the outer footprints reach the box's
+    edges: a line needs ``ceil((L - F) / ((1 - o) F)) + 1`` images, and ``m`` lines likewise
+    across. The n cameras are spread over the m lines (the first n mod m lines get one more),
+    evenly from end to end of each line (at least ``min_spacing`` apart, centred when the line is
+    shorter). Lines are flown back and forth (boustrophedon): a tilted camera (``tilt`` > 0, an
+    oblique survey) pitches forward along its line's direction, so neighbouring lines look from
+    opposite sides; nadir cameras look straight down. Positions are set back by d tan(tilt) so
+    that the optical axis meets the plane at the footprint centre.
+    """
+    lo = np.asarray(lo_xy, dtype=np.float64)[:2]
+    hi = np.asarray(hi_xy, dtype=np.float64)[:2]
+    a = 0 if hi[0] - lo[0] >= hi[1] - lo[1] else 1   # along-track axis
+    c = 1 - a
+    along, across = footprint(distance, image, tilt)
+    if tilt == 0.0 and a == 1:
+        # a nadir camera's image width is along world y (vp_scene.camera: y_b = +y for a vertical
+        # view), which is along the track when the lines run along y
+        along, across = across, along
+    step = 1.0 - float(overlap)
+
+    def count(length: float, size: float) -> int:
+        return int(math.ceil(max(0.0, length - size) / (step * size) - 1e-9)) + 1
+
+    m = count(hi[c] - lo[c], across)
+    per_line = count(hi[a] - lo[a], along)
+    if m * per_line > n or m > n:
+        return None
+    line_pos = _spread(lo[c] + 0.5 * across, hi[c] - 0.5 * across, m, min_spacing)
+    counts = np.full(m, n // m)
+    counts[: n % m] += 1
+    cams = []
+    for k, (pos_c, n_k) in enumerate(zip(line_pos, counts)):
+        sign = 1.0 if k % 2 == 0 else -1.0
+        for pos_a in _spread(lo[a] + 0.5 * along, hi[a] - 0.5 * along, int(n_k), min_spacing)[::int(sign)]:
+            centre = np.zeros(3)
+            centre[a], centre[c], centre[2] = pos_a, pos_c, plane_z
+            v = np.zeros(3)
+            v[a], v[2] = sign * math.sin(tilt), -math.cos(tilt)
+            pos = centre - distance / math.cos(tilt) * v
+            cams.append(np.concatenate([pos, v]))
+    return np.array(cams)
+
+
+def _spread(lo: float, hi: float, n: int, min_spacing: float) -> NDArray[np.float64]:
+    """n positions evenly from lo to hi (their midpoint for n = 1), at least ``min_spacing`` apart
+    (spread about the midpoint when [lo, hi] is too short)."""
+    mid = 0.5 * (lo + hi)
+    if n == 1:
+        return np.array([mid])
+    half = 0.5 * max(hi - lo, min_spacing * (n - 1))
+    return np.linspace(mid - half, mid + half, n)

@@ -39,7 +39,7 @@ from vp_interfaces.msg import CameraPlan
 from vp_planner.gp import MODEL_NAMES
 from vp_planner.optimizers import (MAX_CAMERAS, METHODS, InvalidBudgetError, InvalidNumCamerasError,
                                    InvalidSceneError, NoFeasiblePlanError, PlanResult, UnknownMethodError,
-                                   plan_views, validate_request)
+                                   check_lawnmower, plan_views, validate_request)
 from vp_planner.reward_models import DEFAULT_REWARD_MODEL, REWARD_MODELS, check_reward_model
 from vp_scene.camera import cameras_to_poses, rotation_matrix
 from vp_scene.cloud import realizations_from_cloud
@@ -62,6 +62,9 @@ PARAMS = {
     'bo_mode': ('trust_region', 'egp/gp: trust_region | global'),
     'structured_init': (20, 'structured plans in the egp/gp initial design (0: random, as the paper)'),
     'arc_spacing': (math.radians(30.0), 'arc: rad between neighbouring cameras'),
+    'parts': (0, 'egp/gp: plan the field by this many parts (0: automatic, 1: none)'),
+    'lawnmower_overlap': (0.7, 'lawnmower: image overlap along and across the flight lines, 0..0.95'),
+    'lawnmower_tilt': (0.0, 'lawnmower: camera tilt from nadir, rad (0: nadir, up to 60 degrees)'),
     'num_threads': (1, 'torch threads'),
     'autostart': (False, 'plan with the parameters as soon as a scene arrives'),
     'min_standoff': (0.5, 'm from every scene point'),
@@ -90,6 +93,10 @@ def check_parameters(values: dict) -> dict:
         raise ValueError('structured_init must be >= 0')
     if not 0.0 < v.get('arc_spacing', 1.0) < 2 * math.pi:
         raise ValueError('arc_spacing must be in (0, 2 pi) rad')
+    if v.get('parts', 0) < 0:
+        raise ValueError('parts must be >= 0 (0: automatic)')
+    if 'lawnmower_overlap' in v or 'lawnmower_tilt' in v:
+        check_lawnmower(v.get('lawnmower_overlap', 0.7), v.get('lawnmower_tilt', 0.0))
     if v.get('num_threads', 1) < 1:
         raise ValueError('num_threads must be >= 1')
     for name in ('image_width', 'image_height'):
@@ -286,7 +293,8 @@ class PlannerNode(Node):
             theta_match=self._param('theta_match'), reward=reward,
             image_size=(self._param('image_width'), self._param('image_height')),
             bo_mode=self._param('bo_mode'), structured_init=self._param('structured_init'),
-            arc_spacing=self._param('arc_spacing'))
+            arc_spacing=self._param('arc_spacing'), parts=self._param('parts'),
+            lawnmower_overlap=self._param('lawnmower_overlap'), lawnmower_tilt=self._param('lawnmower_tilt'))
 
     def _poses(self, cameras: np.ndarray) -> list:
         out = []

@@ -150,6 +150,11 @@ class ViewSpace:
         elevation_range: (eps_lo, eps_hi) in radians; eps_lo is raised if needed so that
             descending rays leave the grown box through a side face (see module docstring).
         target_scale: look-at targets lie in the scene box scaled by this factor about its centre.
+        obstacles: points (K, P, 3) or (M, 3) every camera must keep ``min_standoff`` from
+            (default: the realizations). A space for one part of a field rewards views of that
+            part's points but keeps its cameras clear of every plant of the field.
+        fixed_positions: (M, 3) positions of cameras planned elsewhere (another part of the
+            field) that every camera of this space must keep ``min_separation`` from.
     """
 
     def __init__(
@@ -166,6 +171,8 @@ class ViewSpace:
         target_scale: float = 1.0,
         reward_model: Any = DEFAULT_REWARD_MODEL,
         image_size: tuple[int, int] = (2000, 1500),
+        obstacles: Any = None,
+        fixed_positions: Any = None,
     ) -> None:
         if int(num_cameras) != num_cameras or num_cameras < 2:
             raise ValueError(f"num_cameras must be an integer >= 2, got {num_cameras}")
@@ -200,6 +207,11 @@ class ViewSpace:
         self.target_lo = self.extent.centre - ts * self.extent.half
         self.target_hi = self.extent.centre + ts * self.extent.half
         self._tree: Optional[cKDTree] = None
+        self.obstacles = None if obstacles is None else check_realizations(obstacles).reshape(-1, 3)
+        fixed = np.zeros((0, 3)) if fixed_positions is None else np.asarray(fixed_positions, dtype=np.float64)
+        if fixed.ndim != 2 or fixed.shape[1] != 3 or not np.all(np.isfinite(fixed)):
+            raise ValueError(f"fixed_positions must be finite (M, 3) positions, got shape {fixed.shape}")
+        self.fixed_positions = fixed
         self.reward_model = reward_model
         self.image = CameraModel(int(image_size[0]), int(image_size[1]), self.fov)
         self._rewards: dict = {}
@@ -207,9 +219,11 @@ class ViewSpace:
     # ------------------------------------------------------------------ geometry
     @property
     def tree(self) -> cKDTree:
-        """KD-tree over the points of all realizations (built on first use)."""
+        """KD-tree over the stand-off obstacles: the points of all realizations, or ``obstacles``
+        (built on first use)."""
         if self._tree is None:
-            self._tree = cKDTree(self.realizations.reshape(-1, 3))
+            pts = self.realizations.reshape(-1, 3) if self.obstacles is None else self.obstacles
+            self._tree = cKDTree(pts)
         return self._tree
 
     def directions(self, u_az: NDArray, u_el: NDArray) -> NDArray[np.float64]:
@@ -345,6 +359,9 @@ class ViewSpace:
                 cb = c[b0:b0 + step]
                 dist = np.linalg.norm(cb[:, :, None, :] - cb[:, None, :, :], axis=-1)
                 ok[b0:b0 + step] &= (dist[:, iu[0], iu[1]] >= self.min_separation - 1e-9).all(axis=1)
+            if len(self.fixed_positions):
+                far, _ = cKDTree(self.fixed_positions).query(np.where(np.isfinite(c), c, 0.0).reshape(-1, 3), k=1)
+                ok &= (far.reshape(B, N) >= self.min_separation - 1e-9).all(axis=1)
         if self.min_standoff > 0 and B:
             flat = np.where(np.isfinite(c), c, 0.0).reshape(-1, 3)
             dist, _ = self.tree.query(flat, k=1, distance_upper_bound=self.min_standoff)
@@ -536,6 +553,22 @@ class Objective:
                 self.cancelled = True
                 raise PlanningCancelled()
         return torch.from_numpy(vals) if as_torch else vals
+
+    def record_part_evaluation(self) -> bool:
+        """Count one evaluation spent on a part of the field (:mod:`vp_planner.parts`), not on a
+        plan of this space: it uses the budget and reaches the callback like any evaluation but is
+        never a candidate (its trace entry is the best complete plan so far, 0 before the first).
+        Returns False when the callback asked to stop (the run is then cancelled)."""
+        if self.count >= self.total:
+            raise RuntimeError(f"evaluation budget of {self.total} exceeded")
+        self.U.append(np.full(self.space.dim, np.nan))
+        self.cameras.append(np.full((self.space.num_cameras, 6), np.nan))
+        self.values.append(0.0)
+        self.feasible_flags.append(False)
+        self.candidate_flags.append(False)
+        if self.callback is not None and self.callback(self.count, self.total, self.best_value, self.weights) is False:
+            self.cancelled = True
+        return not self.cancelled
 
     def best_cameras(self) -> Optional[NDArray[np.float64]]:
         return None if self.best_index < 0 else self.cameras[self.best_index]
