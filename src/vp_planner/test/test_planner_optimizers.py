@@ -81,6 +81,11 @@ def test_arc_is_the_tuned_circle_with_fixed_spacing(realizations: np.ndarray) ->
     wide = plan_views("arc", realizations, 4, evaluations=28, seed=2, arc_spacing=math.radians(45.0))
     az = np.unwrap(np.arctan2(wide.cameras[:, 1] - centre[1], wide.cameras[:, 0] - centre[0]))
     np.testing.assert_allclose(np.abs(np.diff(az)), math.radians(45.0), atol=1e-9)
+    # 14 cameras 30 degrees apart would wrap past a full turn onto each other: a full ring instead
+    ring = plan_views("arc", realizations, 14, evaluations=20, seed=2)
+    az = np.sort(np.mod(np.arctan2(ring.cameras[:, 1] - centre[1], ring.cameras[:, 0] - centre[0]), 2 * math.pi))
+    np.testing.assert_allclose(np.diff(az), 2 * math.pi / 14, atol=1e-9)
+    assert ViewSpace(realizations, 14).feasible(ring.cameras)
 
 
 def test_circle_geometry(realizations: np.ndarray) -> None:

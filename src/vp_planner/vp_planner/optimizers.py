@@ -338,9 +338,12 @@ ARC_PHASES = 8
 
 def _arc(space: ViewSpace, obj: Objective, evaluations: int, rng: np.random.Generator,
          spacing: float = math.radians(30.0)) -> None:
-    """The ``arc`` baseline (module docstring): tune the circle, then place the arc on it."""
+    """The ``arc`` baseline (module docstring): tune the circle, then place the arc on it. N
+    cameras ``spacing`` apart would wrap past a full turn when N spacing > 2 pi (N > 12 at 30
+    degrees): the arc is then the full ring, 2 pi / N apart."""
     from .patterns import arc
 
+    spacing = min(float(spacing), 2.0 * math.pi / space.num_cameras)
     phases = min(ARC_PHASES, evaluations)
     tune = evaluations - phases
     if tune > 0:

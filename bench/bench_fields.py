@@ -1,0 +1,261 @@
+#!/usr/bin/env python3
+"""Fields: every method on a 3 x 3 grid (N = 8) and a row of 12 plants (N = 12, and N = 16).
+
+For each field and method: the plan's reward (the default model), the planning seconds (one torch
+thread, nothing else running), and its reconstruction on the first ``--realizations`` wind
+realizations (default 2) at 2000 x 1500 (render, COLMAP with pose-chosen image pairs from 8
+cameras up, CPU dense stereo): Chamfer, accuracy, completeness x100 and seconds per realization.
+Methods:
+
+* ``egp``: the default planner; on these fields it plans by parts (``vp_planner.parts``: 100
+  evaluations a part, 50 for the joint refinement);
+* ``egp-one-space``: EGP-EI in one 6N-dimensional space with the same number of evaluations (the
+  measurement behind planning by parts);
+* ``circle``, ``arc``, ``sa``: the baselines, with egp's total number of evaluations;
+* ``lawnmower`` (nadir) and ``lawnmower-oblique`` (30 degrees), 70% overlap: the survey farmers
+  fly (one evaluation, no tuning).
+
+Also measured (``subsampling``): how the ``coverage`` reward's point subsampling (3000 points a
+realization by default) changes the reward on these fields: Spearman's rho against the reward on
+all points over 80 plans a field, the mean shift, and the cost per plan.
+
+Writes ``results/bench_fields.md`` and ``results/bench_fields.json``; every plan and
+reconstruction is cached under ``results/cache/fields`` (a re-run resumes). Uses the Corn50 plants
+of ``../shared/data/corn50`` when present (``--models``), else procedural plants.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import ROOT, cached, default_models, machine, models_tag, scene  # noqa: E402
+
+#: (field, N) cells: the issue's targets, and N = 16 on the row (planned and reconstructed).
+FIELDS = (("grid_3x3", 8), ("row_12", 12), ("row_12", 16))
+#: Method label -> plan_views keyword arguments (``evaluations`` filled in per field).
+METHODS = {
+    "egp": {"method": "egp"},
+    "egp-one-space": {"method": "egp", "parts": 1},
+    "circle": {"method": "circle"},
+    "arc": {"method": "arc"},
+    "sa": {"method": "sa"},
+    "lawnmower": {"method": "lawnmower"},
+    "lawnmower-oblique": {"method": "lawnmower", "lawnmower_tilt": math.radians(30.0)},
+}
+EVALS_PER_PART = 100
+SUBSAMPLE_SIZES = (1500, 3000, 6000, 12000, 0)
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--models", default=default_models(),
+                    help="folder of PLY plant models (default: ../shared/data/corn50 if present; '' procedural)")
+    ap.add_argument("--fields", nargs="+", default=[f"{f}:{n}" for f, n in FIELDS],
+                    help="FIELD:N cells, e.g. grid_3x3:8 row_12:12")
+    ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
+    ap.add_argument("--no-recon", dest="recon", action="store_false", help="plan only")
+    ap.add_argument("--recon-methods", nargs="+", default=None, choices=list(METHODS),
+                    help="methods to reconstruct (default: all of --methods)")
+    ap.add_argument("--realizations", type=int, default=2, help="wind realizations reconstructed per plan")
+    ap.add_argument("--width", type=int, default=2000)
+    ap.add_argument("--height", type=int, default=1500)
+    ap.add_argument("--threads", type=int, default=0, help="reconstruction threads (0: all cores)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", default=str(ROOT / "results"))
+    return ap.parse_args(argv)
+
+
+def field_budget(field: str, n: int, models: str) -> tuple[int, int]:
+    """(parts egp plans by, its total evaluations) on this field."""
+    from vp_planner.optimizers import total_evaluations
+    from vp_planner.parts import auto_parts
+
+    noisy, _ = scene(field, models)
+    parts = auto_parts(noisy.points, n)
+    return parts, total_evaluations("egp", EVALS_PER_PART, parts)
+
+
+def plan_cell(cache: Path, field: str, n: int, label: str, args) -> dict:
+    """One planning run (cached), timed alone with one torch thread."""
+    from vp_planner.optimizers import plan_views
+
+    parts, total = field_budget(field, n, args.models)
+    kwargs = dict(METHODS[label])
+    method = kwargs.pop("method")
+    evals = EVALS_PER_PART if label == "egp" else total
+    path = cache / "plans" / f"{models_tag(args.models)}-{field}-n{n}-{label}-seed{args.seed}-e{evals}.json"
+
+    def compute() -> dict:
+        import torch
+
+        torch.set_num_threads(1)
+        noisy, _ = scene(field, args.models)
+        res = plan_views(method, noisy.points, n, evaluations=evals, initial_evaluations=min(50, evals),
+                         seed=args.seed, **kwargs)
+        return {"cameras": np.asarray(res.cameras).tolist(), "reward": float(res.reward),
+                "reward_model": res.reward_model, "evaluations": int(res.evaluations),
+                "seconds": float(res.seconds), "parts": res.parts, "initial_best": res.initial_best}
+    return cached(path, compute)
+
+
+def recon_cell(cache: Path, out: Path, field: str, n: int, label: str, plan: dict, args) -> dict:
+    """Reconstruct a plan on the first ``args.realizations`` wind realizations (cached)."""
+    from vp_recon.outputs import TABLE_SCALE, contact_sheet, write_image, write_ply
+    from vp_recon.pipeline import ReconConfig, ReconError, reconstruct_plan
+
+    tag = (f"{models_tag(args.models)}-{field}-n{n}-{label}-seed{args.seed}-{args.width}x{args.height}"
+           f"-k{args.realizations}")
+
+    def compute() -> dict:
+        noisy, _ = scene(field, args.models)
+        cfg = ReconConfig(width=args.width, height=args.height, num_threads=args.threads)
+        folder = out / "recon" / "fields" / tag
+        ks = range(min(args.realizations, len(noisy.points)))
+        try:
+            res = reconstruct_plan(noisy, np.asarray(plan["cameras"]), cfg, folder, realizations=ks)
+        except ReconError as exc:  # a plan that does not reconstruct is a result too
+            return {"error": exc.name, "error_msg": str(exc), "chamfer_mean": float("nan"),
+                    "chamfer_std": float("nan"), "per_realization": []}
+        for r in res.realizations:
+            write_ply(folder / f"recon_{r.realization}.ply", r.points, r.colors)
+        if res.realizations and res.realizations[0].rendered:
+            write_image(folder / "views.png", contact_sheet(res.realizations[0].rendered))
+        return {"chamfer_mean": TABLE_SCALE * res.chamfer_mean, "chamfer_std": TABLE_SCALE * res.chamfer_std,
+                "seconds": res.seconds,
+                "per_realization": [{"chamfer": TABLE_SCALE * r.chamfer, "accuracy": TABLE_SCALE * r.accuracy,
+                                     "completeness": TABLE_SCALE * r.completeness, "fscore": r.fscore,
+                                     "points": int(len(r.points)), "images": r.images, "source": r.source,
+                                     "matching": r.matching, "matched_pairs": r.matched_pairs,
+                                     "seconds": r.seconds} for r in res.realizations]}
+    return cached(cache / "recon" / f"{tag}.json", compute)
+
+
+def subsampling_cell(cache: Path, field: str, n: int, plans: dict, args) -> dict:
+    """The coverage reward at several subsample sizes on 80 plans of this field (cached): 20
+    structured, 50 random feasible, and the benchmark's own plans."""
+    import torch
+    from dataclasses import replace
+    from scipy.stats import spearmanr
+
+    from vp_planner.reward_models import CoverageParams, make_reward
+    from vp_planner.space import ViewSpace
+
+    path = cache / "subsampling" / f"{models_tag(args.models)}-{field}-n{n}.json"
+
+    def compute() -> dict:
+        torch.set_num_threads(1)
+        noisy, _ = scene(field, args.models)
+        R = noisy.points
+        space = ViewSpace(R, n)
+        U = np.concatenate([space.structured(20), space.sample(50, np.random.default_rng(args.seed))])
+        cams = np.concatenate([space.decode(U), np.array([p["cameras"] for p in plans.values()
+                                                          if len(p["cameras"]) == n])])
+        out = {"plans": int(len(cams)), "points_per_realization": int(R.shape[1]), "sizes": {}}
+        ref = None
+        for size in reversed(SUBSAMPLE_SIZES):  # all points first: the reference
+            f = make_reward(("coverage", replace(CoverageParams(), max_points=size)), R, dtype=torch.float32)
+            t0 = time.perf_counter()
+            r = np.array([float(f(c[None])[0]) for c in cams])
+            ms = 1000 * (time.perf_counter() - t0) / len(cams)
+            ref = r if ref is None else ref
+            out["sizes"][str(size or R.shape[1])] = {
+                "spearman_vs_all": float(spearmanr(ref, r)[0]), "mean_shift": float(np.mean(r - ref)),
+                "max_abs_diff": float(np.max(np.abs(r - ref))), "ms_per_plan": ms, "mean_reward": float(r.mean())}
+        return out
+    return cached(path, compute)
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    out = Path(args.out)
+    cache = out / "cache" / "fields"
+    cells = []
+    for spec in args.fields:
+        name, _, n = spec.partition(":")
+        cells.append((name, int(n)))
+    plans: dict = {}
+    for field, n in cells:
+        for label in args.methods:
+            t0 = time.perf_counter()
+            plans[(field, n, label)] = plan_cell(cache, field, n, label, args)
+            p = plans[(field, n, label)]
+            print(f"plan {field} N={n} {label}: reward {p['reward']:.4f}, {p['evaluations']} evaluations, "
+                  f"{p['seconds']:.1f} s{'' if time.perf_counter() - t0 > 1 else ' (cached)'}", flush=True)
+    recons: dict = {}
+    if args.recon:
+        for field, n in cells:
+            for label in args.recon_methods or args.methods:
+                if label not in args.methods:
+                    continue
+                t0 = time.perf_counter()
+                r = recon_cell(cache, out, field, n, label, plans[(field, n, label)], args)
+                recons[(field, n, label)] = r
+                print(f"recon {field} N={n} {label}: Chamfer x100 {r['chamfer_mean']:.3f} +- "
+                      f"{r['chamfer_std']:.3f} {r.get('error', '')} ({time.perf_counter() - t0:.0f} s)", flush=True)
+    subsampling = {f"{field}:{n}": subsampling_cell(cache, field, n,
+                                                    {k[2]: v for k, v in plans.items() if k[:2] == (field, n)}, args)
+                   for field, n in cells}
+    write_results(args, out, cells, plans, recons, subsampling)
+    return 0
+
+
+def write_results(args, out: Path, cells, plans, recons, subsampling) -> None:
+    stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d")
+    host = machine()
+    result = {"date": stamp, "machine": host, "models": models_tag(args.models), "seed": args.seed,
+              "resolution": [args.width, args.height], "realizations": args.realizations,
+              "evaluations_per_part": EVALS_PER_PART, "cells": {}, "subsampling": subsampling}
+    lines = [f"# Fields, measured {stamp} ({host})", "",
+             f"Plants: {args.models or 'built-in procedural corn'} (scene seed {args.seed}). Reward: the default "
+             "model. Chamfer x100 (mean +- std over wind realizations "
+             f"0..{args.realizations - 1}, {args.width} x {args.height}), lower is better. Planning seconds alone "
+             "(one torch thread); reconstruction seconds per realization.", ""]
+    for field, n in cells:
+        parts, total = field_budget(field, n, args.models)
+        lines += [f"## {field}, N = {n} (egp: {parts} parts, {total} evaluations)", "",
+                  "| method | reward | evaluations | planning s | Chamfer x100 | accuracy | completeness | "
+                  "recon s / realization | matched pairs |", "|---|---|---|---|---|---|---|---|---|"]
+        for label in args.methods:
+            p = plans[(field, n, label)]
+            r = recons.get((field, n, label))
+            cell = {"plan": p, "recon": r}
+            result["cells"][f"{field}:{n}/{label}"] = cell
+            if r is None:
+                rec = ["-"] * 5
+            elif r.get("error"):
+                rec = [f"failed ({r['error']})", "-", "-", "-", "-"]
+            else:
+                per = r["per_realization"]
+                rec = [f"{r['chamfer_mean']:.3f} +- {r['chamfer_std']:.3f}",
+                       f"{np.mean([x['accuracy'] for x in per]):.3f}",
+                       f"{np.mean([x['completeness'] for x in per]):.3f}",
+                       f"{np.mean([sum(x['seconds'].values()) for x in per]):.0f}",
+                       "/".join(str(x["matched_pairs"]) for x in per)]
+            lines.append(f"| {label} | {p['reward']:.4f} | {p['evaluations']} | {p['seconds']:.1f} | " + " | ".join(rec)
+                         + " |")
+        lines.append("")
+    lines += ["## Point subsampling of the coverage reward", "",
+              "| field | plans | points a realization | kept | Spearman vs all points | mean shift | max abs diff | ms / plan |",
+              "|---|---|---|---|---|---|---|---|"]
+    for key, s in subsampling.items():
+        for size, v in s["sizes"].items():
+            lines.append(f"| {key} | {s['plans']} | {s['points_per_realization']} | {size} | "
+                         f"{v['spearman_vs_all']:.4f} | {v['mean_shift']:+.4f} | {v['max_abs_diff']:.4f} | "
+                         f"{v['ms_per_plan']:.1f} |")
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "bench_fields.md").write_text("\n".join(lines) + "\n")
+    (out / "bench_fields.json").write_text(json.dumps(result, indent=1))
+    print("\n".join(lines))
+    print(f"wrote {out / 'bench_fields.md'} and {out / 'bench_fields.json'}")
+
+
+if __name__ == "__main__":
+    sys.exit(main())
