@@ -214,7 +214,7 @@ def write_results(args, out: Path, cells, plans, recons, subsampling) -> None:
               "resolution": [args.width, args.height], "realizations": args.realizations,
               "evaluations_per_part": EVALS_PER_PART, "cells": {}, "subsampling": subsampling}
     lines = [f"# Fields, measured {stamp} ({host})", "",
-             f"Plants: {args.models or 'built-in procedural corn'} (scene seed {args.seed}). Reward: the default "
+             f"Plants: {'Corn50 (' + models_tag(args.models) + ')' if args.models else 'built-in procedural corn'} (scene seed {args.seed}). Reward: the default "
              "model. Chamfer x100 (mean +- std over wind realizations "
              f"0..{args.realizations - 1}, {args.width} x {args.height}), lower is better. Planning seconds alone "
              "(one torch thread); reconstruction seconds per realization.", ""]
@@ -222,7 +222,7 @@ def write_results(args, out: Path, cells, plans, recons, subsampling) -> None:
         parts, total = field_budget(field, n, args.models)
         lines += [f"## {field}, N = {n} (egp: {parts} parts, {total} evaluations)", "",
                   "| method | reward | evaluations | planning s | Chamfer x100 | accuracy | completeness | "
-                  "recon s / realization | matched pairs |", "|---|---|---|---|---|---|---|---|---|"]
+                  "recon s / realization | pairs matched per realization |", "|---|---|---|---|---|---|---|---|---|"]
         for label in args.methods:
             p = plans[(field, n, label)]
             r = recons.get((field, n, label))
