@@ -323,7 +323,9 @@ class PlannerNode(Node):
                                                 msg.header.stamp, self._param('fov')))
         self.get_logger().info(
             f'published /camera_plan: {len(msg.poses)} cameras, {result.reward_model} reward {result.reward:.4f} '
-            f'({result.method}, {result.evaluations} evaluations, {result.seconds:.1f} s)')
+            f'({result.method}, {result.evaluations} evaluations'
+            + (f', by {len(result.parts)} parts of ' + '+'.join(str(p['cameras']) for p in result.parts) + ' cameras'
+               if result.parts else '') + f', {result.seconds:.1f} s)')
         return msg
 
     # ---------------------------------------------------------------- action
