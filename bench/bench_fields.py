@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import ROOT, cached, default_models, machine, models_tag, scene  # noqa: E402
+from common import ROOT, cached, default_models, machine, models_tag, reconstruct_record, scene  # noqa: E402
 
 #: (field, N) cells: the issue's targets, and N = 16 on the row (planned and reconstructed).
 FIELDS = (("grid_3x3", 8), ("row_12", 12), ("row_12", 16))
@@ -108,8 +108,7 @@ def plan_cell(cache: Path, field: str, n: int, label: str, args) -> dict:
 
 def recon_cell(cache: Path, out: Path, field: str, n: int, label: str, plan: dict, args) -> dict:
     """Reconstruct a plan on the first ``args.realizations`` wind realizations (cached)."""
-    from vp_recon.outputs import TABLE_SCALE, contact_sheet, write_image, write_ply
-    from vp_recon.pipeline import ReconConfig, ReconError, reconstruct_plan
+    from vp_recon.pipeline import ReconConfig
 
     tag = (f"{models_tag(args.models)}-{field}-n{n}-{label}-seed{args.seed}-{args.width}x{args.height}"
            f"-k{args.realizations}")
@@ -117,24 +116,8 @@ def recon_cell(cache: Path, out: Path, field: str, n: int, label: str, plan: dic
     def compute() -> dict:
         noisy, _ = scene(field, args.models)
         cfg = ReconConfig(width=args.width, height=args.height, num_threads=args.threads)
-        folder = out / "recon" / "fields" / tag
         ks = range(min(args.realizations, len(noisy.points)))
-        try:
-            res = reconstruct_plan(noisy, np.asarray(plan["cameras"]), cfg, folder, realizations=ks)
-        except ReconError as exc:  # a plan that does not reconstruct is a result too
-            return {"error": exc.name, "error_msg": str(exc), "chamfer_mean": float("nan"),
-                    "chamfer_std": float("nan"), "per_realization": []}
-        for r in res.realizations:
-            write_ply(folder / f"recon_{r.realization}.ply", r.points, r.colors)
-        if res.realizations and res.realizations[0].rendered:
-            write_image(folder / "views.png", contact_sheet(res.realizations[0].rendered))
-        return {"chamfer_mean": TABLE_SCALE * res.chamfer_mean, "chamfer_std": TABLE_SCALE * res.chamfer_std,
-                "seconds": res.seconds,
-                "per_realization": [{"chamfer": TABLE_SCALE * r.chamfer, "accuracy": TABLE_SCALE * r.accuracy,
-                                     "completeness": TABLE_SCALE * r.completeness, "fscore": r.fscore,
-                                     "points": int(len(r.points)), "images": r.images, "source": r.source,
-                                     "matching": r.matching, "matched_pairs": r.matched_pairs,
-                                     "seconds": r.seconds} for r in res.realizations]}
+        return reconstruct_record(noisy, plan["cameras"], cfg, out / "recon" / "fields" / tag, ks)
     return cached(cache / "recon" / f"{tag}.json", compute)
 
 

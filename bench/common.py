@@ -94,3 +94,28 @@ def plan_cell(cache: Path, scenario: str, variant: str, seed: int, evals: int = 
                 'trace': [float(x) for x in res.trace], 'seconds': float(res.seconds),
                 'ensemble_weights': res.ensemble_weights, 'initial_best': res.initial_best, 'steps': res.steps}
     return cached(path, compute)
+
+
+def reconstruct_record(noisy, cameras, config, folder: Path, realizations=None) -> dict:
+    """Reconstruct a plan (``vp_recon.pipeline.reconstruct_plan``), write its clouds and contact
+    sheet into ``folder``, and return the benchmarks' JSON record (Chamfer etc. x100 as Table I;
+    a plan that does not reconstruct is a result too: its error)."""
+    from vp_recon.outputs import TABLE_SCALE, contact_sheet, write_image, write_ply
+    from vp_recon.pipeline import ReconError, reconstruct_plan
+
+    try:
+        res = reconstruct_plan(noisy, np.asarray(cameras), config, folder, realizations=realizations)
+    except ReconError as exc:
+        return {'error': exc.name, 'error_msg': str(exc), 'chamfer_mean': float('nan'),
+                'chamfer_std': float('nan'), 'per_realization': []}
+    for r in res.realizations:
+        write_ply(folder / f'recon_{r.realization}.ply', r.points, r.colors)
+    if res.realizations and res.realizations[0].rendered:
+        write_image(folder / 'views.png', contact_sheet(res.realizations[0].rendered))
+    return {'chamfer_mean': TABLE_SCALE * res.chamfer_mean, 'chamfer_std': TABLE_SCALE * res.chamfer_std,
+            'seconds': res.seconds,
+            'per_realization': [{'chamfer': TABLE_SCALE * r.chamfer, 'accuracy': TABLE_SCALE * r.accuracy,
+                                 'completeness': TABLE_SCALE * r.completeness, 'fscore': r.fscore,
+                                 'points': int(len(r.points)), 'images': r.images, 'source': r.source,
+                                 'matching': r.matching, 'matched_pairs': r.matched_pairs,
+                                 'seconds': r.seconds} for r in res.realizations]}

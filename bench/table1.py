@@ -25,7 +25,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import ROOT, SCENARIOS, cached, default_models, machine, models_tag, plan_cell, scene  # noqa: E402
+from common import (ROOT, SCENARIOS, cached, default_models, machine, models_tag, plan_cell,  # noqa: E402
+                    reconstruct_record, scene)
 
 #: Table rows: label -> (planner variant of common.VARIANTS, reward model).
 ROWS = {
@@ -63,8 +64,7 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 def recon_cell(cache: Path, out: Path, scenario: str, row: str, plan: dict, args) -> dict:
     """Reconstruct one plan in every wind realization (cached); Chamfer etc. x100 as Table I."""
-    from vp_recon.outputs import TABLE_SCALE, contact_sheet, write_image, write_ply
-    from vp_recon.pipeline import ReconConfig, ReconError, reconstruct_plan
+    from vp_recon.pipeline import ReconConfig
 
     variant, reward = ROWS[row]
     tag = f'{models_tag(args.models)}-{scenario}-{variant}-{reward}-seed0-e{args.evals}-{args.width}x{args.height}'
@@ -74,23 +74,8 @@ def recon_cell(cache: Path, out: Path, scenario: str, row: str, plan: dict, args
     def compute() -> dict:
         noisy, _ = scene(scenario, args.models)
         cfg = ReconConfig(width=args.width, height=args.height, num_threads=args.threads)
-        folder = out / 'recon' / tag
-        try:
-            ks = range(min(args.realizations, len(noisy.points))) if args.realizations else None
-            res = reconstruct_plan(noisy, np.asarray(plan['cameras']), cfg, folder, realizations=ks)
-        except ReconError as exc:  # a plan that does not reconstruct is a result too
-            return {'error': exc.name, 'error_msg': str(exc), 'chamfer_mean': float('nan'),
-                    'chamfer_std': float('nan'), 'per_realization': []}
-        for r in res.realizations:
-            write_ply(folder / f'recon_{r.realization}.ply', r.points, r.colors)
-        if res.realizations and res.realizations[0].rendered:
-            write_image(folder / 'views.png', contact_sheet(res.realizations[0].rendered))
-        return {'chamfer_mean': TABLE_SCALE * res.chamfer_mean, 'chamfer_std': TABLE_SCALE * res.chamfer_std,
-                'seconds': res.seconds,
-                'per_realization': [{'chamfer': TABLE_SCALE * r.chamfer, 'accuracy': TABLE_SCALE * r.accuracy,
-                                     'completeness': TABLE_SCALE * r.completeness, 'fscore': r.fscore,
-                                     'points': int(len(r.points)), 'images': r.images, 'source': r.source}
-                                    for r in res.realizations]}
+        ks = range(min(args.realizations, len(noisy.points))) if args.realizations else None
+        return reconstruct_record(noisy, plan['cameras'], cfg, out / 'recon' / tag, ks)
     return cached(cache / 'recon' / f'{tag}.json', compute)
 
 

@@ -502,9 +502,17 @@ def initial_design(space: ViewSpace, n: int, rng: np.random.Generator, structure
 
 def _bo(space: ViewSpace, obj: Objective, evaluations: int, initial_evaluations: int, seed: int,
         rng: np.random.Generator, ensemble: bool, structured_init: int, bo_mode: str) -> dict:
+    X0 = initial_design(space, initial_evaluations, rng, structured_init, obj.should_stop)
+    return _optimize(space, obj, X0, evaluations, initial_evaluations, seed, ensemble, bo_mode)
+
+
+def _optimize(space: Any, obj: Objective, X0: NDArray[np.float64], evaluations: int, initial_evaluations: int,
+              seed: int, ensemble: bool, bo_mode: str) -> dict:
+    """:func:`vp_planner.bo.optimize` on ``obj`` in ``space`` (a ViewSpace, or the JointSpace of
+    planning by parts) from the initial design X0; the run's weights, models, steps and the
+    initial design's best."""
     from . import bo  # imported lazily: botorch is heavy
 
-    X0 = initial_design(space, initial_evaluations, rng, structured_init, obj.should_stop)
     info: dict = {"weights": None, "model_names": None}
 
     def objective(U: torch.Tensor) -> torch.Tensor:
@@ -543,7 +551,6 @@ def _bo_by_parts(space: ViewSpace, obj: Objective, evaluations: int, initial_eva
     ``obj`` is the whole run's objective (the joint space's): it counts the part evaluations too
     (recorded with reward 0 and ``candidate=False``: a part's reward is not a plan's) so that the
     budget, the progress callback and cancelling work as for any method."""
-    from . import bo
     from .parts import JointSpace, allocate_cameras, partition
 
     R = space.realizations
@@ -571,29 +578,10 @@ def _bo_by_parts(space: ViewSpace, obj: Objective, evaluations: int, initial_eva
                         "initial_best": info.get("initial_best")})
     joint = JointSpace(space, part_spaces)
     obj.space = joint
-    U0 = np.concatenate(part_U)[None]
-    weights: dict = {"last": None}
-
-    def objective(U: torch.Tensor) -> torch.Tensor:
-        return obj(U).to(U.dtype)
-
-    def feasible(U: torch.Tensor) -> torch.Tensor:
-        obj.check_stop()
-        return joint.feasible(U)
-
-    def bo_callback(done: int, total: int, best: float, w: Optional[list]) -> bool:
-        if w is not None:
-            obj.weights = weights["last"] = [float(x) for x in w]
-        return not obj.cancelled
-
-    res = bo.optimize(objective, joint.dim, max(1, evaluations // 2), 1, seed, ensemble=ensemble,
-                      feasible=feasible, initial_design=torch.as_tensor(U0, dtype=torch.float64),
-                      callback=bo_callback, settings=bo.BOSettings(mode="trust_region"),
-                      periodic=torch.as_tensor(joint.periodic), groups=torch.arange(joint.dim) % 6)
-    return {"weights": weights["last"], "model_names": list(res.model_names),
-            "steps": [st.as_dict(res.model_names) for st in res.steps],
-            "initial_best": float(res.best_initial) if math.isfinite(res.best_initial) else None,
-            "parts": records}
+    info = _optimize(joint, obj, np.concatenate(part_U)[None], max(1, evaluations // 2), 1, seed, ensemble,
+                     "trust_region")
+    info["parts"] = records
+    return info
 
 
 def _forward(obj: Objective) -> Callback:
