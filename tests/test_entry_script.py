@@ -183,3 +183,29 @@ def test_the_script_offers_every_method_of_the_planner() -> None:
 
     assert tuple(run_suite.METHODS) == tuple(METHODS)
     assert run_suite.parse_args(["--method", "lawnmower"]).method == "lawnmower"
+
+
+def test_a_goal_whose_acceptance_was_lost_still_gets_its_result(ros_env, start_node, monkeypatch) -> None:
+    """The script's recovery when the planner accepts a goal but its answer is lost (rmw_fastrtps
+    drops a service response sent before the reply path is matched): once the goal's feedback
+    arrives, a handle made from the goal id alone gets the plan."""
+    import run_suite
+
+    monkeypatch.setenv("ROS_DOMAIN_ID", ros_env["ROS_DOMAIN_ID"])
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    start_node("vp_scene", "scene", {"scenario": "one_plant", "points_per_plant": 500, "realizations": 2}, ros_env)
+    planner = start_node("vp_planner", "planner", {"num_threads": 1}, ros_env)
+    args = run_suite.parse_args(["--cameras", "3", "--method", "random", "--evals", "30"])
+    mission = run_suite.Mission(args)
+    try:
+        deadline = time.monotonic() + 120
+        run_suite.wait_for(lambda: mission.scene_ready.is_set() and mission.client.server_is_ready(), [planner],
+                           deadline, "scene and server")
+        _ignored, goal_id = mission.send_goal()        # as if its response never came
+        run_suite.wait_for(lambda: mission.feedback_seen, [planner], deadline, "feedback")
+        result_future = mission.accepted_handle(goal_id).get_result_async()
+        run_suite.wait_for(result_future.done, [planner], deadline, "the result")
+        result = result_future.result().result
+        assert result.error_code == 0 and len(result.cameras) == 3 * 6 and result.evaluations == 30
+    finally:
+        mission.close()

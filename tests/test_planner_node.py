@@ -40,6 +40,15 @@ def send(client, action: ActionClient, goal: PlanViews.Goal, feedback: list | No
     return handle, client.spin_future(handle.get_result_async(), 240.0)
 
 
+def wait_for_server(client, action: ActionClient, planner) -> None:
+    """Until the action server is ready, then run_suite's settle time: server_is_ready() sees the
+    request side only, and a goal answered before its reply path is matched loses its answer."""
+    from run_suite import SETTLE_S
+
+    assert client.spin_until(lambda: action.server_is_ready(), TIMEOUT), planner.output()
+    client.spin_until(lambda: False, SETTLE_S)
+
+
 def goal(num_cameras=4, method="circle", evaluations=20, initial=0, seed=1, reward="") -> PlanViews.Goal:
     g = PlanViews.Goal()
     g.num_cameras, g.method, g.evaluations, g.initial_evaluations, g.seed, g.reward = (
@@ -54,7 +63,7 @@ def system(ros_env, start_node, ros_node):
     planner = start_node("vp_planner", "planner", {"initial_evaluations": 8}, ros_env)
     client = ros_node(ros_env)
     action = ActionClient(client.node, PlanViews, "/plan_views")
-    assert client.spin_until(lambda: action.server_is_ready(), TIMEOUT), planner.output()
+    wait_for_server(client, action, planner)
     return client, action, scene, planner
 
 
@@ -62,7 +71,7 @@ def test_no_scene_goal_aborts_then_plans_and_publishes(ros_env, start_node, ros_
     planner = start_node("vp_planner", "planner", {"scene_timeout": 1.0}, ros_env)
     client = ros_node(ros_env)
     action = ActionClient(client.node, PlanViews, "/plan_views")
-    assert client.spin_until(lambda: action.server_is_ready(), TIMEOUT), planner.output()
+    wait_for_server(client, action, planner)
     _, res = send(client, action, goal())
     assert res.result.error_code == PlanViews.Result.NO_SCENE and "scene" in res.result.error_msg
 
@@ -163,8 +172,8 @@ def test_goal_without_num_cameras_uses_the_parameter(ros_env, start_node, ros_no
     planner = start_node("vp_planner", "planner", {"num_cameras": 3}, ros_env)
     client = ros_node(ros_env)
     action = ActionClient(client.node, PlanViews, "/plan_views")
-    assert client.spin_until(lambda: action.server_is_ready() and "scene received" in planner.output(),
-                             TIMEOUT), planner.output()
+    assert client.spin_until(lambda: "scene received" in planner.output(), TIMEOUT), planner.output()
+    wait_for_server(client, action, planner)
     _, res = send(client, action, goal(num_cameras=0, method="circle", evaluations=6))
     assert res.result.error_code == PlanViews.Result.NONE, res.result.error_msg
     assert len(res.result.plan.poses) == 3
@@ -205,8 +214,8 @@ def test_cloud_in_another_frame_is_refused(ros_env, start_node, ros_node) -> Non
     pub.publish(numpy_to_pointcloud2(noisy.points.reshape(-1, 3), realization=np.repeat(np.arange(k), p).astype(np.uint16),
                                      frame_id="odom"))
     action = ActionClient(client.node, PlanViews, "/plan_views")
-    assert client.spin_until(lambda: action.server_is_ready() and "ignoring /scene/noisy_points" in planner.output(),
-                             TIMEOUT), planner.output()
+    assert client.spin_until(lambda: "ignoring /scene/noisy_points" in planner.output(), TIMEOUT), planner.output()
+    wait_for_server(client, action, planner)
     _, res = send(client, action, goal())
     assert res.result.error_code == PlanViews.Result.NO_SCENE and "'odom'" in res.result.error_msg
     assert planner.alive()

@@ -35,6 +35,12 @@ from typing import Dict, List, Optional
 
 from node_process import NodeProcess, node_command
 
+#: s between the action server being ready and the goal: server_is_ready() sees the request side of
+#: the action's services only; a goal response sent before its reply path is matched is dropped by
+#: rmw_fastrtps ("failed to send response (timeout)", ros2/rmw_fastrtps#706), and the planner then
+#: executes a goal whose acceptance never arrives (the script also recovers from that, by feedback).
+SETTLE_S = 1.0
+
 #: The planner's methods (vp_planner.optimizers.METHODS, which imports torch; a test keeps them equal).
 METHODS = ('egp', 'gp', 'circle', 'arc', 'sa', 'random', 'lawnmower')
 
@@ -142,6 +148,7 @@ class Mission:
         self._spin = threading.Thread(target=self._spin_forever, daemon=True)
         self._spin.start()
         self.progress = None
+        self.feedback_seen = False
 
     def _spin_forever(self) -> None:
         try:
@@ -155,6 +162,7 @@ class Mission:
             self.aggregate.set()
 
     def on_feedback(self, fb_msg) -> None:
+        self.feedback_seen = True
         fb = fb_msg.feedback
         if self.progress is None:
             from tqdm import tqdm
@@ -167,6 +175,10 @@ class Mission:
         self.progress.set_postfix(post, refresh=True)
 
     def send_goal(self):
+        """Send the goal; (the future of its goal handle, its goal id)."""
+        from unique_identifier_msgs.msg import UUID
+        import uuid
+
         goal = self.PlanViews.Goal()
         goal.num_cameras = self.args.cameras
         goal.method = self.args.method
@@ -174,7 +186,15 @@ class Mission:
         goal.initial_evaluations = min(self.args.init, self.args.evals)
         goal.seed = self.args.seed
         goal.reward = self.args.reward
-        return self.client.send_goal_async(goal, feedback_callback=self.on_feedback)
+        goal_id = UUID(uuid=list(uuid.uuid4().bytes))
+        return self.client.send_goal_async(goal, feedback_callback=self.on_feedback, goal_uuid=goal_id), goal_id
+
+    def accepted_handle(self, goal_id):
+        """A handle for a goal the planner accepted (its feedback arrives) whose acceptance never
+        reached us, so that its result can be asked for."""
+        from rclpy.action.client import ClientGoalHandle
+
+        return ClientGoalHandle(self.client, goal_id, self.PlanViews.Impl.SendGoalService.Response(accepted=True))
 
     def close(self) -> None:
         if self.progress is not None:
@@ -285,9 +305,17 @@ def run(args: argparse.Namespace) -> int:
 
         wait_for(mission.scene_ready.is_set, nodes, deadline, 'the scene on /scene/noisy_points')
         wait_for(lambda: mission.client.server_is_ready(), nodes, deadline, 'the /plan_views server')
-        goal_future = mission.send_goal()
-        wait_for(goal_future.done, nodes, deadline, 'the planner to accept the goal')
-        handle = goal_future.result()
+        settled = time.monotonic() + SETTLE_S
+        wait_for(lambda: time.monotonic() > settled, nodes, deadline, 'the action\'s reply paths')
+        goal_future, goal_id = mission.send_goal()
+        wait_for(lambda: goal_future.done() or mission.feedback_seen, nodes, deadline,
+                 'the planner to accept the goal')
+        if goal_future.done():
+            handle = goal_future.result()
+        else:  # executing (its feedback arrives), but the goal response was lost: ask for the result
+            print('note: the planner accepted the goal but its answer was lost in DDS discovery; '
+                  'asking for the result directly', flush=True)
+            handle = mission.accepted_handle(goal_id)
         if not handle.accepted:
             outcome.append('error: the planner rejected the goal')
             return EXIT_FAILED
