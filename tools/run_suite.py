@@ -97,19 +97,14 @@ def check_scenario(ap: argparse.ArgumentParser, scenario: str) -> tuple:
     """(the layout's name, its file as an absolute path or None for a built-in layout); a layout
     file is read and checked now (a bad one is a usage error: exit 2, the file and field named)."""
     try:
-        from vp_scene.layout import BUILTIN_LAYOUTS, LayoutError, is_layout_file, load_layout
+        from vp_scene.layout import LayoutError, read_scenario
     except ImportError as exc:
         ap.error(f'cannot import vp_scene ({exc}): run make setup and source install/setup.bash')
-    if scenario in BUILTIN_LAYOUTS:
-        return scenario, None
-    if not is_layout_file(scenario):
-        ap.error(f"--scenario: {scenario!r} is neither a layout name ({', '.join(BUILTIN_LAYOUTS)}) "
-                 f"nor a layout file (.yaml, .yml, .json)")
     try:
-        layout = load_layout(scenario)
+        layout = read_scenario(scenario)
     except LayoutError as exc:
         ap.error(f'--scenario: {exc}')
-    return layout.name, str(Path(scenario).resolve())
+    return (scenario, None) if layout is None else (layout.name, str(Path(scenario).resolve()))
 
 
 class Mission:

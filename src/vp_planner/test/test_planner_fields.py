@@ -166,8 +166,10 @@ def test_oblique_survey_flies_back_and_forth(two_plants) -> None:
 
 def test_lawnmower_method_is_one_feasible_survey(two_plants) -> None:
     R, _ = two_plants
-    res = plan_views("lawnmower", R, 6, evaluations=50)
+    seen = []
+    res = plan_views("lawnmower", R, 6, evaluations=50, callback=lambda done, total, *_: seen.append((done, total)))
     assert res.evaluations == 1 and not res.stopped and res.cameras.shape == (6, 6)
+    assert seen == [(1, 1)]                       # its progress says 1 of 1, not 1 of 50
     space = ViewSpace(R, 6)
     assert space.feasible(res.cameras)
     assert np.all(res.cameras[:, 2] >= R[..., 2].max() + 0.5 - 1e-9)

@@ -31,7 +31,7 @@ from typing import Any, Optional, Sequence
 
 import numpy as np
 
-from vp_scene.layout import BUILTIN_LAYOUTS, LayoutError, is_layout_file, load_layout, resolve_layout
+from vp_scene.layout import BUILTIN_LAYOUTS, LayoutError, read_scenario, resolve_layout
 
 SCENARIO_NAMES = tuple(BUILTIN_LAYOUTS)
 
@@ -51,15 +51,11 @@ def _scenario(text: str) -> Any:
     """``--scenario``: a built-in name (kept as it is) or a layout file, read at once into its
     canonical dict (:meth:`vp_scene.layout.Layout.to_dict`), which plan.json stores so that the
     plan file rebuilds its scene without the layout file."""
-    if text in SCENARIO_NAMES:
-        return text
-    if not is_layout_file(text):
-        raise argparse.ArgumentTypeError(f"{text!r} is neither a layout name ({', '.join(SCENARIO_NAMES)}) "
-                                         f"nor a layout file (.yaml, .yml, .json)")
     try:
-        return load_layout(text).to_dict()
+        layout = read_scenario(text)
     except LayoutError as exc:
         raise argparse.ArgumentTypeError(" ".join(str(exc).split())) from None
+    return text if layout is None else layout.to_dict()
 
 
 def _scene_args(p: argparse.ArgumentParser) -> None:
@@ -209,6 +205,7 @@ def plan(args: argparse.Namespace) -> dict:
 
     def progress(done: int, total: int, best: float, weights: Optional[list]) -> bool:
         if bar is not None:
+            bar.total = total  # by parts the run makes more evaluations than --evals, a survey one
             bar.update(done - bar.n)
             bar.set_postfix_str(f"best {best:.4f}", refresh=False)
         return True

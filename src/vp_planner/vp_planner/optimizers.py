@@ -242,8 +242,11 @@ def _check_parts(parts: Any, method: str, realizations: NDArray[np.float64], num
 
 
 def total_evaluations(method: str, evaluations: int, parts: int) -> int:
-    """Reward evaluations a run makes: ``evaluations``, or for egp/gp by G > 1 parts, G times that
-    (one plan's budget a part) plus ``evaluations // 2`` for the joint refinement."""
+    """Reward evaluations a run makes: ``evaluations``; for egp/gp by G > 1 parts, G times that
+    (one plan's budget a part) plus ``evaluations // 2`` for the joint refinement; for
+    ``lawnmower`` 1 (a survey is flown as planned, not tuned)."""
+    if method == "lawnmower":
+        return 1
     if method in ("egp", "gp") and parts > 1:
         return parts * int(evaluations) + max(1, int(evaluations) // 2)
     return int(evaluations)
@@ -697,7 +700,7 @@ def plan_views(
                        int(structured_init), bo_mode)
     except PlanningCancelled:
         pass
-    stopped = obj.cancelled or obj.count < (1 if method == "lawnmower" else budget)
+    stopped = obj.cancelled or obj.count < budget
     best = obj.best_cameras()
     if best is None:
         if not stopped:

@@ -12,7 +12,7 @@ import pytest
 
 from vp_scene.build import build_noisy_scene
 from vp_scene.layout import (BUILTIN_LAYOUTS, Layout, LayoutError, PlantSpec, layout_from_dict, load_layout,
-                             resolve_layout)
+                             read_scenario, resolve_layout)
 from vp_scene.plants import PlantModel, load_models, procedural_corn
 from vp_scene.scenario import SCENARIOS, Scene, make_scene, place_points
 
@@ -299,6 +299,16 @@ def test_missing_and_unknown(tmp_path: Path) -> None:
         resolve_layout("field.txt")
     with pytest.raises(LayoutError, match="plant_spacing must be > 0"):
         resolve_layout(str(EXAMPLES / "field.yaml"), plant_spacing=0.0)
+
+
+def test_command_line_scenario_is_a_name_or_a_file_read_at_once(tmp_path: Path) -> None:
+    assert read_scenario("row_12") is None
+    assert read_scenario(str(EXAMPLES / "field.yaml")) == load_layout(EXAMPLES / "field.yaml")
+    with pytest.raises(LayoutError, match=r"^'nine_square' is neither a layout name \(one_plant, .*row_12\) "
+                                          r"nor a layout file \(.yaml, .yml, .json\)$"):
+        read_scenario("nine_square")
+    with pytest.raises(LayoutError, match="^layout file not found: .*field.json$"):
+        read_scenario(str(tmp_path / "field.json"))
 
 
 def test_dict_errors_name_the_given_source() -> None:

@@ -56,7 +56,7 @@ import numpy as np
 
 __all__ = ["LayoutError", "PlantSpec", "Layout", "BUILTIN_LAYOUTS", "LAYOUT_SUFFIXES", "MAX_PLANTS",
            "MIN_PLANT_DISTANCE", "MAX_SCALE", "grid_layout", "builtin_layout", "layout_from_dict",
-           "load_layout", "resolve_layout", "is_layout_file"]
+           "load_layout", "read_scenario", "resolve_layout", "is_layout_file"]
 
 #: Built-in layouts: name -> (rows, columns) of a grid with the caller's plant and row spacing.
 BUILTIN_LAYOUTS: dict[str, tuple[int, int]] = {
@@ -399,6 +399,18 @@ def load_layout(path: Union[str, Path]) -> Layout:
     if not p.is_file():
         raise LayoutError(f"layout file not found: {p}")
     return layout_from_dict(_read(p), str(p), default_name=p.stem)
+
+
+def read_scenario(text: str) -> Optional[Layout]:
+    """A scenario as a command line gives it: None for a built-in layout name, else the layout
+    file it names, read and checked now (LayoutError of one line: the file and the field, or that
+    ``text`` is neither a layout name nor a layout file)."""
+    if text in BUILTIN_LAYOUTS:
+        return None
+    if not is_layout_file(text):
+        raise LayoutError(f"{text!r} is neither a layout name ({', '.join(BUILTIN_LAYOUTS)}) "
+                          f"nor a layout file ({', '.join(LAYOUT_SUFFIXES)})")
+    return load_layout(text)
 
 
 def resolve_layout(scenario: Scenario, plant_spacing: float = 0.6, row_spacing: float = 0.76,

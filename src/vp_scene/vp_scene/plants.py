@@ -27,6 +27,8 @@ __all__ = [
     "load_models",
     "check_plant_size",
     "procedural_corn",
+    "procedural_name",
+    "procedural_name_seed",
     "procedural_seed",
     "sample_surface",
 ]
@@ -272,6 +274,20 @@ def load_models(folder: PathLike) -> list[PlantModel]:
 # Procedural corn
 # --------------------------------------------------------------------------------------------
 
+_PROCEDURAL_NAME = re.compile(r"procedural-(\d+)")
+
+
+def procedural_name(seed: int) -> str:
+    """The name of the procedural plant of ``seed``: ``procedural-<seed>``."""
+    return f"procedural-{int(seed)}"
+
+
+def procedural_name_seed(name: str) -> Optional[int]:
+    """The seed of a procedural plant's name (:func:`procedural_name`), None for any other name."""
+    m = _PROCEDURAL_NAME.fullmatch(name)
+    return None if m is None else int(m.group(1))
+
+
 def procedural_seed(seed: int, index: int) -> int:
     """Stable per-plant seed derived from a scene seed and a plant index ("hash of (seed, i)")."""
     return int(np.random.SeedSequence([int(seed), int(index)]).generate_state(1)[0] & 0x7FFFFFFF)
@@ -499,6 +515,6 @@ def procedural_corn(seed: int = 0, n_points: int = 20000) -> PlantModel:
     zc = float((area * mesh.triangles_center[:, 2]).sum() / area.sum())
     mesh.apply_translation([0.0, 0.0, -zc])
     mesh.metadata["double_sided"] = True
-    mesh.metadata["name"] = f"procedural-{seed}"
+    mesh.metadata["name"] = procedural_name(seed)
     pts, pcol = sample_surface(mesh, n_points, np.random.default_rng([seed, 1]))
-    return PlantModel(name=f"procedural-{seed}", points=pts, colors=pcol, mesh=mesh)
+    return PlantModel(name=procedural_name(seed), points=pts, colors=pcol, mesh=mesh)

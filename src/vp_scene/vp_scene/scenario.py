@@ -11,7 +11,6 @@ ROS-free: numpy (and trimesh for placing meshes).
 from __future__ import annotations
 
 import math
-import re
 from dataclasses import dataclass, field
 from typing import Optional, Sequence, Union
 
@@ -19,7 +18,7 @@ import numpy as np
 import trimesh
 
 from .layout import BUILTIN_LAYOUTS, Layout, LayoutError, PlantSpec, resolve_layout
-from .plants import PlantModel, procedural_corn, procedural_seed
+from .plants import PlantModel, procedural_corn, procedural_name_seed, procedural_seed
 
 __all__ = ["SCENARIOS", "PlacedPlant", "Scene", "layout", "make_scene", "place_points", "place_mesh"]
 
@@ -119,7 +118,6 @@ def place_mesh(mesh: trimesh.Trimesh, plant: PlacedPlant) -> trimesh.Trimesh:
     return out
 
 
-_PROCEDURAL_NAME = re.compile(r"procedural-(\d+)")
 _LISTED_NAMES = 20  # model names listed in an error, at most
 
 
@@ -135,11 +133,11 @@ def _named_model(models: Sequence[PlantModel], name: str, where: str) -> int:
 
 def _procedural_seed_of(name: str, where: str) -> int:
     """The seed of a procedural plant's name ``procedural-<seed>``; any other name needs a models folder."""
-    m = _PROCEDURAL_NAME.fullmatch(name)
-    if m is None:
+    seed = procedural_name_seed(name)
+    if seed is None:
         raise LayoutError(f"{where} {name!r} needs a models folder: without one the plants are procedural "
                           f"(models procedural-<seed>)")
-    return int(m.group(1))
+    return seed
 
 
 def _wrap(yaw: float) -> float:
