@@ -10,7 +10,8 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-42}
 
 # System libraries: headless EGL rendering needs Mesa's libEGL (Debian: libegl1 libgl1-mesa-dri);
-# open3d (Poisson meshing of real plant clouds) needs libusb-1.0; iproute2 for the cross-host test.
+# open3d (Poisson meshing of real plant clouds) needs libusb-1.0; iproute2 for the cross-host test;
+# chromium + chromium-driver for the viewer's browser test.
 # (grep reads the whole list: `grep -q` would stop early, ldconfig would die of SIGPIPE and
 # pipefail would report the library missing)
 missing=()
@@ -20,6 +21,11 @@ grep 'libusb-1.0.so.0' >/dev/null <<<"$libs" || missing+=(libusb-1.0-0)
 # the cross-host test (tests/test_across_hosts.py) builds network namespaces with iproute2 as root
 # (it skips for other users, so only root is asked to install it)
 if [ "$(id -u)" = 0 ] && ! command -v ip >/dev/null; then missing+=(iproute2); fi
+# the viewer's browser test drives Debian's chromium headless through chromedriver (nothing is
+# downloaded at test time; it skips with a reason where they are missing and the user is not root)
+if [ "$(id -u)" = 0 ] && { ! command -v chromium >/dev/null || ! command -v chromedriver >/dev/null; }; then
+  missing+=(chromium chromium-driver)
+fi
 if [ ${#missing[@]} -gt 0 ]; then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
     echo "[setup] installing system libraries: ${missing[*]}"
