@@ -205,6 +205,21 @@ def test_a_silent_drone_is_named_and_nothing_is_dispatched(ros_env, start_node, 
     fleet.client.spin_until(lambda: False, 1.0)  # time for a goal that should not come
     assert not any(fleet.goals[d] for d in drones)
 
+    # issue 19, item 4: a drone reporting NaN was named as having "no pose yet"
+    nan_pub = fleet.client.node.create_publisher(Odometry, "/d2/pose", 10)
+    nan = Odometry()
+    nan.header.frame_id = "map"
+    nan.pose.pose.position.x = float("nan")
+    nan.pose.pose.orientation.w = 1.0
+    for _ in range(5):
+        nan_pub.publish(nan)
+        fleet.client.spin_until(lambda: False, 0.2)
+    assert fleet.client.spin_until(lambda: "drone d2: ignoring a pose with non-finite" in dispatcher.output(),
+                                   10), dispatcher.output()
+    ans = fleet.send(ring(2), stamp=2011)
+    assert ans.error_code == FleetAssignment.DRONE_SILENT and list(ans.silent_drones) == ["d2"], ans.error_msg
+    assert "d2 (reports a non-finite pose: (nan, 0, 0))" in ans.error_msg, ans.error_msg
+
     sims.update(start_drones(start_node, ros_env, {"d2": starts["d2"]}, pose_type="odometry"))
     assert fleet.wait_for_poses(dispatcher), dispatcher.output()
     ans = fleet.send(ring(2), stamp=202)

@@ -99,7 +99,7 @@ def start_script(ros_env, tmp_path, *args) -> NodeProcess:
 
 def planning_started(ros_env, tmp_path) -> tuple[NodeProcess, dict]:
     """The script on a long egp mission, once the planner works on the goal; (script, node pids)."""
-    script = start_script(ros_env, tmp_path, "--method", "egp", "--evals", "3000", "--init", "10",
+    script = start_script(ros_env, tmp_path, "--method", "egp", "--evals", "1000", "--init", "10",
                           "--timeout", "300")
     assert script.wait_for_output("planning 4 cameras", 120), script.output()[-3000:]
     pids = started_pids(script.output())

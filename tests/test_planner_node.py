@@ -117,6 +117,9 @@ def test_no_scene_goal_aborts_then_plans_and_publishes(ros_env, start_node, ros_
     (dict(method="magic"), "UNKNOWN_METHOD"),
     (dict(method="egp", evaluations=5, initial=10), "INVALID_BUDGET"),
     (dict(reward="magic"), "UNKNOWN_REWARD_MODEL"),
+    # issue 19, item 1: 4e9 evaluations grew the planner to 20 GB until the kernel killed it
+    (dict(method="circle", evaluations=4_000_000_000), "BUDGET_TOO_LARGE"),
+    (dict(method="egp", evaluations=1001, initial=10), "BUDGET_TOO_LARGE"),
 ])
 def test_bad_goals_are_aborted_and_node_keeps_serving(system, bad, code) -> None:
     client, action, _, planner = system

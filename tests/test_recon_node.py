@@ -198,11 +198,12 @@ def test_plan_without_scene_is_reported(ros_env, start_node, ros_node, tmp_path)
 
 
 @pytest.mark.parametrize("stage", ["recon ready", "sparse done"])
-def test_sigterm_exits_promptly_whatever_the_node_does(stage, recon_system) -> None:
+def test_sigterm_exits_promptly_whatever_the_node_does(stage, recon_system, tmp_path) -> None:
     """Issue 10, item 4: the recon ignored SIGTERM in 2 of 72 trials (its main thread stuck in
     the multithreaded executor), and once COLMAP had run, glog's SIGTERM handler (installed by
     importing pycolmap) killed it with a stack trace. Idle or in the middle of a
-    reconstruction: exit 0 within a few seconds, quietly."""
+    reconstruction: exit 0 within a few seconds, quietly. Issue 19, item 4: a plan interrupted
+    before anything was written left an empty ``plan-<time>/`` folder behind."""
     client, pub, scores, _clouds, recon = recon_system()
     if stage != "recon ready":
         pub.publish(pose_array(ring()))
@@ -215,3 +216,8 @@ def test_sigterm_exits_promptly_whatever_the_node_does(stage, recon_system) -> N
     assert code == 0, out[-3000:]
     assert took < 5.0, f"exited {took:.1f} s after SIGTERM"
     assert "Traceback" not in out, out[-3000:]
+    if stage != "recon ready":
+        assert "reconstructing" in out, out[-3000:]
+        folders = sorted((tmp_path / "out").glob("plan-*"))
+        empty = [f.name for f in folders if not any(p.is_file() for p in f.rglob("*"))]
+        assert not empty, f"empty plan folders left behind: {empty}"

@@ -190,9 +190,8 @@ class NodeProcess:
 
     def stop(self, timeout: float = 10.0) -> Optional[int]:
         """SIGTERM the process group (the suite's nodes exit 0 within seconds), then SIGKILL; the
-        exit status. SIGTERM rather than SIGINT: a Python process that is still importing its
-        modules ends quietly by the signal's default action instead of a KeyboardInterrupt
-        traceback."""
+        exit status. The suite's nodes answer SIGINT and SIGTERM alike (exit 0, also while still
+        importing: :mod:`vp_scene.node_entry`); SIGTERM also ends other commands quietly."""
         for sig, wait in ((signal.SIGTERM, timeout), (signal.SIGKILL, 3.0)):
             if not self.alive():
                 break

@@ -18,9 +18,9 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'planner = vp_planner.planner_node:main',
-            'dispatcher = vp_planner.dispatcher_node:main',
-            'sim_drone = vp_planner.sim_drone_node:main',
+            'planner = vp_planner.node_entry:planner',
+            'dispatcher = vp_planner.node_entry:dispatcher',
+            'sim_drone = vp_planner.node_entry:sim_drone',
             'plan = vp_planner.cli:main',
         ],
     },

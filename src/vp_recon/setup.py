@@ -18,7 +18,7 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'recon = vp_recon.recon_node:main',
+            'recon = vp_recon.node_entry:recon',
             'reconstruct = vp_recon.cli:main',
         ],
     },

@@ -18,7 +18,7 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'scene = vp_scene.scene_node:main',
+            'scene = vp_scene.node_entry:scene',
         ],
     },
 )

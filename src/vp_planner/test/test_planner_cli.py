@@ -72,6 +72,26 @@ def test_cli_errors(tmp_path: Path) -> None:
     assert main(["--out", str(tmp_path / "y"), "--models", str(tmp_path / "missing"), "--no-progress"]) == 2
 
 
+def test_cli_refuses_an_unbounded_budget_in_one_line(tmp_path: Path) -> None:
+    """Issue 19, item 1: `--method circle --evals 100000000` allocated 2.5 GB; `--method egp --evals
+    1000000000` ended in a 28-line traceback. Now both are refused in one line, exit 2, before
+    anything is allocated (the child's address space is capped at 6 GiB: a regression fails
+    here instead of taking the machine down)."""
+    import resource
+
+    def cap() -> None:
+        resource.setrlimit(resource.RLIMIT_AS, (6 << 30, 6 << 30))
+
+    for method, evals in (("circle", "100000000"), ("egp", "1000000000")):
+        p = subprocess.run([sys.executable, "-m", "vp_planner.cli", "--method", method, "--cameras", "4",
+                            "--evals", evals, "--out", str(tmp_path / method), "--no-progress"],
+                           capture_output=True, text=True, timeout=120, preexec_fn=cap)
+        assert p.returncode == 2, p.stderr[-3000:]
+        lines = [ln for ln in p.stderr.splitlines() if ln.strip()]
+        assert len(lines) == 1 and "above the bound" in lines[0], p.stderr[-3000:]
+        assert not (tmp_path / method / "plan.json").exists()
+
+
 def test_cli_argparse_error_is_one_line(capsys: pytest.CaptureFixture) -> None:
     with pytest.raises(SystemExit) as info:
         main(["--method", "nope", "--out", "x"])
@@ -167,6 +187,7 @@ def test_cli_layout_file_makes_a_self_contained_plan(tmp_path: Path) -> None:
 @pytest.mark.parametrize("content, text", [
     ("grid: {rows: three, columns: 2}", "field.yaml: grid.rows must be an integer >= 1, got 'three'"),
     (None, "layout file not found: "),
+    ("plants: [{x: 1000000000, y: 0}]", "field.yaml: plant 0 stands at x = 1e+09, y = 0 m, outside"),  # issue 19
 ])
 def test_cli_bad_layout_file_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture, content, text) -> None:
     field = tmp_path / "field.yaml"

@@ -185,3 +185,38 @@ def test_feasible_plan_search_honours_should_stop(realizations: np.ndarray) -> N
     calls = []
     res = plan_views("random", realizations, 3, evaluations=40, should_stop=lambda: calls.append(1) or len(calls) > 2)
     assert res.stopped and 0 < res.evaluations < 40
+
+
+def test_evaluation_budget_is_bounded_before_anything_is_allocated(realizations: np.ndarray) -> None:
+    """Issue 19, item 1: a budget of 4e9 evaluations was accepted and grew the planner to 20 GB
+    (circle, sa and random had no bound; egp asked torch for 192 GB). Each method has a
+    documented bound, and a run the memory cannot hold is refused too, both before the space
+    or any record is allocated."""
+    from vp_planner.optimizers import (MAX_EVALUATIONS, BudgetTooLargeError, check_budget_memory,
+                                       estimate_run_memory)
+
+    assert set(MAX_EVALUATIONS) == set(METHODS)
+    assert MAX_EVALUATIONS["egp"] == MAX_EVALUATIONS["gp"] == 1000
+    assert all(MAX_EVALUATIONS[m] == 100_000 for m in ("circle", "arc", "sa", "random", "lawnmower"))
+    for method, evals in (("circle", 4_000_000_000), ("sa", 100_001), ("random", 10**9), ("egp", 1001)):
+        with pytest.raises(BudgetTooLargeError, match=f"above the bound of {MAX_EVALUATIONS[method]}"):
+            plan_views(method, realizations, 4, evaluations=evals, initial_evaluations=10)
+    assert issubclass(BudgetTooLargeError, InvalidBudgetError)
+    # the memory estimate: records grow with N, the GPs with n^2
+    assert estimate_run_memory("circle", 100, 100_000) > 1.4e9
+    assert estimate_run_memory("egp", 4, 1000) > 192e6 > estimate_run_memory("circle", 4, 1000)
+    with pytest.raises(BudgetTooLargeError, match="GiB are available"):
+        check_budget_memory("circle", 100, 100_000, available=2**30)
+    check_budget_memory("circle", 4, 100, available=2**30)
+    # at the bound, a run still plans (and within its budget)
+    ok = plan_views("circle", realizations, 3, evaluations=MAX_EVALUATIONS["circle"] // 1000)
+    assert ok.evaluations == 100
+
+
+def test_egp_names_the_range_it_serves_when_no_feasible_plan_exists(realizations: np.ndarray) -> None:
+    """Issue 19, item 4: egp found no feasible plan for N = 100 on one_plant while circle does,
+    although 2-100 cameras are allowed. egp's shell holds random feasible plans up to a few dozen
+    cameras a plant; beyond, its refusal says so and names the methods that serve the rest."""
+    with pytest.raises(NoFeasiblePlanError, match="egp/gp plan up to about 40 cameras a plant .*circle"):
+        plan_views("egp", realizations, 100, evaluations=3, initial_evaluations=2, structured_init=0)
+    assert plan_views("circle", realizations, 100, evaluations=1).cameras.shape == (100, 6)

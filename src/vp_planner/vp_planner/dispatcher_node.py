@@ -158,6 +158,7 @@ class DispatcherNode(Node):
         self._scene_problem = ''
         # drone -> (monotonic time of the report, frame_id, position (3,))
         self._reports: dict[str, tuple[float, str, np.ndarray]] = {}
+        self._nonfinite: dict[str, tuple] = {}  # drone -> its latest position, when that was not finite
         self._stop = False
         self._goal_pubs = {}
         pose_type = Odometry if v['pose_type'] == 'odometry' else PoseStamped
@@ -206,8 +207,11 @@ class DispatcherNode(Node):
         if not np.all(np.isfinite(p)):
             self.get_logger().warn(f'drone {drone}: ignoring a pose with non-finite coordinates',
                                    throttle_duration_sec=5.0)
+            with self._lock:  # named as such when the drone is missed (issue 19: it read "no pose yet")
+                self._nonfinite[drone] = (float(p[0]), float(p[1]), float(p[2]))
             return
         with self._lock:
+            self._nonfinite.pop(drone, None)
             first = drone not in self._reports
             self._reports[drone] = (time.monotonic(), msg.header.frame_id, p)
         if first:
@@ -296,8 +300,13 @@ class DispatcherNode(Node):
             self._wait(lambda: len(fresh()) == len(self._drones), timeout)
             reports = fresh()
             ages = {d: time.monotonic() - r[0] for d, r in self._reports.items()}
-        silent = [(d, f'{d} (last pose {ages[d]:.1f} s ago)' if d in ages else f'{d} (no pose yet)')
-                  for d in self._drones if d not in reports]
+            nonfinite = dict(self._nonfinite)
+
+        def why(d: str) -> str:
+            if d in nonfinite:
+                return f'{d} (reports a non-finite pose: ({", ".join(f"{x:g}" for x in nonfinite[d])}))'
+            return f'{d} (last pose {ages[d]:.1f} s ago)' if d in ages else f'{d} (no pose yet)'
+        silent = [(d, why(d)) for d in self._drones if d not in reports]
         wrong = [f'{d} reports in {r[1]!r}' for d, r in reports.items() if r[1] != v['fleet_frame']]
         return {d: r[2] for d, r in reports.items()}, silent, wrong
 

@@ -43,6 +43,16 @@ anything is allocated). What limits N is time and feasibility: one evaluation co
 BO methods work in 6N dimensions, and random feasible plans (min_separation between every pair)
 become rare beyond a few dozen cameras. Hence the bound of 100 cameras, far above the paper's
 N <= 6; a run is cancellable throughout (``should_stop``), the feasible-plan search included.
+
+Size of a budget: 1 <= evaluations <= :data:`MAX_EVALUATIONS` [method]: 1000 for egp/gp (the
+paper uses 100-200; a GP's fit costs O(n^3) time and O(n^2) memory in the n evaluations made,
+four of them for egp, so 1000 is already hours of fitting) and 100000 for the baselines (each
+evaluation is recorded: a few hundred bytes plus 150 bytes a camera). Planning by parts
+multiplies the budget (:func:`total_evaluations`). Beyond the bound, or when
+:func:`estimate_run_memory` of the run exceeds 80 % of the memory available, the request is
+refused before anything is allocated (:class:`BudgetTooLargeError`; the planner node's
+``BUDGET_TOO_LARGE``). Before this bound a goal of 4e9 evaluations grew the planner to 20 GB
+until the kernel killed it.
 """
 from __future__ import annotations
 
@@ -76,6 +86,9 @@ __all__ = [
     "InvalidNumCamerasError",
     "UnknownMethodError",
     "InvalidBudgetError",
+    "BudgetTooLargeError",
+    "MAX_EVALUATIONS",
+    "estimate_run_memory",
     "InvalidSceneError",
     "NoFeasiblePlanError",
 ]
@@ -84,6 +97,9 @@ METHODS: tuple[str, ...] = ("egp", "gp", "circle", "arc", "sa", "random", "lawnm
 
 #: The largest number of cameras N of a plan (see the module docstring).
 MAX_CAMERAS: int = 100
+
+#: The largest evaluation budget of a plan, by method (see the module docstring).
+MAX_EVALUATIONS: dict[str, int] = {m: (1000 if m in ("egp", "gp") else 100_000) for m in METHODS}
 
 Callback = Callable[[int, int, float, Optional[list]], bool]
 StopCheck = Callable[[], bool]
@@ -111,6 +127,10 @@ class UnknownMethodError(ValueError):
 
 class InvalidBudgetError(ValueError):
     """evaluations < 1, or smaller than initial_evaluations for egp/gp."""
+
+
+class BudgetTooLargeError(InvalidBudgetError):
+    """evaluations above :data:`MAX_EVALUATIONS`, or a run the memory cannot hold."""
 
 
 class InvalidSceneError(ValueError):
@@ -171,6 +191,9 @@ def validate_request(method: str, num_cameras: Any, evaluations: Any, initial_ev
         raise InvalidNumCamerasError(f"num_cameras must be an integer from 2 to {MAX_CAMERAS}, got {num_cameras}")
     if isinstance(evaluations, bool) or int(evaluations) != evaluations or evaluations < 1:
         raise InvalidBudgetError(f"evaluations must be an integer >= 1, got {evaluations}")
+    if evaluations > MAX_EVALUATIONS[method]:
+        raise BudgetTooLargeError(f"evaluations = {evaluations} is above the bound of {MAX_EVALUATIONS[method]} "
+                                  f"for method {method} (README, 'Planner node')")
     if method in ("egp", "gp"):
         if int(initial_evaluations) != initial_evaluations or initial_evaluations < 1:
             raise InvalidBudgetError(f"initial_evaluations must be an integer >= 1, got {initial_evaluations}")
@@ -197,6 +220,32 @@ def estimate_memory(num_cameras: int, num_realizations: int, num_points: int, re
         return 10 * 8 * DEFAULT_MAX_ELEMENTS + 80 * S
     kp = K * min(P, CoverageParams().max_points or P)
     return 200 * N * kp + 6 * 4 * (1 << 22) + 80 * S
+
+
+def estimate_run_memory(method: str, num_cameras: int, evaluations: int) -> int:
+    """Bytes a run of ``evaluations`` reward evaluations (all of them, parts included) keeps
+    beyond one evaluation's own (an upper estimate): every evaluation is recorded (its U row and
+    its cameras, 6N float64 each with their array headers, the value and flags: about
+    300 + 96 N bytes), the grid methods hold their candidate plans at once (48 N bytes each)
+    and egp/gp's GPs hold n x n kernel matrices and their factors and gradients while fitting
+    (four models of about six float64 matrices: 192 n^2 bytes)."""
+    N, E = int(num_cameras), int(evaluations)
+    need = E * (300 + 96 * N) + E * 48 * N
+    if method in ("egp", "gp"):
+        need += 192 * E * E
+    return need
+
+
+def check_budget_memory(method: str, num_cameras: int, evaluations: int,
+                        available: Optional[int] = None) -> None:
+    """BudgetTooLargeError when :func:`estimate_run_memory` exceeds 80 % of the available memory
+    (``available`` bytes; default: :func:`available_memory`), before anything is allocated."""
+    need = estimate_run_memory(method, num_cameras, evaluations)
+    have = available_memory() if available is None else int(available)
+    if have is not None and need > 0.8 * have:
+        raise BudgetTooLargeError(
+            f"{evaluations} evaluations of {num_cameras} cameras with {method} need about {need / 2**30:.1f} GiB; "
+            f"{have / 2**30:.1f} GiB are available: use a smaller budget")
 
 
 def available_memory() -> Optional[int]:
@@ -499,7 +548,15 @@ def initial_design(space: ViewSpace, n: int, rng: np.random.Generator, structure
     (PlanningCancelled as soon as ``should_stop()`` is True)."""
     S = space.structured(max_plans=max(0, min(structured, n))) if structured > 0 else np.zeros((0, space.dim))
     S = S[:n]
-    rest = space.sample(n - len(S), rng, should_stop=should_stop) if n > len(S) else np.zeros((0, space.dim))
+    try:
+        rest = space.sample(n - len(S), rng, should_stop=should_stop) if n > len(S) else np.zeros((0, space.dim))
+    except NoFeasiblePlanError as exc:
+        # The range egp/gp serve (issue 19, item 4; README "Planner node"): their space is a
+        # shell about the scene, and random plans in it keep min_separation only up to a few
+        # dozen cameras (one plant, 0.5 m: 40 cameras found 10 feasible plans, 44 none, in 16000
+        # draws). The ring methods widen their circle instead and serve every N up to 100.
+        raise NoFeasiblePlanError(f"{exc}; egp/gp plan up to about 40 cameras a plant (more: circle, arc, sa "
+                                  f"or lawnmower, or a field planned by parts)") from None
     return np.concatenate([S, rest], axis=0)
 
 
@@ -658,8 +715,9 @@ def plan_views(
     Raises:
         UnknownMethodError, InvalidNumCamerasError, InvalidBudgetError, InvalidSceneError (all
         ValueError) for bad arguments (InvalidNumCamerasError also for a plan the memory cannot
-        hold, :func:`check_memory`); NoFeasiblePlanError (ValueError) when no feasible plan was
-        found.
+        hold, :func:`check_memory`; BudgetTooLargeError, an InvalidBudgetError, for a budget above
+        :data:`MAX_EVALUATIONS` or one the memory cannot hold, :func:`check_budget_memory`);
+        NoFeasiblePlanError (ValueError) when no feasible plan was found.
     """
     validate_request(method, num_cameras, evaluations, initial_evaluations)
     check_reward_model(reward)
@@ -672,11 +730,12 @@ def plan_views(
     check_memory(num_cameras, R.shape, reward)
     n_parts = _check_parts(parts, method, R, num_cameras)
     check_lawnmower(lawnmower_overlap, lawnmower_tilt)
+    budget = total_evaluations(method, evaluations, n_parts)
+    check_budget_memory(method, num_cameras, budget)
     start = time.perf_counter()
     space = ViewSpace(R, num_cameras, min_standoff=min_standoff, min_altitude=min_altitude,
                       min_separation=min_separation, fov=fov, theta_match=theta_match, shell_depth=shell_depth,
                       reward_model=reward, image_size=image_size)
-    budget = total_evaluations(method, evaluations, n_parts)
     obj = Objective(space, budget, callback=callback, dtype=dtype, should_stop=should_stop)
     rng = np.random.default_rng(seed)
     torch.manual_seed(seed)

@@ -37,8 +37,8 @@ from visualization_msgs.msg import Marker, MarkerArray
 from vp_interfaces.action import PlanViews
 from vp_interfaces.msg import CameraPlan
 from vp_planner.gp import MODEL_NAMES
-from vp_planner.optimizers import (MAX_CAMERAS, METHODS, InvalidBudgetError, InvalidNumCamerasError,
-                                   InvalidSceneError, NoFeasiblePlanError, PlanResult, UnknownMethodError,
+from vp_planner.optimizers import (MAX_CAMERAS, METHODS, BudgetTooLargeError, InvalidBudgetError,
+                                   InvalidNumCamerasError, InvalidSceneError, NoFeasiblePlanError, PlanResult, UnknownMethodError,
                                    check_lawnmower, plan_views, validate_request)
 from vp_planner.reward_models import DEFAULT_REWARD_MODEL, REWARD_MODELS, check_reward_model
 from vp_scene.camera import cameras_to_poses, rotation_matrix
@@ -388,6 +388,8 @@ class PlannerNode(Node):
             return abort(PlanViews.Result.INVALID_NUM_CAMERAS, str(exc))
         except UnknownMethodError as exc:
             return abort(PlanViews.Result.UNKNOWN_METHOD, str(exc))
+        except BudgetTooLargeError as exc:
+            return abort(PlanViews.Result.BUDGET_TOO_LARGE, str(exc))
         except InvalidBudgetError as exc:
             return abort(PlanViews.Result.INVALID_BUDGET, str(exc))
         try:
@@ -436,6 +438,8 @@ class PlannerNode(Node):
             return finish(PlanViews.Result.NONE, '', succeed=True)
         except InvalidNumCamerasError as exc:  # more cameras than the memory holds
             return abort(PlanViews.Result.INVALID_NUM_CAMERAS, str(exc))
+        except BudgetTooLargeError as exc:  # a run the memory cannot hold
+            return abort(PlanViews.Result.BUDGET_TOO_LARGE, str(exc))
         except NoFeasiblePlanError as exc:
             return abort(PlanViews.Result.NO_FEASIBLE_PLAN, str(exc))
         except InvalidSceneError as exc:

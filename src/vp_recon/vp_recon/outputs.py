@@ -65,6 +65,20 @@ def new_run_folder(root: PathLike, prefix: str = "plan", now: Optional[float] = 
     raise FileExistsError(f"no free {prefix}-{stamp}-<n> folder in {root}")
 
 
+def remove_if_empty(folder: Optional[PathLike]) -> bool:
+    """Remove ``folder`` when it holds no file (empty sub-folders are removed with it); True when
+    it is gone. Only ``os.rmdir`` is used, which never deletes a file: a file written meanwhile
+    by another thread keeps the folder (and is never lost)."""
+    if folder is None or not Path(folder).is_dir():
+        return folder is not None
+    for parent, _dirs, _files in sorted(os.walk(folder), key=lambda t: -len(Path(t[0]).parts)):
+        try:
+            os.rmdir(parent)
+        except OSError:
+            return False
+    return True
+
+
 def contact_sheet(images: Sequence[NDArray[np.uint8]], thumb_width: int = 480, columns: int = 0,
                   labels: bool = True) -> NDArray[np.uint8]:
     """A grid of RGB thumbnails (``columns`` 0: about square), labelled with the view index."""

@@ -57,7 +57,7 @@ from sensor_msgs.msg import PointCloud2
 
 from vp_interfaces.msg import CameraPlan, ReconstructionScore, SceneDescription
 from vp_recon.metrics import DEFAULT_FSCORE_THRESHOLD
-from vp_recon.outputs import contact_sheet, new_run_folder, write_image, write_ply
+from vp_recon.outputs import contact_sheet, new_run_folder, remove_if_empty, write_image, write_ply
 from vp_recon.pipeline import (ReconCancelled, ReconConfig, ReconError, RealizationResult, ensure_writable_dir,
                                reconstruct_plan)
 from vp_scene.build import build_noisy_scene
@@ -140,6 +140,7 @@ class ReconNode(Node):
         self._truth: Optional[np.ndarray] = None
         self._scene = None  # rebuilt NoisyScene matching _description
         self._stop = False
+        self._run_dir: Optional[Path] = None  # the plan folder being filled (see on_shutdown)
         self.score_pub = self.create_publisher(Score, '/reconstruction/score', 10)
         self.points_pub = self.create_publisher(PointCloud2, '/reconstruction/points', LATCHED)
         self.create_subscription(SceneDescription, '/scene/description', self._on_description, LATCHED)
@@ -174,10 +175,14 @@ class ReconNode(Node):
                            num_threads=self._param('num_threads')).validate()
 
     def on_shutdown(self, timeout: float) -> bool:
-        """SIGINT/SIGTERM: the worker abandons its plan at the next stage; nothing to wait for."""
+        """SIGINT/SIGTERM: the worker abandons its plan at the next stage; nothing to wait for.
+        The plan's folder goes with it when nothing was written into it yet (issue 19, item 4:
+        an interrupted recon left an empty ``plan-<time>/``); what was written stays."""
         with self._lock:
             self._stop = True
             self._lock.notify_all()
+            run_dir = self._run_dir
+        remove_if_empty(run_dir)
         return True
 
     # ---------------------------------------------------------------- inputs
@@ -294,6 +299,8 @@ class ReconNode(Node):
             root = ensure_writable_dir(Path(self._param('output_folder')).expanduser())
             try:
                 run_dir = new_run_folder(root)
+                with self._lock:
+                    self._run_dir = run_dir
             except OSError as exc:
                 raise ReconError(Score.OUTPUT_NOT_WRITABLE, f'cannot create a plan folder in {root}: {exc}')
         except (ReconError, ValueError) as exc:
@@ -334,6 +341,7 @@ class ReconNode(Node):
             result = reconstruct_plan(scene, cameras, config, out_dir=run_dir, realizations=range(K),
                                       progress=progress, on_realization=on_realization)
         except ReconError as exc:
+            remove_if_empty(run_dir)  # a plan that wrote nothing leaves no folder
             if exc.realization is not None:
                 self._publish_error(exc.code, str(exc), exc.realization, n_cams, plan)
             text = (f'realization {exc.realization} of {K} failed: {exc}' if exc.realization is not None

@@ -277,6 +277,12 @@ BAD_FILES = [
     ("field.yaml", "plants: [{x: 0, y: 0}, {x: 1, y: 0}]\njitter: 0.6",
      "field.yaml: jitter must be less than half the smallest distance between two plants (0.5 m), got 0.6"),
     ("field.yaml", "plants: [{x: .inf, y: 0}]", "field.yaml: plants[0].x must be a number (metres), got inf"),
+    # issue 19, item 3: a plant at x = 1e9 was planned (reward 0, cameras 1e9 m up)
+    ("field.yaml", "plants: [{x: 0, y: 0}, {x: 1000000000, y: 0}]",
+     "field.yaml: plant 1 stands at x = 1e+09, y = 0 m, outside the field's extent of +-100 m"),
+    ("field.yaml", "plants: [{x: 0, y: -100.5}]", "field.yaml: plant 0 stands at x = 0, y = -100.5 m, outside"),
+    ("field.yaml", "grid: {rows: 1, columns: 10, plant_spacing: 25}",
+     "field.yaml: plant 0 stands at x = -112.5, y = 0 m, outside the field's extent"),
 ]
 
 
@@ -288,6 +294,19 @@ def test_bad_file_is_one_line_naming_file_and_field(tmp_path: Path, name: str, t
     text = str(err.value)
     assert "\n" not in text and text.startswith(str(path)), text
     assert message in text.replace(str(tmp_path) + "/", ""), text
+
+
+def test_extent_is_checked_for_every_kind_of_layout() -> None:
+    """Issue 19, item 3: one extent check for files, built-in layouts and rebuilt placements."""
+    from vp_scene.layout import MAX_EXTENT, builtin_layout
+
+    assert MAX_EXTENT == 100.0
+    with pytest.raises(LayoutError, match="^built-in layout 'row_12': plant 0 stands at x = -6.05e"):
+        builtin_layout("row_12", plant_spacing=1.1e8)
+    with pytest.raises(LayoutError, match="^scene: plant 1 stands at x = 3, y = 250 m"):
+        Layout.from_placements("f", [("a", 0.0, 1.0, 0.0, 0.0), ("a", 0.0, 1.0, 3.0, 250.0)], source="scene")
+    edge = Layout.from_placements("f", [("a", 0.0, 1.0, 100.0, -100.0)])
+    assert edge.positions()[0, 0] == 100.0
 
 
 def test_missing_and_unknown(tmp_path: Path) -> None:

@@ -38,7 +38,9 @@ File format (a mapping; unknown keys are errors)::
 The grid's plant (row i, column j), i < rows, j < columns, stands at
 x = (j - (columns - 1) / 2) plant_spacing, y = (i - (rows - 1) / 2) row_spacing, row after row.
 Limits: 1 to :data:`MAX_PLANTS` plants, at least :data:`MIN_PLANT_DISTANCE` m apart (before
-jitter), scale in (0, :data:`MAX_SCALE`]. Every error is a :class:`LayoutError` of one line that
+jitter), every plant within :data:`MAX_EXTENT` m of the origin of ``map`` in x and in y (a field
+of 200 m x 200 m; beyond, a plan is not a drone sortie: a plant at x = 1e9 was planned with
+cameras 1e9 m up), scale in (0, :data:`MAX_SCALE`]. Every error is a :class:`LayoutError` of one line that
 names the source (the file) and the field, e.g.
 ``field.yaml: grid.rows must be an integer >= 1, got 'three'``.
 
@@ -55,7 +57,7 @@ from typing import Any, Iterable, NoReturn, Optional, Union
 import numpy as np
 
 __all__ = ["LayoutError", "PlantSpec", "Layout", "BUILTIN_LAYOUTS", "LAYOUT_SUFFIXES", "MAX_PLANTS",
-           "MIN_PLANT_DISTANCE", "MAX_SCALE", "grid_layout", "builtin_layout", "layout_from_dict",
+           "MIN_PLANT_DISTANCE", "MAX_SCALE", "MAX_EXTENT", "grid_layout", "builtin_layout", "layout_from_dict",
            "load_layout", "read_scenario", "resolve_layout", "is_layout_file"]
 
 #: Built-in layouts: name -> (rows, columns) of a grid with the caller's plant and row spacing.
@@ -74,6 +76,8 @@ MAX_PLANTS = 200
 MIN_PLANT_DISTANCE = 0.1
 #: Largest scale a spec may give.
 MAX_SCALE = 3.0
+#: m: every plant stands within this distance of the origin of ``map``, in x and in y.
+MAX_EXTENT = 100.0
 
 _TOP_KEYS = ("name", "plants", "grid", "jitter")
 _PLANT_KEYS = ("x", "y", "yaw", "scale", "model")
@@ -131,6 +135,10 @@ class Layout:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "plants", tuple(self.plants))
+        for i, p in enumerate(self.plants):  # the one extent check of every layout (issue 19, item 3)
+            if not (abs(p.x) <= MAX_EXTENT and abs(p.y) <= MAX_EXTENT):
+                _fail(self.where, f"plant {i} stands at x = {p.x:g}, y = {p.y:g} m, outside the field's "
+                                  f"extent of +-{MAX_EXTENT:g} m about the origin of map")
 
     @property
     def where(self) -> str:

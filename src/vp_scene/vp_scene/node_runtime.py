@@ -4,8 +4,9 @@ Process contract of ``scene``, ``planner`` and ``recon``:
 
 * SIGINT or SIGTERM: the node winds down and exits 0, quietly (no traceback), within
   :data:`SHUTDOWN_DEADLINE` seconds, always; a second signal exits at once. A signal that arrives
-  while Python is still importing the node's modules ends the process by the signal's default
-  action (no handler is installed yet), which is just as quiet.
+  while Python is still importing the node's modules, or while the node is being constructed,
+  ends the process at once with exit 0 (the console entry, :mod:`vp_scene.node_entry`, answers
+  signals before the first heavy import; nothing has started yet that could be lost).
 * A bad parameter at start (wrong type, or a value out of range): one log line naming it, exit 2.
 * A crash of the executor: the traceback, exit 1.
 
@@ -13,8 +14,9 @@ Why not rclpy's own signal handlers: they shut the context down the moment the s
 whatever the node is still doing (answering an action client, publishing, finishing its
 constructor) fails with RCLError tracebacks, and a main thread blocked in a
 MultiThreadedExecutor's wait was seen to miss the shutdown (issue 10, items 4, 6 and 10). Here
-the handler only sets an event (or, while the node is being constructed, aborts the
-constructor); the executor spins in a thread of its own; the main thread waits for the event,
+the handler only sets an event (or, while the node is being constructed, ends the process:
+raising an exception into the constructor was swallowed where a library's import catches
+BaseException, as trimesh's does); the executor spins in a thread of its own; the main thread waits for the event,
 lets the node wind down (``node.on_shutdown(timeout)``, optional: e.g. abort an action goal and
 answer its client), shuts the executor and the context down and ends the process with
 ``os._exit`` (worker threads inside C++ libraries cannot block the exit). A watchdog ends the
@@ -93,11 +95,6 @@ def typed_values(specs: dict, values: dict) -> dict:
     return out
 
 
-class _Interrupted(BaseException):
-    """A signal arrived while the node was being constructed (not an Exception: no handler in
-    the node's code may swallow it)."""
-
-
 def _exit(code: int) -> None:
     """End the process now (after flushing): no interpreter finalization that could wait on
     threads still inside C++ code (COLMAP, Open3D, the DDS middleware)."""
@@ -132,10 +129,10 @@ def run_node(name: str, make_node: Callable[[], Any], args: Optional[list] = Non
     def on_signal(signum: int, _frame: Any) -> None:
         if stop.is_set():  # a second signal: no more waiting
             _exit(EXIT_OK)
+        if constructing[0]:  # nothing runs yet that could be lost
+            _exit(EXIT_OK)
         stop.set()
         watchdog.start()
-        if constructing[0]:
-            raise _Interrupted()
 
     def install() -> None:
         for sig in (signal.SIGINT, signal.SIGTERM):
@@ -152,8 +149,6 @@ def run_node(name: str, make_node: Callable[[], Any], args: Optional[list] = Non
         # so a node using it imports it in its constructor, before this line.
         install()
         constructing[0] = False
-    except _Interrupted:
-        _exit(EXIT_OK)
     except (ValueError, OSError) as exc:
         constructing[0] = False
         logger.error(f"{error_prefix}: {' '.join(str(exc).split())}")

@@ -1,0 +1,43 @@
+"""The console entry of every node: signals are answered before the first heavy import.
+
+A console script imports the module that holds ``main`` before ``main`` can install anything,
+and the suite's node modules import torch, trimesh, pycolmap, Open3D and rclpy at their top.
+During those seconds Python's default handlers were in charge: SIGINT raised KeyboardInterrupt
+wherever the import happened to be (a 24-48 line traceback, or nothing at all where a library
+catches BaseException around its optional imports, as trimesh's ``__init__`` does: the node
+kept running), and SIGTERM ended the process by the default action (exit 143). Here the
+entry installs a handler that ends the process at once, quietly, with exit 0 (nothing has been
+started yet that could be lost), then imports the node module and runs its ``main``, whose
+:func:`vp_scene.node_runtime.run_node` replaces the handler with the node's own shutdown.
+
+Only the standard library is imported here.
+"""
+from __future__ import annotations
+
+import importlib
+import os
+import signal
+import sys
+
+__all__ = ["start"]
+
+
+def _quit(_signum: int, _frame: object) -> None:
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except Exception:  # noqa: BLE001 - exiting anyway
+            pass
+    os._exit(0)
+
+
+def start(module: str) -> int:
+    """Install the quiet early handlers for SIGINT and SIGTERM, import ``module`` and return
+    its ``main()``."""
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, _quit)
+    return importlib.import_module(module).main()
+
+
+def scene() -> int:
+    return start("vp_scene.scene_node")
