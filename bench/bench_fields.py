@@ -36,7 +36,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import ROOT, cached, default_models, machine, models_tag, reconstruct_record, scene  # noqa: E402
+from common import (ROOT, add_capture, cached, capture_of, capture_tag, chamfer_text, default_models,  # noqa: E402
+                    machine, models_tag, reconstruct_record, scene)
 
 #: (field, N) cells: the issue's targets, and N = 16 on the row (planned and reconstructed).
 FIELDS = (("grid_3x3", 8), ("row_12", 12), ("row_12", 16))
@@ -70,6 +71,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument("--threads", type=int, default=0, help="reconstruction threads (0: all cores)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default=str(ROOT / "results"))
+    add_capture(ap)
     return ap.parse_args(argv)
 
 
@@ -111,11 +113,13 @@ def recon_cell(cache: Path, out: Path, field: str, n: int, label: str, plan: dic
     from vp_recon.pipeline import ReconConfig
 
     tag = (f"{models_tag(args.models)}-{field}-n{n}-{label}-seed{args.seed}-{args.width}x{args.height}"
-           f"-k{args.realizations}")
+           f"-k{args.realizations}"
+           f"{capture_tag(capture_of(args))}")
 
     def compute() -> dict:
         noisy, _ = scene(field, args.models)
-        cfg = ReconConfig(width=args.width, height=args.height, num_threads=args.threads)
+        cfg = ReconConfig(width=args.width, height=args.height, num_threads=args.threads,
+                          capture=capture_of(args))
         ks = range(min(args.realizations, len(noisy.points)))
         return reconstruct_record(noisy, plan["cameras"], cfg, out / "recon" / "fields" / tag, ks)
     return cached(cache / "recon" / f"{tag}.json", compute)
@@ -181,8 +185,8 @@ def main(argv=None) -> int:
                 t0 = time.perf_counter()
                 r = recon_cell(cache, out, field, n, label, plans[(field, n, label)], args)
                 recons[(field, n, label)] = r
-                print(f"recon {field} N={n} {label}: Chamfer x100 {r['chamfer_mean']:.3f} +- "
-                      f"{r['chamfer_std']:.3f} {r.get('error', '')} ({time.perf_counter() - t0:.0f} s)", flush=True)
+                print(f"recon {field} N={n} {label}: Chamfer x100 {chamfer_text(r)} "
+                      f"({time.perf_counter() - t0:.0f} s)", flush=True)
     subsampling = {f"{field}:{n}": subsampling_cell(cache, field, n,
                                                     {k[2]: v for k, v in plans.items() if k[:2] == (field, n)}, args)
                    for field, n in cells}

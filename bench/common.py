@@ -96,6 +96,41 @@ def plan_cell(cache: Path, scenario: str, variant: str, seed: int, evals: int = 
     return cached(path, compute)
 
 
+def add_capture(ap) -> None:
+    """The capture flags of the reconstruction CLI (default: realistic; README 'Capture model')."""
+    from vp_recon.cli import add_capture_arguments
+
+    add_capture_arguments(ap)
+
+
+def capture_of(args):
+    """The CaptureModel of a benchmark's flags."""
+    from vp_recon.cli import capture_from_args
+
+    return capture_from_args(args)
+
+
+def capture_tag(capture) -> str:
+    """Cache-name suffix of a capture: '' for the ideal one (the records before the capture model
+    were ideal and keep their names), '-realistic' (+ a digest of non-default figures) else."""
+    import hashlib
+
+    from vp_scene.capture import REALISTIC
+
+    if capture.ideal:
+        return ''
+    if capture == REALISTIC:
+        return '-realistic'
+    return '-realistic-' + hashlib.sha1(json.dumps(capture.to_dict(), sort_keys=True).encode()).hexdigest()[:8]
+
+
+def chamfer_text(record: dict) -> str:
+    """'mean +- std' of a reconstruction record, or 'failed (ERROR)': a failure is a result."""
+    if record.get('error') or record.get('chamfer_mean') is None:
+        return f"failed ({record.get('error', 'no result')})"
+    return f"{record['chamfer_mean']:.3f} +- {record['chamfer_std']:.3f}"
+
+
 def reconstruct_record(noisy, cameras, config, folder: Path, realizations=None) -> dict:
     """Reconstruct a plan (``vp_recon.pipeline.reconstruct_plan``), write its clouds and contact
     sheet into ``folder``, and return the benchmarks' JSON record (Chamfer etc. x100 as Table I;
@@ -103,18 +138,21 @@ def reconstruct_record(noisy, cameras, config, folder: Path, realizations=None) 
     from vp_recon.outputs import TABLE_SCALE, contact_sheet, write_image, write_ply
     from vp_recon.pipeline import ReconError, reconstruct_plan
 
+    capture = {'capture': config.capture.kind, 'capture_params': config.capture.to_dict(),
+               'sparse_mode': config.sparse_mode_used}
     try:
         res = reconstruct_plan(noisy, np.asarray(cameras), config, folder, realizations=realizations)
-    except ReconError as exc:
-        return {'error': exc.name, 'error_msg': str(exc), 'chamfer_mean': float('nan'),
-                'chamfer_std': float('nan'), 'per_realization': []}
+    except ReconError as exc:  # a failure: chamfer null, counted and ranked last by every benchmark
+        return {'error': exc.name, 'error_msg': str(exc), 'chamfer_mean': None,
+                'chamfer_std': None, 'per_realization': [], **capture}
     for r in res.realizations:
         write_ply(folder / f'recon_{r.realization}.ply', r.points, r.colors)
     if res.realizations and res.realizations[0].rendered:
         write_image(folder / 'views.png', contact_sheet(res.realizations[0].rendered))
     return {'chamfer_mean': TABLE_SCALE * res.chamfer_mean, 'chamfer_std': TABLE_SCALE * res.chamfer_std,
-            'seconds': res.seconds,
-            'per_realization': [{'chamfer': TABLE_SCALE * r.chamfer, 'accuracy': TABLE_SCALE * r.accuracy,
+            'chamfer_shape_mean': TABLE_SCALE * res.chamfer_shape_mean, 'seconds': res.seconds, **capture,
+            'per_realization': [{'chamfer': TABLE_SCALE * r.chamfer, 'chamfer_shape': TABLE_SCALE * r.chamfer_shape,
+                                 'accuracy': TABLE_SCALE * r.accuracy,
                                  'completeness': TABLE_SCALE * r.completeness, 'fscore': r.fscore,
                                  'points': int(len(r.points)), 'images': r.images, 'source': r.source,
                                  'matching': r.matching, 'matched_pairs': r.matched_pairs,

@@ -32,7 +32,8 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import ROOT, SCENARIOS, cached, default_models, machine, models_tag, scene  # noqa: E402
+from common import (ROOT, SCENARIOS, add_capture, cached, capture_of, capture_tag, default_models,  # noqa: E402
+                    machine, models_tag, scene)
 
 CACHE = ROOT / 'results' / 'cache' / 'plan_quality'
 
@@ -48,6 +49,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument('--height', type=int, default=1500)
     ap.add_argument('--ground', action='store_true', help='render a textured soil plane under the plants')
     ap.add_argument('--phase', default='all', choices=['plans', 'recon', 'analyze', 'all'])
+    add_capture(ap)
     ap.add_argument('--variants', nargs='+', default=None,
                     help='analyze: variants to report (default: every one found in the cache)')
     ap.add_argument('--out', default=str(ROOT / 'results'))
@@ -148,7 +150,7 @@ def describe_cameras(cams: np.ndarray, centre: np.ndarray) -> dict:
 
 # ----------------------------------------------------------------------------- reconstruction
 def variant_name(args) -> str:
-    return f'{args.width}x{args.height}' + ('-ground' if args.ground else '')
+    return f'{args.width}x{args.height}' + ('-ground' if args.ground else '') + capture_tag(capture_of(args))
 
 
 def recon_cell(scenario: str, models: str, plan: dict, k: int, args) -> dict:
@@ -159,7 +161,7 @@ def recon_cell(scenario: str, models: str, plan: dict, k: int, args) -> dict:
     def compute() -> dict:
         noisy, _ = scene(scenario, models)
         cfg = ReconConfig(width=args.width, height=args.height, ground=args.ground, keep_images=False,
-                          num_threads=args.threads)
+                          num_threads=args.threads, capture=capture_of(args))
         t0 = time.perf_counter()
         try:
             r = reconstruct_realization(noisy, k, np.asarray(plan['cameras']), cfg)

@@ -26,7 +26,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import (ROOT, SCENARIOS, cached, default_models, machine, models_tag, plan_cell,  # noqa: E402
-                    reconstruct_record, scene)
+                    add_capture, capture_of, capture_tag, chamfer_text, reconstruct_record, scene)
 
 #: Table rows: label -> (planner variant of common.VARIANTS, reward model).
 ROWS = {
@@ -59,6 +59,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument('--realizations', type=int, default=0,
                     help='reconstruct the first n wind realizations of each plan (0: all K)')
     ap.add_argument('--out', default=str(ROOT / 'results'))
+    add_capture(ap)
     return ap.parse_args(argv)
 
 
@@ -67,13 +68,15 @@ def recon_cell(cache: Path, out: Path, scenario: str, row: str, plan: dict, args
     from vp_recon.pipeline import ReconConfig
 
     variant, reward = ROWS[row]
-    tag = f'{models_tag(args.models)}-{scenario}-{variant}-{reward}-seed0-e{args.evals}-{args.width}x{args.height}'
+    tag = (f'{models_tag(args.models)}-{scenario}-{variant}-{reward}-seed0-e{args.evals}-{args.width}x{args.height}'
+           + capture_tag(capture_of(args)))
     if args.realizations:
         tag += f'-k{args.realizations}'
 
     def compute() -> dict:
         noisy, _ = scene(scenario, args.models)
-        cfg = ReconConfig(width=args.width, height=args.height, num_threads=args.threads)
+        cfg = ReconConfig(width=args.width, height=args.height, num_threads=args.threads,
+                          capture=capture_of(args))
         ks = range(min(args.realizations, len(noisy.points))) if args.realizations else None
         return reconstruct_record(noisy, plan['cameras'], cfg, out / 'recon' / tag, ks)
     return cached(cache / 'recon' / f'{tag}.json', compute)
@@ -133,9 +136,8 @@ def write_results(args, out: Path, plans, recons) -> None:
             paper = PAPER[scenario].get(row)
             table['cells'][f'{scenario}/{row}'] = {'recon': r, 'reward': plan['reward'], 'rewards': rewards,
                                                    'paper': paper, 'cameras': plan['cameras']}
-            failed = f' ({r["error"]})' if r.get('error') else ''
             ref = f' [{paper[0]:.3f} +- {paper[1]:.3f}]' if paper else ''
-            cells.append(f'{r["chamfer_mean"]:.3f} +- {r["chamfer_std"]:.3f}{failed}{ref}, '
+            cells.append(f'{chamfer_text(r)}{ref}, '
                          f'reward {rewards["coverage"]:.3f} / {rewards["paper"]:.3f}')
         lines.append('| ' + ' | '.join(cells) + ' |')
     lines += ['', 'Plants used (scene seed 0; name, yaw deg, scale):', '']

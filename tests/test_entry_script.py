@@ -27,7 +27,7 @@ REPO = Path(__file__).resolve().parents[1]
 SCRIPT = REPO / "tools" / "run_suite.py"
 ECHO = REPO / "tests" / "echo_camera_plan.py"
 SMALL = ["--scenario", "one_plant", "--cameras", "4", "--points-per-plant", "3000", "--realizations", "2",
-         "--width", "800", "--height", "600"]
+         "--width", "800", "--height", "600", "--capture", "ideal"]  # the plumbing; realistic: test_recon_capture
 
 
 def alive(pid: int) -> bool:
@@ -64,6 +64,7 @@ def test_end_to_end_small_mission(ros_env, tmp_path) -> None:
     assert summary["scenario"] == "one_plant" and summary["method"] == "egp"
     assert len(summary["cameras"]) == 4 and len(summary["poses"]) == 4
     assert math.isfinite(summary["chamfer_mean"]) and summary["chamfer_mean"] > 0
+    assert summary["capture"] == "ideal" and summary["chamfer_shape_mean"] > 0  # issue 18: the capture recorded
     assert 0 < summary["reward"] <= 1
     assert "Chamfer distance x100" in log and "[planner]" in log and "[recon]" in log
     echoed = json.loads(echo_out.read_text())

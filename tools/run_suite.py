@@ -66,6 +66,9 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
     ap.add_argument('--points-per-plant', type=int, default=4000)
     ap.add_argument('--width', type=int, default=2000, help='rendered image width')
     ap.add_argument('--height', type=int, default=1500, help='rendered image height')
+    ap.add_argument('--capture', default='realistic', choices=['realistic', 'ideal'],
+                    help="the recon node's capture model (README 'Capture model'): realistic (hover and "
+                         "localization errors, sensor noise, SfM with the reported poses) or ideal")
     ap.add_argument('--out', default='out/run', help='output folder')
     ap.add_argument('--drones', type=int, default=0,
                     help='start the dispatcher and this many simulated drones (0: none; else at least --cameras)')
@@ -287,7 +290,7 @@ def run(args: argparse.Namespace) -> int:
             {**env, 'OMP_NUM_THREADS': '1'}, out))
         nodes.append(start_node('recon', 'vp_recon', 'recon', {
             'output_folder': str(out), 'width': args.width, 'height': args.height,
-            'method': args.method, 'num_threads': recon_threads},
+            'method': args.method, 'num_threads': recon_threads, 'capture': args.capture},
             {**env, 'OMP_NUM_THREADS': str(recon_threads)}, out))
         if args.drones:
             drones = [f'd{k}' for k in range(args.drones)]
@@ -355,11 +358,15 @@ def run(args: argparse.Namespace) -> int:
             'scenario': args.scenario_name, 'scenario_file': args.scenario_file,
             'method': args.method, 'cameras': cameras,
             'reward': result.reward, 'reward_model': result.reward_model,
-            'chamfer_mean': agg.chamfer, 'chamfer_std': agg.chamfer_std,
+            'chamfer_mean': None if agg.error_code else agg.chamfer,
+            'chamfer_std': None if agg.error_code else agg.chamfer_std,
+            'chamfer_shape_mean': None if agg.error_code else agg.chamfer_shape,
+            'capture': agg.capture or args.capture, 'registered_images': agg.registered_images,
             'poses': poses, 'seconds': time.monotonic() - start,
             'evaluations': result.evaluations, 'trace': list(result.trace), 'seed': args.seed,
             'error_code': agg.error_code, 'error_msg': agg.error_msg,
             'per_realization': [{'realization': s.realization, 'chamfer': s.chamfer,
+                                 'chamfer_shape': s.chamfer_shape, 'registered_images': s.registered_images,
                                  'accuracy': s.accuracy, 'completeness': s.completeness,
                                  'fscore': s.fscore, 'points': s.num_points,
                                  'error_code': s.error_code, 'error_msg': s.error_msg}

@@ -29,7 +29,7 @@ def _plan(tmp_path: Path, cameras=None, **extra) -> Path:
 
 def test_cli_writes_outputs(tmp_path: Path) -> None:
     out = tmp_path / "out"
-    rc = main(["--plan", str(_plan(tmp_path)), "--out", str(out), "--width", "640", "--height", "480",
+    rc = main(["--plan", str(_plan(tmp_path)), "--out", str(out), "--width", "640", "--height", "480", "--capture", "ideal",
                "--realizations", "1", "--no-progress"])
     assert rc == 0
     data = json.loads((out / "recon.json").read_text())
@@ -48,7 +48,7 @@ def test_cli_writes_outputs(tmp_path: Path) -> None:
 def test_cli_matching_option(tmp_path: Path, capsys) -> None:
     """--matching poses on 4 cameras: pairs from the poses (auto would match all 6), in recon.json."""
     out = tmp_path / "out"
-    rc = main(["--plan", str(_plan(tmp_path)), "--out", str(out), "--width", "640", "--height", "480",
+    rc = main(["--plan", str(_plan(tmp_path)), "--out", str(out), "--width", "640", "--height", "480", "--capture", "ideal",
                "--realizations", "0", "--sparse-only", "--matching", "poses", "--no-progress"])
     assert rc == 0, capsys.readouterr().err
     data = json.loads((out / "recon.json").read_text())
@@ -103,7 +103,7 @@ def test_cli_unwritable_out_and_bad_args(tmp_path: Path, capsys) -> None:
 
 def test_cli_nothing_visible_records_error(tmp_path: Path, capsys) -> None:
     cams = [[1.4, 0.0, 1.2, 1.0, 0.0, 0.0], [0.0, 1.4, 1.2, 0.0, 1.0, 0.0]]      # looking away
-    rc = main(["--plan", str(_plan(tmp_path, cameras=cams)), "--out", str(tmp_path / "o"), "--width", "320",
+    rc = main(["--plan", str(_plan(tmp_path, cameras=cams)), "--out", str(tmp_path / "o"), "--capture", "ideal", "--width", "320",
                "--height", "240", "--no-progress"])
     err = capsys.readouterr().err
     assert rc == 1 and "[NOTHING_VISIBLE]" in err

@@ -32,7 +32,7 @@ def _plan(tmp_path: Path, scenario: object) -> Path:
 def test_recon_of_a_layout_plan(tmp_path: Path, capsys) -> None:
     layout = load_layout(EXAMPLES / "plants.json").to_dict()
     out = tmp_path / "out"
-    rc = main(["--plan", str(_plan(tmp_path, layout)), "--out", str(out), "--width", "640", "--height", "480",
+    rc = main(["--plan", str(_plan(tmp_path, layout)), "--out", str(out), "--width", "640", "--height", "480", "--capture", "ideal",
                "--realizations", "0", "--sparse-only", "--no-progress"])
     assert rc == 0, capsys.readouterr().err[-3000:]
     data = json.loads((out / "recon.json").read_text())

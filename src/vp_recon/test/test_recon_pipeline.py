@@ -4,11 +4,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from vp_scene.capture import IDEAL
+
 from vp_recon.meshing import scene_meshes
 from vp_recon.pipeline import (EMPTY_PLAN, NO_SCENE, NOTHING_VISIBLE, OUTPUT_NOT_WRITABLE, RECONSTRUCTION_FAILED,
                                ReconCancelled, ReconConfig, ReconError, reconstruct_plan, reconstruct_realization)
 
-CFG = ReconConfig(width=640, height=480)
+# These tests check the plumbing on small images under the ideal capture (exact poses, as before
+# issue 18); the realistic capture is tested at the paper's resolution in test_recon_capture.py.
+CFG = ReconConfig(width=640, height=480, capture=IDEAL)
 TARGET = np.array([0.0, 0.0, 0.9])
 
 
@@ -55,7 +59,7 @@ def test_degenerate_plan_is_worse_or_fails(noisy_scene, good) -> None:
 
 
 def test_sparse_only(noisy_scene) -> None:
-    cfg = ReconConfig(width=640, height=480, dense=False, keep_images=False)
+    cfg = ReconConfig(width=640, height=480, dense=False, keep_images=False, capture=IDEAL)
     res = reconstruct_realization(noisy_scene, 0, ring(4, 30.0), cfg)
     # the scored sparse cloud is the cleaned one (cropped, silhouette-filtered), as the dense cloud
     assert res.source == "sparse" and 10 < len(res.points) <= res.sparse_points
@@ -74,7 +78,7 @@ def test_auto_matching_uses_the_poses_from_eight_cameras(noisy_scene) -> None:
 
     assert MATCH_POSES_FROM == 8 and matching_method("auto", 7) == "exhaustive"
     cams = ring(8, 20.0)
-    cfg = ReconConfig(width=640, height=480, dense=False, keep_images=False)
+    cfg = ReconConfig(width=640, height=480, dense=False, keep_images=False, capture=IDEAL)
     res = reconstruct_realization(noisy_scene, 0, cams, cfg)
     expected = select_pairs(cams, noisy_scene.points[0], CameraModel(640, 480))
     assert res.matching == "poses" and res.matched_pairs == len(expected) < 28
@@ -160,7 +164,7 @@ def test_one_loop_stops_at_the_first_failing_realization(noisy_scene) -> None:
 
 
 def test_on_realization_sees_each_result_with_its_images(noisy_scene) -> None:
-    cfg = ReconConfig(width=640, height=480, dense=False)
+    cfg = ReconConfig(width=640, height=480, dense=False, capture=IDEAL)
     seen = []
     res = reconstruct_plan(noisy_scene, ring(6, 30.0), cfg, realizations=[1, 0],
                            on_realization=lambda r: seen.append((r.realization, len(r.rendered))))
@@ -191,7 +195,8 @@ def test_target_is_inside_the_plant(noisy_scene) -> None:
 
 def test_incremental_mode_is_aligned_to_the_world(noisy_scene) -> None:
     """Unknown poses: COLMAP's own frame, similarity-aligned to the camera centres."""
-    cfg = ReconConfig(width=1000, height=750, sparse_mode="incremental", dense=False, keep_images=False)
+    cfg = ReconConfig(width=1000, height=750, sparse_mode="incremental", dense=False, keep_images=False,
+                      capture=IDEAL)
     res = reconstruct_realization(noisy_scene, 0, ring(8, 20.0), cfg)
     assert res.images >= 3 and res.sparse_points > 20
     assert res.accuracy < 0.03

@@ -41,8 +41,34 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
 
 
+def add_capture_arguments(p: argparse.ArgumentParser) -> None:
+    """``--capture realistic|ideal`` and one flag per figure of :class:`vp_scene.capture.
+    CaptureModel` (default: the realistic model's; the CLI, the benchmarks)."""
+    from vp_scene.capture import CAPTURES, REALISTIC
+
+    p.add_argument("--capture", default="realistic", choices=CAPTURES,
+                   help="realistic: hover and localization errors and sensor noise of an RTK multirotor "
+                        "(README 'Capture model'); ideal: planned poses flown and known exactly (before issue 18)")
+    for name, unit in (("hover_position_sigma", "m"), ("hover_attitude_sigma", "deg"),
+                       ("report_position_sigma", "m"), ("report_attitude_sigma", "deg"),
+                       ("sensor_noise", "of full scale")):
+        p.add_argument("--" + name.replace("_", "-"), type=float, default=None,
+                       help=f"capture figure, {unit} (default {getattr(REALISTIC, name):.4g}; ideal: 0)")
+    p.add_argument("--capture-seed", type=int, default=None, help="seed of the capture draws (default 0)")
+
+
+def capture_from_args(args: argparse.Namespace) -> object:
+    """The CaptureModel the flags of :func:`add_capture_arguments` ask for; ValueError naming a bad one."""
+    from vp_scene.capture import CaptureModel
+
+    figures = {n: getattr(args, n) for n in ("hover_position_sigma", "hover_attitude_sigma",
+                                             "report_position_sigma", "report_attitude_sigma", "sensor_noise")}
+    return CaptureModel.named(args.capture, seed=args.capture_seed, **figures)
+
+
 def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     from .pipeline import MATCH_POSES_FROM, MATCHINGS
+    from .sparse import MODES
 
     p = _Parser(prog=PROG, description="Render, reconstruct (COLMAP on CPU + SGBM) and score a view plan.")
     p.add_argument("--plan", required=True, help="plan.json written by the planner (make plan)")
@@ -51,7 +77,11 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     p.add_argument("--height", type=int, default=1500, help="image height, pixels (paper: 1500)")
     p.add_argument("--realizations", default=None, help="comma-separated realization indices (default: all)")
     p.add_argument("--sparse-only", action="store_true", help="score the sparse cloud (no dense stereo)")
-    p.add_argument("--sparse-mode", default="known_poses", choices=("known_poses", "incremental"))
+    p.add_argument("--sparse-mode", default="auto", choices=("auto",) + MODES,
+                   help="auto (default): incremental SfM with the reported poses as priors for a realistic "
+                        "capture, known_poses for the ideal one; known_poses: triangulate with the reported "
+                        "poses; refined_poses: that, then a bundle adjustment of poses and points")
+    add_capture_arguments(p)
     p.add_argument("--matching", default="auto", choices=MATCHINGS,
                    help="image pairs SIFT matches: all of them (exhaustive), those chosen from the known poses "
                         f"and scene (poses), or auto: poses from {MATCH_POSES_FROM} cameras up (default)")
@@ -99,7 +129,8 @@ def run(args: argparse.Namespace) -> dict:
         config = ReconConfig(width=args.width, height=args.height, fov=plan.fov, dense=not args.sparse_only,
                              sparse_mode=args.sparse_mode, fscore_threshold=args.fscore_threshold,
                              voxel=args.voxel, mesh_cache=args.mesh_cache, keep_workdir=args.keep_workdir,
-                             ground=args.ground, num_threads=args.threads, matching=args.matching).validate()
+                             ground=args.ground, num_threads=args.threads, matching=args.matching,
+                             capture=capture_from_args(args)).validate()
     except ValueError as exc:
         raise CliError(str(exc)) from None
     try:  # before the output folder is made: a bad scene leaves nothing behind
@@ -128,12 +159,14 @@ def run(args: argparse.Namespace) -> dict:
             "scenario": noisy.scene.scenario, "reward": plan.data.get("reward"),
             "reward_model": plan.data.get("reward_model"), "num_cameras": int(len(cams)),
             "width": config.width, "height": config.height, "fov": config.fov, "dense": config.dense, "ground": config.ground,
-            "sparse_mode": config.sparse_mode, "matching": config.matching}
+            "sparse_mode": config.sparse_mode_used, "matching": config.matching,
+            "capture": config.capture.to_dict()}
     try:
         result = reconstruct_plan(noisy, cams, config, out_dir=out, realizations=ks, progress=progress)
     except ReconError as exc:
         # record the failure for batch tools (Table I counts failed plans), then report it
-        write_json(out / "recon.json", {**info, "error": {"code": exc.code, "name": exc.name, "message": str(exc)}})
+        write_json(out / "recon.json", {**info, "chamfer_mean": None,
+                                        "error": {"code": exc.code, "name": exc.name, "message": str(exc)}})
         raise
     finally:
         for b in bars.values():

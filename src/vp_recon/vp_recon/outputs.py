@@ -114,18 +114,19 @@ def summary(result: Any, extra: Optional[dict] = None) -> dict:
     for r in result.realizations:
         per.append({
             "realization": r.realization,
-            "chamfer": r.chamfer * s, "accuracy": r.accuracy * s, "completeness": r.completeness * s,
-            "fscore": r.fscore, "precision": r.precision, "recall": r.recall,
+            "chamfer": r.chamfer * s, "chamfer_shape": r.chamfer_shape * s, "accuracy": r.accuracy * s,
+            "completeness": r.completeness * s, "fscore": r.fscore, "precision": r.precision, "recall": r.recall,
             "points": int(len(r.points)), "images": int(r.images), "num_images": int(r.num_images),
             "visible_images": int(r.visible_images), "source": r.source, "sparse_points": int(r.sparse_points),
             "matching": r.matching, "matched_pairs": int(r.matched_pairs),
             "seconds": {k: float(v) for k, v in r.seconds.items()},
         })
     out = {
-        "units": "chamfer, chamfer_std, accuracy, completeness: metres x 100 (paper Table I); "
+        "units": "chamfer, chamfer_std, chamfer_shape, accuracy, completeness: metres x 100 (paper Table I); "
                  "fscore, precision, recall: fraction in [0, 1] at fscore_threshold metres",
         "chamfer_mean": result.chamfer_mean * s,
         "chamfer_std": result.chamfer_std * s,
+        "chamfer_shape_mean": result.chamfer_shape_mean * s,
         "fscore_threshold": result.realizations[0].fscore_threshold if result.realizations else None,
         "realizations": len(result.realizations),
         "per_realization": per,

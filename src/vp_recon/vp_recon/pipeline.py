@@ -1,17 +1,33 @@
 """Render a camera plan, reconstruct it and score it against the truth (paper Sec. V-B, Table I).
 
-For each wind realization k of a :class:`vp_scene.wind.NoisyScene`:
+For each wind realization k of a :class:`vp_scene.wind.NoisyScene`, the plan is *flown* under
+the capture model ``config.capture`` (:mod:`vp_scene.capture`; issue "Flights, not renders"):
 
 1. mesh: the plants' meshes displaced by realization k's wind (:mod:`vp_recon.meshing`),
-2. render: one image per camera at ``width x height`` (:mod:`vp_recon.render`),
-3. sparse: COLMAP SIFT + matching + triangulation (:mod:`vp_recon.sparse`); the pairs matched are
-   all of them, or, from :data:`MATCH_POSES_FROM` cameras up (``matching='auto'``), those
-   :func:`vp_recon.pairs.select_pairs` picks from the known poses and realization k's true points,
-4. dense: SGBM on neighbouring pairs (:mod:`vp_recon.dense`; COLMAP PatchMatch needs CUDA),
+2. render: one image per camera at ``width x height`` (:mod:`vp_recon.render`) from the camera's
+   ACTUAL pose (planned + hover error), with sensor noise; the drone REPORTS its pose with a
+   localization error,
+3. sparse: COLMAP SIFT + matching (:mod:`vp_recon.sparse`); the pairs matched are all of them,
+   or, from :data:`MATCH_POSES_FROM` cameras up (``matching='auto'``), those
+   :func:`vp_recon.pairs.select_pairs` picks from the reported poses and the planning cloud
+   (all K realizations of the noisy scene: what the planner saw); then
+   ``sparse_mode='incremental'`` (the default of a realistic capture): COLMAP's incremental SfM
+   with the reported centres as pose priors, registered to ``map`` from the reported centres;
+   ``'known_poses'``: triangulation with the reported poses (an ablation),
+4. dense: SGBM on neighbouring pairs (:mod:`vp_recon.dense`; COLMAP PatchMatch needs CUDA) with
+   the poses the sparse step gives (SfM's, in ``map``),
 5. score: Chamfer distance etc. of the (dense, else sparse) cloud against realization k's true
-   points ``noisy_scene.points[k]`` (:mod:`vp_recon.metrics`). The sparse cloud is cleaned
-   like the dense one (cropped to the scene's box, points on background in some view dropped)
-   and is always scored too (``sparse_score``), so that a plan can be judged on either.
+   points ``noisy_scene.points[k]`` in ``map`` (the registration error is part of what a flight
+   gets) and, beside it, ``chamfer_shape`` after a rigid ICP refinement (the shape alone)
+   (:mod:`vp_recon.metrics`). The sparse cloud is cleaned like the dense one (cropped to the
+   scene's box, points on background in some view dropped) and is always scored too
+   (``sparse_score``), so that a plan can be judged on either.
+
+``capture = IDEAL`` (``--capture ideal``) is the reconstruction before the capture model, bit for
+bit: the planned poses flown and known exactly, noise-free images, pairs chosen with realization
+k's true points, triangulation with the planned poses (``sparse_mode`` ``'auto'`` resolves to
+``'known_poses'`` there). Masks (``ground=False``: a blue-screen colour key of the rendered image;
+``ground=True``: the renderer's silhouette pass, an oracle) are the renderer's in both.
 
 All distances in this module are metres; x100 (Table I) is applied by writers (cli, ROS node).
 Errors are :class:`ReconError` with a ``code`` equal to the ``vp_interfaces/ReconstructionScore``
@@ -37,7 +53,9 @@ from typing import Callable, Optional, Sequence, Union
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .metrics import DEFAULT_FSCORE_THRESHOLD, CloudScore, EmptyCloudError, chamfer
+from vp_scene.capture import CaptureModel, REALISTIC
+
+from .metrics import DEFAULT_FSCORE_THRESHOLD, CloudScore, EmptyCloudError, chamfer, chamfer_after_icp
 
 __all__ = [
     "NONE", "UNKNOWN", "EMPTY_PLAN", "NO_SCENE", "NOTHING_VISIBLE", "RECONSTRUCTION_FAILED",
@@ -106,7 +124,10 @@ class ReconConfig:
     Attributes:
         width, height: rendered image size (paper: 2000 x 1500).
         fov: horizontal field of view, rad (the planner's, default pi/2).
-        sparse_mode: ``'known_poses'`` (triangulate with the planned poses) or ``'incremental'``.
+        sparse_mode: ``'known_poses'`` (triangulate with the reported poses), ``'incremental'``
+            (SfM with the reported centres as pose priors) or ``'auto'``: incremental for a
+            realistic capture, known_poses for the ideal one.
+        capture: the capture model (:mod:`vp_scene.capture`; default: an RTK multirotor).
         dense: run dense stereo (else the sparse cloud is scored).
         fscore_threshold: F-score distance threshold, metres.
         mesh_cache: folder of cached Poisson meshes for point-cloud plant models (None: default).
@@ -130,7 +151,7 @@ class ReconConfig:
     width: int = 2000
     height: int = 1500
     fov: float = math.pi / 2
-    sparse_mode: str = "known_poses"
+    sparse_mode: str = "auto"
     dense: bool = True
     fscore_threshold: float = DEFAULT_FSCORE_THRESHOLD
     mesh_cache: Optional[str] = None
@@ -145,6 +166,14 @@ class ReconConfig:
     ground: bool = False
     num_threads: int = 0
     matching: str = "auto"
+    capture: CaptureModel = REALISTIC
+
+    @property
+    def sparse_mode_used(self) -> str:
+        """``sparse_mode`` with ``'auto'`` resolved by the capture."""
+        if self.sparse_mode != "auto":
+            return self.sparse_mode
+        return "known_poses" if self.capture.ideal else "incremental"
 
     def validate(self) -> "ReconConfig":
         """Raise ValueError naming the first bad field; return self."""
@@ -156,8 +185,11 @@ class ReconConfig:
                 raise ValueError(f"{name} must be an integer >= 16 pixels, got {v!r}")
         if not (isinstance(self.fov, (int, float)) and 0 < self.fov < math.pi):
             raise ValueError(f"fov must be in (0, pi) rad, got {self.fov!r}")
-        if self.sparse_mode not in MODES:
-            raise ValueError(f"sparse_mode must be one of {', '.join(MODES)}, got {self.sparse_mode!r}")
+        if self.sparse_mode not in ("auto",) + MODES:
+            raise ValueError(f"sparse_mode must be one of auto, {', '.join(MODES)}, got {self.sparse_mode!r}")
+        if not isinstance(self.capture, CaptureModel):
+            raise ValueError(f"capture must be a vp_scene.capture.CaptureModel, got {self.capture!r}")
+        self.capture.validate()
         if self.matching not in MATCHINGS:
             raise ValueError(f"matching must be one of {', '.join(MATCHINGS)}, got {self.matching!r}")
         if not (math.isfinite(self.fscore_threshold) and self.fscore_threshold > 0):
@@ -197,6 +229,10 @@ class RealizationResult:
         dense_pair_points: the raw points each of them gave.
         rendered: the rendered RGB images (empty unless kept).
         seconds: wall time per stage: mesh, render, sparse, dense, score.
+        chamfer_shape: Chamfer distance (m) after a rigid ICP refinement onto the truth (the
+            shape alone, registration error removed).
+        capture: the capture model's :meth:`~vp_scene.capture.CaptureModel.to_dict`.
+        sparse_mode: the sparse step that ran (``'known_poses'`` or ``'incremental'``).
     """
 
     realization: int
@@ -223,16 +259,21 @@ class RealizationResult:
     dense_pair_points: list = field(default_factory=list)
     rendered: list = field(default_factory=list, repr=False)
     seconds: dict = field(default_factory=dict)
+    chamfer_shape: float = math.nan
+    capture: dict = field(default_factory=dict)
+    sparse_mode: str = "known_poses"
 
 
 @dataclass
 class PlanReconResult:
-    """All realizations of one plan; chamfer_mean / chamfer_std (population std) in metres."""
+    """All realizations of one plan; chamfer_mean / chamfer_std (population std) and
+    chamfer_shape_mean in metres."""
 
     realizations: list
     chamfer_mean: float
     chamfer_std: float
     seconds: dict
+    chamfer_shape_mean: float = math.nan
 
     @property
     def num_images(self) -> int:
@@ -355,11 +396,15 @@ def reconstruct_realization(noisy_scene: object, k: int, cameras: ArrayLike, con
         seconds["mesh"] = time.perf_counter() - t0
 
         t0 = time.perf_counter()
+        capture = cfg.capture
+        flight = capture.fly(cams, k)  # ideal: the planned cameras, flown and reported exactly
         try:
             renderer = Renderer(cfg.width, cfg.height, cfg.fov)
-            images, masks, _ = renderer.render(meshes, cams, ground=cfg.ground)
+            images, masks, _ = renderer.render(meshes, flight.actual, ground=cfg.ground)
         except RenderError as exc:
             raise ReconError(UNKNOWN, str(exc)) from exc
+        images = [capture.expose(im, k, i) for i, im in enumerate(images)]
+        reported = cams if capture.ideal else flight.reported
         seconds["render"] = time.perf_counter() - t0
         fg = np.array([int(m.sum()) for m in masks])
         seeing = np.flatnonzero(fg >= cfg.min_foreground)
@@ -375,15 +420,20 @@ def reconstruct_realization(noisy_scene: object, k: int, cameras: ArrayLike, con
         matching = matching_method(cfg.matching, len(cams))
         pairs = None
         if matching == "poses":
-            pairs = select_pairs(cams, truth_all[k], CameraModel(cfg.width, cfg.height, cfg.fov))
+            # ideal: as before the capture model (realization k's truth); a flight: the planning cloud
+            cloud = truth_all[k] if capture.ideal else truth_all.reshape(-1, 3)
+            pairs = select_pairs(reported, cloud, CameraModel(cfg.width, cfg.height, cfg.fov))
             if not pairs:
                 raise ReconError(RECONSTRUCTION_FAILED, f"no two of the {len(cams)} cameras see a common part of "
                                                         "the scene: no image pair to match (matching 'poses')")
         t_pairs = time.perf_counter() - t0
         try:
-            sp = sparse_reconstruct(images, cams, renderer.K, wd / f"realization_{k}", mode=cfg.sparse_mode,
+            mode = cfg.sparse_mode_used
+            priors = None if capture.ideal or mode != "incremental" else reported[:, :3]
+            sp = sparse_reconstruct(images, reported, renderer.K, wd / f"realization_{k}", mode=mode,
                                     masks=masks if cfg.sift_masks else None, max_features=cfg.max_features,
-                                    num_threads=cfg.num_threads or -1, pairs=pairs)
+                                    num_threads=cfg.num_threads or -1, pairs=pairs, prior_centres=priors,
+                                    prior_sigma=max(capture.report_position_sigma, 0.01))
         except SparseError as exc:
             raise ReconError(RECONSTRUCTION_FAILED, f"sparse reconstruction failed: {exc}") from exc
         except OSError as exc:
@@ -393,13 +443,17 @@ def reconstruct_realization(noisy_scene: object, k: int, cameras: ArrayLike, con
 
         t0 = time.perf_counter()
         box = crop_box(noisy_scene, cfg.crop_margin)
+        # the poses the sparse step knows: the reported ones, or SfM's (in map) where registered
+        # (ideal: the planned poses whatever the mode, as before the capture model)
+        geo = reported if capture.ideal or mode == "known_poses" else \
+            np.where(np.isfinite(sp.cameras), sp.cameras, reported)
         keep = crop_to_box(sp.points, box[0], box[1])
-        keep[keep] = silhouette_filter(sp.points[keep], cams, renderer.K, masks)
+        keep[keep] = silhouette_filter(sp.points[keep], geo, renderer.K, masks)
         points, colors, source = sp.points[keep], sp.colors[keep], "sparse"
         sparse_score = chamfer(points, truth_all[k], cfg.fscore_threshold) if len(points) else None
         dn = None
         if cfg.dense:
-            dn = dense_reconstruct(images, masks, cams, renderer.K, box, guide=sp.points,
+            dn = dense_reconstruct(images, masks, geo, renderer.K, box, guide=sp.points,
                                    neighbours=cfg.neighbours, voxel=cfg.voxel, pair_inliers=sp.pair_inliers)
             if len(dn.points):
                 points, colors, source = dn.points, dn.colors, "dense"
@@ -409,6 +463,7 @@ def reconstruct_realization(noisy_scene: object, k: int, cameras: ArrayLike, con
         t0 = time.perf_counter()
         try:
             score = chamfer(points, truth_all[k], cfg.fscore_threshold)
+            shape = chamfer_after_icp(points, truth_all[k], cfg.fscore_threshold)
         except EmptyCloudError as exc:
             raise ReconError(RECONSTRUCTION_FAILED, f"the reconstruction is empty: {exc}") from exc
         seconds["score"] = time.perf_counter() - t0
@@ -425,7 +480,8 @@ def reconstruct_realization(noisy_scene: object, k: int, cameras: ArrayLike, con
         source=source, sparse_points=len(sp.points), sparse_score=sparse_score, pair_inliers=dict(sp.pair_inliers),
         matching=matching, matched_pairs=sp.matched_pairs, sparse_seconds={"pairs": t_pairs, **sp.seconds},
         dense_pairs=list(dn.pairs) if dn is not None else [], dense_pair_points=list(dn.pair_points) if dn is not None else [],
-        rendered=images if cfg.keep_images else [], seconds=seconds)
+        rendered=images if cfg.keep_images else [], seconds=seconds, chamfer_shape=shape.chamfer,
+        capture=capture.to_dict(), sparse_mode=mode)
 
 
 def reconstruct_plan(noisy_scene: object, cameras: ArrayLike, config: Optional[ReconConfig] = None,
@@ -490,4 +546,4 @@ def reconstruct_plan(noisy_scene: object, cameras: ArrayLike, config: Optional[R
     seconds = {s: float(sum(r.seconds.get(s, 0.0) for r in results)) for s in ("mesh",) + STAGES}
     seconds["total"] = time.perf_counter() - t_all
     return PlanReconResult(realizations=results, chamfer_mean=float(ch.mean()), chamfer_std=float(ch.std()),
-                           seconds=seconds)
+                           seconds=seconds, chamfer_shape_mean=float(np.mean([r.chamfer_shape for r in results])))

@@ -61,6 +61,7 @@ from vp_recon.outputs import contact_sheet, new_run_folder, remove_if_empty, wri
 from vp_recon.pipeline import (ReconCancelled, ReconConfig, ReconError, RealizationResult, ensure_writable_dir,
                                reconstruct_plan)
 from vp_scene.build import build_noisy_scene
+from vp_scene.capture import IDEAL, REALISTIC, CaptureModel
 from vp_scene.camera import poses_to_cameras
 from vp_scene.cloud import numpy_to_pointcloud2, realizations_from_cloud
 from vp_scene.layout import Layout
@@ -76,7 +77,15 @@ PARAMS = {
     'width': (2000, 'rendered image width, pixels'),
     'height': (1500, 'rendered image height, pixels'),
     'fov': (math.pi / 2, 'horizontal field of view, rad (the planner\'s)'),
-    'sparse_mode': ('known_poses', 'known_poses | incremental'),
+    'sparse_mode': ('auto', 'auto (incremental for a realistic capture, known_poses for the ideal one) | '
+                            'known_poses | incremental | refined_poses'),
+    'capture': ('realistic', 'realistic (hover and localization errors, sensor noise) | ideal (none)'),
+    'hover_position_sigma': (REALISTIC.hover_position_sigma, 'capture: hover error, m per axis'),
+    'hover_attitude_sigma': (REALISTIC.hover_attitude_sigma, 'capture: hover error of the optical axis, deg'),
+    'report_position_sigma': (REALISTIC.report_position_sigma, 'capture: localization error, m per axis'),
+    'report_attitude_sigma': (REALISTIC.report_attitude_sigma, 'capture: localization error, deg'),
+    'sensor_noise': (REALISTIC.sensor_noise, 'capture: image noise std, fraction of full scale'),
+    'capture_seed': (0, 'capture: seed of the draws'),
     'dense': (True, 'CPU dense stereo (else the sparse cloud is scored)'),
     'matching': ('auto', 'image pairs SIFT matches: auto (from the poses from 8 cameras up) | exhaustive | poses'),
     'fscore_threshold': (DEFAULT_FSCORE_THRESHOLD, 'F-score distance threshold, m'),
@@ -90,6 +99,20 @@ PARAMS = {
 
 #: /camera_plan/info messages remembered to find the one of a plan.
 _INFO_MEMORY = 16
+
+
+#: The parameters of the capture model (a realistic capture's figures; ignored by the ideal one).
+CAPTURE_KEYS = ('capture', 'hover_position_sigma', 'hover_attitude_sigma', 'report_position_sigma',
+                'report_attitude_sigma', 'sensor_noise', 'capture_seed')
+
+
+def capture_model(values: dict) -> CaptureModel:
+    """The capture model of the parameter values (defaults for those not given); ValueError."""
+    full = {k: values.get(k, PARAMS[k][0]) for k in CAPTURE_KEYS}
+    if full['capture'] == 'ideal':
+        return IDEAL
+    figures = {k: full[k] for k in CAPTURE_KEYS[1:-1]}
+    return CaptureModel.named(full['capture'], seed=full['capture_seed'], **figures)
 
 
 def check_parameters(values: dict) -> dict:
@@ -108,6 +131,8 @@ def check_parameters(values: dict) -> dict:
     if any(k in v for k in config_keys):  # the rendering settings: ReconConfig's own checks
         defaults = {k: PARAMS[k][0] for k in config_keys}
         ReconConfig(**{**defaults, **{k: v[k] for k in config_keys if k in v}}).validate()
+    if any(k in v for k in CAPTURE_KEYS):
+        capture_model(v)
     return v
 
 
@@ -172,7 +197,8 @@ class ReconNode(Node):
         return ReconConfig(width=self._param('width'), height=self._param('height'), fov=self._param('fov'),
                            sparse_mode=self._param('sparse_mode'), dense=self._param('dense'),
                            matching=self._param('matching'), fscore_threshold=self._param('fscore_threshold'), keep_images=True,
-                           num_threads=self._param('num_threads')).validate()
+                           num_threads=self._param('num_threads'),
+                           capture=capture_model({k: self._param(k) for k in CAPTURE_KEYS})).validate()
 
     def on_shutdown(self, timeout: float) -> bool:
         """SIGINT/SIGTERM: the worker abandons its plan at the next stage; nothing to wait for.
@@ -330,6 +356,7 @@ class ReconNode(Node):
             msg = self._score(k, K, n_cams, plan)
             msg.chamfer, msg.accuracy, msg.completeness = (100 * res.chamfer, 100 * res.accuracy,
                                                            100 * res.completeness)
+            msg.chamfer_shape, msg.registered_images = 100 * res.chamfer_shape, int(res.images)
             msg.fscore, msg.num_points = float(res.fscore), int(len(res.points))
             self.score_pub.publish(msg)
             self._publish_clouds(done, frame)
@@ -351,6 +378,8 @@ class ReconNode(Node):
         agg = self._score(Score.AGGREGATE, K, n_cams, plan)
         per = result.realizations
         agg.chamfer, agg.chamfer_std = 100 * result.chamfer_mean, 100 * result.chamfer_std
+        agg.chamfer_shape = 100 * result.chamfer_shape_mean
+        agg.registered_images = int(min(r.images for r in per))
         agg.accuracy = float(np.mean([100 * r.accuracy for r in per]))
         agg.completeness = float(np.mean([100 * r.completeness for r in per]))
         agg.fscore = float(np.mean([r.fscore for r in per]))
@@ -379,6 +408,7 @@ class ReconNode(Node):
         msg.reward = float(info.reward) if info is not None else math.nan
         msg.reward_model = info.reward_model if info is not None else ''
         msg.fscore_threshold = float(self._param('fscore_threshold'))
+        msg.capture = self._param('capture')
         return msg
 
     def _publish_error(self, code: int, text: str, realization: int, images: int, plan: Optional[PoseArray],
@@ -386,7 +416,7 @@ class ReconNode(Node):
         K = realizations if realization == Score.AGGREGATE else 1
         msg = self._score(realization, K, images, plan)
         msg.error_code, msg.error_msg = int(code), text
-        msg.chamfer = msg.accuracy = msg.completeness = float('nan')
+        msg.chamfer = msg.accuracy = msg.completeness = msg.chamfer_shape = float('nan')
         where = 'plan' if realization == Score.AGGREGATE else f'realization {realization}'
         self.get_logger().error(f'{where}: {text}')
         self.score_pub.publish(msg)

@@ -10,9 +10,11 @@ Pipeline (Schönberger & Frahm, "Structure-from-Motion Revisited", CVPR 2016):
    :func:`vp_recon.pairs.select_pairs` chooses them from the known poses),
 4. ``mode='known_poses'``: a reconstruction holding the true poses (cam_from_world =
    (R_cw, t) of :func:`vp_scene.camera.world_to_camera`), then ``triangulate_points``;
-   ``mode='incremental'``: ``incremental_mapping`` (unknown poses), the largest model
-   aligned to the true camera centres with a similarity transform (Umeyama 1991; needs 3
-   registered images).
+   ``mode='incremental'``: ``incremental_mapping`` (unknown poses; with ``prior_centres`` the
+   reported camera centres are pose priors of the bundle adjustment, COLMAP's
+   ``use_prior_position``), the largest model aligned to the given camera centres (the
+   reported ones of a flight; never the true ones there) with a similarity transform
+   (Umeyama 1991; needs 3 registered images).
 
 The 3D points come back in the world frame.
 """
@@ -34,7 +36,7 @@ from .pairs import check_pairs
 
 __all__ = ["SparseError", "SparseResult", "sparse_reconstruct", "MODES"]
 
-MODES = ("known_poses", "incremental")
+MODES = ("known_poses", "incremental", "refined_poses")
 
 
 class SparseError(RuntimeError):
@@ -56,6 +58,9 @@ class SparseResult:
         pair_inliers: verified inlier matches per image pair (i, j), i < j (indices of ``images``).
         matched_pairs: image pairs handed to the matcher (N (N - 1) / 2 when exhaustive).
         seconds: wall time of ``extract``, ``match`` and ``triangulate`` (the model, either mode).
+        cameras: (N, 6) the cameras of the model in the world frame ([c, v], roll dropped): the
+            given ones in ``known_poses`` mode; in ``incremental`` mode the registered images'
+            estimated poses after the alignment, NaN rows for images not registered.
     """
 
     points: NDArray[np.float64]
@@ -67,6 +72,7 @@ class SparseResult:
     pair_inliers: dict = field(default_factory=dict)
     matched_pairs: int = 0
     seconds: dict = field(default_factory=dict)
+    cameras: Optional[NDArray[np.float64]] = None
 
 
 def _write_pairs(pairs: Sequence[tuple[int, int]], names: Sequence[str], path: Path) -> None:
@@ -114,7 +120,9 @@ def sparse_reconstruct(images: Sequence[NDArray[np.uint8]], cameras: NDArray[np.
                        workdir: Path, mode: str = "known_poses",
                        masks: Optional[Sequence[NDArray[np.bool_]]] = None,
                        max_features: int = 8192, num_threads: int = -1, quiet: bool = True,
-                       pairs: Optional[Sequence[tuple[int, int]]] = None) -> SparseResult:
+                       pairs: Optional[Sequence[tuple[int, int]]] = None,
+                       prior_centres: Optional[NDArray[np.float64]] = None,
+                       prior_sigma: float = 0.02) -> SparseResult:
     """SIFT + matching (all pairs, or the given ones) + triangulation of the rendered ``images`` (N RGB uint8).
 
     Args:
@@ -128,6 +136,10 @@ def sparse_reconstruct(images: Sequence[NDArray[np.uint8]], cameras: NDArray[np.
         quiet: silence COLMAP's INFO / WARNING log lines (errors still show).
         pairs: image index pairs (i, j) to match (order and duplicates do not matter); None:
             exhaustive matching.
+        prior_centres: incremental mode: (N, 3) camera centres known to ``prior_sigma`` m per
+            axis (a drone's reported positions), written as COLMAP pose priors and used by its
+            bundle adjustment (``use_prior_position``); None: none (the alignment then uses the
+            centres of ``cameras``).
 
     Raises:
         ValueError: bad mode, image count, image sizes or pairs.
@@ -139,14 +151,16 @@ def sparse_reconstruct(images: Sequence[NDArray[np.uint8]], cameras: NDArray[np.
     if quiet:
         pycolmap.logging.minloglevel = 2
     try:
-        return _sparse(pycolmap, images, cameras, K, Path(workdir), mode, masks, max_features, num_threads, pairs)
+        return _sparse(pycolmap, images, cameras, K, Path(workdir), mode, masks, max_features, num_threads, pairs,
+                       prior_centres, prior_sigma)
     finally:
         pycolmap.logging.minloglevel = level
 
 
 def _sparse(pycolmap: object, images: Sequence[NDArray[np.uint8]], cameras: NDArray[np.float64],
             K: NDArray[np.float64], workdir: Path, mode: str, masks: Optional[Sequence[NDArray[np.bool_]]],
-            max_features: int, num_threads: int, pairs: Optional[Sequence[tuple[int, int]]]) -> SparseResult:
+            max_features: int, num_threads: int, pairs: Optional[Sequence[tuple[int, int]]],
+            prior_centres: Optional[NDArray[np.float64]] = None, prior_sigma: float = 0.02) -> SparseResult:
     if mode not in MODES:
         raise ValueError(f"unknown sparse mode {mode!r}; expected one of {', '.join(MODES)}")
     cams = check_cameras(cameras)
@@ -179,6 +193,9 @@ def _sparse(pycolmap: object, images: Sequence[NDArray[np.uint8]], cameras: NDAr
     device = pycolmap.Device.cpu
     pycolmap.extract_features(db_path, img_dir, image_names=names, camera_mode=pycolmap.CameraMode.SINGLE,
                               reader_options=reader, extraction_options=extraction, device=device)
+    if prior_centres is not None and mode == "incremental":
+        _write_priors(pycolmap, db_path, names, np.asarray(prior_centres, dtype=np.float64).reshape(-1, 3),
+                      prior_sigma)
     seconds["extract"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     matching = pycolmap.FeatureMatchingOptions()
@@ -220,18 +237,22 @@ def _sparse(pycolmap: object, images: Sequence[NDArray[np.uint8]], cameras: NDAr
     # Few views: keep points seen by only two images (COLMAP drops them by default).
     options.triangulation.ignore_two_view_tracks = False
     if mode == "known_poses":
-        rec = pycolmap.Reconstruction()
-        for cam in db_cameras:
-            rec.add_camera_with_trivial_rig(cam)
-        R, t = world_to_camera(cams)
-        for i, name in enumerate(names):
-            dbi = db_images[name]
-            image = pycolmap.Image(name=name, camera_id=dbi.camera_id, image_id=dbi.image_id)
-            pose = pycolmap.Rigid3d(pycolmap.Rotation3d(R[i]), t[i].reshape(3, 1))
-            rec.add_image_with_trivial_frame(image, pose)
+        rec = _known_pose_model(pycolmap, db_cameras, db_images, names, cams)
         rec = pycolmap.triangulate_points(rec, db_path, img_dir, out_dir, clear_points=True, options=options)
         xyz, rgb, track = _read_points(rec)
         seen = sum(1 for im in rec.images.values() if im.has_pose and im.num_points3D > 0)
+    elif mode == "refined_poses":
+        rec = _known_pose_model(pycolmap, db_cameras, db_images, names, cams)
+        rec = pycolmap.triangulate_points(rec, db_path, img_dir, out_dir, clear_points=True, options=options)
+        ba = pycolmap.BundleAdjustmentOptions()
+        ba.refine_focal_length = ba.refine_principal_point = ba.refine_extra_params = False
+        pycolmap.bundle_adjustment(rec, ba)
+        seen = sum(1 for im in rec.images.values() if im.has_pose and im.num_points3D > 0)
+        xyz, rgb, track = _read_points(rec)
+        if seen < 3:
+            raise SparseError(f"{seen} of {len(names)} images observe a triangulated point; refining their "
+                              f"poses and aligning them to the world needs 3")
+        xyz, est = _align(pycolmap, rec, names, cams[:, :3], xyz, lambda im: im.has_pose and im.num_points3D > 0)
     else:
         options.ba_refine_focal_length = False
         options.ba_refine_extra_params = False
@@ -240,28 +261,83 @@ def _sparse(pycolmap: object, images: Sequence[NDArray[np.uint8]], cameras: NDAr
         options.mapper.init_min_num_inliers = 30
         options.mapper.abs_pose_min_num_inliers = 15
         options.min_model_size = 3
+        if prior_centres is not None:
+            options.use_prior_position = True
+            options.use_robust_loss_on_prior_position = True
         models = pycolmap.incremental_mapping(db_path, img_dir, out_dir, options=options)
         if not models:
-            raise SparseError(f"incremental mapping registered no image pair ({verified} verified pairs)")
+            raise SparseError(f"incremental mapping registered no image pair: 0 of {len(names)} images "
+                              f"registered ({verified} verified pairs)")
         rec = max(models.values(), key=lambda r: r.num_reg_images())
         seen = int(rec.num_reg_images())
         xyz, rgb, track = _read_points(rec)
         if seen < 3:
-            raise SparseError(f"incremental mapping registered {seen} images; aligning to the world needs 3")
-        idx = {n: i for i, n in enumerate(names)}
-        src, tgt = [], []
-        for im in rec.images.values():
-            if im.has_pose:
-                src.append(im.projection_center())
-                tgt.append(cams[idx[im.name], :3])
-        sim = pycolmap.estimate_sim3d(np.array(src), np.array(tgt))
-        if sim is None:
-            raise SparseError("cannot align the incremental reconstruction to the camera positions")
-        M = np.asarray(sim.matrix())
-        xyz = xyz @ M[:, :3].T + M[:, 3]
+            raise SparseError(f"incremental mapping registered {seen} of {len(names)} images; aligning to the "
+                              f"world needs 3")
+        anchor = cams[:, :3] if prior_centres is None else np.asarray(prior_centres, dtype=np.float64).reshape(-1, 3)
+        xyz, est = _align(pycolmap, rec, names, anchor, xyz, lambda im: im.has_pose)
     if len(xyz) == 0:
         raise SparseError(f"no 3D point triangulated ({verified} verified image pairs, keypoints {keypoints})")
     seconds["triangulate"] = time.perf_counter() - t0
     return SparseResult(points=xyz, colors=rgb, registered=int(seen), keypoints=[int(k) for k in keypoints],
                         verified_pairs=verified, mean_track_length=track, pair_inliers=pair_inliers,
-                        matched_pairs=matched, seconds=seconds)
+                        matched_pairs=matched, seconds=seconds, cameras=cams.copy() if mode == "known_poses" else est)
+
+
+def _known_pose_model(pycolmap: object, db_cameras: list, db_images: dict, names: Sequence[str],
+                      cams: NDArray[np.float64]) -> object:
+    """A reconstruction holding the images at the poses of ``cams`` (no points yet)."""
+    rec = pycolmap.Reconstruction()
+    for cam in db_cameras:
+        rec.add_camera_with_trivial_rig(cam)
+    R, t = world_to_camera(cams)
+    for i, name in enumerate(names):
+        dbi = db_images[name]
+        image = pycolmap.Image(name=name, camera_id=dbi.camera_id, image_id=dbi.image_id)
+        pose = pycolmap.Rigid3d(pycolmap.Rotation3d(R[i]), t[i].reshape(3, 1))
+        rec.add_image_with_trivial_frame(image, pose)
+    return rec
+
+
+def _align(pycolmap: object, rec: object, names: Sequence[str], anchor: NDArray[np.float64],
+           xyz: NDArray[np.float64], use: object) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The model's points and cameras in the world: the similarity (Umeyama) that takes the
+    centres of the images ``use(image)`` accepts to their ``anchor`` rows. Cameras as [c, v]
+    (v: the optical axis; a roll of the model is dropped), NaN rows for the other images."""
+    idx = {n: i for i, n in enumerate(names)}
+    src, tgt, reg = [], [], []
+    for im in rec.images.values():
+        if use(im):
+            src.append(np.asarray(im.projection_center()))
+            tgt.append(anchor[idx[im.name]])
+            reg.append(im)
+    sim = pycolmap.estimate_sim3d(np.array(src), np.array(tgt))
+    if sim is None:
+        raise SparseError("cannot align the reconstruction to the camera positions")
+    M = np.asarray(sim.matrix())
+    rot = M[:, :3] / np.cbrt(np.linalg.det(M[:, :3]))  # the similarity's rotation
+    est = np.full((len(names), 6), np.nan)
+    for im, c in zip(reg, src):
+        R_cw = np.asarray(im.cam_from_world().rotation.matrix())
+        est[idx[im.name], :3] = M[:, :3] @ c + M[:, 3]
+        est[idx[im.name], 3:] = rot @ R_cw[2]  # the optical axis z_o in the world
+    return xyz @ M[:, :3].T + M[:, 3], est
+
+
+def _write_priors(pycolmap: object, db_path: Path, names: Sequence[str], centres: NDArray[np.float64],
+                  sigma: float) -> None:
+    """Each image's camera centre as a COLMAP pose prior (Cartesian, isotropic ``sigma`` m)."""
+    if centres.shape != (len(names), 3) or not np.all(np.isfinite(centres)):
+        raise ValueError(f"prior_centres must be finite, ({len(names)}, 3), got shape {centres.shape}")
+    cov = np.eye(3) * max(float(sigma), 1e-3) ** 2
+    with pycolmap.Database.open(db_path) as db:
+        by_name = {im.name: im for im in db.read_all_images()}
+        for name, c in zip(names, centres):
+            im = by_name.get(name)
+            if im is None:
+                continue
+            prior = pycolmap.PosePrior(position=c.reshape(3, 1), position_covariance=cov,
+                                       coordinate_system=pycolmap.PosePriorCoordinateSystem.CARTESIAN)
+            prior.corr_data_id = pycolmap.data_t(pycolmap.sensor_t(pycolmap.SensorType.CAMERA, im.camera_id),
+                                                 im.image_id)
+            db.write_pose_prior(prior)
