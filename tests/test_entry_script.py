@@ -178,7 +178,7 @@ def test_bad_layout_file_is_a_usage_error_before_any_node_starts(ros_env, tmp_pa
 
 
 def test_the_script_offers_every_method_of_the_planner() -> None:
-    """run_suite keeps its own list (it does not import torch): it must equal the planner's."""
+    """run_suite offers the registry's methods (vp_planner.methods, torch-free), as the planner does."""
     import run_suite
     from vp_planner.optimizers import METHODS
 

@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Dict, List, Optional
 
 from node_process import NodeProcess, node_command
+from vp_planner.methods import METHODS  # the registry (torch-free)
 
 #: s between the action server being ready and the goal: server_is_ready() sees the request side of
 #: the action's services only; a goal response sent before its reply path is matched is dropped by
@@ -41,8 +42,6 @@ from node_process import NodeProcess, node_command
 #: executes a goal whose acceptance never arrives (the script also recovers from that, by feedback).
 SETTLE_S = 1.0
 
-#: The planner's methods (vp_planner.optimizers.METHODS, which imports torch; a test keeps them equal).
-METHODS = ('egp', 'gp', 'circle', 'arc', 'sa', 'random', 'lawnmower')
 
 ROOT = Path(__file__).resolve().parent.parent
 

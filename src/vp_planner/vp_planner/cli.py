@@ -84,7 +84,7 @@ def _reward_args(p: argparse.ArgumentParser, default: Optional[str]) -> None:
 
 def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     """Arguments of ``plan`` (the default command) or ``score``; ``args.command`` says which."""
-    from .optimizers import METHODS
+    from .methods import METHODS
     from .reward_models import DEFAULT_REWARD_MODEL
 
     argv = list(sys.argv[1:] if argv is None else argv)

@@ -44,7 +44,8 @@ BO methods work in 6N dimensions, and random feasible plans (min_separation betw
 become rare beyond a few dozen cameras. Hence the bound of 100 cameras, far above the paper's
 N <= 6; a run is cancellable throughout (``should_stop``), the feasible-plan search included.
 
-Size of a budget: 1 <= evaluations <= :data:`MAX_EVALUATIONS` [method]: 1000 for egp/gp (the
+Size of a budget: 1 <= evaluations <= :data:`MAX_EVALUATIONS` [method] (:mod:`vp_planner.methods`,
+the registry of the methods): 1000 for egp/gp (the
 paper uses 100-200; a GP's fit costs O(n^3) time and O(n^2) memory in the n evaluations made,
 four of them for egp, so 1000 is already hours of fitting) and 100000 for the baselines (each
 evaluation is recorded: a few hundred bytes plus 150 bytes a camera). Planning by parts
@@ -65,6 +66,7 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 
+from .methods import BAYESIAN, MAX_EVALUATIONS, METHODS
 from .reward import DEFAULT_FOV, DEFAULT_THETA_MATCH
 from .reward_models import DEFAULT_REWARD_MODEL, check_reward_model
 from .space import (
@@ -93,13 +95,10 @@ __all__ = [
     "NoFeasiblePlanError",
 ]
 
-METHODS: tuple[str, ...] = ("egp", "gp", "circle", "arc", "sa", "random", "lawnmower")
 
 #: The largest number of cameras N of a plan (see the module docstring).
 MAX_CAMERAS: int = 100
 
-#: The largest evaluation budget of a plan, by method (see the module docstring).
-MAX_EVALUATIONS: dict[str, int] = {m: (1000 if m in ("egp", "gp") else 100_000) for m in METHODS}
 
 Callback = Callable[[int, int, float, Optional[list]], bool]
 StopCheck = Callable[[], bool]
@@ -194,7 +193,7 @@ def validate_request(method: str, num_cameras: Any, evaluations: Any, initial_ev
     if evaluations > MAX_EVALUATIONS[method]:
         raise BudgetTooLargeError(f"evaluations = {evaluations} is above the bound of {MAX_EVALUATIONS[method]} "
                                   f"for method {method} (README, 'Planner node')")
-    if method in ("egp", "gp"):
+    if method in BAYESIAN:
         if int(initial_evaluations) != initial_evaluations or initial_evaluations < 1:
             raise InvalidBudgetError(f"initial_evaluations must be an integer >= 1, got {initial_evaluations}")
         if evaluations < initial_evaluations:
@@ -231,7 +230,7 @@ def estimate_run_memory(method: str, num_cameras: int, evaluations: int) -> int:
     (four models of about six float64 matrices: 192 n^2 bytes)."""
     N, E = int(num_cameras), int(evaluations)
     need = E * (300 + 96 * N) + E * 48 * N
-    if method in ("egp", "gp"):
+    if method in BAYESIAN:
         need += 192 * E * E
     return need
 
@@ -279,7 +278,7 @@ def _check_parts(parts: Any, method: str, realizations: NDArray[np.float64], num
     InvalidNumCamerasError for more parts than pairs of cameras."""
     if isinstance(parts, bool) or int(parts) != parts or parts < 0:
         raise ValueError(f"parts must be an integer >= 0 (0: automatic), got {parts!r}")
-    if method not in ("egp", "gp"):
+    if method not in BAYESIAN:
         return 1
     if parts == 0:
         from .parts import auto_parts
@@ -296,7 +295,7 @@ def total_evaluations(method: str, evaluations: int, parts: int) -> int:
     ``lawnmower`` 1 (a survey is flown as planned, not tuned)."""
     if method == "lawnmower":
         return 1
-    if method in ("egp", "gp") and parts > 1:
+    if method in BAYESIAN and parts > 1:
         return parts * int(evaluations) + max(1, int(evaluations) // 2)
     return int(evaluations)
 
