@@ -32,10 +32,26 @@ CASES = [
 ]
 
 
+def caught(pid: int, sig: int) -> bool:
+    """``sig`` is in the process's caught-signal mask (/proc/<pid>/status SigCgt)."""
+    try:
+        with open(f"/proc/{pid}/status") as fh:
+            mask = next(int(ln.split()[1], 16) for ln in fh if ln.startswith("SigCgt:"))
+    except (OSError, StopIteration):
+        return False
+    return bool(mask >> (int(sig) - 1) & 1)
+
+
 @pytest.mark.parametrize("name, delay, sig", CASES, ids=[f"{n}-{d}s-{s.name}" for n, d, s in CASES])
 def test_a_signal_at_any_moment_exits_quietly(name, delay, sig, ros_env, start_node) -> None:
     pkg, exe, params = NODES[name]
     node = start_node(pkg, exe, params, ros_env)
+    # the delay counts from the entry's first instruction (the quiet handler installed: Python
+    # alone does not catch SIGTERM); what comes before is the interpreter's own start-up
+    deadline = time.monotonic() + 30.0
+    while not caught(node.pid, signal.SIGTERM) and node.alive() and time.monotonic() < deadline:
+        time.sleep(0.005)
+    assert caught(node.pid, signal.SIGTERM), f"{name}: no handler after 30 s:\n{node.output()}"
     time.sleep(delay)
     assert node.alive(), f"{name} ended by itself before the signal:\n{node.output()}"
     node.signal(sig)
@@ -46,3 +62,31 @@ def test_a_signal_at_any_moment_exits_quietly(name, delay, sig, ros_env, start_n
     assert code is not None, f"{name} still running 10 s after {sig.name} at {delay} s:\n{out}"
     assert code == 0 and took < 5.0, f"{name}: exit {code} {took:.1f} s after {sig.name} at {delay} s:\n{out}"
     assert "Traceback" not in out and "KeyboardInterrupt" not in out, out
+
+
+def test_the_entries_answer_signals_before_the_node_module_is_imported(tmp_path) -> None:
+    """The delays above count from the quiet handler; this pins that the handler comes before the
+    node's module (and its torch/trimesh/pycolmap imports): a stand-in node module checks, while
+    it is imported, that SIGINT and SIGTERM are already answered; and every console entry of the
+    suite goes through vp_scene.node_entry."""
+    import re
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    (tmp_path / "fake_node.py").write_text(
+        "import signal\n"
+        "from vp_scene.node_entry import _quit\n"
+        "assert signal.getsignal(signal.SIGINT) is _quit and signal.getsignal(signal.SIGTERM) is _quit\n"
+        "def main():\n    return 0\n")
+    code = f"import sys; sys.path.insert(0, {str(tmp_path)!r}); from vp_scene.node_entry import start; " \
+           "sys.exit(start('fake_node'))"
+    assert subprocess.run([sys.executable, "-c", code], timeout=60).returncode == 0
+    repo = Path(__file__).resolve().parents[1]
+    for pkg in ("vp_scene", "vp_planner", "vp_recon"):
+        text = (repo / "src" / pkg / "setup.py").read_text()
+        for name, target in re.findall(r"'(\w+) = ([\w.]+:\w+)'", text):
+            if name.endswith("node") or target.split(":")[0].endswith("_node"):
+                raise AssertionError(f"{pkg} {name} starts {target} without vp_scene.node_entry")
+            if name in ("scene", "planner", "dispatcher", "sim_drone", "recon"):
+                assert target.startswith(f"{pkg}.node_entry:"), (name, target)
