@@ -79,9 +79,60 @@ def test_end_to_end_small_mission(ros_env, tmp_path) -> None:
     for entry in fleet["drones"]:  # fleet frame = map here: the goals are the plan's poses
         np.testing.assert_allclose(entry["goal"], summary["poses"][entry["pose_index"]], atol=1e-9)
     pids = started_pids(proc.stdout)
-    assert {"dispatcher", "sim_d0", "sim_d4"} <= set(pids), pids
+    assert {"recorder", "dispatcher", "sim_d0", "sim_d4"} <= set(pids), pids
+    check_recording(out / "run.mcap", summary, drones=5, realizations=2)
     for pid in pids.values():
         assert not alive(pid)
+
+
+def read_recording(path: Path) -> tuple[dict, dict, dict]:
+    """(topic -> schema name, topic -> decoded messages, the file's summary statistics) of an MCAP
+    file, read with mcap's seeking reader (it needs the summary that closing writes) and
+    mcap_ros2's decoder."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    types, messages = {}, {}
+    with open(path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        summary = reader.get_summary()
+        assert summary is not None and summary.statistics is not None, f"{path}: not closed (no summary)"
+        assert reader.get_header().profile == "ros2"
+        for schema, channel, _message, decoded in reader.iter_decoded_messages():
+            assert channel.message_encoding == "cdr" and schema.encoding == "ros2msg"
+            assert "offered_qos_profiles" in channel.metadata, channel.topic
+            types[channel.topic] = schema.name
+            messages.setdefault(channel.topic, []).append(decoded)
+    return types, messages, summary.statistics
+
+
+def check_recording(path: Path, summary: dict, drones: int, realizations: int) -> None:
+    """run.mcap of a finished run: every topic of the run with its type, the plan as in summary.json."""
+    types, messages, stats = read_recording(path)
+    expected = {"/scene/noisy_points": "sensor_msgs/msg/PointCloud2", "/camera_plan": "geometry_msgs/msg/PoseArray",
+                "/camera_plan/info": "vp_interfaces/msg/CameraPlan",
+                "/camera_plan/markers": "visualization_msgs/msg/MarkerArray",
+                "/fleet/assignment": "vp_interfaces/msg/FleetAssignment",
+                "/reconstruction/score": "vp_interfaces/msg/ReconstructionScore",
+                "/reconstruction/points": "sensor_msgs/msg/PointCloud2"}
+    for d in range(drones):
+        expected[f"/d{d}/pose"] = "geometry_msgs/msg/PoseStamped"
+    for entry in summary["fleet"]["drones"]:
+        expected[f"/{entry['drone']}/goal_pose"] = "geometry_msgs/msg/PoseStamped"
+    for topic, type_name in expected.items():
+        assert types.get(topic) == type_name, (topic, sorted(types.items()))
+    assert stats.message_count == sum(len(m) for m in messages.values())
+    for topic in ("/scene/noisy_points", "/camera_plan", "/camera_plan/info"):
+        assert len(messages[topic]) == 1, (topic, len(messages[topic]))
+    plan = messages["/camera_plan"][0]
+    assert plan.header.frame_id == "map"
+    np.testing.assert_allclose([[p.position.x, p.position.y, p.position.z, p.orientation.x, p.orientation.y,
+                                 p.orientation.z, p.orientation.w] for p in plan.poses], summary["poses"], atol=1e-9)
+    assert len(messages["/reconstruction/score"]) == realizations + 1  # each realization, then the aggregate
+    assert messages["/reconstruction/score"][-1].chamfer == summary["chamfer_mean"]
+    cloud = messages["/scene/noisy_points"][0]
+    assert cloud.width * cloud.height > 0 and len(cloud.data) == cloud.row_step * cloud.height
+    assert all(len(messages[f"/d{d}/pose"]) >= 2 for d in range(drones))
 
 
 def wait_gone(pids: dict, timeout: float) -> list:
@@ -104,7 +155,7 @@ def planning_started(ros_env, tmp_path) -> tuple[NodeProcess, dict]:
                           "--timeout", "300")
     assert script.wait_for_output("planning 4 cameras", 120), script.output()[-3000:]
     pids = started_pids(script.output())
-    assert set(pids) == {"scene", "planner", "recon"}, script.output()[-3000:]
+    assert set(pids) == {"recorder", "scene", "planner", "recon"}, script.output()[-3000:]
     return script, pids
 
 
@@ -119,6 +170,23 @@ def test_killing_the_planner_stops_everything(ros_env, tmp_path) -> None:
     assert code == 3, text[-3000:]
     assert re.search(r'node "planner" died', text), text[-3000:]
     assert not wait_gone(pids, 10.0), text[-3000:]
+
+
+def test_interrupting_the_script_leaves_a_readable_recording(ros_env, tmp_path) -> None:
+    """SIGINT (Ctrl-C) mid-plan: exit 130, the nodes stopped, and run.mcap closed (it has its
+    summary) with what was published so far: the scene, no plan yet."""
+    script, pids = planning_started(ros_env, tmp_path)
+    try:
+        script.signal(signal.SIGINT)
+        code = script.wait(60)
+    finally:
+        script.stop()
+    text = script.output()
+    assert code == 130, text[-3000:]
+    assert not wait_gone(pids, 10.0), text[-3000:]
+    types, messages, _stats = read_recording(tmp_path / "run" / "run.mcap")
+    assert types["/scene/noisy_points"] == "sensor_msgs/msg/PointCloud2" and len(messages["/scene/noisy_points"]) == 1
+    assert "/camera_plan" not in messages
 
 
 def test_sigkill_of_the_script_takes_the_nodes_with_it(ros_env, tmp_path) -> None:

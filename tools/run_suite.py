@@ -6,7 +6,9 @@ and streams their logs, asks the planner for a plan through the ``/plan_views`` 
 progress bar from its feedback), waits for the recon node's aggregate score on
 ``/reconstruction/score`` and writes ``<out>/summary.json``. With ``--drones N`` it also starts
 the dispatcher with drones d0..d<N-1> and N simulated drones (``vp_planner sim_drone``, on a
-launch row 5 m south of the plot) and prints which drone goes where (``/fleet/assignment``). Everything is shut down on success,
+launch row 5 m south of the plot) and prints which drone goes where (``/fleet/assignment``).
+A ``recorder`` node (vp_recon) writes the run's topics to ``<out>/run.mcap`` (a ROS 2 bag that
+``ros2 bag info``/``play`` and Foxglove open); it is started first and stopped last. Everything is shut down on success,
 on Ctrl-C and when any node dies; the nodes die with this script even when it is killed with
 SIGKILL (parent-death signal, tools/node_process.py). While the nodes are stopped their output
 goes to ``<out>/<node>.log`` only, so the outcome (or the error, with the dead node's last line)
@@ -44,6 +46,9 @@ SETTLE_S = 1.0
 
 
 ROOT = Path(__file__).resolve().parent.parent
+
+#: The run's topics as a ROS 2 bag (MCAP), in the output folder (README "Looking at a plan").
+RECORDING = 'run.mcap'
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_NODE_DIED, EXIT_TIMEOUT, EXIT_INTERRUPTED = 0, 1, 2, 3, 4, 130
 
@@ -282,6 +287,10 @@ def run(args: argparse.Namespace) -> int:
     try:
         # the planner and the recon share the cores: 1 thread for the planner, the rest for the recon
         recon_threads = max(1, (os.cpu_count() or 2) - 1)
+        # first, so that it sees every topic from its start; stopped last (the nodes stop in
+        # reverse order), which closes <out>/run.mcap (vp_recon.recording)
+        nodes.append(start_node('recorder', 'vp_recon', 'recorder', {'output': str(out / RECORDING)},
+                                {**env, 'OMP_NUM_THREADS': '1'}, out))
         nodes.append(start_node('scene', 'vp_scene', 'scene', scene_params, {**env, 'OMP_NUM_THREADS': '1'}, out))
         nodes.append(start_node('planner', 'vp_planner', 'planner', {
             'num_cameras': args.cameras, 'method': args.method, 'evaluations': args.evals,

@@ -20,6 +20,7 @@ setup(
         'console_scripts': [
             'recon = vp_recon.node_entry:recon',
             'reconstruct = vp_recon.cli:main',
+            'recorder = vp_recon.recorder_node:main',
         ],
     },
 )

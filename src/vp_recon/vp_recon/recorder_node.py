@@ -1,0 +1,111 @@
+"""The ``recorder`` node: a run's topics into one MCAP file (:mod:`vp_recon.recording`).
+
+Every ``discovery_period`` s it lists the graph's topics (``get_topic_names_and_types``) and
+subscribes, once, to each one that matches a pattern of ``topics`` and has a publisher: a
+serialized subscription (``raw=True``: the CDR bytes are written as they arrive, never decoded),
+with QoS adapted to the publishers as rosbag2 does (reliable when all of them are, transient local
+when all of them are, so latched messages published before the recorder started are recorded
+too). On SIGINT/SIGTERM the file is closed (summary and footer written) and the counts logged;
+signals, exit codes and parameter types follow :mod:`vp_scene.node_runtime` (a bad parameter or
+an unwritable file: one line, exit 2).
+
+    ros2 run vp_recon recorder --ros-args -p output:=out/run/run.mcap
+"""
+from __future__ import annotations
+
+import fnmatch
+import importlib
+import time
+from typing import Dict
+
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+from vp_recon.recording import RUN_TOPICS, RecordingError, RunRecording, qos_profiles_yaml
+from vp_scene.node_runtime import declare_typed, run_node, typed_values
+
+PARAMS = {
+    'output': ('run.mcap', 'the MCAP file to write (its folder is created)'),
+    'topics': (list(RUN_TOPICS), 'topic patterns to record (fnmatch: * also matches /)'),
+    'discovery_period': (0.5, 's between two looks at the graph for new topics'),
+}
+
+
+def check_parameters(values: dict) -> dict:
+    v = typed_values(PARAMS, values)
+    if not v.get('output', 'x'):
+        raise ValueError('output must not be empty')
+    if v.get('discovery_period', 1.0) <= 0:
+        raise ValueError('discovery_period must be > 0')
+    return v
+
+
+def get_message(type_name: str) -> type:
+    """The Python class of 'pkg/msg/Type' (rosidl_runtime_py.utilities.get_message, which the
+    PyPI Jazzy wheels do not ship)."""
+    pkg, kind, name = type_name.split('/')
+    return getattr(importlib.import_module(f'{pkg}.{kind}'), name)
+
+
+class RecorderNode(Node):
+    def __init__(self) -> None:
+        super().__init__('recorder')
+        declare_typed(self, PARAMS)
+        v = check_parameters({n: self.get_parameter(n).value for n in PARAMS})
+        self._patterns = list(v['topics']) or list(RUN_TOPICS)
+        try:
+            self.recording = RunRecording(v['output'])
+        except RecordingError as exc:
+            raise ValueError(str(exc)) from exc
+        self._subscribed: Dict[str, object] = {}
+        self._refused: set = set()
+        self.create_timer(v['discovery_period'], self._discover)
+        self.get_logger().info(f'recording {", ".join(self._patterns)} to {self.recording.path}')
+        self._discover()
+
+    def _discover(self) -> None:
+        for topic, types in self.get_topic_names_and_types():
+            if topic in self._subscribed or topic in self._refused:
+                continue
+            if not any(fnmatch.fnmatchcase(topic, p) for p in self._patterns):
+                continue
+            publishers = self.get_publishers_info_by_topic(topic)
+            if not publishers:
+                continue  # QoS is adapted to the publishers: wait for one
+            if len(types) != 1:
+                self._refuse(topic, f'{len(types)} types ({", ".join(types)})')
+                continue
+            reliable = all(p.qos_profile.reliability == ReliabilityPolicy.RELIABLE for p in publishers)
+            latched = all(p.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in publishers)
+            depth = max(1, max(p.qos_profile.depth for p in publishers))
+            try:
+                msg_type = get_message(types[0])
+                self.recording.add_topic(topic, types[0], qos_profiles_yaml(reliable, latched, depth))
+            except (RecordingError, AttributeError, ModuleNotFoundError, ValueError) as exc:
+                self._refuse(topic, str(exc))
+                continue
+            qos = QoSProfile(depth=max(depth, 100),
+                             reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
+            self._subscribed[topic] = self.create_subscription(
+                msg_type, topic, lambda data, t=topic: self.recording.write(t, data, time.time_ns()), qos, raw=True)
+            self.get_logger().info(f'recording {topic} ({types[0]}{", latched" if latched else ""})')
+
+    def _refuse(self, topic: str, why: str) -> None:
+        self._refused.add(topic)
+        self.get_logger().error(f'not recording {topic}: {why}')
+
+    def on_shutdown(self, timeout: float) -> bool:
+        self.recording.close()
+        counts = ', '.join(f'{t} {n}' for t, n in sorted(self.recording.counts.items()))
+        self.get_logger().info(f'closed {self.recording.path}: {counts or "no messages"}')
+        return True
+
+
+def main(args=None) -> int:
+    """Entry point ``recorder``."""
+    return run_node('recorder', RecorderNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
