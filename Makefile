@@ -23,12 +23,15 @@ OUT      ?= out/$(SCENE_TAG)-$(METHOD)-$(CAMERAS)cams-seed$(SEED)
 MODELS   ?=
 PLAN     ?= $(OUT)/plan.json
 RECON_ARGS ?=
+# make view RUN=out/<run folder> [PORT=8080]: the run's recording in the browser (README "Looking at a plan")
+RUN      ?= $(OUT)
+PORT     ?= 8080
 
 ENV := . .venv/bin/activate && . install/setup.bash &&
 
-.PHONY: help setup test run plan recon score bench clean
+.PHONY: help setup test run plan recon score view bench clean
 help:
-	@echo "make setup | test | run | plan | recon | score | bench | clean   (see README.md)"
+	@echo "make setup | test | run | plan | recon | score | view | bench | clean   (see README.md)"
 
 setup:
 	@tools/setup.sh
@@ -50,6 +53,9 @@ recon: setup
 
 score: setup
 	@$(ENV) python -m vp_planner.cli score --plan $(PLAN) $(if $(REWARD),--reward $(REWARD))
+
+view: setup
+	@$(ENV) python -m vp_recon.viewer $(RUN) --port $(PORT)
 
 bench: setup
 	@$(ENV) python bench/table1.py $(if $(MODELS),--models $(MODELS))

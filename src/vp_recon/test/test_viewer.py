@@ -1,0 +1,200 @@
+"""vp_recon.viewer: the scene it builds from a recording, its bad-input errors, and the page in a
+real headless chromium (skipped only when /usr/bin/chromium is absent)."""
+from __future__ import annotations
+
+import shutil
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from vp_recon.recording import RunRecording, qos_profiles_yaml
+from vp_recon.viewer import PlanViewer, ViewerError, frustum_poses, load_run, replay_recording
+from vp_scene.camera import cameras_to_poses, look_at
+
+CHROMIUM, CHROMEDRIVER = Path("/usr/bin/chromium"), Path("/usr/bin/chromedriver")
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def ring(n: int, radius: float = 1.5, height: float = 1.2) -> np.ndarray:
+    a = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    return look_at(np.stack([radius * np.cos(a), radius * np.sin(a), np.full(n, height)], -1), np.zeros(3))
+
+
+def pose_array(cameras: np.ndarray):
+    from geometry_msgs.msg import Pose, PoseArray
+
+    msg = PoseArray()
+    msg.header.frame_id = "map"
+    for x, y, z, qx, qy, qz, qw in cameras_to_poses(cameras):
+        p = Pose()
+        p.position.x, p.position.y, p.position.z = float(x), float(y), float(z)
+        p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w = float(qx), float(qy), float(qz), float(qw)
+        msg.poses.append(p)
+    return msg
+
+
+def write_run(folder: Path, cameras: np.ndarray) -> Path:
+    """A run folder whose run.mcap holds a scene (2 realizations), a plan and its fleet assignment,
+    a drone pose and a reconstruction: what make run records."""
+    from geometry_msgs.msg import PoseStamped
+    from rclpy.serialization import serialize_message
+    from vp_interfaces.msg import DroneAssignment, FleetAssignment
+    from vp_scene.cloud import numpy_to_pointcloud2
+
+    grid = np.stack(np.meshgrid(*(np.arange(n) * 0.1 for n in (10, 10, 5)), indexing="ij"), -1).reshape(-1, 3)
+    scene = np.stack([grid, grid + 0.03])  # 2 realizations of 500 points, 10 cm apart
+    scene_msg = numpy_to_pointcloud2(scene.reshape(-1, 3), np.full((1000, 3), 100, np.uint8),
+                                     realization=np.repeat(np.arange(2, dtype=np.uint16), 500), frame_id="map")
+    recon = scene[0, :300] + 0.001
+    recon_msg = numpy_to_pointcloud2(recon, np.zeros((300, 3), np.uint8),
+                                     realization=np.zeros(300, np.uint16), frame_id="map")
+    fleet = FleetAssignment()
+    fleet.entries = [DroneAssignment(drone=f"d{k}", pose_index=k) for k in range(len(cameras))]
+    pose = PoseStamped()
+    pose.header.frame_id = "map"
+    pose.pose.position.z = 1.0
+    folder.mkdir(parents=True, exist_ok=True)
+    with RunRecording(folder / "run.mcap") as rec:
+        for topic, type_name, msg in (
+                ("/scene/noisy_points", "sensor_msgs/msg/PointCloud2", scene_msg),
+                ("/camera_plan", "geometry_msgs/msg/PoseArray", pose_array(cameras)),
+                ("/fleet/assignment", "vp_interfaces/msg/FleetAssignment", fleet),
+                ("/d0/pose", "geometry_msgs/msg/PoseStamped", pose),
+                ("/reconstruction/points", "sensor_msgs/msg/PointCloud2", recon_msg)):
+            rec.add_topic(topic, type_name, qos_profiles_yaml(True, True, 1))
+            rec.write(topic, serialize_message(msg))
+    return folder
+
+
+def test_frustums_look_where_the_cameras_look() -> None:
+    cams = ring(5)
+    wxyz, pos = frustum_poses(cams)
+    z_axis = Rotation.from_quat(wxyz[:, [1, 2, 3, 0]]).apply([0.0, 0.0, 1.0])  # viser: OpenCV frame, z forward
+    v = cams[:, 3:] / np.linalg.norm(cams[:, 3:], axis=1, keepdims=True)
+    np.testing.assert_allclose(z_axis, v, atol=1e-9)
+    np.testing.assert_allclose(pos, cams[:, :3])
+
+
+def test_a_recorded_run_is_shown_with_one_frustum_per_camera(tmp_path) -> None:
+    cams = ring(4)
+    viewer = PlanViewer(port=free_port(), max_points=400)
+    try:
+        replay_recording(viewer, load_run(write_run(tmp_path / "run", cams)))
+        assert len(viewer.frustums) == 4
+        np.testing.assert_allclose([f.position for f in viewer.frustums], cams[:, :3], atol=1e-6)
+        colors = {tuple(int(c) for c in f.color) for f in viewer.frustums}
+        assert len(colors) == 4  # one colour per drone
+        assert viewer.realization.options == ("0", "1")
+        assert "400 of 500 points shown (downsampled)" in viewer.status.content
+        assert "coloured by distance to the truth" in viewer.status.content
+        assert "uncovered (magenta): 200 of 500" in viewer.status.content
+        viewer.realization.value = "1"  # the other wind realization: no reconstruction of it
+        assert "reconstruction: none for realization 1" in viewer.status.content
+    finally:
+        viewer.close()
+
+
+def run_cli(*args: str, timeout: float = 60.0) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "vp_recon.viewer", *args], capture_output=True, text=True,
+                          timeout=timeout)
+
+
+def test_bad_input_is_one_line_and_exit_2(tmp_path) -> None:
+    folder = write_run(tmp_path / "run", ring(3))
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    truncated = tmp_path / "truncated"
+    truncated.mkdir()
+    data = (folder / "run.mcap").read_bytes()
+    (truncated / "run.mcap").write_bytes(data[: len(data) // 2])
+    cases = [(empty, "no recording (run.mcap)"), (tmp_path / "nowhere", "no such run folder"),
+             (truncated, "not a readable MCAP recording")]
+    for run, said in cases:
+        proc = run_cli(str(run), "--port", str(free_port()))
+        assert proc.returncode == 2, (run, proc.stdout, proc.stderr)
+        lines = proc.stderr.strip().splitlines()
+        assert len(lines) == 1 and said in lines[0], (run, proc.stderr)
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen(1)
+        port = busy.getsockname()[1]
+        proc = run_cli(str(folder), "--port", str(port), "--seconds", "5")
+    assert proc.returncode == 2, (proc.stdout, proc.stderr)
+    assert proc.stderr.strip().splitlines()[-1] == f"error: port {port} on 127.0.0.1 is in use (try --port / make view PORT=...)"
+    with pytest.raises(ViewerError, match="no recording"):
+        load_run(empty)
+
+
+@pytest.fixture
+def chromium():
+    """A headless chromium driven by selenium, nothing downloaded; chromedriver and chromium are
+    ended on teardown."""
+    if not CHROMIUM.exists():
+        pytest.skip("/usr/bin/chromium is absent (Debian package chromium)")
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    options = webdriver.ChromeOptions()
+    options.binary_location = str(CHROMIUM)
+    for flag in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                 "--disable-background-networking", "--disable-component-update", "--disable-sync",
+                 "--disable-dev-shm-usage", "--window-size=1280,800"):
+        options.add_argument(flag)
+    service = Service(str(CHROMEDRIVER))
+    driver = webdriver.Chrome(service=service, options=options)
+    driver.set_page_load_timeout(60)
+    try:
+        yield driver
+    finally:
+        try:
+            driver.quit()
+        finally:
+            service.stop()
+
+
+def wait_text(driver, text: str, timeout: float) -> None:
+    deadline = time.monotonic() + timeout
+    body = ""
+    while time.monotonic() < deadline:
+        body = driver.execute_script("return document.body ? document.body.innerText : ''") or ""
+        if text in body:
+            return
+        time.sleep(0.25)
+    raise AssertionError(f"{text!r} not on the page within {timeout} s; page text: {body[-1500:]!r}")
+
+
+def test_the_page_shows_the_plan_and_follows_a_new_one(chromium, tmp_path) -> None:
+    """A real browser: the page loads the plan (4 frustums: the GUI line the server writes with them
+    appears in the page), a client is connected, and a new plan of 6 cameras reaches the page."""
+    viewer = PlanViewer(port=free_port(), max_points=2000)
+    try:
+        replay_recording(viewer, load_run(write_run(tmp_path / "run", ring(4))))
+        chromium.get(viewer.url)
+        wait_text(chromium, "plan: 4 cameras", 90)
+        assert len(viewer.server.get_clients()) == 1
+        viewer.show_plan(ring(6, radius=2.0))
+        wait_text(chromium, "plan: 6 cameras", 60)
+        assert len(viewer.frustums) == 6
+        if SCREENSHOT_TO is not None:
+            time.sleep(2.0)  # let the point clouds render
+            chromium.save_screenshot(str(SCREENSHOT_TO))
+        png = tmp_path / "page.png"
+        chromium.save_screenshot(str(png))
+        assert png.stat().st_size > 10_000  # a rendered page, not a blank one
+    finally:
+        viewer.close()
+
+
+#: Set by tools that refresh docs/viewer.png from this test (None in the suite).
+SCREENSHOT_TO = None
