@@ -21,6 +21,7 @@ setup(
             'recon = vp_recon.node_entry:recon',
             'reconstruct = vp_recon.cli:main',
             'recorder = vp_recon.recorder_node:main',
+            'viewer = vp_recon.viewer_node:main',
         ],
     },
 )

@@ -16,6 +16,7 @@ every browser that connects gets the same state):
 
 Clouds larger than ``max_points`` are shown as a uniform random subset (the GUI says so).
 
+Live: the ``viewer`` node (:mod:`vp_recon.viewer_node`) feeds it from the run's topics.
 Offline (``make view RUN=out/...``): ``python -m vp_recon.viewer RUN_FOLDER --port 8080``
 replays the latest message of each topic of ``RUN_FOLDER/run.mcap`` (``make run`` records it,
 :mod:`vp_recon.recording`) and serves until Ctrl-C. Bad input (no recording, a file that is not
@@ -26,6 +27,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import Dict, Optional, Sequence
@@ -91,6 +93,8 @@ class PlanViewer:
         self._recon: Optional[tuple] = None
         self._drone_colors: Dict[str, tuple] = {}
         self.frustums: list = []
+        self.drones: Dict[str, object] = {}
+        self._lock = threading.RLock()  # the GUI's callbacks run in viser's thread, updates in the caller's
         self._cameras = np.zeros((0, 6))
         self._assigned = {}
         gui = self.server.gui
@@ -127,6 +131,10 @@ class PlanViewer:
         self._draw_plan()
 
     def _draw_plan(self) -> None:
+        with self._lock:
+            self._draw_plan_locked()
+
+    def _draw_plan_locked(self) -> None:
         for handle in self.frustums:
             handle.remove()
         cams = self._cameras
@@ -142,8 +150,13 @@ class PlanViewer:
         self.plan_info.content = f"**plan**: {len(cams)} cameras" + (f" ({flown})" if flown else "")
 
     def show_drone(self, name: str, position: Sequence[float]) -> None:
-        self.server.scene.add_icosphere(f"/drones/{name}", radius=0.08, color=self._color_of(name),
-                                        position=tuple(float(c) for c in position))
+        xyz = tuple(float(c) for c in position)
+        with self._lock:
+            if name in self.drones:
+                self.drones[name].position = xyz
+            else:
+                self.drones[name] = self.server.scene.add_icosphere(
+                    f"/drones/{name}", radius=0.08, color=self._color_of(name), position=xyz)
 
     def show_reconstruction(self, points: np.ndarray, realization: Optional[np.ndarray]) -> None:
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
@@ -158,6 +171,10 @@ class PlanViewer:
         return self._drone_colors[drone]
 
     def _redraw_clouds(self) -> None:
+        with self._lock:
+            self._redraw_clouds_locked()
+
+    def _redraw_clouds_locked(self) -> None:
         k = int(self.realization.value)
         notes = []
         truth = None
@@ -179,7 +196,8 @@ class PlanViewer:
                 idx = _subsample(len(mine), self.max_points)
                 if reference is not None and len(reference):
                     colors, d = distance_colors(mine[idx], reference, self.distance_scale)
-                    notes.append(f"reconstruction: {len(idx)} of {len(mine)} points, coloured by distance to "
+                    notes.append(f"reconstruction: {len(idx)} of {len(mine)} points"
+                                 + (" (downsampled)" if len(idx) < len(mine) else "") + ", coloured by distance to "
                                  f"{against} (blue 0 to red >= {self.distance_scale * 100:g} cm), median "
                                  f"{np.median(d) * 100:.2f} cm")
                 else:

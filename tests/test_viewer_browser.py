@@ -1,0 +1,135 @@
+"""The viewer node (vp_recon viewer) seen in a real headless chromium driven by selenium: the page
+loads, shows the plan a planner published (N cameras: the GUI line the viewer writes with its N
+frustums appears in the page) and follows a new plan. Skipped only when /usr/bin/chromium is
+absent; nothing is downloaded (chromedriver and chromium from Debian, selenium-manager never
+runs); every wait has a deadline; chromium and chromedriver are ended on teardown. Also: a port in
+use is one line and exit 2.
+
+With VP_VIEWER_SCREENSHOT=path the test saves the page (README's docs/viewer.png comes from it).
+"""
+from __future__ import annotations
+
+import os
+import socket
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from geometry_msgs.msg import PoseArray
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import PointCloud2
+
+CHROMIUM, CHROMEDRIVER = Path("/usr/bin/chromium"), Path("/usr/bin/chromedriver")
+LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def plan_msg(n: int, radius: float) -> PoseArray:
+    """n cameras on a circle of ``radius`` m at 1.2 m, looking at the plant."""
+    from test_recon_node import pose_array  # tests/: one builder of PoseArray test plans
+    from vp_scene.camera import look_at
+
+    a = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    return pose_array(look_at(np.stack([radius * np.cos(a), radius * np.sin(a), np.full(n, 1.2)], -1),
+                              [0.0, 0.0, 0.4]))
+
+
+def scene_msg() -> PointCloud2:
+    from vp_scene.cloud import numpy_to_pointcloud2
+
+    rng = np.random.default_rng(0)
+    t = rng.uniform(0, 0.8, 4000)
+    pts = np.stack([0.05 * np.cos(30 * t), 0.05 * np.sin(30 * t), t], -1) + rng.normal(0, 0.01, (4000, 3))
+    colors = np.tile(np.array([[60, 160, 60]], np.uint8), (4000, 1))
+    return numpy_to_pointcloud2(pts, colors, realization=np.zeros(4000, np.uint16), frame_id="map")
+
+
+@pytest.fixture
+def chromium():
+    if not CHROMIUM.exists():
+        pytest.skip("/usr/bin/chromium is absent (Debian package chromium)")
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    options = webdriver.ChromeOptions()
+    options.binary_location = str(CHROMIUM)
+    for flag in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                 "--disable-background-networking", "--disable-component-update", "--disable-sync",
+                 "--disable-dev-shm-usage", "--window-size=1280,800"):
+        options.add_argument(flag)
+    service = Service(str(CHROMEDRIVER))
+    driver = webdriver.Chrome(service=service, options=options)
+    driver.set_page_load_timeout(60)
+    try:
+        yield driver
+    finally:
+        try:
+            driver.quit()
+        finally:
+            service.stop()
+
+
+def page_text(driver) -> str:
+    return driver.execute_script("return document.body ? document.body.innerText : ''") or ""
+
+
+def wait_text(driver, text: str, timeout: float) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if text in page_text(driver):
+            return
+        time.sleep(0.25)
+    raise AssertionError(f"{text!r} not on the page within {timeout} s; page text: {page_text(driver)[-1500:]!r}")
+
+
+def wait_page(driver, url: str, timeout: float) -> None:
+    """Load ``url`` once the node serves it (it starts after the node's process does)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            driver.get(url)
+            return
+        except Exception:  # noqa: BLE001 - connection refused until the server is up
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.5)
+
+
+def test_the_page_shows_the_plan_and_follows_a_new_one(ros_env, start_node, ros_node, chromium) -> None:
+    port = free_port()
+    viewer = start_node("vp_recon", "viewer", {"port": port}, ros_env)
+    assert viewer.wait_for_output(f"viewer at http://127.0.0.1:{port}", 60), viewer.output()[-2000:]
+    client = ros_node(ros_env)
+    scene = client.node.create_publisher(PointCloud2, "/scene/noisy_points", LATCHED)
+    plans = client.node.create_publisher(PoseArray, "/camera_plan", LATCHED)
+    scene.publish(scene_msg())
+    plans.publish(plan_msg(4, 1.5))
+    wait_page(chromium, f"http://127.0.0.1:{port}", 60)
+    wait_text(chromium, "plan: 4 cameras", 90)
+    wait_text(chromium, "4000 of 4000 points shown", 30)
+    plans.publish(plan_msg(6, 2.0))  # a new plan: the page follows
+    wait_text(chromium, "plan: 6 cameras", 60)
+    assert "plan: 4 cameras" not in page_text(chromium)
+    shot = os.environ.get("VP_VIEWER_SCREENSHOT")
+    if shot:
+        time.sleep(3.0)  # let the clouds and frustums render
+        chromium.save_screenshot(shot)
+    assert viewer.poll() is None, viewer.output()[-2000:]
+
+
+def test_a_port_in_use_is_one_line_and_exit_2(ros_env, start_node) -> None:
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen(1)
+        port = busy.getsockname()[1]
+        viewer = start_node("vp_recon", "viewer", {"port": port}, ros_env)
+        code = viewer.wait(60)
+    assert code == 2, viewer.output()[-2000:]
+    errors = [line for line in viewer.output().splitlines() if "ERROR" in line]
+    assert len(errors) == 1 and f"port {port} on 127.0.0.1 is in use" in errors[0], viewer.output()[-2000:]
