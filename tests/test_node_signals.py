@@ -7,8 +7,11 @@ KeyboardInterrupt raised by Python's default handler was swallowed), other nodes
 action) while the README promised 0."""
 from __future__ import annotations
 
+import os
 import signal
+import tempfile
 import time
+from pathlib import Path
 
 import pytest
 
@@ -19,6 +22,7 @@ NODES = {
     "recon": ("vp_recon", "recon", {}),
     "dispatcher": ("vp_planner", "dispatcher", {"drones": ["d1", "d2"]}),
     "sim_drone": ("vp_planner", "sim_drone", {"drone": "d1"}),
+    "recorder": ("vp_recon", "recorder", {"output": str(Path(tempfile.gettempdir()) / f"vp_signals_{os.getpid()}.mcap")}),
 }
 
 #: (node, delay in s, signal): early (interpreter start, heavy imports), middle, spinning.
@@ -29,6 +33,7 @@ CASES = [
     ("recon", 0.4, signal.SIGINT), ("recon", 0.8, signal.SIGTERM), ("recon", 3.0, signal.SIGINT),
     ("dispatcher", 0.6, signal.SIGINT), ("dispatcher", 0.3, signal.SIGTERM),
     ("sim_drone", 0.6, signal.SIGINT), ("sim_drone", 2.0, signal.SIGTERM),
+    ("recorder", 0.3, signal.SIGINT), ("recorder", 2.0, signal.SIGINT),
 ]
 
 

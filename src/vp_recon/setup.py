@@ -20,8 +20,8 @@ setup(
         'console_scripts': [
             'recon = vp_recon.node_entry:recon',
             'reconstruct = vp_recon.cli:main',
-            'recorder = vp_recon.recorder_node:main',
-            'viewer = vp_recon.viewer_node:main',
+            'recorder = vp_recon.node_entry:recorder',
+            'viewer = vp_recon.node_entry:viewer',
         ],
     },
 )
