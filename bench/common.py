@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import os
 import platform
 from pathlib import Path
 from typing import Any, Callable, Optional
@@ -20,7 +21,6 @@ def default_models() -> str:
 
 
 def machine() -> str:
-    import os
     return f'{platform.machine()}, {os.cpu_count()} CPU cores, Python {platform.python_version()}'
 
 
@@ -33,7 +33,7 @@ def cached(path: Path, compute: Callable[[], Any]) -> Any:
             path.unlink()  # a torn write from an interrupted run: recompute
     value = compute()
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix('.tmp')
+    tmp = path.with_name(f'.{path.name}.{os.getpid()}.tmp')  # one per writer: workers write concurrently
     tmp.write_text(json.dumps(value))
     tmp.replace(path)
     return value
@@ -69,6 +69,16 @@ VARIANTS = {
 }
 
 
+def plan_path(cache: Path, scenario: str, variant: str, seed: int, evals: int = 100, init: int = 50,
+              models: str = '', num_cameras: Optional[int] = None, reward: Optional[str] = None) -> Path:
+    """The cache file of :func:`plan_cell` (same arguments)."""
+    from vp_planner.reward_models import DEFAULT_REWARD_MODEL
+
+    n = num_cameras or SCENARIOS[scenario]
+    reward = reward or DEFAULT_REWARD_MODEL
+    return cache / 'plans' / f'{models_tag(models)}-{scenario}-n{n}-{variant}-{reward}-seed{seed}-e{evals}-i{init}.json'
+
+
 def plan_cell(cache: Path, scenario: str, variant: str, seed: int, evals: int = 100, init: int = 50,
               models: str = '', num_cameras: Optional[int] = None, reward: Optional[str] = None) -> dict:
     """One planning run (cached): cameras, reward, best-so-far trace, seconds, the initial
@@ -81,7 +91,7 @@ def plan_cell(cache: Path, scenario: str, variant: str, seed: int, evals: int = 
     reward = reward or DEFAULT_REWARD_MODEL
     kwargs = dict(VARIANTS[variant])
     method = kwargs.pop('method')
-    path = cache / 'plans' / f'{models_tag(models)}-{scenario}-n{n}-{variant}-{reward}-seed{seed}-e{evals}-i{init}.json'
+    path = plan_path(cache, scenario, variant, seed, evals, init, models, num_cameras, reward)
 
     def compute() -> dict:
         import torch

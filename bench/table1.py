@@ -25,8 +25,10 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from cluster import Task, add_cluster_args, open_client, run_tasks  # noqa: E402
 from common import (ROOT, SCENARIOS, cached, default_models, machine, models_tag, plan_cell,  # noqa: E402
-                    add_capture, capture_of, capture_tag, chamfer_text, reconstruct_record, scene)
+                    add_capture, capture_of, capture_tag, chamfer_text, plan_path, reconstruct_record,
+                    scene)
 
 #: Table rows: label -> (planner variant of common.VARIANTS, reward model).
 ROWS = {
@@ -60,18 +62,23 @@ def parse_args(argv=None) -> argparse.Namespace:
                     help='reconstruct the first n wind realizations of each plan (0: all K)')
     ap.add_argument('--out', default=str(ROOT / 'results'))
     add_capture(ap)
+    add_cluster_args(ap)
     return ap.parse_args(argv)
+
+
+def recon_tag(scenario: str, row: str, args) -> str:
+    """The cache name of :func:`recon_cell`."""
+    variant, reward = ROWS[row]
+    tag = (f'{models_tag(args.models)}-{scenario}-{variant}-{reward}-seed0-e{args.evals}-{args.width}x{args.height}'
+           + capture_tag(capture_of(args)))
+    return tag + (f'-k{args.realizations}' if args.realizations else '')
 
 
 def recon_cell(cache: Path, out: Path, scenario: str, row: str, plan: dict, args) -> dict:
     """Reconstruct one plan in every wind realization (cached); Chamfer etc. x100 as Table I."""
     from vp_recon.pipeline import ReconConfig
 
-    variant, reward = ROWS[row]
-    tag = (f'{models_tag(args.models)}-{scenario}-{variant}-{reward}-seed0-e{args.evals}-{args.width}x{args.height}'
-           + capture_tag(capture_of(args)))
-    if args.realizations:
-        tag += f'-k{args.realizations}'
+    tag = recon_tag(scenario, row, args)
 
     def compute() -> dict:
         noisy, _ = scene(scenario, args.models)
@@ -82,26 +89,48 @@ def recon_cell(cache: Path, out: Path, scenario: str, row: str, plan: dict, args
     return cached(cache / 'recon' / f'{tag}.json', compute)
 
 
-def main(argv=None) -> int:
-    args = parse_args(argv)
-    from tqdm import tqdm
+def plan_tasks(cache: Path, args) -> list[Task]:
+    """Every planning run of the table: (scenario, row, seed)."""
+    tasks = []
+    for scenario in args.scenarios:
+        for row in args.rows:
+            variant, reward = ROWS[row]
+            for seed in range(args.seeds):
+                a = (cache, scenario, variant, seed, args.evals, args.init, args.models, None, reward)
+                tasks.append(Task((scenario, row, seed), plan_cell, a, plan_path(*a), f'{scenario} {row} seed {seed}'))
+    return tasks
 
+
+def recon_tasks(cache: Path, out: Path, plans: dict, args) -> list[Task]:
+    """One reconstruction per (scenario, row): the seed-0 plan in every wind realization."""
+    return [Task((s, row), recon_cell, (cache, out, s, row, plans[(s, row, 0)], args),
+                 cache / 'recon' / f'{recon_tag(s, row, args)}.json', f'{s} {row}')
+            for s in args.scenarios for row in args.rows if 'error' not in plans[(s, row, 0)]]
+
+
+def failed_recon(plan: dict) -> dict:
+    """The record of a plan that failed: its reconstruction failed too (counted, ranked last)."""
+    return {'error': plan['error'], 'error_msg': f'planning failed: {plan.get("error_msg", "")}',
+            'chamfer_mean': float('nan'), 'chamfer_std': float('nan'), 'per_realization': []}
+
+
+def run(args, client) -> tuple[dict, dict]:
+    """(plans, recons) of the table through the cluster ``client``."""
     out = Path(args.out)
     cache = out / 'cache'
-    plans, recons = {}, {}
-    jobs = [(s, row, seed) for s in args.scenarios for row in args.rows for seed in range(args.seeds)]
-    bar = tqdm(jobs, desc='planning', unit='plan', file=sys.stdout)
-    for scenario, row, seed in bar:
-        bar.set_postfix_str(f'{scenario} {row} seed {seed}')
-        variant, reward = ROWS[row]
-        plans[(scenario, row, seed)] = plan_cell(cache, scenario, variant, seed, args.evals, args.init,
-                                                 args.models, reward=reward)
-    cells = [(s, row) for s in args.scenarios for row in args.rows]
-    bar = tqdm(cells, desc='reconstructing', unit='plan', file=sys.stdout)
-    for scenario, row in bar:
-        bar.set_postfix_str(f'{scenario} {row}')
-        recons[(scenario, row)] = recon_cell(cache, out, scenario, row, plans[(scenario, row, 0)], args)
-    write_results(args, out, plans, recons)
+    plans = run_tasks(client, plan_tasks(cache, args), 'planning')
+    recons = run_tasks(client, recon_tasks(cache, out, plans, args), 'reconstructing')
+    for key, plan in plans.items():
+        if key[2] == 0 and 'error' in plan:
+            recons[key[:2]] = failed_recon(plan)
+    return plans, recons
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    with open_client(args.scheduler, args.workers) as client:
+        plans, recons = run(args, client)
+    write_results(args, Path(args.out), plans, recons)
     return 0
 
 

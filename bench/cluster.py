@@ -1,0 +1,159 @@
+"""The benchmarks' task engine: dask.distributed, on this machine or on a cluster users already run.
+
+Every benchmark builds a list of :class:`Task` (a pure function of picklable arguments that returns
+a plain JSON record, usually through ``common.cached``) and hands it to :func:`run_tasks`:
+
+- a task whose result is already in the results cache (``Task.cache``, one JSON file per cell) is
+  not submitted: the cache stays the unit of resumability, a rerun finishes only the missing tasks;
+- every other task is submitted to the Dask scheduler, one progress bar runs over all tasks of
+  the benchmark (the cached ones count as done);
+- a task that raises is recorded as ``{'error': <exception type>, 'error_msg': <message>}``, never
+  dropped; a worker that dies mid-task has its task rerun elsewhere by the scheduler (Dask's own
+  ``distributed.scheduler.allowed-failures``; we do not re-implement it).
+
+:func:`open_client` gives the client: ``scheduler='local'`` starts a ``LocalCluster`` of
+``workers`` processes with one thread each; any other value (or ``DASK_SCHEDULER_ADDRESS`` when
+``scheduler`` is None) is the address of a running ``dask scheduler``. Workers start with
+OMP/MKL/OPENBLAS thread counts of 1 (Dask's ``distributed.nanny.pre-spawn-environ``, set here
+explicitly, plus torch's own count through :class:`OneThread`), so N workers never oversubscribe
+N cores. A worker of a remote cluster must import the suite (``install/setup.bash``) and this
+folder (``PYTHONPATH=<repo>/bench``), see the README, "Running the benchmarks on a cluster".
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import contextlib
+import os
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Hashable, Iterator, Optional
+
+BENCH = Path(__file__).resolve().parent
+#: Environment of every worker process of the local cluster (read before torch/numpy load).
+ONE_THREAD_ENV = {'OMP_NUM_THREADS': '1', 'MKL_NUM_THREADS': '1', 'OPENBLAS_NUM_THREADS': '1',
+                  'NUMEXPR_NUM_THREADS': '1', 'VECLIB_MAXIMUM_THREADS': '1'}
+
+
+@dataclass
+class Task:
+    """One unit of a benchmark: ``fn(*args)`` on a worker, its record under ``key``.
+    ``cache``: the JSON file ``fn`` writes its record to (None: not cached)."""
+    key: Hashable
+    fn: Callable[..., Any]
+    args: tuple = ()
+    cache: Optional[Path] = None
+    label: str = field(default='')
+
+
+def add_cluster_args(ap: argparse.ArgumentParser) -> None:
+    """``--scheduler`` and ``--workers``, the same in every benchmark."""
+    ap.add_argument('--scheduler', default=None,
+                    help="'local' (a LocalCluster on this machine) or the address of a running dask "
+                         "scheduler, e.g. tcp://10.0.0.5:8786 (default: $DASK_SCHEDULER_ADDRESS, else local)")
+    ap.add_argument('--workers', type=int, default=1,
+                    help='worker processes of the local cluster, one thread each (default 1)')
+
+
+from distributed import WorkerPlugin  # noqa: E402
+
+
+class OneThread(WorkerPlugin):
+    """Worker plugin: torch (and whatever reads the env later) on one thread per worker."""
+    name = 'vp-one-thread'
+
+    def setup(self, worker) -> None:
+        os.environ.update(ONE_THREAD_ENV)
+        try:
+            import torch
+            torch.set_num_threads(1)
+        except ImportError:  # a worker without torch runs no planning task anyway
+            pass
+
+
+
+@contextlib.contextmanager
+def open_client(scheduler: Optional[str] = None, workers: int = 1, quiet: bool = False) -> Iterator:
+    """A ``distributed.Client`` for ``scheduler`` ('local', an address, or None: the environment's
+    ``DASK_SCHEDULER_ADDRESS`` else local); closes the client and any cluster it started."""
+    import dask
+    from distributed import Client, LocalCluster
+
+    scheduler = scheduler or os.environ.get('DASK_SCHEDULER_ADDRESS') or 'local'
+    if workers < 1:
+        raise ValueError(f'--workers must be at least 1, got {workers}')
+    env = dict(ONE_THREAD_ENV)
+    env['PYTHONPATH'] = os.pathsep.join(p for p in (str(BENCH), os.environ.get('PYTHONPATH', '')) if p)
+    with contextlib.ExitStack() as stack:
+        if scheduler == 'local':
+            with dask.config.set({'distributed.nanny.pre-spawn-environ': env}):
+                cluster = stack.enter_context(LocalCluster(
+                    n_workers=workers, threads_per_worker=1, processes=True, env=env,
+                    dashboard_address=':0', silence_logs=logging.ERROR))
+            client = stack.enter_context(Client(cluster))
+        else:
+            client = stack.enter_context(Client(scheduler, timeout='30s'))
+        client.register_plugin(OneThread(), name=OneThread.name)
+        if not quiet:
+            where = 'local cluster' if scheduler == 'local' else scheduler
+            n = len(client.scheduler_info().get('workers', {}))
+            print(f'dask: {where}, {n} worker(s); dashboard {client.dashboard_link}', file=sys.stderr)
+        yield client
+
+
+def _record(fn: Callable[..., Any], args: tuple) -> Any:
+    """Run a task on a worker; an exception becomes a named error record (never lost)."""
+    try:
+        return fn(*args)
+    except Exception as exc:  # noqa: BLE001 - every failure is a result of the benchmark
+        return {'error': type(exc).__name__, 'error_msg': str(exc)}
+
+
+def _cached_record(task: Task) -> Optional[Any]:
+    import json
+
+    if task.cache is None or not task.cache.exists():
+        return None
+    try:
+        return json.loads(task.cache.read_text())
+    except (json.JSONDecodeError, OSError):
+        return None  # a torn or unreadable file: the task runs again
+
+
+def run_tasks(client, tasks: list[Task], desc: str = 'tasks', timeout: Optional[float] = None) -> dict:
+    """Every task's record by key, in the order given: cached ones read, the others run on the
+    cluster under one progress bar; failures are ``{'error', 'error_msg'}`` records.
+    ``timeout``: seconds for all of them (None: no limit), else ``TimeoutError``."""
+    from distributed import as_completed
+    from tqdm import tqdm
+
+    keys = [t.key for t in tasks]
+    if len(set(keys)) != len(keys):
+        raise ValueError('run_tasks: two tasks share a key')
+    records: dict = {}
+    todo = []
+    for t in tasks:
+        hit = _cached_record(t)
+        if hit is None:
+            todo.append(t)
+        else:
+            records[t.key] = hit
+    bar = tqdm(total=len(tasks), initial=len(records), desc=desc, unit='task', file=sys.stdout, mininterval=2)
+    futures = {}
+    for t in todo:
+        fut = client.submit(_record, t.fn, t.args, pure=False)
+        futures[fut] = t
+    try:
+        for fut in as_completed(futures, timeout=timeout):
+            t = futures[fut]
+            try:
+                records[t.key] = fut.result()
+            except Exception as exc:  # noqa: BLE001 - e.g. KilledWorker after Dask's retries
+                records[t.key] = {'error': type(exc).__name__, 'error_msg': str(exc)}
+            bar.set_postfix_str(str(t.label or t.key)[:60])
+            bar.update()
+    finally:
+        bar.close()
+        client.cancel([f for f in futures if not f.done()])  # on a timeout or ^C: nothing left running
+    return {k: records[k] for k in keys}

@@ -1,0 +1,152 @@
+"""The benchmarks' Dask engine (bench/cluster.py) on real local clusters of worker processes.
+
+- a Table I slice (circle + arc on one procedural plant, 1 realization, 800x600 images, 4
+  evaluations) gives the same records in-process, through 1 worker and through 2 workers, and a
+  rerun submits nothing (the results cache is the unit of resumability);
+- a task that raises is recorded with its named error, the others finish;
+- a worker SIGKILLed mid-run: the scheduler reruns its tasks on the other, a result per task.
+
+Every wait has a deadline (``run_tasks(timeout=...)``); the clusters close in ``with`` blocks.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import sys
+import threading
+import time
+from pathlib import Path
+
+import cloudpickle
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "bench"))
+import cluster  # noqa: E402  (bench/cluster.py)
+import table1  # noqa: E402  (bench/table1.py)
+
+# The workers cannot import this test module: ship its task functions by value.
+cloudpickle.register_pickle_by_value(sys.modules[__name__])
+
+DEADLINE_S = 420  # a loaded 2-core box: generous
+
+
+def _slice_args(out: Path, workers: int) -> argparse.Namespace:
+    return table1.parse_args(["--models", "", "--scenarios", "one_plant", "--rows", "circle", "arc",
+                              "--seeds", "1", "--evals", "4", "--init", "2", "--width", "800",
+                              "--height", "600", "--realizations", "1", "--threads", "1",
+                              "--scheduler", "local", "--workers", str(workers), "--out", str(out)])
+
+
+def _strip(rec):
+    if isinstance(rec, dict):
+        return {str(k): _strip(v) for k, v in rec.items() if k != "seconds"}
+    if isinstance(rec, (list, tuple)):
+        return [_strip(v) for v in rec]
+    return rec
+
+
+def _without_times(rec) -> str:
+    """Records as JSON text without their wall-clock fields (they differ run to run, the numbers
+    must not); as text so that a NaN (a failed reconstruction) compares equal to itself."""
+    return json.dumps(_strip(rec), sort_keys=True)
+
+
+def _in_process(args) -> tuple[dict, dict]:
+    out = Path(args.out)
+    plans = {t.key: t.fn(*t.args) for t in table1.plan_tasks(out / "cache", args)}
+    recons = {t.key: t.fn(*t.args) for t in table1.recon_tasks(out / "cache", out, plans, args)}
+    return plans, recons
+
+
+def test_table1_slice_same_records_in_process_and_on_1_and_2_workers(tmp_path, monkeypatch):
+    monkeypatch.setenv("PYOPENGL_PLATFORM", "egl")
+    plans, recons = _in_process(_slice_args(tmp_path / "inproc", 1))
+    assert set(plans) == {("one_plant", "circle", 0), ("one_plant", "arc", 0)}
+    assert set(recons) == {("one_plant", "circle"), ("one_plant", "arc")}
+    assert any("error" not in r and r["chamfer_mean"] > 0 for r in recons.values()), recons
+    ref = _without_times((plans, recons))
+    for workers in (1, 2):
+        args = _slice_args(tmp_path / f"w{workers}", workers)
+        with cluster.open_client("local", workers, quiet=True) as client:
+            assert len(client.scheduler_info()["workers"]) == workers
+            got = _without_times(table1.run(args, client))
+            assert got == ref, f"{workers} worker(s) changed the records"
+            # rerun: every task is cached, nothing is submitted
+            submitted = []
+            monkeypatch.setattr(client, "submit", lambda *a, **k: submitted.append(a) or None)
+            assert _without_times(table1.run(args, client)) == ref
+            assert submitted == []
+            monkeypatch.undo()
+            monkeypatch.setenv("PYOPENGL_PLATFORM", "egl")
+
+
+def test_missing_cache_entry_is_the_only_task_rerun(tmp_path):
+    args = _slice_args(tmp_path, 1)
+    cache = tmp_path / "cache"
+    with cluster.open_client("local", 1, quiet=True) as client:
+        first = cluster.run_tasks(client, table1.plan_tasks(cache, args), timeout=DEADLINE_S)
+        tasks = table1.plan_tasks(cache, args)
+        tasks[1].cache.unlink()
+        before = {t.key: t.cache.stat().st_mtime_ns for t in tasks if t.cache.exists()}
+        again = cluster.run_tasks(client, tasks, timeout=DEADLINE_S)
+    assert _without_times(again) == _without_times(first)
+    assert tasks[1].cache.exists()
+    assert {t.key: t.cache.stat().st_mtime_ns for t in tasks if t.key in before} == before
+    assert not list(cache.rglob("*.tmp")), "a torn temporary file was left behind"
+
+
+def _root(x: float) -> float:
+    import math
+    return math.sqrt(x)
+
+
+def test_failing_task_recorded_with_named_error_others_finish():
+    tasks = [cluster.Task(x, _root, (float(x),)) for x in (4, -1, 9, 16)]
+    with cluster.open_client("local", 2, quiet=True) as client:
+        rec = cluster.run_tasks(client, tasks, timeout=DEADLINE_S)
+    assert list(rec) == [4, -1, 9, 16]
+    assert rec[4] == 2.0 and rec[9] == 3.0 and rec[16] == 4.0
+    assert rec[-1] == {"error": "ValueError", "error_msg": "math domain error"}
+
+
+def _slow_square(x: int) -> dict:
+    import os
+    import time
+    time.sleep(1.5)
+    return {"x": x, "square": x * x, "pid": os.getpid()}
+
+
+def test_worker_sigkilled_mid_run_its_tasks_finish_on_the_other():
+    n = 12
+    tasks = [cluster.Task(i, _slow_square, (i,)) for i in range(n)]
+    with cluster.open_client("local", 2, quiet=True) as client:
+        pids = client.run(os.getpid)  # worker address -> pid
+        assert len(pids) == 2
+        victim = sorted(pids.values())[0]
+        killed = threading.Event()
+
+        def kill_when_busy() -> None:
+            deadline = time.monotonic() + 60
+            while time.monotonic() < deadline:  # both workers are running tasks
+                if sum(len(v) for v in client.processing().values()) >= 2:
+                    break
+                time.sleep(0.1)
+            time.sleep(0.5)  # mid-task
+            os.kill(victim, signal.SIGKILL)
+            killed.set()
+
+        killer = threading.Thread(target=kill_when_busy, daemon=True)
+        killer.start()
+        rec = cluster.run_tasks(client, tasks, timeout=DEADLINE_S)
+        killer.join(timeout=70)
+    assert killed.is_set()
+    with pytest.raises(ProcessLookupError):
+        os.kill(victim, 0)
+    assert sorted(rec) == list(range(n))
+    assert all("error" not in r and r["square"] == i * i for i, r in rec.items()), rec
+    # the victim finished fewer than its share: the rest ran elsewhere (the other worker or the
+    # nanny's restarted one)
+    assert sum(r["pid"] == victim for r in rec.values()) < n
