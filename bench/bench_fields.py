@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from cluster import Task, add_cluster_args, open_client, run_tasks  # noqa: E402
 from common import (ROOT, add_capture, cached, capture_of, capture_tag, chamfer_text, default_models,  # noqa: E402
                     machine, models_tag, reconstruct_record, scene)
 
@@ -72,6 +73,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default=str(ROOT / "results"))
     add_capture(ap)
+    add_cluster_args(ap)
     return ap.parse_args(argv)
 
 
@@ -85,15 +87,20 @@ def field_budget(field: str, n: int, models: str) -> tuple[int, int]:
     return parts, total_evaluations("egp", EVALS_PER_PART, parts)
 
 
+def plan_path(cache: Path, field: str, n: int, label: str, args) -> tuple[Path, int]:
+    """(cache file, evaluation budget) of :func:`plan_cell`."""
+    parts, total = field_budget(field, n, args.models)
+    evals = EVALS_PER_PART if label == "egp" else total
+    return cache / "plans" / f"{models_tag(args.models)}-{field}-n{n}-{label}-seed{args.seed}-e{evals}.json", evals
+
+
 def plan_cell(cache: Path, field: str, n: int, label: str, args) -> dict:
     """One planning run (cached), timed alone with one torch thread."""
     from vp_planner.optimizers import plan_views
 
-    parts, total = field_budget(field, n, args.models)
     kwargs = dict(METHODS[label])
     method = kwargs.pop("method")
-    evals = EVALS_PER_PART if label == "egp" else total
-    path = cache / "plans" / f"{models_tag(args.models)}-{field}-n{n}-{label}-seed{args.seed}-e{evals}.json"
+    path, evals = plan_path(cache, field, n, label, args)
 
     def compute() -> dict:
         import torch
@@ -108,13 +115,16 @@ def plan_cell(cache: Path, field: str, n: int, label: str, args) -> dict:
     return cached(path, compute)
 
 
+def recon_tag(field: str, n: int, label: str, args) -> str:
+    return (f"{models_tag(args.models)}-{field}-n{n}-{label}-seed{args.seed}-{args.width}x{args.height}"
+            f"-k{args.realizations}{capture_tag(capture_of(args))}")
+
+
 def recon_cell(cache: Path, out: Path, field: str, n: int, label: str, plan: dict, args) -> dict:
     """Reconstruct a plan on the first ``args.realizations`` wind realizations (cached)."""
     from vp_recon.pipeline import ReconConfig
 
-    tag = (f"{models_tag(args.models)}-{field}-n{n}-{label}-seed{args.seed}-{args.width}x{args.height}"
-           f"-k{args.realizations}"
-           f"{capture_tag(capture_of(args))}")
+    tag = recon_tag(field, n, label, args)
 
     def compute() -> dict:
         noisy, _ = scene(field, args.models)
@@ -168,27 +178,30 @@ def main(argv=None) -> int:
     for spec in args.fields:
         name, _, n = spec.partition(":")
         cells.append((name, int(n)))
-    plans: dict = {}
-    for field, n in cells:
-        for label in args.methods:
-            t0 = time.perf_counter()
-            plans[(field, n, label)] = plan_cell(cache, field, n, label, args)
-            p = plans[(field, n, label)]
-            print(f"plan {field} N={n} {label}: reward {p['reward']:.4f}, {p['evaluations']} evaluations, "
-                  f"{p['seconds']:.1f} s{'' if time.perf_counter() - t0 > 1 else ' (cached)'}", flush=True)
-    recons: dict = {}
-    if args.recon:
-        for field, n in cells:
-            for label in args.recon_methods or args.methods:
-                if label not in args.methods:
-                    continue
-                t0 = time.perf_counter()
-                r = recon_cell(cache, out, field, n, label, plans[(field, n, label)], args)
-                recons[(field, n, label)] = r
-                print(f"recon {field} N={n} {label}: Chamfer x100 {chamfer_text(r)} "
-                      f"({time.perf_counter() - t0:.0f} s)", flush=True)
+    with open_client(args.scheduler, args.workers) as client:
+        tasks = [Task((field, n, label), plan_cell, (cache, field, n, label, args),
+                      plan_path(cache, field, n, label, args)[0], f"{field} N={n} {label}")
+                 for field, n in cells for label in args.methods]
+        plans = run_tasks(client, tasks, "planning")
+        for (field, n, label), p in plans.items():
+            print(f"plan {field} N={n} {label}: " + (f"FAILED {p['error']}: {p['error_msg']}" if "error" in p else
+                  f"reward {p['reward']:.4f}, {p['evaluations']} evaluations, {p['seconds']:.1f} s"), flush=True)
+        recons: dict = {}
+        if args.recon:
+            tasks = [Task((field, n, label), recon_cell, (cache, out, field, n, label, plans[(field, n, label)], args),
+                          cache / "recon" / f"{recon_tag(field, n, label, args)}.json", f"{field} N={n} {label}")
+                     for field, n in cells for label in args.recon_methods or args.methods
+                     if label in args.methods and "error" not in plans[(field, n, label)]]
+            recons = run_tasks(client, tasks, "reconstructing")
+            for key, p in plans.items():  # a failed plan is a failed reconstruction: counted, ranked last
+                if "error" in p and (args.recon_methods is None or key[2] in args.recon_methods):
+                    recons[key] = {"error": p["error"], "error_msg": f"planning failed: {p['error_msg']}",
+                                   "chamfer_mean": float("nan"), "chamfer_std": float("nan"), "per_realization": []}
+            for (field, n, label), r in recons.items():
+                print(f"recon {field} N={n} {label}: Chamfer x100 {chamfer_text(r)} {r.get('error', '')}", flush=True)
     subsampling = {f"{field}:{n}": subsampling_cell(cache, field, n,
-                                                    {k[2]: v for k, v in plans.items() if k[:2] == (field, n)}, args)
+                                                    {k[2]: v for k, v in plans.items()
+                                                     if k[:2] == (field, n) and "error" not in v}, args)
                    for field, n in cells}
     write_results(args, out, cells, plans, recons, subsampling)
     return 0
@@ -226,8 +239,9 @@ def write_results(args, out: Path, cells, plans, recons, subsampling) -> None:
                        f"{np.mean([x['completeness'] for x in per]):.3f}",
                        f"{np.mean([sum(x['seconds'].values()) for x in per]):.0f}",
                        "/".join(str(x["matched_pairs"]) for x in per)]
-            lines.append(f"| {label} | {p['reward']:.4f} | {p['evaluations']} | {p['seconds']:.1f} | " + " | ".join(rec)
-                         + " |")
+            planned = (f"failed ({p['error']}) | - | -" if "error" in p else
+                       f"{p['reward']:.4f} | {p['evaluations']} | {p['seconds']:.1f}")
+            lines.append(f"| {label} | {planned} | " + " | ".join(rec) + " |")
         lines.append("")
     lines += ["## Point subsampling of the coverage reward", "",
               "| field | plans | points a realization | kept | Spearman vs all points | mean shift | max abs diff | ms / plan |",

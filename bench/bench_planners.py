@@ -27,7 +27,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import ROOT, SCENARIOS, VARIANTS, default_models, machine, models_tag, plan_cell  # noqa: E402
+from cluster import Task, add_cluster_args, open_client, run_tasks  # noqa: E402
+from common import ROOT, SCENARIOS, VARIANTS, default_models, machine, models_tag, plan_cell, plan_path  # noqa: E402
 
 DEFAULT_VARIANTS = ('egp', 'egp-random-init', 'circle', 'arc', 'sa', 'random')
 BASELINES = ('circle', 'arc', 'sa', 'random')
@@ -43,20 +44,27 @@ def main(argv=None) -> int:
     ap.add_argument('--evals', type=int, default=100)
     ap.add_argument('--init', type=int, default=50)
     ap.add_argument('--out', default=str(ROOT / 'results'))
+    add_cluster_args(ap)
     args = ap.parse_args(argv)
-    from tqdm import tqdm
 
     out = Path(args.out)
     cache = out / 'cache'
-    jobs = [(s, r, v, seed) for r in args.rewards for s in args.scenarios for v in args.variants
-            for seed in range(args.seeds)]
-    runs = {}
-    bar = tqdm(jobs, desc='planning', unit='run', file=sys.stdout, mininterval=10)
+    tasks = []
+    for reward in args.rewards:
+        for scenario in args.scenarios:
+            for variant in args.variants:
+                for seed in range(args.seeds):
+                    a = (cache, scenario, variant, seed, args.evals, args.init, args.models, None, reward)
+                    tasks.append(Task((scenario, reward, variant, seed), plan_cell, a, plan_path(*a),
+                                      f'{scenario} {reward} {variant} seed {seed}'))
     t0 = time.time()
-    for scenario, reward, variant, seed in bar:
-        bar.set_postfix_str(f'{scenario} {reward} {variant} seed {seed}')
-        runs[(scenario, reward, variant, seed)] = plan_cell(cache, scenario, variant, seed, args.evals, args.init,
-                                                            args.models, reward=reward)
+    with open_client(args.scheduler, args.workers) as client:
+        runs = run_tasks(client, tasks, 'planning')
+    failed = {k: r for k, r in runs.items() if 'error' in r}
+    for k, r in failed.items():
+        print(f'FAILED {k}: {r["error"]}: {r["error_msg"]}', file=sys.stderr)
+    if failed:  # the report below averages over seeds: name the failures and stop, never drop them
+        raise SystemExit(f'{len(failed)} of {len(runs)} planning runs failed (listed above)')
     report = {'machine': machine(), 'date': time.strftime('%Y-%m-%d'), 'models': models_tag(args.models),
               'evaluations': args.evals, 'initial_evaluations': args.init, 'seeds': args.seeds, 'cells': {}}
     lines = [f'# Planner benchmark ({report["date"]}, {report["machine"]}, plants: {report["models"]})', '',

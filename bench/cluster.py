@@ -17,13 +17,15 @@ a plain JSON record, usually through ``common.cached``) and hands it to :func:`r
 OMP/MKL/OPENBLAS thread counts of 1 (Dask's ``distributed.nanny.pre-spawn-environ``, set here
 explicitly, plus torch's own count through :class:`OneThread`), so N workers never oversubscribe
 N cores. A worker of a remote cluster must import the suite (``install/setup.bash``) and this
-folder (``PYTHONPATH=<repo>/bench``), see the README, "Running the benchmarks on a cluster".
+folder (``PYTHONPATH=<repo>/bench``); the client writes every record into its own results
+cache (workers need not share its disk; a reconstruction's clouds and images stay on the
+worker that made them), see the README, "Running the benchmarks on a cluster".
 """
 from __future__ import annotations
 
 import argparse
-import logging
 import contextlib
+import logging
 import os
 import sys
 from dataclasses import dataclass, field
@@ -57,6 +59,9 @@ def add_cluster_args(ap: argparse.ArgumentParser) -> None:
 
 
 from distributed import WorkerPlugin  # noqa: E402
+
+sys.path.insert(0, str(BENCH))
+from common import write_json  # noqa: E402
 
 
 class OneThread(WorkerPlugin):
@@ -102,12 +107,13 @@ def open_client(scheduler: Optional[str] = None, workers: int = 1, quiet: bool =
         yield client
 
 
-def _record(fn: Callable[..., Any], args: tuple) -> Any:
-    """Run a task on a worker; an exception becomes a named error record (never lost)."""
+def _record(fn: Callable[..., Any], args: tuple) -> tuple[bool, Any]:
+    """Run a task on a worker: (True, its record), or (False, a named error record) when it
+    raises (never lost; not cached, so that a rerun tries again)."""
     try:
-        return fn(*args)
+        return True, fn(*args)
     except Exception as exc:  # noqa: BLE001 - every failure is a result of the benchmark
-        return {'error': type(exc).__name__, 'error_msg': str(exc)}
+        return False, {'error': type(exc).__name__, 'error_msg': str(exc)}
 
 
 def _cached_record(task: Task) -> Optional[Any]:
@@ -148,7 +154,9 @@ def run_tasks(client, tasks: list[Task], desc: str = 'tasks', timeout: Optional[
         for fut in as_completed(futures, timeout=timeout):
             t = futures[fut]
             try:
-                records[t.key] = fut.result()
+                ok, records[t.key] = fut.result()
+                if ok and t.cache is not None:  # the client's copy: workers may not share its disk
+                    write_json(t.cache, records[t.key])
             except Exception as exc:  # noqa: BLE001 - e.g. KilledWorker after Dask's retries
                 records[t.key] = {'error': type(exc).__name__, 'error_msg': str(exc)}
             bar.set_postfix_str(str(t.label or t.key)[:60])

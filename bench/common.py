@@ -4,6 +4,7 @@ from __future__ import annotations
 import json
 import os
 import platform
+import threading
 from pathlib import Path
 from typing import Any, Callable, Optional
 
@@ -32,11 +33,17 @@ def cached(path: Path, compute: Callable[[], Any]) -> Any:
         except json.JSONDecodeError:
             path.unlink()  # a torn write from an interrupted run: recompute
     value = compute()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f'.{path.name}.{os.getpid()}.tmp')  # one per writer: workers write concurrently
-    tmp.write_text(json.dumps(value))
-    tmp.replace(path)
+    write_json(path, value)
     return value
+
+
+def write_json(path: Path, value: Any) -> None:
+    """Write ``value`` to ``path`` atomically (a temporary file per writer, then ``os.replace``:
+    several cluster workers and the client write the cache concurrently)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f'.{path.name}.{os.getpid()}.{threading.get_ident()}.tmp')
+    tmp.write_text(json.dumps(value))
+    os.replace(tmp, path)
 
 
 _SCENES: dict = {}
