@@ -39,10 +39,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from cluster import Task, add_cluster_args, open_client, run_tasks  # noqa: E402
 from common import (ROOT, add_capture, cached, capture_of, capture_tag, chamfer_text, default_models,  # noqa: E402
                     machine, models_tag, reconstruct_record, scene)
+from stats import describe, describe_difference, paired_difference, rank, summary  # noqa: E402
 
 #: (field, N) cells: the issue's targets, and N = 16 on the row (planned and reconstructed).
 FIELDS = (("grid_3x3", 8), ("row_12", 12), ("row_12", 16))
 #: Method label -> plan_views keyword arguments (``evaluations`` filled in per field).
+#: The baselines of the paired differences (every METHODS row that is not egp).
+BASELINES = ("circle", "arc", "sa", "lawnmower", "lawnmower-oblique")
 METHODS = {
     "egp": {"method": "egp"},
     "egp-one-space": {"method": "egp", "parts": 1},
@@ -196,15 +199,39 @@ def main(argv=None) -> int:
             for key, p in plans.items():  # a failed plan is a failed reconstruction: counted, ranked last
                 if "error" in p and (args.recon_methods is None or key[2] in args.recon_methods):
                     recons[key] = {"error": p["error"], "error_msg": f"planning failed: {p['error_msg']}",
-                                   "chamfer_mean": float("nan"), "chamfer_std": float("nan"), "per_realization": []}
+                                   "chamfer_mean": None, "chamfer_std": None, "per_realization": []}
             for (field, n, label), r in recons.items():
-                print(f"recon {field} N={n} {label}: Chamfer x100 {chamfer_text(r)} {r.get('error', '')}", flush=True)
+                print(f"recon {field} N={n} {label}: Chamfer x100 {chamfer_text(r)}", flush=True)
     subsampling = {f"{field}:{n}": subsampling_cell(cache, field, n,
                                                     {k[2]: v for k, v in plans.items()
                                                      if k[:2] == (field, n) and "error" not in v}, args)
                    for field, n in cells}
     write_results(args, out, cells, plans, recons, subsampling)
     return 0
+
+
+def realization_chamfers(r: dict, args) -> dict:
+    """realization -> Chamfer x100 of a reconstruction record, None where it failed (a failed
+    plan reconstruction fails in every realization asked)."""
+    per = [] if r.get("error") else r["per_realization"]
+    return {k: (per[k]["chamfer"] if k < len(per) else None) for k in range(args.realizations)}
+
+
+def paired_lines(field: str, n: int, args, recons: dict, result: dict) -> list[str]:
+    """egp rows - the best-ranked baseline, paired per wind realization, 95 % t-interval."""
+    units = {label: realization_chamfers(recons[(field, n, label)], args)
+             for label in args.methods if (field, n, label) in recons}
+    baselines = [m for m in units if m in BASELINES]
+    egps = [m for m in units if m not in BASELINES]
+    if not baselines or not egps:
+        return []
+    best = rank({m: summary(units[m]) for m in baselines})[0]
+    lines = ["", f"Paired per realization, Chamfer x100 minus the best baseline ({best}); mean [95 % t-interval] (n):", ""]
+    for m in egps:
+        d = paired_difference(units[m], units[best])
+        result.setdefault("paired", {})[f"{field}:{n}/{m}"] = {"baseline": best, **d}
+        lines.append(f"- {m} - {best}: {describe_difference(d)}")
+    return lines
 
 
 def write_results(args, out: Path, cells, plans, recons, subsampling) -> None:
@@ -215,7 +242,7 @@ def write_results(args, out: Path, cells, plans, recons, subsampling) -> None:
               "evaluations_per_part": EVALS_PER_PART, "cells": {}, "subsampling": subsampling}
     lines = [f"# Fields, measured {stamp} ({host})", "",
              f"Plants: {'Corn50 (' + models_tag(args.models) + ')' if args.models else 'built-in procedural corn'} (scene seed {args.seed}). Reward: the default "
-             "model. Chamfer x100 (mean +- std over wind realizations "
+             "model. Chamfer x100 (mean +- sample std (ddof 1, n successful; failures counted) over wind realizations "
              f"0..{args.realizations - 1}, {args.width} x {args.height}), lower is better. Planning seconds alone "
              "(one torch thread); reconstruction seconds per realization.", ""]
     for field, n in cells:
@@ -231,10 +258,10 @@ def write_results(args, out: Path, cells, plans, recons, subsampling) -> None:
             if r is None:
                 rec = ["-"] * 5
             elif r.get("error"):
-                rec = [f"failed ({r['error']})", "-", "-", "-", "-"]
+                rec = [f"{describe(summary(realization_chamfers(r, args)))} ({r['error']})", "-", "-", "-", "-"]
             else:
                 per = r["per_realization"]
-                rec = [f"{r['chamfer_mean']:.3f} +- {r['chamfer_std']:.3f}",
+                rec = [describe(summary(realization_chamfers(r, args))),
                        f"{np.mean([x['accuracy'] for x in per]):.3f}",
                        f"{np.mean([x['completeness'] for x in per]):.3f}",
                        f"{np.mean([sum(x['seconds'].values()) for x in per]):.0f}",
@@ -242,6 +269,7 @@ def write_results(args, out: Path, cells, plans, recons, subsampling) -> None:
             planned = (f"failed ({p['error']}) | - | -" if "error" in p else
                        f"{p['reward']:.4f} | {p['evaluations']} | {p['seconds']:.1f}")
             lines.append(f"| {label} | {planned} | " + " | ".join(rec) + " |")
+        lines += paired_lines(field, n, args, recons, result)
         lines.append("")
     lines += ["## Point subsampling of the coverage reward", "",
               "| field | plans | points a realization | kept | Spearman vs all points | mean shift | max abs diff | ms / plan |",

@@ -27,8 +27,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from cluster import Task, add_cluster_args, open_client, run_tasks  # noqa: E402
 from common import (ROOT, SCENARIOS, cached, default_models, machine, models_tag, plan_cell,  # noqa: E402
-                    add_capture, capture_of, capture_tag, chamfer_text, plan_path, reconstruct_record,
+                    add_capture, capture_of, capture_tag, plan_path, reconstruct_record,
                     scene)
+from stats import describe, describe_difference, paired_difference, rank, summary  # noqa: E402
 
 #: Table rows: label -> (planner variant of common.VARIANTS, reward model).
 ROWS = {
@@ -38,6 +39,8 @@ ROWS = {
     'egp': ('egp', 'coverage'),
     'egp (paper configuration)': ('egp-paper-config', 'paper'),
 }
+#: The baseline rows (what a drone operator flies anyway, and the paper's SA).
+BASELINES = ('circle', 'arc', 'sa')
 PAPER = {  # Table I of the paper, Chamfer x100 (mean, std)
     'one_plant': {'circle': (4.127, 0.194), 'sa': (3.844, 0.224), 'egp (paper configuration)': (3.256, 0.245)},
     'three_row': {'circle': (2.817, 0.079), 'sa': (2.43, 0.192), 'egp (paper configuration)': (1.614, 0.166)},
@@ -60,25 +63,27 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument('--height', type=int, default=1500)
     ap.add_argument('--realizations', type=int, default=0,
                     help='reconstruct the first n wind realizations of each plan (0: all K)')
+    ap.add_argument('--recon-seeds', type=int, default=1,
+                    help='reconstruct the plans of the first n seeds (statistics over seed x realization)')
     ap.add_argument('--out', default=str(ROOT / 'results'))
     add_capture(ap)
     add_cluster_args(ap)
     return ap.parse_args(argv)
 
 
-def recon_tag(scenario: str, row: str, args) -> str:
+def recon_tag(scenario: str, row: str, args, seed: int = 0) -> str:
     """The cache name of :func:`recon_cell`."""
     variant, reward = ROWS[row]
-    tag = (f'{models_tag(args.models)}-{scenario}-{variant}-{reward}-seed0-e{args.evals}-{args.width}x{args.height}'
+    tag = (f'{models_tag(args.models)}-{scenario}-{variant}-{reward}-seed{seed}-e{args.evals}-{args.width}x{args.height}'
            + capture_tag(capture_of(args)))
     return tag + (f'-k{args.realizations}' if args.realizations else '')
 
 
-def recon_cell(cache: Path, out: Path, scenario: str, row: str, plan: dict, args) -> dict:
+def recon_cell(cache: Path, out: Path, scenario: str, row: str, plan: dict, args, seed: int = 0) -> dict:
     """Reconstruct one plan in every wind realization (cached); Chamfer etc. x100 as Table I."""
     from vp_recon.pipeline import ReconConfig
 
-    tag = recon_tag(scenario, row, args)
+    tag = recon_tag(scenario, row, args, seed)
 
     def compute() -> dict:
         noisy, _ = scene(scenario, args.models)
@@ -101,17 +106,23 @@ def plan_tasks(cache: Path, args) -> list[Task]:
     return tasks
 
 
+def recon_seeds(args) -> range:
+    return range(min(max(1, args.recon_seeds), args.seeds))
+
+
 def recon_tasks(cache: Path, out: Path, plans: dict, args) -> list[Task]:
-    """One reconstruction per (scenario, row): the seed-0 plan in every wind realization."""
-    return [Task((s, row), recon_cell, (cache, out, s, row, plans[(s, row, 0)], args),
-                 cache / 'recon' / f'{recon_tag(s, row, args)}.json', f'{s} {row}')
-            for s in args.scenarios for row in args.rows if 'error' not in plans[(s, row, 0)]]
+    """One reconstruction per (scenario, row, seed < --recon-seeds): the plan in every wind
+    realization (a plan that failed has no task: :func:`run` records its failure)."""
+    return [Task((s, row, seed), recon_cell, (cache, out, s, row, plans[(s, row, seed)], args, seed),
+                 cache / 'recon' / f'{recon_tag(s, row, args, seed)}.json', f'{s} {row} seed {seed}')
+            for s in args.scenarios for row in args.rows for seed in recon_seeds(args)
+            if 'error' not in plans[(s, row, seed)]]
 
 
 def failed_recon(plan: dict) -> dict:
     """The record of a plan that failed: its reconstruction failed too (counted, ranked last)."""
     return {'error': plan['error'], 'error_msg': f'planning failed: {plan.get("error_msg", "")}',
-            'chamfer_mean': float('nan'), 'chamfer_std': float('nan'), 'per_realization': []}
+            'chamfer_mean': None, 'chamfer_std': None, 'per_realization': []}
 
 
 def run(args, client) -> tuple[dict, dict]:
@@ -121,8 +132,8 @@ def run(args, client) -> tuple[dict, dict]:
     plans = run_tasks(client, plan_tasks(cache, args), 'planning')
     recons = run_tasks(client, recon_tasks(cache, out, plans, args), 'reconstructing')
     for key, plan in plans.items():
-        if key[2] == 0 and 'error' in plan:
-            recons[key[:2]] = failed_recon(plan)
+        if key[2] in recon_seeds(args) and 'error' in plan:
+            recons[key] = failed_recon(plan)
     return plans, recons
 
 
@@ -132,6 +143,44 @@ def main(argv=None) -> int:
         plans, recons = run(args, client)
     write_results(args, Path(args.out), plans, recons)
     return 0
+
+
+def chamfer_units(recons: dict, scenario: str, row: str, args) -> dict:
+    """(seed, realization) -> Chamfer x100 of a row, None where the reconstruction failed (a plan
+    whose reconstruction fails fails in every realization asked: ``reconstruct_plan`` stops at the
+    first failing one)."""
+    K = len(scene(scenario, args.models)[0].points)
+    ks = min(args.realizations, K) if args.realizations else K
+    units = {}
+    for seed in recon_seeds(args):
+        r = recons[(scenario, row, seed)]
+        per = [] if r.get('error') else r['per_realization']
+        for k in range(ks):
+            units[(seed, k)] = per[k]['chamfer'] if k < len(per) else None
+    return units
+
+
+def paired_lines(args, units: dict, table: dict) -> list[str]:
+    """Markdown (and ``table['paired']``) of egp - best baseline, paired per (seed, realization),
+    for every egp row against the best-ranked baseline row of each scenario."""
+    baselines = [r for r in args.rows if r in BASELINES]
+    egps = [r for r in args.rows if r not in BASELINES]
+    if not baselines or not egps:
+        return []
+    lines = ['', '## Paired differences: egp - best baseline (Chamfer x100, negative: egp better)', '',
+             'Per (scenario, seed, realization) where both reconstructed; mean [95 % t-interval] (n); '
+             'the best baseline is the best-ranked of ' + ', '.join(baselines) + ' in the scenario.', '',
+             '| scenario | best baseline | ' + ' | '.join(egps) + ' |', '|---|---|' + '---|' * len(egps)]
+    table['paired'] = {}
+    for scenario in args.scenarios:
+        best = rank({r: summary(units[(scenario, r)]) for r in baselines})[0]
+        cells = [scenario, best]
+        for row in egps:
+            d = paired_difference(units[(scenario, row)], units[(scenario, best)])
+            table['paired'][f'{scenario}/{row}'] = {'baseline': best, **d}
+            cells.append(describe_difference(d))
+        lines.append('| ' + ' | '.join(cells) + ' |')
+    return lines
 
 
 def _score(plan: dict, scenario: str, models: str, reward: str) -> float:
@@ -150,25 +199,35 @@ def write_results(args, out: Path, plans, recons) -> None:
     host = machine()
     table = {'date': stamp, 'machine': host, 'models': models_tag(args.models), 'rows': ROWS,
              'evaluations': args.evals, 'resolution': [args.width, args.height], 'cells': {}}
+    seeds = recon_seeds(args)
     lines = [f'# Table I, measured {stamp} ({host})', '',
-             f'Plants: {args.models or "built-in procedural corn"}. Chamfer distance x 100 '
-             f'(mean +- std over {args.realizations or "all"} wind realizations of K = 5), lower is better; the paper\'s value in '
-             'brackets. Rewards of the plan under both models (coverage / paper).', '',
+             f'Plants: {args.models or "built-in procedural corn"}. Chamfer distance x 100, mean +- sample std '
+             f'(ddof 1) over the plans of seeds 0..{len(seeds) - 1} x {args.realizations or "all"} wind realizations '
+             'of K = 5 (n: the successful reconstructions; a failed one is counted and ranks its row last), lower is '
+             'better; the paper\'s value in brackets. Rewards of the seed-0 plan under both models (coverage / paper).', '',
              '| method | ' + ' | '.join(f'{s} (N={SCENARIOS[s]})' for s in args.scenarios) + ' |',
              '|---|' + '---|' * len(args.scenarios)]
+    units = {(s, row): chamfer_units(recons, s, row, args) for s in args.scenarios for row in args.rows}
     for row in args.rows:
         cells = [row]
         for scenario in args.scenarios:
-            r = recons[(scenario, row)]
+            recs = {seed: recons[(scenario, row, seed)] for seed in seeds}
             plan = plans[(scenario, row, 0)]
-            rewards = {m: _score(plan, scenario, args.models, m) for m in ('coverage', 'paper')}
             paper = PAPER[scenario].get(row)
-            table['cells'][f'{scenario}/{row}'] = {'recon': r, 'reward': plan['reward'], 'rewards': rewards,
-                                                   'paper': paper, 'cameras': plan['cameras']}
+            stat = summary({f'{seed}/{k}': v for (seed, k), v in units[(scenario, row)].items()})
+            errors = sorted({r['error'] for r in recs.values() if r.get('error')})
+            cell = {'recon': recs[0], 'recon_by_seed': {str(k): v for k, v in recs.items()}, 'chamfer': stat,
+                    'paper': paper}
             ref = f' [{paper[0]:.3f} +- {paper[1]:.3f}]' if paper else ''
-            cells.append(f'{chamfer_text(r)}{ref}, '
-                         f'reward {rewards["coverage"]:.3f} / {rewards["paper"]:.3f}')
+            text = describe(stat) + (f' ({", ".join(errors)})' if errors else '') + ref
+            if 'error' not in plan:
+                rewards = {m: _score(plan, scenario, args.models, m) for m in ('coverage', 'paper')}
+                cell.update(reward=plan['reward'], rewards=rewards, cameras=plan['cameras'])
+                text += f', reward {rewards["coverage"]:.3f} / {rewards["paper"]:.3f}'
+            table['cells'][f'{scenario}/{row}'] = cell
+            cells.append(text)
         lines.append('| ' + ' | '.join(cells) + ' |')
+    lines += paired_lines(args, units, table)
     lines += ['', 'Plants used (scene seed 0; name, yaw deg, scale):', '']
     for scenario in args.scenarios:
         noisy, _ = scene(scenario, args.models)
@@ -176,19 +235,23 @@ def write_results(args, out: Path, plans, recons) -> None:
                 for p in noisy.scene.plants]
         table.setdefault('plants', {})[scenario] = used
         lines.append(f'- {scenario}: ' + ', '.join(f'{n} ({y}, {sc})' for n, y, sc in used))
-    lines += ['', '## Final reward of each row\'s own reward model (mean +- std over seeds)', '',
+    lines += ['', '## Final reward of each row\'s own reward model (mean +- sample std over seeds, n)', '',
               '| method | ' + ' | '.join(args.scenarios) + ' |', '|---|' + '---|' * len(args.scenarios)]
     regret = {}
     for row in args.rows:
         cells = [row]
         for scenario in args.scenarios:
-            traces = np.array([plans[(scenario, row, s)]['trace'] for s in range(args.seeds)])
-            finals = traces[:, -1]
-            cells.append(f'{finals.mean():.4f} +- {finals.std():.4f} ({ROWS[row][1]})')
+            runs = [plans[(scenario, row, s)] for s in range(args.seeds)]
+            ok = [p for p in runs if 'error' not in p]
+            traces = np.array([p['trace'] for p in ok]).reshape(len(ok), -1)
+            stat = summary({s: (p['trace'][-1] if 'error' not in p else None) for s, p in enumerate(runs)})
+            cells.append(f'{stat["mean"]:.4f} +- {stat["std"]:.4f} (n={stat["n"]}'
+                         + (f', {stat["failed"]} failed' if stat['failed'] else '') + f'; {ROWS[row][1]})')
             regret[(scenario, row)] = 1.0 - traces  # paper eq. SR with optimum 1
             table['cells'][f'{scenario}/{row}']['final_reward'] = {
-                'mean': float(finals.mean()), 'std': float(finals.std()), 'model': ROWS[row][1],
-                'seconds_mean': float(np.mean([plans[(scenario, row, s)]['seconds'] for s in range(args.seeds)]))}
+                **stat, 'model': ROWS[row][1],
+                'failures': {str(s): f'{p["error"]}: {p["error_msg"]}' for s, p in enumerate(runs) if 'error' in p},
+                'seconds_mean': float(np.mean([p['seconds'] for p in ok])) if ok else float('nan')}
         lines.append('| ' + ' | '.join(cells) + ' |')
     out.mkdir(parents=True, exist_ok=True)
     (out / 'table1.md').write_text('\n'.join(lines) + '\n')
@@ -198,6 +261,8 @@ def write_results(args, out: Path, plans, recons) -> None:
     for ax, scenario in zip(axes[0], args.scenarios):
         for row in args.rows:
             sr = regret[(scenario, row)]
+            if not len(sr):  # every seed failed: named in the table above
+                continue
             t = np.arange(1, sr.shape[1] + 1)
             ax.plot(t, sr.mean(0), label=f'{row} ({ROWS[row][1]})')
             ax.fill_between(t, sr.mean(0) - sr.std(0), sr.mean(0) + sr.std(0), alpha=0.15)

@@ -1,0 +1,68 @@
+"""Statistics of the benchmark tables: sample spread with its n, paired differences with t-intervals.
+
+- :func:`summary`: mean and sample standard deviation (ddof = 1) of the successful runs, with n and
+  the number of failed runs (a failed reconstruction is a result: counted, never skipped).
+- :func:`rank`: rows ordered best first by (failures, mean): a row with a failed reconstruction
+  ranks after every row without one (a failure ranks last), whatever its mean.
+- :func:`paired_difference`: d_i = a_i - b_i over the units (scenario, seed, realization) where both
+  succeeded, mean d and its 95 % t-interval  mean +- t_{0.975, n-1} s_d / sqrt(n)  (scipy.stats.t);
+  units where either failed are counted apart. n < 2 gives no interval (NaN bounds).
+"""
+from __future__ import annotations
+
+import math
+from typing import Hashable, Mapping, Optional
+
+import numpy as np
+
+
+def summary(values: Mapping[Hashable, Optional[float]]) -> dict:
+    """{'mean', 'std' (ddof 1), 'n', 'failed'} of unit -> value (None or NaN: a failed run)."""
+    ok = np.array([v for v in values.values() if v is not None and math.isfinite(v)], dtype=float)
+    return {'mean': float(ok.mean()) if len(ok) else float('nan'),
+            'std': float(ok.std(ddof=1)) if len(ok) > 1 else float('nan'),
+            'n': int(len(ok)), 'failed': int(len(values) - len(ok))}
+
+
+def rank(summaries: Mapping[str, dict]) -> list[str]:
+    """Row names best first: fewer failures first, then lower mean (NaN means last)."""
+    def key(name: str):
+        s = summaries[name]
+        return (s['failed'] > 0, s['failed'], math.isnan(s['mean']), s['mean'] if not math.isnan(s['mean']) else 0.0)
+    return sorted(summaries, key=key)
+
+
+def paired_difference(a: Mapping[Hashable, Optional[float]], b: Mapping[Hashable, Optional[float]],
+                      level: float = 0.95) -> dict:
+    """Mean of a - b over the units both have succeeded on, with its ``level`` t-interval;
+    ``only_a_failed`` / ``only_b_failed`` / ``both_failed`` / ``missing`` count the other units."""
+    from scipy.stats import t
+
+    def good(v) -> bool:
+        return v is not None and math.isfinite(v)
+
+    units = sorted(set(a) | set(b), key=repr)
+    d = np.array([a[u] - b[u] for u in units if u in a and u in b and good(a[u]) and good(b[u])], dtype=float)
+    out = {'mean': float(d.mean()) if len(d) else float('nan'), 'n': int(len(d)), 'level': level,
+           'low': float('nan'), 'high': float('nan'),
+           'only_a_failed': sum(1 for u in units if u in a and u in b and not good(a[u]) and good(b[u])),
+           'only_b_failed': sum(1 for u in units if u in a and u in b and good(a[u]) and not good(b[u])),
+           'both_failed': sum(1 for u in units if u in a and u in b and not good(a[u]) and not good(b[u])),
+           'missing': sum(1 for u in units if u not in a or u not in b)}
+    if len(d) > 1:
+        half = float(t.ppf(0.5 + level / 2, len(d) - 1) * d.std(ddof=1) / math.sqrt(len(d)))
+        out['low'], out['high'] = out['mean'] - half, out['mean'] + half
+    return out
+
+
+def describe(s: dict) -> str:
+    """'mean +- std (n=.., k failed)' of a :func:`summary`."""
+    failed = f', {s["failed"]} failed' if s['failed'] else ''
+    return f'{s["mean"]:.3f} +- {s["std"]:.3f} (n={s["n"]}{failed})'
+
+
+def describe_difference(d: dict) -> str:
+    """'mean [low, high] (n=..)' of a :func:`paired_difference`, with its failures."""
+    fails = [f'{d[k]} {k.replace("_", " ")}' for k in ('only_a_failed', 'only_b_failed', 'both_failed', 'missing') if d[k]]
+    return (f'{d["mean"]:+.3f} [{d["low"]:+.3f}, {d["high"]:+.3f}] (n={d["n"]}'
+            + (', ' + ', '.join(fails) if fails else '') + ')')

@@ -1,0 +1,43 @@
+"""bench/stats.py: sample std with n, failures counted and ranked last, paired t-intervals."""
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import stats as sps
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+from stats import paired_difference, rank, summary  # noqa: E402  (bench/stats.py)
+
+
+def test_summary_is_sample_std_with_n_and_counts_failures():
+    s = summary({0: 1.0, 1: 2.0, 2: 4.0, 3: None, 4: float("nan")})
+    assert s["n"] == 3 and s["failed"] == 2
+    assert s["mean"] == pytest.approx(7 / 3)
+    assert s["std"] == pytest.approx(np.std([1.0, 2.0, 4.0], ddof=1))
+    one = summary({0: 1.0})
+    assert one["n"] == 1 and math.isnan(one["std"])
+
+
+def test_a_row_with_a_failure_ranks_last_whatever_its_mean():
+    rows = {"good": summary({0: 3.0, 1: 3.2}), "failed_once": summary({0: 0.1, 1: None}),
+            "better": summary({0: 1.0, 1: 1.1}), "all_failed": summary({0: None, 1: None})}
+    assert rank(rows) == ["better", "good", "failed_once", "all_failed"]
+
+
+def test_paired_difference_t_interval_matches_scipy_and_counts_failures():
+    rng = np.random.default_rng(3)
+    a = {(s, k): float(x) for (s, k), x in zip([(s, k) for s in range(3) for k in range(5)], rng.normal(2, 0.3, 15))}
+    b = {u: v + float(rng.normal(0.4, 0.2)) for u, v in a.items()}
+    b[(0, 0)] = None  # baseline failed there
+    a[(1, 1)] = float("nan")  # egp failed there
+    d = paired_difference(a, b)
+    diffs = np.array([a[u] - b[u] for u in a if u not in ((0, 0), (1, 1))])
+    lo, hi = sps.t.interval(0.95, len(diffs) - 1, loc=diffs.mean(), scale=sps.sem(diffs))
+    assert d["n"] == 13 and d["only_a_failed"] == 1 and d["only_b_failed"] == 1 and d["both_failed"] == 0
+    assert d["mean"] == pytest.approx(diffs.mean())
+    assert (d["low"], d["high"]) == pytest.approx((lo, hi))
+    assert d["high"] < 0  # a is better by ~0.4, clearly
