@@ -11,7 +11,6 @@ Every wait has a deadline (``run_tasks(timeout=...)``); the clusters close in ``
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import signal
 import sys
@@ -26,6 +25,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "bench"))
 import cluster  # noqa: E402  (bench/cluster.py)
 import table1  # noqa: E402  (bench/table1.py)
+from bench_cluster import numbers_text as _without_times  # noqa: E402
 
 # The workers cannot import this test module: ship its task functions by value.
 cloudpickle.register_pickle_by_value(sys.modules[__name__])
@@ -38,20 +38,6 @@ def _slice_args(out: Path, workers: int) -> argparse.Namespace:
                               "--seeds", "1", "--evals", "4", "--init", "2", "--width", "800",
                               "--height", "600", "--realizations", "1", "--threads", "1",
                               "--scheduler", "local", "--workers", str(workers), "--out", str(out)])
-
-
-def _strip(rec):
-    if isinstance(rec, dict):
-        return {str(k): _strip(v) for k, v in rec.items() if k != "seconds"}
-    if isinstance(rec, (list, tuple)):
-        return [_strip(v) for v in rec]
-    return rec
-
-
-def _without_times(rec) -> str:
-    """Records as JSON text without their wall-clock fields (they differ run to run, the numbers
-    must not); as text so that a NaN (a failed reconstruction) compares equal to itself."""
-    return json.dumps(_strip(rec), sort_keys=True)
 
 
 def _in_process(args) -> tuple[dict, dict]:
