@@ -7,9 +7,7 @@ KeyboardInterrupt raised by Python's default handler was swallowed), other nodes
 action) while the README promised 0."""
 from __future__ import annotations
 
-import os
 import signal
-import tempfile
 import time
 from pathlib import Path
 
@@ -22,7 +20,7 @@ NODES = {
     "recon": ("vp_recon", "recon", {}),
     "dispatcher": ("vp_planner", "dispatcher", {"drones": ["d1", "d2"]}),
     "sim_drone": ("vp_planner", "sim_drone", {"drone": "d1"}),
-    "recorder": ("vp_recon", "recorder", {"output": str(Path(tempfile.gettempdir()) / f"vp_signals_{os.getpid()}.mcap")}),
+    "recorder": ("vp_recon", "recorder", {}),  # output: in the test's tmp_path (below)
 }
 
 #: (node, delay in s, signal): early (interpreter start, heavy imports), middle, spinning.
@@ -48,8 +46,10 @@ def caught(pid: int, sig: int) -> bool:
 
 
 @pytest.mark.parametrize("name, delay, sig", CASES, ids=[f"{n}-{d}s-{s.name}" for n, d, s in CASES])
-def test_a_signal_at_any_moment_exits_quietly(name, delay, sig, ros_env, start_node) -> None:
+def test_a_signal_at_any_moment_exits_quietly(name, delay, sig, ros_env, start_node, tmp_path) -> None:
     pkg, exe, params = NODES[name]
+    if name == "recorder":
+        params = {"output": str(tmp_path / "signals.mcap")}
     node = start_node(pkg, exe, params, ros_env)
     # the delay counts from the entry's first instruction (the quiet handler installed: Python
     # alone does not catch SIGTERM); what comes before is the interpreter's own start-up
