@@ -404,7 +404,7 @@ def reconstruct_realization(noisy_scene: object, k: int, cameras: ArrayLike, con
         except RenderError as exc:
             raise ReconError(UNKNOWN, str(exc)) from exc
         images = [capture.expose(im, k, i) for i, im in enumerate(images)]
-        reported = cams if capture.ideal else flight.reported
+        reported = flight.reported  # ideal: the planned cameras themselves
         seconds["render"] = time.perf_counter() - t0
         fg = np.array([int(m.sum()) for m in masks])
         seeing = np.flatnonzero(fg >= cfg.min_foreground)
