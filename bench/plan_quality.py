@@ -15,8 +15,8 @@ ablations of ``study_models``) scores every plan, and Spearman's rho between the
 
 Phases (``--phase``): ``plans`` (generate, cached), ``recon`` (reconstruct, one cached JSON per
 plan and realization: resumable), ``analyze`` (models, Spearman, ``results/plan_quality.json``
-and ``results/plan_quality.png``), ``all``. Variants: ``--ground`` renders a textured soil plane
-(masks from the known scene) instead of the blue screen; ``--sparse`` analyzes the sparse
+and ``results/plan_quality.png``), ``all``. Variants: ``--ground`` / ``--no-ground`` choose the
+background (default: by the capture, soil for a flight, as ``vp_recon.cli``); ``--sparse`` analyzes the sparse
 cloud's Chamfer instead of the dense one (same reconstructions).
 """
 from __future__ import annotations
@@ -48,7 +48,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument('--threads', type=int, default=0,
                     help='threads of the reconstruction (0: all cores; 1 when something else runs beside it)')
     ap.add_argument('--height', type=int, default=1500)
-    ap.add_argument('--ground', action='store_true', help='render a textured soil plane under the plants')
+    ap.add_argument('--ground', action=argparse.BooleanOptionalAction, default=None,
+                    help='render a textured soil plane under the plants (default: by the capture, as vp_recon.cli)')
     ap.add_argument('--phase', default='all', choices=['plans', 'recon', 'analyze', 'all'])
     add_capture(ap)
     ap.add_argument('--variants', nargs='+', default=None,
@@ -155,7 +156,12 @@ def describe_cameras(cams: np.ndarray, centre: np.ndarray) -> dict:
 
 # ----------------------------------------------------------------------------- reconstruction
 def variant_name(args) -> str:
-    return f'{args.width}x{args.height}' + ('-ground' if args.ground else '') + capture_tag(capture_of(args))
+    capture = capture_of(args)
+    ground = (not capture.ideal) if args.ground is None else args.ground  # ReconConfig.ground_used
+    # the capture's own background is the name's default: '-ground' = soil under an ideal capture,
+    # '-sky' = the blue screen under a flight
+    background = ('-ground' if ground else '') if capture.ideal else ('' if ground else '-sky')
+    return f'{args.width}x{args.height}' + background + capture_tag(capture)
 
 
 def recon_path(scenario: str, models: str, plan: dict, k: int, args) -> Path:

@@ -3,7 +3,7 @@
     python -m vp_recon.cli --plan out/run/plan.json --out out/run [--width 2000 --height 1500]
         [--realizations 0,1] [--sparse-only] [--sparse-mode known_poses|incremental]
         [--matching auto|exhaustive|poses]
-        [--fscore-threshold 0.02] [--mesh-cache DIR] [--keep-workdir] [--ground] [--no-progress]
+        [--fscore-threshold 0.02] [--mesh-cache DIR] [--keep-workdir] [--[no-]ground] [--no-progress]
 
 Rebuilds the scene from plan.json's ``scene`` dict (vp_scene.build.build_noisy_scene) and writes
 
@@ -89,8 +89,10 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     p.add_argument("--voxel", type=float, default=0.002, help="dense voxel downsampling, metres (0: none)")
     p.add_argument("--mesh-cache", default=None, help="cache folder of Poisson meshes of PLY plant models")
     p.add_argument("--keep-workdir", action="store_true", help="keep the COLMAP workspaces in OUT/work")
-    p.add_argument("--ground", action="store_true",
-                   help="render a textured soil plane under the plants (masks from the known scene)")
+    p.add_argument("--ground", action=argparse.BooleanOptionalAction, default=None,
+                   help="render a textured soil plane under the plants (--no-ground: a blue screen); default: "
+                        "soil for a realistic capture (plant masks from the images alone, by excess green), "
+                        "the blue screen for --capture ideal")
     # as the recon node: the last core stays with a planner beside it (a planner of 1 thread took
     # 2.4x its time beside a reconstruction on all cores of 2; README "Results")
     p.add_argument("--threads", type=int, default=max(1, (os.cpu_count() or 2) - 1),
@@ -158,7 +160,7 @@ def run(args: argparse.Namespace) -> dict:
     info = {"plan": str(Path(args.plan).resolve()), "method": plan.data.get("method"),
             "scenario": noisy.scene.scenario, "reward": plan.data.get("reward"),
             "reward_model": plan.data.get("reward_model"), "num_cameras": int(len(cams)),
-            "width": config.width, "height": config.height, "fov": config.fov, "dense": config.dense, "ground": config.ground,
+            "width": config.width, "height": config.height, "fov": config.fov, "dense": config.dense, "ground": config.ground_used,
             "sparse_mode": config.sparse_mode_used, "matching": config.matching,
             "capture": config.capture.to_dict()}
     try:

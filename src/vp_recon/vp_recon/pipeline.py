@@ -26,8 +26,10 @@ the capture model ``config.capture`` (:mod:`vp_scene.capture`; issue "Flights, n
 ``capture = IDEAL`` (``--capture ideal``) is the reconstruction before the capture model, bit for
 bit: the planned poses flown and known exactly, noise-free images, pairs chosen with realization
 k's true points, triangulation with the planned poses (``sparse_mode`` ``'auto'`` resolves to
-``'known_poses'`` there). Masks (``ground=False``: a blue-screen colour key of the rendered image;
-``ground=True``: the renderer's silhouette pass, an oracle) are the renderer's in both.
+``'known_poses'`` there). Background (``ground``; ``None``: by the capture): a flight renders a
+textured soil plane under the plants and segments each (noisy) image alone, by excess green
+(:func:`vp_recon.render.plant_mask`); the ideal capture keeps the blue screen and the renderer's
+masks (colour key; with ``ground=True`` the segmentation pass, an oracle).
 
 All distances in this module are metres; x100 (Table I) is applied by writers (cli, ROS node).
 Errors are :class:`ReconError` with a ``code`` equal to the ``vp_interfaces/ReconstructionScore``
@@ -140,8 +142,11 @@ class ReconConfig:
         sift_masks: restrict SIFT to the (dilated) foreground masks.
         min_foreground: pixels of plant an image needs to count as seeing the plant.
         max_features: SIFT features per image.
-        ground: render a textured soil plane under the plants (masks from the known scene,
-            see :mod:`vp_recon.render`) instead of a blue screen.
+        ground: render a textured soil plane under the plants (True) or a blue screen (False);
+            None (default): soil for a realistic capture, the blue screen for the ideal one.
+            A realistic capture's masks come from its images alone (excess green on soil,
+            colour key on the sky); the ideal capture's from the renderer (see
+            :mod:`vp_recon.render`).
         num_threads: threads of COLMAP and OpenCV (0: all cores).
         matching: ``'exhaustive'`` (all image pairs), ``'poses'`` (the pairs
             :func:`vp_recon.pairs.select_pairs` picks from the known poses and scene) or
@@ -163,7 +168,7 @@ class ReconConfig:
     sift_masks: bool = False
     min_foreground: int = 50
     max_features: int = 8192
-    ground: bool = False
+    ground: Optional[bool] = None
     num_threads: int = 0
     matching: str = "auto"
     capture: CaptureModel = REALISTIC
@@ -174,6 +179,11 @@ class ReconConfig:
         if self.sparse_mode != "auto":
             return self.sparse_mode
         return "known_poses" if self.capture.ideal else "incremental"
+
+    @property
+    def ground_used(self) -> bool:
+        """``ground`` with ``None`` resolved by the capture (soil for a flight)."""
+        return (not self.capture.ideal) if self.ground is None else bool(self.ground)
 
     def validate(self) -> "ReconConfig":
         """Raise ValueError naming the first bad field; return self."""
@@ -190,6 +200,8 @@ class ReconConfig:
         if not isinstance(self.capture, CaptureModel):
             raise ValueError(f"capture must be a vp_scene.capture.CaptureModel, got {self.capture!r}")
         self.capture.validate()
+        if self.ground is not None and not isinstance(self.ground, (bool, np.bool_)):
+            raise ValueError(f"ground must be True, False or None (by the capture), got {self.ground!r}")
         if self.matching not in MATCHINGS:
             raise ValueError(f"matching must be one of {', '.join(MATCHINGS)}, got {self.matching!r}")
         if not (math.isfinite(self.fscore_threshold) and self.fscore_threshold > 0):
@@ -374,7 +386,7 @@ def reconstruct_realization(noisy_scene: object, k: int, cameras: ArrayLike, con
     from .dense import crop_to_box, dense_reconstruct, silhouette_filter
     from .meshing import scene_meshes
     from .pairs import select_pairs
-    from .render import RenderError, Renderer
+    from .render import RenderError, Renderer, image_mask
     from .sparse import SparseError, sparse_reconstruct
 
     cfg = (config or ReconConfig()).validate()
@@ -400,10 +412,13 @@ def reconstruct_realization(noisy_scene: object, k: int, cameras: ArrayLike, con
         flight = capture.fly(cams, k)  # ideal: the planned cameras, flown and reported exactly
         try:
             renderer = Renderer(cfg.width, cfg.height, cfg.fov)
-            images, masks, _ = renderer.render(meshes, flight.actual, ground=cfg.ground)
+            images, masks, _ = renderer.render(meshes, flight.actual, ground=cfg.ground_used)
         except RenderError as exc:
             raise ReconError(UNKNOWN, str(exc)) from exc
         images = [capture.expose(im, k, i) for i, im in enumerate(images)]
+        if not capture.ideal:
+            # a flight has no segmentation pass: plant pixels from its (noisy) image alone
+            masks = [image_mask(im, cfg.ground_used) for im in images]
         reported = flight.reported  # ideal: the planned cameras themselves
         seconds["render"] = time.perf_counter() - t0
         fg = np.array([int(m.sum()) for m in masks])
