@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 import socket
+import sys
 import time
 from pathlib import Path
 
@@ -20,7 +21,9 @@ from geometry_msgs.msg import PoseArray
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
 
-CHROMIUM, CHROMEDRIVER = Path("/usr/bin/chromium"), Path("/usr/bin/chromedriver")
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+from browser import CHROMIUM, headless_chromium, page_text, wait_page, wait_text  # noqa: E402  (bench/browser.py)
+
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
@@ -54,51 +57,8 @@ def scene_msg() -> PointCloud2:
 def chromium():
     if not CHROMIUM.exists():
         pytest.skip("/usr/bin/chromium is absent (Debian package chromium)")
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service
-
-    options = webdriver.ChromeOptions()
-    options.binary_location = str(CHROMIUM)
-    for flag in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                 "--disable-background-networking", "--disable-component-update", "--disable-sync",
-                 "--disable-dev-shm-usage", "--window-size=1280,800"):
-        options.add_argument(flag)
-    service = Service(str(CHROMEDRIVER))
-    driver = webdriver.Chrome(service=service, options=options)
-    driver.set_page_load_timeout(60)
-    try:
+    with headless_chromium() as driver:
         yield driver
-    finally:
-        try:
-            driver.quit()
-        finally:
-            service.stop()
-
-
-def page_text(driver) -> str:
-    return driver.execute_script("return document.body ? document.body.innerText : ''") or ""
-
-
-def wait_text(driver, text: str, timeout: float) -> None:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if text in page_text(driver):
-            return
-        time.sleep(0.25)
-    raise AssertionError(f"{text!r} not on the page within {timeout} s; page text: {page_text(driver)[-1500:]!r}")
-
-
-def wait_page(driver, url: str, timeout: float) -> None:
-    """Load ``url`` once the node serves it (it starts after the node's process does)."""
-    deadline = time.monotonic() + timeout
-    while True:
-        try:
-            driver.get(url)
-            return
-        except Exception:  # noqa: BLE001 - connection refused until the server is up
-            if time.monotonic() > deadline:
-                raise
-            time.sleep(0.5)
 
 
 def test_the_page_shows_the_plan_and_follows_a_new_one(ros_env, start_node, ros_node, chromium) -> None:

@@ -95,6 +95,8 @@ def test_a_recorded_run_is_shown_with_one_frustum_per_camera(tmp_path) -> None:
         assert "400 of 500 points shown (downsampled)" in viewer.status.content
         assert "coloured by distance to the truth" in viewer.status.content
         assert "uncovered (magenta): 200 of 500" in viewer.status.content
+        viewer.points_shown.value = 1000  # the page's display cap (slider): no subset needed any more
+        assert "500 of 500 points shown" in viewer.status.content and "downsampled" not in viewer.status.content
         viewer.realization.value = "1"  # the other wind realization: no reconstruction of it
         assert "reconstruction: none for realization 1" in viewer.status.content
     finally:
