@@ -33,11 +33,6 @@ from pathlib import Path
 from typing import Any, Callable, Hashable, Iterator, Optional
 
 BENCH = Path(__file__).resolve().parent
-#: Environment of every worker process of the local cluster (read before torch/numpy load).
-ONE_THREAD_ENV = {'OMP_NUM_THREADS': '1', 'MKL_NUM_THREADS': '1', 'OPENBLAS_NUM_THREADS': '1',
-                  'NUMEXPR_NUM_THREADS': '1', 'VECLIB_MAXIMUM_THREADS': '1'}
-
-
 @dataclass
 class Task:
     """One unit of a benchmark: ``fn(*args)`` on a worker, its record under ``key``.
@@ -58,53 +53,15 @@ def add_cluster_args(ap: argparse.ArgumentParser) -> None:
                     help='worker processes of the local cluster, one thread each (default 1)')
 
 
-from distributed import WorkerPlugin  # noqa: E402
-
 sys.path.insert(0, str(BENCH))
 from common import write_json  # noqa: E402
+from vp_scene.cluster import ONE_THREAD_ENV, OneThread  # noqa: E402,F401  (the suite's one home of the engine)
+from vp_scene.cluster import open_client as _open_client  # noqa: E402
 
 
-class OneThread(WorkerPlugin):
-    """Worker plugin: torch (and whatever reads the env later) on one thread per worker."""
-    name = 'vp-one-thread'
-
-    def setup(self, worker) -> None:
-        os.environ.update(ONE_THREAD_ENV)
-        try:
-            import torch
-            torch.set_num_threads(1)
-        except ImportError:  # a worker without torch runs no planning task anyway
-            pass
-
-
-
-@contextlib.contextmanager
-def open_client(scheduler: Optional[str] = None, workers: int = 1, quiet: bool = False) -> Iterator:
-    """A ``distributed.Client`` for ``scheduler`` ('local', an address, or None: the environment's
-    ``DASK_SCHEDULER_ADDRESS`` else local); closes the client and any cluster it started."""
-    import dask
-    from distributed import Client, LocalCluster
-
-    scheduler = scheduler or os.environ.get('DASK_SCHEDULER_ADDRESS') or 'local'
-    if workers < 1:
-        raise ValueError(f'--workers must be at least 1, got {workers}')
-    env = dict(ONE_THREAD_ENV)
-    env['PYTHONPATH'] = os.pathsep.join(p for p in (str(BENCH), os.environ.get('PYTHONPATH', '')) if p)
-    with contextlib.ExitStack() as stack:
-        if scheduler == 'local':
-            with dask.config.set({'distributed.nanny.pre-spawn-environ': env}):
-                cluster = stack.enter_context(LocalCluster(
-                    n_workers=workers, threads_per_worker=1, processes=True, env=env,
-                    dashboard_address=':0', silence_logs=logging.ERROR))
-            client = stack.enter_context(Client(cluster))
-        else:
-            client = stack.enter_context(Client(scheduler, timeout='30s'))
-        client.register_plugin(OneThread(), name=OneThread.name)
-        if not quiet:
-            where = 'local cluster' if scheduler == 'local' else scheduler
-            n = len(client.scheduler_info().get('workers', {}))
-            print(f'dask: {where}, {n} worker(s); dashboard {client.dashboard_link}', file=sys.stderr)
-        yield client
+def open_client(scheduler: Optional[str] = None, workers: int = 1, quiet: bool = False):
+    """:func:`vp_scene.cluster.open_client` whose local workers also import this folder."""
+    return _open_client(scheduler, workers, quiet, pythonpath=(str(BENCH),))
 
 
 def _record(fn: Callable[..., Any], args: tuple) -> tuple[bool, Any]:

@@ -1,9 +1,9 @@
 #!/usr/bin/env python3
-"""Table I's plans flown: the seed-0 plans of ``results/table1.json`` reconstructed under a capture.
+"""Table I's plans flown: the seed-0 plans of ``results/ideal/table1.json`` reconstructed under a capture.
 
 Table I (``bench/table1.py``) was measured with the ideal capture (planned poses flown and known
 exactly, noise-free renders). This benchmark takes exactly those plans (the cameras stored in
-``results/table1.json``, the same scenes: the same models and scene seed 0) and reconstructs each
+``results/ideal/table1.json``, the same scenes: the same models and scene seed 0) and reconstructs each
 in the first ``--realizations`` wind realizations under ``--capture`` (default: realistic, README
 "Capture model"), so that the two columns differ only by the capture. A plan that does not
 reconstruct is a result: it is counted, shown as failed and ranked last, never dropped.
@@ -26,7 +26,8 @@ from common import (ROOT, add_capture, cached, capture_of, capture_tag, chamfer_
 
 def parse_args(argv=None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    ap.add_argument('--table', default=str(ROOT / 'results' / 'table1.json'), help='Table I results with the plans')
+    ap.add_argument('--table', default=str(ROOT / 'results' / 'ideal' / 'table1.json'),
+                    help='Table I results with the plans (default: the ideal-capture table)')
     ap.add_argument('--models', default=str(ROOT.parent / 'shared' / 'data' / 'corn50'),
                     help="the plants Table I used (its 'models' entry names them)")
     ap.add_argument('--scenarios', nargs='+', default=['one_plant', 'three_row'])

@@ -136,3 +136,63 @@ def test_worker_sigkilled_mid_run_its_tasks_finish_on_the_other():
     # the victim finished fewer than its share: the rest ran elsewhere (the other worker or the
     # nanny's restarted one)
     assert sum(r["pid"] == victim for r in rec.values()) < n
+
+
+def _recon_plan(tmp_path: Path) -> Path:
+    import json
+    import math
+
+    import numpy as np
+
+    a = np.deg2rad(30.0 * np.arange(4))
+    c = np.stack([1.4 * np.cos(a), 1.4 * np.sin(a), np.full(4, 1.2)], axis=1)
+    scene = {"scenario": "one_plant", "models": None, "seed": 0, "points_per_plant": 2000, "plant_spacing": 0.6,
+             "row_spacing": 0.76, "levels": 10, "realizations": 3, "wind_variance": 0.002, "wind_direction": 0.0}
+    plan = tmp_path / "plan.json"
+    plan.write_text(json.dumps({"scenario": "one_plant", "method": "ring", "reward": 0.5, "fov": math.pi / 2,
+                                "scene": scene,
+                                "cameras": np.concatenate([c, np.array([0.0, 0.0, 0.9]) - c], axis=1).tolist()}))
+    return plan
+
+
+def test_recon_cli_realizations_in_parallel_give_the_in_process_records(tmp_path, monkeypatch):
+    """Issue 22, item 6: ``python -m vp_recon.cli --scheduler local --workers 2`` reconstructs the K
+    realizations of a plan on a local Dask cluster: the records (every realization, in order) are
+    those of the run in one process."""
+    import json
+    import subprocess
+
+    monkeypatch.setenv("PYOPENGL_PLATFORM", "egl")
+    plan = _recon_plan(tmp_path)
+    base = [sys.executable, "-m", "vp_recon.cli", "--plan", str(plan), "--width", "640", "--height", "480",
+            "--capture", "ideal", "--threads", "1", "--no-progress"]
+    runs = {}
+    for name, extra in (("inproc", []), ("dask", ["--scheduler", "local", "--workers", "2"])):
+        out = tmp_path / name
+        done = subprocess.run(base + ["--out", str(out)] + extra, capture_output=True, text=True, timeout=DEADLINE_S)
+        assert done.returncode == 0, done.stderr[-2000:]
+        runs[name] = json.loads((out / "recon.json").read_text())
+        assert sorted(p.name for p in out.glob("recon_*.ply")) == ["recon_0.ply", "recon_1.ply", "recon_2.ply"]
+    assert runs["dask"]["scheduler"] == "local" and runs["inproc"]["scheduler"] == "in-process"
+    a, b = runs["inproc"]["per_realization"], runs["dask"]["per_realization"]
+    assert [r["realization"] for r in b] == [0, 1, 2]
+    for ra, rb in zip(a, b):
+        assert rb["chamfer"] == pytest.approx(ra["chamfer"], abs=1e-3), (ra, rb)  # x100
+        assert rb["points"] == pytest.approx(ra["points"], rel=0.01)
+
+
+def test_recon_on_a_cluster_fails_with_the_first_failing_realization(tmp_path, monkeypatch):
+    """The failure rule on the cluster: a plan that sees nothing fails with realization 0's error,
+    named as in one process, and the cluster is closed afterwards."""
+    import numpy as np
+
+    from vp_recon.pipeline import NOTHING_VISIBLE, ReconConfig, ReconError, reconstruct_plan
+    from vp_scene.build import build_noisy_scene
+
+    monkeypatch.setenv("PYOPENGL_PLATFORM", "egl")
+    noisy, _ = build_noisy_scene("one_plant", points_per_plant=1000, realizations=3)
+    away = np.array([[3.0, 0.0, 1.0, 1.0, 0.0, 0.0], [3.0, 0.5, 1.0, 1.0, 0.0, 0.0]])  # looking away
+    with cluster.open_client("local", 2, quiet=True) as client:
+        with pytest.raises(ReconError) as err:
+            reconstruct_plan(noisy, away, ReconConfig(width=320, height=240, num_threads=1), client=client)
+    assert err.value.code == NOTHING_VISIBLE and err.value.realization == 0

@@ -116,6 +116,20 @@ def test_plan_becomes_scores_and_clouds(recon_system, tmp_path) -> None:
     assert not list(out[0].glob("realization_*"))  # COLMAP workspaces are cleaned up
 
 
+def test_realizations_on_a_local_dask_cluster(recon_system) -> None:
+    """Issue 22, item 6: parameter scheduler 'local' reconstructs the K realizations of a plan on a
+    local Dask cluster of ``workers`` processes; the node publishes every score as without it."""
+    client, pub, scores, clouds, recon = recon_system(scheduler="local", workers=2, width=400, height=300)
+    pub.publish(pose_array(ring()))
+    assert client.spin_until(lambda: aggregate(scores), TIMEOUT), recon.output()[-4000:]
+    agg = aggregate(scores)[0]
+    assert agg.error_code == Score.NONE, agg.error_msg
+    per = [s for s in scores if s.realization != Score.AGGREGATE]
+    assert sorted(s.realization for s in per) == [0, 1] and agg.realizations == 2
+    assert "realizations in parallel on Dask (local" in recon.output()
+    assert recon.poll() is None, recon.output()[-2000:]
+
+
 def test_bad_plans_give_error_scores_and_node_keeps_running(recon_system) -> None:
     client, pub, scores, _clouds, recon = recon_system()
     pub.publish(pose_array(np.zeros((0, 6))))

@@ -499,13 +499,66 @@ def reconstruct_realization(noisy_scene: object, k: int, cameras: ArrayLike, con
         capture=capture.to_dict(), sparse_mode=mode)
 
 
+def _realization_task(noisy_scene: object, k: int, cams: NDArray[np.float64], cfg: ReconConfig,
+                      workdir: Optional[Path]) -> tuple:
+    """One realization on a Dask worker: ('ok', result) or ('error', code, message) (a ReconError
+    travels as its fields: the exception's own pickling is not part of its contract)."""
+    try:
+        return ("ok", reconstruct_realization(noisy_scene, k, cams, cfg, workdir=workdir))
+    except ReconError as exc:
+        return ("error", exc.code, str(exc))
+
+
+def _on_cluster(client: object, noisy_scene: object, cams: NDArray[np.float64], cfg: ReconConfig,
+                ks: list, work_root: Optional[Path], progress: Optional[ProgressFn],
+                on_realization: Optional[RealizationFn]) -> list:
+    """:func:`reconstruct_plan`'s loop on a Dask cluster (one task a realization)."""
+    from distributed import as_completed
+
+    scene = client.scatter(noisy_scene, broadcast=True)
+    futures = {}
+    for n, k in enumerate(ks):
+        keep = cfg.keep_images and (n == 0 or on_realization is not None)
+        sub = ReconConfig(**{**cfg.__dict__, "keep_images": keep, "num_threads": 1})
+        futures[client.submit(_realization_task, scene, k, cams, sub, work_root, pure=False)] = (n, k)
+    done: dict = {}
+    failed: dict = {}
+    try:
+        for fut in as_completed(list(futures)):
+            n, k = futures[fut]
+            out = fut.result()
+            if out[0] == "error":
+                failed[n] = ReconError(out[1], out[2])
+                failed[n].realization = k
+                continue
+            res = out[1]
+            for stage in STAGES:
+                _tick(progress, stage, k)
+            if on_realization is not None:
+                on_realization(res)
+            if n > 0:
+                res.rendered = []
+            done[n] = res
+            if failed and min(failed) < min(set(range(len(ks))) - set(done) - set(failed), default=len(ks)):
+                break  # the first failing realization in order is known: the plan fails with it
+    finally:
+        client.cancel([f for f in futures if not f.done()])
+    if failed:
+        raise failed[min(failed)]
+    return [done[n] for n in range(len(ks))]
+
+
 def reconstruct_plan(noisy_scene: object, cameras: ArrayLike, config: Optional[ReconConfig] = None,
                      out_dir: Optional[PathLike] = None, realizations: Optional[Sequence[int]] = None,
                      progress: Optional[ProgressFn] = None,
-                     on_realization: Optional[RealizationFn] = None) -> PlanReconResult:
+                     on_realization: Optional[RealizationFn] = None, client: object = None) -> PlanReconResult:
     """Reconstruct and score a plan on every (or the listed) wind realization(s), in order.
 
     The failure rule (module docstring): the first realization that fails stops the plan.
+    With a Dask ``client`` (:func:`vp_scene.cluster.open_client`) the realizations reconstruct in
+    parallel on its workers, one thread each; the result is the in-process one (same records, in
+    the order asked), the failure rule reads "the failing realization first in that order", and
+    ``progress`` / ``on_realization`` run in this process as each realization comes back.
 
     Args:
         out_dir: output folder, checked writable (created); the COLMAP workspaces go to
@@ -544,7 +597,9 @@ def reconstruct_plan(noisy_scene: object, cameras: ArrayLike, config: Optional[R
             work_root = ensure_writable_dir(out / "work")
     results = []
     t_all = time.perf_counter()
-    for n, k in enumerate(ks):
+    if client is not None:
+        results = _on_cluster(client, noisy_scene, cams, cfg, ks, work_root, progress, on_realization)
+    for n, k in enumerate(ks if client is None else ()):
         keep = cfg.keep_images and (n == 0 or on_realization is not None)
         sub = ReconConfig(**{**cfg.__dict__, "keep_images": keep})
         try:

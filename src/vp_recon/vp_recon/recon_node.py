@@ -40,6 +40,7 @@ log line; the node keeps running. Signals, exit codes and parameter types follow
 """
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import threading
@@ -95,6 +96,9 @@ PARAMS = {
     'frame_id': ('map', 'frame of the plans and of the published clouds'),
     # beside the planner (1 thread by default) the reconstruction takes the other cores
     'num_threads': (max(1, (os.cpu_count() or 2) - 1), 'threads of COLMAP, OpenCV and the renderer'),
+    'scheduler': ('', "Dask cluster the realizations reconstruct on in parallel: 'local' (workers processes "
+                      "here) or a scheduler address tcp://host:8786; '' (default): in this process"),
+    'workers': (max(1, (os.cpu_count() or 2) - 1), "worker processes of scheduler 'local', one thread each"),
 }
 
 #: /camera_plan/info messages remembered to find the one of a plan.
@@ -123,8 +127,9 @@ def check_parameters(values: dict) -> dict:
         raise ValueError(f'max_realizations must be >= 0 (0: all), got {v["max_realizations"]}')
     if v.get('scene_timeout', 0.0) < 0.0:
         raise ValueError(f'scene_timeout must be >= 0 s, got {v["scene_timeout"]}')
-    if v.get('num_threads', 1) < 1:
-        raise ValueError(f'num_threads must be >= 1, got {v["num_threads"]}')
+    if v.get('num_threads', 1) < 1 or v.get('workers', 1) < 1:
+        raise ValueError(f'num_threads and workers must be >= 1, got {v.get("num_threads", 1)}, '
+                         f'{v.get("workers", 1)}')
     if v.get('output_folder', 'x') == '' or v.get('frame_id', 'x') == '':
         raise ValueError('output_folder and frame_id must not be empty')
     config_keys = ('width', 'height', 'fov', 'sparse_mode', 'dense', 'matching', 'fscore_threshold')
@@ -365,8 +370,22 @@ class ReconNode(Node):
             started[0] = time.monotonic()
 
         try:
-            result = reconstruct_plan(scene, cameras, config, out_dir=run_dir, realizations=range(K),
-                                      progress=progress, on_realization=on_realization)
+            with contextlib.ExitStack() as stack:
+                client = None
+                if self._param('scheduler'):
+                    from vp_scene.cluster import open_client
+
+                    client = stack.enter_context(open_client(self._param('scheduler'), self._param('workers'),
+                                                             quiet=True))
+                    self.get_logger().info(f'realizations in parallel on Dask ({self._param("scheduler")}, '
+                                           f'dashboard {client.dashboard_link})')
+                result = reconstruct_plan(scene, cameras, config, out_dir=run_dir, realizations=range(K),
+                                          progress=progress, on_realization=on_realization, client=client)
+        except OSError as exc:  # the cluster: no scheduler at that address, workers that cannot start
+            remove_if_empty(run_dir)
+            self._publish_error(Score.UNKNOWN, f'the Dask cluster {self._param("scheduler")!r} failed: {exc}',
+                                Score.AGGREGATE, n_cams, plan, realizations=len(done))
+            return
         except ReconError as exc:
             remove_if_empty(run_dir)  # a plan that wrote nothing leaves no folder
             if exc.realization is not None:

@@ -1,0 +1,72 @@
+"""The suite's cluster engine: a dask.distributed client, on this machine or on a cluster users run.
+
+One home for how the suite talks to Dask (the benchmarks' task runner ``bench/cluster.py`` and the
+reconstruction of a plan's realizations in parallel, :func:`vp_recon.pipeline.reconstruct_plan`):
+
+:func:`open_client` gives the client: ``scheduler='local'`` starts a ``LocalCluster`` of
+``workers`` processes with one thread each; any other value (or ``DASK_SCHEDULER_ADDRESS`` when
+``scheduler`` is None) is the address of a running ``dask scheduler``. Workers start with
+OMP/MKL/OPENBLAS thread counts of 1 (Dask's ``distributed.nanny.pre-spawn-environ``, set here
+explicitly, plus torch's own count through :class:`OneThread`), so N workers never oversubscribe
+N cores. A worker of a remote cluster must import the suite (``install/setup.bash``).
+"""
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import sys
+from typing import Iterator, Optional, Sequence
+
+__all__ = ["ONE_THREAD_ENV", "OneThread", "open_client"]
+
+#: Environment of every worker process of the local cluster (read before torch/numpy load).
+ONE_THREAD_ENV = {'OMP_NUM_THREADS': '1', 'MKL_NUM_THREADS': '1', 'OPENBLAS_NUM_THREADS': '1',
+                  'NUMEXPR_NUM_THREADS': '1', 'VECLIB_MAXIMUM_THREADS': '1'}
+
+from distributed import WorkerPlugin  # noqa: E402
+
+
+class OneThread(WorkerPlugin):
+    """Worker plugin: torch (and whatever reads the env later) on one thread per worker."""
+    name = 'vp-one-thread'
+
+    def setup(self, worker) -> None:
+        os.environ.update(ONE_THREAD_ENV)
+        try:
+            import torch
+            torch.set_num_threads(1)
+        except ImportError:  # a worker without torch runs no planning task anyway
+            pass
+
+
+@contextlib.contextmanager
+def open_client(scheduler: Optional[str] = None, workers: int = 1, quiet: bool = False,
+                pythonpath: Sequence[str] = ()) -> Iterator:
+    """A ``distributed.Client`` for ``scheduler`` ('local', an address, or None: the environment's
+    ``DASK_SCHEDULER_ADDRESS`` else local); closes the client and any cluster it started.
+    ``pythonpath``: folders the local cluster's workers import from (besides the suite)."""
+    import dask
+    from distributed import Client, LocalCluster
+
+    scheduler = scheduler or os.environ.get('DASK_SCHEDULER_ADDRESS') or 'local'
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ValueError(f'workers must be an integer >= 1, got {workers!r}')
+    env = dict(ONE_THREAD_ENV)
+    path = [str(p) for p in pythonpath] + [os.environ.get('PYTHONPATH', '')]
+    env['PYTHONPATH'] = os.pathsep.join(p for p in path if p)
+    with contextlib.ExitStack() as stack:
+        if scheduler == 'local':
+            with dask.config.set({'distributed.nanny.pre-spawn-environ': env}):
+                cluster = stack.enter_context(LocalCluster(
+                    n_workers=workers, threads_per_worker=1, processes=True, env=env,
+                    dashboard_address=':0', silence_logs=logging.ERROR))
+            client = stack.enter_context(Client(cluster))
+        else:
+            client = stack.enter_context(Client(scheduler, timeout='30s'))
+        client.register_plugin(OneThread(), name=OneThread.name)
+        if not quiet:
+            where = 'local cluster' if scheduler == 'local' else scheduler
+            n = len(client.scheduler_info().get('workers', {}))
+            print(f'dask: {where}, {n} worker(s); dashboard {client.dashboard_link}', file=sys.stderr)
+        yield client
