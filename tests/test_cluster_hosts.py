@@ -1,7 +1,8 @@
 """The cluster engine across hosts: a `dask scheduler` in one network namespace, a `dask worker`
 in each of two others (the lab of tests/test_across_hosts.py: a bridge with no uplink, no route
 out, torn down also on failure; skipped with its reason where namespaces cannot be made). A
-Table I slice run from a client beside the scheduler gives the records of the in-process run."""
+Table I slice run from a client beside the scheduler gives the records of the in-process run; a
+worker SIGKILLed in its namespace mid-run loses no task."""
 from __future__ import annotations
 
 import json
@@ -60,3 +61,63 @@ def test_table1_slice_on_a_scheduler_and_two_workers_in_namespaces(lab, tmp_path
     got = json.loads(out.read_text())
     got = ({tuple(k): v for k, v in got["plans"]}, {tuple(k): v for k, v in got["recons"]})
     assert _without_times(got) == ref
+
+
+KILL_CLIENT = """
+import json, os, signal, sys, threading, time
+sys.path.insert(0, {bench!r})
+import cluster
+
+def slow_square(x):
+    import os, time
+    time.sleep(1.5)
+    return {{'x': x, 'square': x * x, 'pid': os.getpid()}}
+
+with cluster.open_client({sched!r}, quiet=True) as client:
+    client.wait_for_workers(2, timeout=180)
+    pids = client.run(os.getpid)  # worker address -> pid (one pid namespace: the lab's are network ones)
+    victim = pids[next(a for a in pids if {victim_addr!r} in a)]
+    killed = []
+
+    def kill_when_busy():
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and sum(len(v) for v in client.processing().values()) < 2:
+            time.sleep(0.1)
+        time.sleep(0.5)  # mid-task
+        os.kill(victim, signal.SIGKILL)
+        killed.append(victim)
+
+    killer = threading.Thread(target=kill_when_busy, daemon=True)
+    killer.start()
+    rec = cluster.run_tasks(client, [cluster.Task(i, slow_square, (i,)) for i in range(12)], timeout=300)
+    killer.join(timeout=70)
+    left = len(client.scheduler_info()['workers'])
+open({out!r}, 'w').write(json.dumps({{'killed': killed, 'victim': victim, 'left': left,
+                                      'records': [[k, v] for k, v in rec.items()]}}))
+"""
+
+
+def test_a_worker_killed_in_its_namespace_loses_no_task(lab, tmp_path):  # noqa: F811
+    """Issue 22, item 2: the worker of one host SIGKILLed mid-run (no nanny to restart it): the
+    scheduler reruns its tasks on the other host's worker; every task has its result."""
+    env = dict(os.environ, OMP_NUM_THREADS="1", DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT="30s",
+               PYTHONPATH=os.pathsep.join([str(REPO / "bench"), os.environ.get("PYTHONPATH", "")]))
+    env.pop("DASK_SCHEDULER_ADDRESS", None)
+    sched = f"tcp://{lab.addr['scene']}:{PORT}"
+    dask = str(Path(sys.executable).with_name("dask"))
+    lab.start("scene", "scheduler", [dask, "scheduler", "--host", lab.addr["scene"], "--port", str(PORT),
+                                     "--no-dashboard"], env)
+    for host in ("planner", "recon"):
+        lab.start(host, "worker", [dask, "worker", sched, "--host", lab.addr[host], "--nthreads", "1",
+                                   "--no-nanny", "--no-dashboard", "--name", host], env)
+    out = tmp_path / "kill.json"
+    code = KILL_CLIENT.format(bench=str(REPO / "bench"), sched=sched, victim_addr=lab.addr["recon"], out=str(out))
+    res = subprocess.run(["ip", "netns", "exec", lab.ns["scene"], sys.executable, "-c", code], env=env,
+                         capture_output=True, text=True, timeout=420)
+    assert res.returncode == 0, res.stderr[-3000:]
+    got = json.loads(out.read_text())
+    assert got["killed"] == [got["victim"]] and got["left"] == 1  # the recon host's worker is gone
+    rec = {k: v for k, v in got["records"]}
+    assert sorted(rec) == list(range(12))
+    assert all("error" not in r and r["square"] == i * i for i, r in rec.items()), rec
+    assert sum(r["pid"] == got["victim"] for r in rec.values()) < 12  # the rest ran on the other host
