@@ -190,6 +190,40 @@ def _score(plan: dict, scenario: str, models: str, reward: str) -> float:
     return float(make_reward(reward, noisy.points)(np.asarray(plan['cameras'])[None])[0])
 
 
+def capture_text(args) -> str:
+    """The capture of the reconstructions, in words (README "Capture model")."""
+    capture = capture_of(args)
+    if capture.ideal:
+        return 'ideal (the planned poses flown and known exactly, noise-free renders, blue screen)'
+    return (f'{capture.kind}: flown with hover and localization errors and sensor noise '
+            f'({json.dumps(capture.to_dict())}), over the textured soil with plant masks from the images alone, '
+            'COLMAP SfM with the reported centres as pose priors, registered to map on them')
+
+
+def shape_lines(args, recons: dict, table: dict) -> list[str]:
+    """Markdown of the Chamfer after a rigid ICP refinement (the shape alone, without the
+    registration error of a flight) and the images registered, per row and scenario."""
+    seeds = recon_seeds(args)
+    lines = ['', '## Shape alone and registration', '',
+             'Chamfer x100 after a rigid ICP refinement onto the truth (`chamfer_shape`: what the Chamfer would be '
+             'with a perfect registration to map), mean +- sample std (n); images registered per reconstruction '
+             '(min-max). A failed reconstruction is counted.', '',
+             '| method | ' + ' | '.join(args.scenarios) + ' |', '|---|' + '---|' * len(args.scenarios)]
+    table['shape'] = {}
+    for row in args.rows:
+        cells = [row]
+        for scenario in args.scenarios:
+            per = [p for seed in seeds for p in recons[(scenario, row, seed)].get('per_realization', [])]
+            stat = summary({i: p.get('chamfer_shape') for i, p in enumerate(per)})
+            failed = sum(1 for seed in seeds if recons[(scenario, row, seed)].get('error'))
+            imgs = [p['images'] for p in per]
+            table['shape'][f'{scenario}/{row}'] = {**stat, 'images': imgs, 'failed_plans': failed}
+            cells.append((describe(stat) if per else 'failed') + (f', images {min(imgs)}-{max(imgs)}' if imgs else '')
+                         + (f', {failed} plan(s) failed' if failed else ''))
+        lines.append('| ' + ' | '.join(cells) + ' |')
+    return lines
+
+
 def write_results(args, out: Path, plans, recons) -> None:
     import matplotlib
     matplotlib.use('Agg')
@@ -198,6 +232,7 @@ def write_results(args, out: Path, plans, recons) -> None:
     stamp = datetime.now(timezone.utc).strftime('%Y-%m-%d')
     host = machine()
     table = {'date': stamp, 'machine': host, 'models': models_tag(args.models), 'rows': ROWS,
+             'capture': capture_of(args).to_dict(),
              'evaluations': args.evals, 'resolution': [args.width, args.height], 'cells': {}}
     seeds = recon_seeds(args)
     lines = [f'# Table I, measured {stamp} ({host})', '',
@@ -205,6 +240,7 @@ def write_results(args, out: Path, plans, recons) -> None:
              f'(ddof 1) over the plans of seeds 0..{len(seeds) - 1} x {args.realizations or "all"} wind realizations '
              'of K = 5 (n: the successful reconstructions; a failed one is counted and ranks its row last), lower is '
              'better; the paper\'s value in brackets. Rewards of the seed-0 plan under both models (coverage / paper).', '',
+             f'Capture: {capture_text(args)}', '',
              '| method | ' + ' | '.join(f'{s} (N={SCENARIOS[s]})' for s in args.scenarios) + ' |',
              '|---|' + '---|' * len(args.scenarios)]
     units = {(s, row): chamfer_units(recons, s, row, args) for s in args.scenarios for row in args.rows}
@@ -228,6 +264,7 @@ def write_results(args, out: Path, plans, recons) -> None:
             cells.append(text)
         lines.append('| ' + ' | '.join(cells) + ' |')
     lines += paired_lines(args, units, table)
+    lines += shape_lines(args, recons, table)
     lines += ['', 'Plants used (scene seed 0; name, yaw deg, scale):', '']
     for scenario in args.scenarios:
         noisy, _ = scene(scenario, args.models)

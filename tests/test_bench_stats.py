@@ -41,3 +41,20 @@ def test_paired_difference_t_interval_matches_scipy_and_counts_failures():
     assert d["mean"] == pytest.approx(diffs.mean())
     assert (d["low"], d["high"]) == pytest.approx((lo, hi))
     assert d["high"] < 0  # a is better by ~0.4, clearly
+
+
+def test_table1_shape_table_counts_a_failed_plan() -> None:
+    """Table I's shape/registration table: sample statistics of chamfer_shape over the
+    realizations, the images registered, and a failed plan counted (never dropped)."""
+    import table1
+
+    args = table1.parse_args(["--models", "", "--scenarios", "one_plant", "--rows", "circle", "egp", "--seeds", "1",
+                              "--realizations", "2"])
+    recons = {("one_plant", "circle", 0): {"per_realization": [{"chamfer_shape": 1.0, "images": 4},
+                                                               {"chamfer_shape": 1.2, "images": 3}]},
+              ("one_plant", "egp", 0): {"error": "RECONSTRUCTION_FAILED", "per_realization": []}}
+    table: dict = {}
+    lines = table1.shape_lines(args, recons, table)
+    assert "| circle | 1.100 +- 0.141 (n=2), images 3-4 |" in lines
+    assert "| egp | failed, 1 plan(s) failed |" in lines
+    assert table["shape"]["one_plant/egp"]["failed_plans"] == 1
