@@ -12,7 +12,7 @@ the capture model ``config.capture`` (:mod:`vp_scene.capture`; issue "Flights, n
    :func:`vp_recon.pairs.select_pairs` picks from the reported poses and the planning cloud
    (all K realizations of the noisy scene: what the planner saw); then
    ``sparse_mode='incremental'`` (the default of a realistic capture): COLMAP's incremental SfM
-   with the reported centres as pose priors, registered to ``map`` from the reported centres;
+   with the reported centres as pose priors, registered to ``map`` on the reported poses (centres and attitudes);
    ``'known_poses'``: triangulation with the reported poses (an ablation),
 4. dense: SGBM on neighbouring pairs (:mod:`vp_recon.dense`; COLMAP PatchMatch needs CUDA) with
    the poses the sparse step gives (SfM's, in ``map``),

@@ -1,0 +1,65 @@
+"""Registration of a structure-from-motion model to map from a flight's reported poses
+(vp_recon.sparse.similarity_from_poses): exact poses give the similarity back; with a drone's
+errors the attitudes pin the rotation where a tight cluster of centres cannot."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from vp_recon.sparse import SparseError, similarity_from_poses
+from vp_scene.camera import look_at, world_to_camera
+
+
+def flight(n: int, arc_deg: float, radius: float = 1.5):
+    a = np.deg2rad(np.linspace(0.0, arc_deg, n))
+    c = np.stack([radius * np.cos(a), radius * np.sin(a), np.full(n, 1.2)], axis=1)
+    return look_at(c, [0.0, 0.0, 0.8])
+
+
+def model_of(cams, s, R, t):
+    """The model a SfM would give of ``cams``: x_world = s R x_model + t."""
+    R_cw, _ = world_to_camera(cams)
+    centres = (cams[:, :3] - t) @ R / s  # R^T (c - t) / s
+    return centres, np.einsum("nij,jk->nik", R_cw, R)  # R_cw_model = R_cw R
+
+
+def test_exact_poses_give_the_similarity_back() -> None:
+    cams = flight(4, 90.0)
+    s, R, t = 0.37, Rotation.from_euler("xyz", [20, -40, 110], degrees=True).as_matrix(), np.array([1.0, -2.0, 0.5])
+    mc, mR = model_of(cams, s, R, t)
+    M = similarity_from_poses(mc, mR, cams[:, :3], world_to_camera(cams)[0])
+    np.testing.assert_allclose(M, np.hstack([s * R, t[:, None]]), atol=1e-9)
+
+
+def test_attitudes_pin_the_rotation_of_a_tight_arc() -> None:
+    """4 cameras on a 20-degree arc (0.5 m), reported to 2 cm and 0.5 degree: the error of the
+    plant's points (0.8 m in front) after the registration, mean over 200 draws, is well under the
+    centres-only (Umeyama) one."""
+    import pycolmap
+
+    rng = np.random.default_rng(0)
+    cams = flight(4, 20.0)
+    s, R, t = 0.5, Rotation.from_euler("z", 30, degrees=True).as_matrix(), np.zeros(3)
+    mc, mR = model_of(cams, s, R, t)
+    plant = np.array([[0.0, 0.0, 0.8], [0.1, 0.1, 1.2], [-0.1, 0.0, 0.3]])
+    plant_model = (plant - t) @ R / s
+    err = {"poses": [], "centres": []}
+    R_cw = world_to_camera(cams)[0]
+    for _ in range(200):
+        rep_c = cams[:, :3] + rng.normal(0.0, 0.02, (4, 3))
+        rep_R = np.einsum("nij,njk->nik", Rotation.from_rotvec(rng.normal(0.0, np.deg2rad(0.5), (4, 3))).as_matrix(),
+                          R_cw)
+        M = similarity_from_poses(mc, mR, rep_c, rep_R)
+        err["poses"].append(np.linalg.norm(plant_model @ M[:, :3].T + M[:, 3] - plant, axis=1).mean())
+        U = np.asarray(pycolmap.estimate_sim3d(mc, rep_c).matrix())
+        err["centres"].append(np.linalg.norm(plant_model @ U[:, :3].T + U[:, 3] - plant, axis=1).mean())
+    poses, centres = np.mean(err["poses"]), np.mean(err["centres"])
+    assert poses < 0.5 * centres, (poses, centres)
+
+
+def test_one_centre_has_no_scale() -> None:
+    cams = flight(3, 0.0)
+    mc, mR = model_of(cams, 1.0, np.eye(3), np.zeros(3))
+    with pytest.raises(SparseError, match="one centre"):
+        similarity_from_poses(mc, mR, cams[:, :3], world_to_camera(cams)[0])
