@@ -149,7 +149,6 @@ class DispatcherNode(Node):
         declare_typed(self, PARAMS)
         v = check_parameters({n: self.get_parameter(n).value for n in PARAMS})  # ValueError: exit 2
         self.add_on_set_parameters_callback(self._on_set_parameters)
-        import vp_planner.space  # noqa: F401  (the feasibility rules, with torch: now, not on the first plan)
 
         self._drones: list[str] = list(v['drones'])
         self._lock = threading.Condition()

@@ -38,8 +38,9 @@ Feasibility
 -----------
 A plan is dispatched only if it satisfies the planner's rules (stand-off from every scene point,
 altitude above the ground, separation between cameras). The rules have one home,
-:meth:`vp_planner.space.ViewSpace.feasible`; :func:`plan_problems` asks it and, for a refused
-plan, explains which cameras break what.
+:class:`vp_planner.feasibility.FeasibilityRules` (torch-free; :class:`vp_planner.space.ViewSpace`
+uses it too); :func:`plan_problems` asks it and, for a refused plan, explains which cameras break
+what.
 """
 from __future__ import annotations
 
@@ -55,6 +56,8 @@ from scipy.sparse.csgraph import maximum_bipartite_matching
 from scipy.spatial.transform import Rotation
 
 from vp_scene.camera import check_cameras, optical_orientation
+
+from .feasibility import FeasibilityRules
 
 __all__ = [
     "ASSIGNMENTS",
@@ -246,22 +249,19 @@ def plan_problems(cameras: ArrayLike, realizations: Optional[ArrayLike], min_sta
     ``cameras`` (N, 6) = [c, v] in the scene's frame; ``realizations`` (K, P, 3) the scene's wind
     realizations, or None when no scene is known: then the stand-off rule cannot be checked and
     is left out (the caller decides whether that is acceptable). The verdict is
-    :meth:`vp_planner.space.ViewSpace.feasible` (the rules' one home; a one-camera plan is
-    checked as that camera twice, with no separation rule); the returned sentences only explain
-    a refusal: the cameras below ``min_altitude``, nearer than ``min_standoff`` to a scene point,
-    and the pairs nearer than ``min_separation`` to each other.
+    :class:`vp_planner.feasibility.FeasibilityRules` (the rules' one home, torch-free; a
+    one-camera plan is checked as that camera twice, with no separation rule); the returned
+    sentences only explain a refusal: the cameras below ``min_altitude``, nearer than
+    ``min_standoff`` to a scene point, and the pairs nearer than ``min_separation`` to each other.
     """
-    from vp_planner.space import ViewSpace  # torch comes with it: imported when first needed
-
     cams = check_cameras(cameras)
     n = len(cams)
     plan, separation = (cams, min_separation) if n >= 2 else (np.concatenate([cams, cams]), 0.0)
+    # without a scene the stand-off rule is off
     standoff = min_standoff if realizations is not None else 0.0
-    # without a scene the stand-off rule is off and the cloud only sets the space's extent
-    scene = realizations if realizations is not None else cams[None, :, :3]
-    space = ViewSpace(scene, len(plan), min_standoff=standoff, min_altitude=min_altitude,
-                      min_separation=separation)
-    if space.feasible(plan[None])[0]:
+    rules = FeasibilityRules(realizations, len(plan), min_standoff=standoff, min_altitude=min_altitude,
+                             min_separation=separation)
+    if rules(plan[None])[0]:
         return []
     problems = []
     c = cams[:, :3]
@@ -269,7 +269,7 @@ def plan_problems(cameras: ArrayLike, realizations: Optional[ArrayLike], min_sta
         problems.append(f"camera {i} at {_fmt(c[i])} is {c[i, 2]:.3f} m above the ground "
                         f"(min_altitude {min_altitude:g} m)")
     if standoff > 0:
-        near, _ = space.tree.query(c, k=1)
+        near, _ = rules.tree.query(c, k=1)
         for i in np.flatnonzero(near < standoff - 1e-9):
             problems.append(f"camera {i} at {_fmt(c[i])} is {near[i]:.3f} m from the nearest scene point "
                             f"(min_standoff {standoff:g} m)")
@@ -278,7 +278,7 @@ def plan_problems(cameras: ArrayLike, realizations: Optional[ArrayLike], min_sta
         for i, j in zip(*np.triu_indices(n, 1)):
             if d[i, j] < separation - 1e-9:
                 problems.append(f"cameras {i} and {j} are {d[i, j]:.3f} m apart (min_separation {separation:g} m)")
-    return problems or ["the plan breaks the planner's feasibility rules (vp_planner.space.ViewSpace.feasible)"]
+    return problems or ["the plan breaks the planner's feasibility rules (vp_planner.feasibility)"]
 
 
 def _fmt(p: Sequence[float]) -> str:

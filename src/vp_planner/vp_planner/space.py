@@ -33,7 +33,8 @@ realizations. By construction:
 Only the minimum separation between cameras is not guaranteed by the decode.
 
 Handling infeasible candidates: :meth:`ViewSpace.feasible` checks all rules (altitude,
-stand-off against every point of every realization with a KD-tree, separation, finiteness).
+stand-off against every point of every realization with a KD-tree, separation, finiteness; the
+rules live in the torch-free :mod:`vp_planner.feasibility`).
 :class:`Objective` returns 0 for an infeasible plan (still counted as an evaluation), BO
 restricts its acquisition to feasible candidates through ``feasible``, and the plan a method
 returns is always the best *feasible* plan evaluated (an error if none was).
@@ -51,6 +52,7 @@ from scipy.spatial import cKDTree
 
 from vp_scene.camera import CameraModel
 
+from .feasibility import FeasibilityRules, check_minima, check_realizations
 from .reward import DEFAULT_FOV, DEFAULT_THETA_MATCH
 from .reward_models import DEFAULT_REWARD_MODEL, RewardFunction, make_reward
 
@@ -65,9 +67,6 @@ __all__ = [
 
 Callback = Callable[[int, int, float, Optional[list]], bool]
 
-#: Bound on the elements of the pairwise-distance array of one feasibility chunk.
-_SEPARATION_ELEMENTS = 1 << 20
-
 
 class NoFeasiblePlanError(ValueError):
     """No feasible plan could be found or was evaluated."""
@@ -75,26 +74,6 @@ class NoFeasiblePlanError(ValueError):
 
 class PlanningCancelled(Exception):
     """Raised inside an objective when the progress callback asks to stop."""
-
-
-def check_realizations(realizations: Any) -> NDArray[np.float64]:
-    """Validate noisy scene realizations and return them as a (K, P, 3) float64 array.
-
-    A (P, 3) cloud counts as K = 1. Raises ValueError for a wrong shape, an empty cloud or
-    non-finite coordinates.
-    """
-    if isinstance(realizations, torch.Tensor):
-        realizations = realizations.detach().cpu().numpy()
-    R = np.asarray(realizations, dtype=np.float64)
-    if R.ndim == 2:
-        R = R[None]
-    if R.ndim != 3 or R.shape[-1] != 3:
-        raise ValueError(f"realizations must have shape (K, P, 3), got {R.shape}")
-    if R.shape[0] == 0 or R.shape[1] == 0:
-        raise ValueError("the point cloud is empty")
-    if not np.all(np.isfinite(R)):
-        raise ValueError("the point cloud contains non-finite coordinates")
-    return R
 
 
 @dataclass(frozen=True)
@@ -176,10 +155,7 @@ class ViewSpace:
     ) -> None:
         if int(num_cameras) != num_cameras or num_cameras < 2:
             raise ValueError(f"num_cameras must be an integer >= 2, got {num_cameras}")
-        for name, val in (("min_standoff", min_standoff), ("min_altitude", min_altitude),
-                          ("min_separation", min_separation)):
-            if not math.isfinite(val) or val < 0:
-                raise ValueError(f"{name} must be finite and >= 0, got {val}")
+        check_minima(min_standoff, min_altitude, min_separation)
         self.realizations = check_realizations(realizations)
         self.num_cameras = int(num_cameras)
         self.dim = 6 * self.num_cameras
@@ -206,12 +182,10 @@ class ViewSpace:
             raise ValueError(f"target_scale must be in [0, 1], got {target_scale}")
         self.target_lo = self.extent.centre - ts * self.extent.half
         self.target_hi = self.extent.centre + ts * self.extent.half
-        self._tree: Optional[cKDTree] = None
-        self.obstacles = None if obstacles is None else check_realizations(obstacles).reshape(-1, 3)
-        fixed = np.zeros((0, 3)) if fixed_positions is None else np.asarray(fixed_positions, dtype=np.float64)
-        if fixed.ndim != 2 or fixed.shape[1] != 3 or not np.all(np.isfinite(fixed)):
-            raise ValueError(f"fixed_positions must be finite (M, 3) positions, got shape {fixed.shape}")
-        self.fixed_positions = fixed
+        self.rules = FeasibilityRules(self.realizations if obstacles is None else obstacles, self.num_cameras,
+                                      self.min_standoff, self.min_altitude, self.min_separation, fixed_positions)
+        self.obstacles = None if obstacles is None else self.rules.obstacles
+        self.fixed_positions = self.rules.fixed_positions
         self.reward_model = reward_model
         self.image = CameraModel(int(image_size[0]), int(image_size[1]), self.fov)
         self._rewards: dict = {}
@@ -221,10 +195,7 @@ class ViewSpace:
     def tree(self) -> cKDTree:
         """KD-tree over the stand-off obstacles: the points of all realizations, or ``obstacles``
         (built on first use)."""
-        if self._tree is None:
-            pts = self.realizations.reshape(-1, 3) if self.obstacles is None else self.obstacles
-            self._tree = cKDTree(pts)
-        return self._tree
+        return self.rules.tree
 
     def directions(self, u_az: NDArray, u_el: NDArray) -> NDArray[np.float64]:
         phi = 2.0 * math.pi * u_az
@@ -345,28 +316,7 @@ class ViewSpace:
         return torch.from_numpy(ok) if is_torch else ok
 
     def _feasible_cameras(self, cams: NDArray[np.float64]) -> NDArray[np.bool_]:
-        B = cams.shape[0]
-        c, v = cams[..., :3], cams[..., 3:]
-        ok = np.isfinite(cams).all(axis=(1, 2))
-        ok &= (np.linalg.norm(v, axis=-1) > 0).all(axis=1)
-        ok &= (c[..., 2] >= self.min_altitude - 1e-9).all(axis=1)
-        if self.min_separation > 0 and B:
-            # pairwise distances of a chunk of plans at a time: (chunk, N, N) stays bounded
-            N = self.num_cameras
-            iu = np.triu_indices(N, 1)
-            step = max(1, _SEPARATION_ELEMENTS // (N * N))
-            for b0 in range(0, B, step):
-                cb = c[b0:b0 + step]
-                dist = np.linalg.norm(cb[:, :, None, :] - cb[:, None, :, :], axis=-1)
-                ok[b0:b0 + step] &= (dist[:, iu[0], iu[1]] >= self.min_separation - 1e-9).all(axis=1)
-            if len(self.fixed_positions):
-                far, _ = cKDTree(self.fixed_positions).query(np.where(np.isfinite(c), c, 0.0).reshape(-1, 3), k=1)
-                ok &= (far.reshape(B, N) >= self.min_separation - 1e-9).all(axis=1)
-        if self.min_standoff > 0 and B:
-            flat = np.where(np.isfinite(c), c, 0.0).reshape(-1, 3)
-            dist, _ = self.tree.query(flat, k=1, distance_upper_bound=self.min_standoff)
-            ok &= (dist.reshape(B, self.num_cameras) >= self.min_standoff - 1e-9).all(axis=1)
-        return ok
+        return self.rules(cams)
 
     # ------------------------------------------------------------------ sampling
     def sample(self, n: int, rng: Any = None, max_tries: int = 1000,
