@@ -24,7 +24,7 @@ import torch
 from vp_planner.reward import noisy_reward, prepare_points
 from vp_planner.reward_models import make_reward
 from vp_planner.space import ViewSpace
-from vp_scene.plants import load_ply
+from vp_scene.ply import load_ply
 
 ROOT = Path(__file__).resolve().parents[1]
 

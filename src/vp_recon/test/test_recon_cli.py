@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from vp_recon.cli import main
-from vp_scene.plants import load_ply
+from vp_scene.ply import load_ply
 
 SCENE = {"scenario": "one_plant", "models": None, "seed": 0, "points_per_plant": 2000, "plant_spacing": 0.6,
          "row_spacing": 0.76, "levels": 10, "realizations": 2, "wind_variance": 0.002, "wind_direction": 0.0}

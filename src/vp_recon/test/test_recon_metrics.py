@@ -9,7 +9,7 @@ from scipy.spatial.distance import cdist
 from vp_recon.dense import neighbour_pairs, silhouette_filter, voxel_downsample
 from vp_recon.metrics import EmptyCloudError, chamfer
 from vp_recon.outputs import write_ply
-from vp_scene.plants import load_ply
+from vp_scene.ply import load_ply
 from vp_scene.camera import intrinsics
 
 

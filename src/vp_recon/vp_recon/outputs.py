@@ -27,7 +27,7 @@ PathLike = Union[str, os.PathLike]
 def write_ply(path: PathLike, points: NDArray[np.float64], colors: Optional[NDArray[np.uint8]] = None) -> None:
     """Binary PLY (trimesh's writer: float32 x, y, z; uchar red, green, blue, alpha when coloured),
     written atomically (a temporary file renamed over ``path``). Read it back with
-    ``vp_scene.plants.load_ply`` or ``trimesh.load``."""
+    ``vp_scene.ply.load_ply`` or ``trimesh.load``."""
     import trimesh
 
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)

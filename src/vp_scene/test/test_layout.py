@@ -13,7 +13,9 @@ import pytest
 from vp_scene.build import build_noisy_scene
 from vp_scene.layout import (BUILTIN_LAYOUTS, Layout, LayoutError, PlantSpec, layout_from_dict, load_layout,
                              read_scenario, resolve_layout)
-from vp_scene.plants import PlantModel, load_models, procedural_corn
+from vp_scene.plants import PlantModel
+from vp_scene.ply import load_models
+from vp_scene.procedural import procedural_corn
 from vp_scene.scenario import SCENARIOS, Scene, make_scene, place_points
 
 REPO = Path(__file__).resolve().parents[3]

@@ -7,7 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vp_scene.plants import PlantModel, PlantModelError, load_models, load_ply, procedural_corn
+from vp_scene.plants import PlantModel, PlantModelError
+from vp_scene.ply import load_models, load_ply
+from vp_scene.procedural import procedural_corn
 
 CORN50 = Path(__file__).resolve().parents[3].parent / "shared" / "data" / "corn50"
 

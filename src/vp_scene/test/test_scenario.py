@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vp_scene.plants import PlantModel, load_models
+from vp_scene.plants import PlantModel
+from vp_scene.ply import load_models
 from vp_scene.scenario import SCENARIOS, PlacedPlant, layout, make_scene, place_mesh, place_points
 
 CORN50 = Path(__file__).resolve().parents[3].parent / "shared" / "data" / "corn50"

@@ -5,7 +5,8 @@ from pathlib import Path
 from typing import Optional, Sequence, Union
 
 from .layout import Layout, resolve_layout
-from .plants import PlantModel, load_models
+from .plants import PlantModel
+from .ply import load_models
 from .scenario import make_scene
 from .wind import NoisyScene, WindConfig, make_noisy_scene
 

@@ -18,7 +18,8 @@ import numpy as np
 import trimesh
 
 from .layout import BUILTIN_LAYOUTS, Layout, LayoutError, PlantSpec, resolve_layout
-from .plants import PlantModel, procedural_corn, procedural_name_seed, procedural_seed
+from .plants import PlantModel
+from .procedural import procedural_corn, procedural_name_seed, procedural_seed
 
 __all__ = ["SCENARIOS", "PlacedPlant", "Scene", "layout", "make_scene", "place_points", "place_mesh"]
 
