@@ -1,7 +1,10 @@
 """Start parameters of the planner, recon and dispatcher nodes (real processes): a wrong type or a
 bad value is one log line and exit 2, an integer where a float is expected is simply a float
-(issue 10, items 7 and 12; issue 11 for the dispatcher)."""
+(issue 10, items 7 and 12; issue 11 for the dispatcher). Every node's parameter descriptors, asked
+over DDS through DescribeParameters: descriptions, ranges, read_only, enforced (issue 19)."""
 from __future__ import annotations
+
+import math
 
 import pytest
 
@@ -48,3 +51,92 @@ def test_integers_where_floats_are_expected_are_accepted(exe, params, ros_env, s
     node = start_node(PKG[exe], exe, params, ros_env)
     assert node.wait_for_output(READY[exe], 30.0), node.output()
     assert node.alive() and "Traceback" not in node.output()
+
+
+# ---------------------------------------------------------------- descriptors (issue 19, the house)
+INT, DOUBLE = "integer", "floating"
+INT64_MAX = 2 ** 63 - 1
+
+#: node -> (package, executable, start parameters, {parameter: expected limits}, a value outside a
+#: range or None, a read-only parameter with a new value or None). Limits: (kind, from, to, read_only); None: no range.
+DESCRIBED = {
+    "planner": ("vp_planner", "planner", {}, {
+        "num_cameras": (INT, 2, 100, False), "evaluations": (INT, 1, 100000, False),
+        "fov": (DOUBLE, 0.0, math.pi, False), "lawnmower_overlap": (DOUBLE, 0.0, 0.95, False),
+        "lawnmower_tilt": (DOUBLE, 0.0, math.radians(60.0), False), "num_threads": (INT, 1, INT64_MAX, True),
+        "min_standoff": (DOUBLE, 0.0, math.inf, False), "method": None},
+        ("num_cameras", 101), ("num_threads", 2)),
+    "dispatcher": ("vp_planner", "dispatcher", {"drones": ["d0", "d1"]}, {
+        "pose_timeout": (DOUBLE, 0.0, math.inf, False), "min_separation": (DOUBLE, 0.0, math.inf, False),
+        "drones": (None, None, None, True), "assignment": None},
+        ("min_altitude", -0.5), ("drones", ["d0"])),
+    "scene": ("vp_scene", "scene", {"points_per_plant": 200, "realizations": 2}, {
+        "realizations": (INT, 1, INT64_MAX, False), "levels": (INT, 1, INT64_MAX, False),
+        "wind_variance": (DOUBLE, 0.0, math.inf, False), "scenario": None},
+        ("levels", 0), None),
+    "recon": ("vp_recon", "recon", {}, {
+        "width": (INT, 16, INT64_MAX, False), "sensor_noise": (DOUBLE, 0.0, 0.5, False),
+        "hover_attitude_sigma": (DOUBLE, 0.0, 10.0, False), "max_realizations": (INT, 0, INT64_MAX, False)},
+        ("sensor_noise", 0.9), None),
+    "sim_drone": ("vp_planner", "sim_drone", {"drone": "d0"}, {
+        "speed": (DOUBLE, 0.0, math.inf, True), "drone": (None, None, None, True)},
+        None, ("speed", 3.0)),
+}
+
+
+@pytest.mark.parametrize("name", list(DESCRIBED))
+def test_descriptors_show_the_limits_and_rclpy_enforces_them(name, ros_env, start_node, ros_node) -> None:
+    """``ros2 param describe`` on a stock install: a real node answers rcl_interfaces'
+    DescribeParameters with a description for every parameter, the ranges the node enforces
+    (IntegerRange / FloatingPointRange) and read_only where a change is not honoured; a
+    set_parameters outside a range, or of a read-only parameter, is refused and leaves the value."""
+    from rcl_interfaces.srv import DescribeParameters, ListParameters
+    from rclpy.parameter import Parameter
+    from rclpy.parameter_client import AsyncParameterClient
+
+    pkg, exe, params, expected, outside, fixed = DESCRIBED[name]
+    node = start_node(pkg, exe, params, ros_env)
+    client = ros_node(ros_env)
+    node_name = exe
+    lister = client.node.create_client(ListParameters, f"/{node_name}/list_parameters")
+    describer = client.node.create_client(DescribeParameters, f"/{node_name}/describe_parameters")
+    assert client.spin_until(lambda: lister.service_is_ready() and describer.service_is_ready(), 60.0), node.output()
+    names = [n for n in client.spin_future(lister.call_async(ListParameters.Request()), 60.0).result.names
+             if n not in ("use_sim_time", "start_type_description_service")]
+    assert set(expected) <= set(names), names
+    descs = {d.name: d for d in client.spin_future(
+        describer.call_async(DescribeParameters.Request(names=names)), 60.0).descriptors}
+    assert set(descs) == set(names)
+    for n, d in descs.items():
+        assert d.description.strip(), f"{name}: parameter {n} has no description"
+    for n, limits in expected.items():
+        d = descs[n]
+        if limits is None:
+            assert not d.integer_range and not d.floating_point_range and not d.read_only, (n, d)
+            continue
+        kind, lo, hi, read_only = limits
+        assert d.read_only == read_only, (n, d)
+        if kind == INT:
+            assert len(d.integer_range) == 1 and not d.floating_point_range, (n, d)
+            r = d.integer_range[0]
+            assert (r.from_value, r.to_value) == (lo, hi), (n, r)
+        elif kind == DOUBLE:
+            assert len(d.floating_point_range) == 1 and not d.integer_range, (n, d)
+            r = d.floating_point_range[0]
+            assert r.from_value == pytest.approx(lo) and r.to_value == pytest.approx(hi), (n, r)
+
+    setter = AsyncParameterClient(client.node, node_name)
+    assert setter.wait_for_services(timeout_sec=60.0)
+    for prm_name, value in ([outside] if outside else []):
+        before = client.spin_future(setter.get_parameters([prm_name]), 60.0).values[0]
+        res = client.spin_future(setter.set_parameters([Parameter(prm_name, value=value)]), 60.0).results[0]
+        assert not res.successful and "out of range" in res.reason and prm_name in res.reason, res.reason
+        after = client.spin_future(setter.get_parameters([prm_name]), 60.0).values[0]
+        assert after == before, (before, after)
+    if fixed:
+        prm_name, value = fixed
+        before = client.spin_future(setter.get_parameters([prm_name]), 60.0).values[0]
+        res = client.spin_future(setter.set_parameters([Parameter(prm_name, value=value)]), 60.0).results[0]
+        assert not res.successful and f"read-only parameter: {prm_name}" in res.reason, res.reason
+        assert client.spin_future(setter.get_parameters([prm_name]), 60.0).values[0] == before
+    assert node.alive(), node.output()

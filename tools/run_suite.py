@@ -254,6 +254,8 @@ class NodeDied(RuntimeError):
 
 
 def run(args: argparse.Namespace) -> int:
+    from vp_scene.messages import msgs_to_poses, point_array, pose_array, score_record  # conversions' one home
+
     out = Path(args.out).resolve()
     out.mkdir(parents=True, exist_ok=True)
     env = dict(os.environ)
@@ -334,8 +336,7 @@ def run(args: argparse.Namespace) -> int:
         if result.error_code != 0:
             outcome.append(f'error: planning failed (error_code {result.error_code}): {result.error_msg}')
             return EXIT_FAILED
-        poses = [[p.position.x, p.position.y, p.position.z, p.orientation.x, p.orientation.y,
-                  p.orientation.z, p.orientation.w] for p in result.plan.poses]
+        poses = msgs_to_poses(result.plan.poses).tolist()
         cameras = [list(result.cameras[i:i + 6]) for i in range(0, len(result.cameras), 6)]
         print(f'plan: {result.reward_model} reward {result.reward:.4f} after {result.evaluations} evaluations '
               f'({result.planning_time:.1f} s)', flush=True)
@@ -373,22 +374,15 @@ def run(args: argparse.Namespace) -> int:
             'poses': poses, 'seconds': time.monotonic() - start,
             'evaluations': result.evaluations, 'trace': list(result.trace), 'seed': args.seed,
             'error_code': agg.error_code, 'error_msg': agg.error_msg,
-            'per_realization': [{'realization': s.realization, 'chamfer': s.chamfer,
-                                 'chamfer_shape': s.chamfer_shape, 'registered_images': s.registered_images,
-                                 'accuracy': s.accuracy, 'completeness': s.completeness,
-                                 'fscore': s.fscore, 'points': s.num_points,
-                                 'error_code': s.error_code, 'error_msg': s.error_msg}
-                                for s in per],
+            'per_realization': [score_record(s) for s in per],
         }
         if fleet is not None:
             summary['fleet'] = {
                 'assignment': fleet.assignment, 'total_distance': fleet.total_distance,
                 'max_distance': fleet.max_distance, 'spare_drones': list(fleet.spare_drones),
                 'drones': [{'drone': e.drone, 'pose_index': e.pose_index, 'distance': e.distance,
-                            'start': [e.start.x, e.start.y, e.start.z],
-                            'goal': [e.goal.position.x, e.goal.position.y, e.goal.position.z,
-                                     e.goal.orientation.x, e.goal.orientation.y, e.goal.orientation.z,
-                                     e.goal.orientation.w]} for e in fleet.entries]}
+                            'start': point_array(e.start).tolist(),
+                            'goal': pose_array(e.goal).tolist()} for e in fleet.entries]}
         (out / 'summary.json').write_text(json.dumps(summary, indent=2))
         if agg.error_code != 0:
             outcome.append(f'error: reconstruction failed (error_code {agg.error_code}): {agg.error_msg}')

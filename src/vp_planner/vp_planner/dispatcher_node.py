@@ -38,8 +38,7 @@ from functools import partial
 from typing import Optional
 
 import numpy as np
-from geometry_msgs.msg import Point, Pose, PoseArray, PoseStamped
-from nav_msgs.msg import Odometry
+from geometry_msgs.msg import PoseArray, PoseStamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
@@ -49,39 +48,46 @@ from vp_interfaces.msg import DroneAssignment, FleetAssignment
 from vp_planner.fleet import (ASSIGNMENTS, ORIENTATIONS, AssignmentError, FleetTransform, assign, goal_orientations,
                               plan_problems)
 from vp_scene.camera import poses_to_cameras
-from vp_scene.cloud import realizations_from_cloud
-from vp_scene.node_runtime import declare_typed, run_node, typed_values
+from vp_scene.messages import POSE_TYPES, drone_topic, msgs_to_poses, point_msg, pose_msg, position_of, realizations_from_cloud
+from vp_scene.node_runtime import Param, declare_typed, run_node, typed_values
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 Msg = FleetAssignment
-POSE_TYPES = ("pose", "odometry")
 
-#: The node's parameters: name -> (default, description); the default's type is enforced.
+#: The node's parameters (:class:`vp_scene.node_runtime.Param`); those that make topics are
+#: read_only (fixed at start: restart the node to change them).
+_M = (0.0, math.inf)
 PARAMS = {
-    'drones': ([], 'names of the drones, e.g. "drones:=[d0, d1, d2, d3]" (the {drone} of the topic templates)'),
-    'goal_topic': ('/{drone}/goal_pose', "each drone's goal topic (geometry_msgs/PoseStamped), {drone} = its name"),
-    'pose_topic': ('/{drone}/pose', "each drone's pose topic, {drone} = its name"),
-    'pose_type': ('pose', 'pose: geometry_msgs/PoseStamped | odometry: nav_msgs/Odometry'),
-    'assignment': ('min_total', 'min_total | min_max travel distance'),
-    'orientation': ('body', 'goal orientation, body: +x = optical axis (as /camera_plan) | optical: REP-103 '
-                            'camera optical frame (z forward, x right, y down)'),
-    'frame_id': ('map', 'frame of the plans and of the scene (the planner\'s frame_id)'),
-    'fleet_frame': ('map', "frame of the drones' poses and goals"),
-    'fleet_x': (0.0, 'm, origin of fleet_frame in frame_id'),
-    'fleet_y': (0.0, 'm, origin of fleet_frame in frame_id'),
-    'fleet_z': (0.0, 'm, origin of fleet_frame in frame_id'),
-    'fleet_yaw': (0.0, 'rad, rotation of fleet_frame about the z axis of frame_id'),
-    'pose_timeout': (2.0, 's: a drone whose last pose is older is silent and the dispatch fails'),
-    'min_standoff': (0.5, 'm from every scene point (the planner\'s rule)'),
-    'min_altitude': (0.3, 'm above the ground (the planner\'s rule)'),
-    'min_separation': (0.5, 'm between cameras (the planner\'s rule)'),
-    'require_scene': (True, 'refuse a plan when no scene arrived to check the stand-off (false: dispatch '
-                            'with a warning)'),
-    'scene_timeout': (10.0, 's a plan that arrives before the scene waits for it'),
+    'drones': Param([], 'names of the drones, e.g. "drones:=[d0, d1, d2, d3]" (the {drone} of the topic templates)',
+                    None, True, 'at least one; letters, digits and _, starting with a letter; no name twice'),
+    'goal_topic': Param('/{drone}/goal_pose', "each drone's goal topic (geometry_msgs/PoseStamped), {drone} = its name",
+                        None, True, 'contains {drone}'),
+    'pose_topic': Param('/{drone}/pose', "each drone's pose topic, {drone} = its name", None, True,
+                        'contains {drone}; not the goal_topic'),
+    'pose_type': Param('pose', 'pose: geometry_msgs/PoseStamped | odometry: nav_msgs/Odometry', None, True,
+                       'one of ' + ', '.join(POSE_TYPES)),
+    'assignment': Param('min_total', 'travel distance minimized: the total or the longest flight', None, False,
+                        'one of ' + ', '.join(ASSIGNMENTS)),
+    'orientation': Param('body', 'goal orientation, body: +x = optical axis (as /camera_plan) | optical: REP-103 '
+                                 'camera optical frame (z forward, x right, y down)', None, False,
+                         'one of ' + ', '.join(ORIENTATIONS)),
+    'frame_id': Param('map', 'frame of the plans and of the scene (the planner\'s frame_id)', None, False, 'not empty'),
+    'fleet_frame': Param('map', "frame of the drones' poses and goals", None, False,
+                         'not empty; fleet_x/y/z/yaw are 0 when it is frame_id'),
+    'fleet_x': Param(0.0, 'm, origin of fleet_frame in frame_id'),
+    'fleet_y': Param(0.0, 'm, origin of fleet_frame in frame_id'),
+    'fleet_z': Param(0.0, 'm, origin of fleet_frame in frame_id'),
+    'fleet_yaw': Param(0.0, 'rad, rotation of fleet_frame about the z axis of frame_id'),
+    'pose_timeout': Param(2.0, 's: a drone whose last pose is older is silent and the dispatch fails', _M, False,
+                          '> 0'),
+    'min_standoff': Param(0.5, 'm from every scene point (the planner\'s rule)', _M),
+    'min_altitude': Param(0.3, 'm above the ground (the planner\'s rule)', _M),
+    'min_separation': Param(0.5, 'm between cameras (the planner\'s rule)', _M),
+    'require_scene': Param(True, 'refuse a plan when no scene arrived to check the stand-off (false: dispatch '
+                                 'with a warning)'),
+    'scene_timeout': Param(10.0, 's a plan that arrives before the scene waits for it', _M),
 }
-#: Parameters that make topics: fixed at start (a change is refused with the reason).
-STATIC = ('drones', 'goal_topic', 'pose_topic', 'pose_type')
 _NAME = re.compile(r'^[A-Za-z][A-Za-z0-9_]*$')
 
 
@@ -129,10 +135,6 @@ def _transform(v: dict) -> FleetTransform:
     return FleetTransform(v['fleet_x'], v['fleet_y'], v['fleet_z'], v['fleet_yaw'])
 
 
-def topic_of(template: str, drone: str) -> str:
-    return template.replace('{drone}', drone)
-
-
 def _stamp(t) -> str:
     return f'{t.sec}.{t.nanosec:09d}'
 
@@ -146,8 +148,7 @@ class DispatcherNode(Node):
 
     def __init__(self) -> None:
         super().__init__('dispatcher')
-        declare_typed(self, PARAMS)
-        v = check_parameters({n: self.get_parameter(n).value for n in PARAMS})  # ValueError: exit 2
+        v = declare_typed(self, PARAMS, check_parameters)  # ValueError: exit 2
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         self._drones: list[str] = list(v['drones'])
@@ -160,10 +161,10 @@ class DispatcherNode(Node):
         self._nonfinite: dict[str, tuple] = {}  # drone -> its latest position, when that was not finite
         self._stop = False
         self._goal_pubs = {}
-        pose_type = Odometry if v['pose_type'] == 'odometry' else PoseStamped
+        pose_type = POSE_TYPES[v['pose_type']]
         for d in self._drones:
-            self._goal_pubs[d] = self.create_publisher(PoseStamped, topic_of(v['goal_topic'], d), LATCHED)
-            self.create_subscription(pose_type, topic_of(v['pose_topic'], d), partial(self._on_pose, d),
+            self._goal_pubs[d] = self.create_publisher(PoseStamped, drone_topic(v['goal_topic'], d), LATCHED)
+            self.create_subscription(pose_type, drone_topic(v['pose_topic'], d), partial(self._on_pose, d),
                                      qos_profile_sensor_data)
         self.assignment_pub = self.create_publisher(FleetAssignment, '/fleet/assignment', LATCHED)
         self.create_subscription(PointCloud2, '/scene/noisy_points', self._on_scene, LATCHED)
@@ -172,18 +173,13 @@ class DispatcherNode(Node):
         self._worker.start()
         self.get_logger().info(
             f'dispatcher ready: {len(self._drones)} drones ({", ".join(self._drones)}), {v["assignment"]}, '
-            f'goals on {topic_of(v["goal_topic"], "<drone>")} in {v["fleet_frame"]!r}; waiting for /camera_plan')
+            f'goals on {drone_topic(v["goal_topic"], "<drone>")} in {v["fleet_frame"]!r}; waiting for /camera_plan')
 
     # ---------------------------------------------------------------- parameters
     def _values(self) -> dict:
         return check_parameters({n: self.get_parameter(n).value for n in PARAMS})
 
     def _on_set_parameters(self, params) -> SetParametersResult:
-        fixed = [p.name for p in params if p.name in STATIC]
-        if fixed:
-            reason = f'{", ".join(fixed)} cannot change while the node runs (restart it)'
-            self.get_logger().warn(f'parameter change refused: {reason}')
-            return SetParametersResult(successful=False, reason=reason)
         current = {n: self.get_parameter(n).value for n in PARAMS}
         try:
             check_parameters({**current, **{p.name: p.value for p in params}})
@@ -201,8 +197,7 @@ class DispatcherNode(Node):
 
     # ---------------------------------------------------------------- inputs
     def _on_pose(self, drone: str, msg) -> None:
-        pose = msg.pose.pose if isinstance(msg, Odometry) else msg.pose
-        p = np.array([pose.position.x, pose.position.y, pose.position.z])
+        p = position_of(msg)
         if not np.all(np.isfinite(p)):
             self.get_logger().warn(f'drone {drone}: ignoring a pose with non-finite coordinates',
                                    throttle_duration_sec=5.0)
@@ -336,8 +331,7 @@ class DispatcherNode(Node):
                               f'dispatcher expects {v["frame_id"]!r} (frame_id); no transform is applied', v)
         if n == 0:
             return self._fail(plan, Msg.EMPTY_PLAN, 'the plan on /camera_plan has no poses', v)
-        poses = np.array([[p.position.x, p.position.y, p.position.z, p.orientation.x, p.orientation.y,
-                           p.orientation.z, p.orientation.w] for p in plan.poses])
+        poses = msgs_to_poses(plan.poses)
         try:
             if not np.all(np.isfinite(poses)):
                 raise ValueError('non-finite coordinates')
@@ -362,7 +356,7 @@ class DispatcherNode(Node):
         positions, silent, wrong = self._positions(v)
         if silent:
             return self._fail(plan, Msg.DRONE_SILENT, f'no pose within pose_timeout {v["pose_timeout"]:g} s from '
-                              f'{", ".join(text for _, text in silent)} on {topic_of(v["pose_topic"], "<drone>")}: not guessing '
+                              f'{", ".join(text for _, text in silent)} on {drone_topic(v["pose_topic"], "<drone>")}: not guessing '
                               'where they are', v, silent=tuple(silent), standoff_checked=scene is not None)
         if wrong:
             return self._fail(plan, Msg.WRONG_FRAME, f'drone poses must be in fleet_frame {v["fleet_frame"]!r}: '
@@ -383,17 +377,14 @@ class DispatcherNode(Node):
         lines = []
         for j, i in enumerate(result.drone_of_pose):
             drone = drones[int(i)]
-            g = goals[j]
-            pose = Pose()
-            pose.position.x, pose.position.y, pose.position.z = (float(x) for x in g[:3])
-            pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w = (float(x) for x in g[3:])
+            pose = pose_msg(goals[j])
             goal = PoseStamped()
             goal.header.stamp, goal.header.frame_id = out.header.stamp, v['fleet_frame']
             goal.pose = pose
             self._goal_pubs[drone].publish(goal)
             entry = DroneAssignment()
             entry.drone, entry.pose_index, entry.goal = drone, j, pose
-            entry.start = Point(x=float(start[i, 0]), y=float(start[i, 1]), z=float(start[i, 2]))
+            entry.start = point_msg(start[i])
             entry.distance = float(result.distances[j])
             out.entries.append(entry)
             lines.append(f'{drone} -> pose {j} ({entry.distance:.2f} m)')

@@ -24,56 +24,62 @@ from typing import Optional
 
 import numpy as np
 import torch
-from geometry_msgs.msg import Point, Pose, PoseArray
+from geometry_msgs.msg import PoseArray
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
-from std_msgs.msg import ColorRGBA
-from visualization_msgs.msg import Marker, MarkerArray
+from visualization_msgs.msg import MarkerArray
 
 from vp_interfaces.action import PlanViews
 from vp_interfaces.msg import CameraPlan
 from vp_planner.gp import MODEL_NAMES
-from vp_planner.optimizers import (MAX_CAMERAS, METHODS, BudgetTooLargeError, InvalidBudgetError,
+from vp_planner.optimizers import (MAX_CAMERAS, MAX_EVALUATIONS, METHODS, BudgetTooLargeError, InvalidBudgetError,
                                    InvalidNumCamerasError, InvalidSceneError, NoFeasiblePlanError, PlanResult, UnknownMethodError,
                                    check_lawnmower, plan_views, validate_request)
 from vp_planner.reward_models import DEFAULT_REWARD_MODEL, REWARD_MODELS, check_reward_model
-from vp_scene.camera import cameras_to_poses, rotation_matrix
-from vp_scene.cloud import realizations_from_cloud
-from vp_scene.node_runtime import declare_typed, run_node, typed_values
+from vp_scene.messages import cameras_to_pose_array, camera_plan_msg, frustum_markers, realizations_from_cloud
+from vp_scene.node_runtime import INT_MAX, Param, declare_typed, run_node, typed_values
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
-#: The node's parameters: name -> (default, description); the default's type is enforced.
+#: The node's parameters (:class:`vp_scene.node_runtime.Param`): default (its type is enforced),
+#: description, the range the node enforces, read_only where a change is not honoured.
+_EVALS = (1, max(MAX_EVALUATIONS.values()))
+_OPEN = 'the ends are excluded'
 PARAMS = {
-    'num_cameras': (4, f'N, 2..{MAX_CAMERAS} (autostart, and goals that leave it 0)'),
-    'method': ('egp', ' | '.join(METHODS)),
-    'evaluations': (100, 'reward evaluations (goals that leave it 0)'),
-    'initial_evaluations': (50, 'initial design of egp/gp (goals that leave it 0)'),
-    'seed': (0, 'random seed (goals with seed -1)'),
-    'reward': (DEFAULT_REWARD_MODEL, ' | '.join(REWARD_MODELS)),
-    'image_width': (2000, 'image width of the cameras, pixels (the coverage reward)'),
-    'image_height': (1500, 'image height of the cameras, pixels'),
-    'bo_mode': ('trust_region', 'egp/gp: trust_region | global'),
-    'structured_init': (20, 'structured plans in the egp/gp initial design (0: random, as the paper)'),
-    'arc_spacing': (math.radians(30.0), 'arc: rad between neighbouring cameras'),
-    'parts': (0, 'egp/gp: plan the field by this many parts (0: automatic, 1: none)'),
-    'lawnmower_overlap': (0.7, 'lawnmower: image overlap along and across the flight lines, 0..0.95'),
-    'lawnmower_tilt': (0.0, 'lawnmower: camera tilt from nadir, rad (0: nadir, up to 60 degrees)'),
-    'num_threads': (1, 'torch threads'),
-    'autostart': (False, 'plan with the parameters as soon as a scene arrives'),
-    'min_standoff': (0.5, 'm from every scene point'),
-    'min_altitude': (0.3, 'm above the ground'),
-    'min_separation': (0.5, 'm between cameras'),
-    'fov': (math.pi / 2, 'horizontal field of view, rad'),
-    'theta_match': (math.pi / 4, 'matching angle of the reward, rad'),
-    'frame_id': ('map', 'frame of the plans; the scene cloud must be in it'),
-    'scene_timeout': (10.0, 's a goal that arrives before the scene waits for it'),
+    'num_cameras': Param(4, f'N, 2..{MAX_CAMERAS} (autostart, and goals that leave it 0)', (2, MAX_CAMERAS)),
+    'method': Param('egp', 'planning method (autostart, and goals that leave it empty)', None, False,
+                    'one of ' + ', '.join(METHODS)),
+    'evaluations': Param(100, 'reward evaluations (goals that leave it 0)', _EVALS, False,
+                         'at most ' + ', '.join(f'{m} {n}' for m, n in MAX_EVALUATIONS.items())),
+    'initial_evaluations': Param(50, 'initial design of egp/gp (goals that leave it 0)', _EVALS),
+    'seed': Param(0, 'random seed (goals with seed -1)', (0, INT_MAX)),
+    'reward': Param(DEFAULT_REWARD_MODEL, 'reward model', None, False, 'one of ' + ', '.join(REWARD_MODELS)),
+    'image_width': Param(2000, 'image width of the cameras, pixels (the coverage reward)', (16, INT_MAX)),
+    'image_height': Param(1500, 'image height of the cameras, pixels', (16, INT_MAX)),
+    'bo_mode': Param('trust_region', 'egp/gp: search of the acquisition', None, False, 'one of trust_region, global'),
+    'structured_init': Param(20, 'structured plans in the egp/gp initial design (0: random, as the paper)',
+                             (0, INT_MAX)),
+    'arc_spacing': Param(math.radians(30.0), 'arc: rad between neighbouring cameras', (0.0, 2 * math.pi), False,
+                         _OPEN),
+    'parts': Param(0, 'egp/gp: plan the field by this many parts (0: automatic, 1: none)', (0, INT_MAX)),
+    'lawnmower_overlap': Param(0.7, 'lawnmower: image overlap along and across the flight lines', (0.0, 0.95)),
+    'lawnmower_tilt': Param(0.0, 'lawnmower: camera tilt from nadir, rad (0: nadir, up to 60 degrees)',
+                            (0.0, math.radians(60.0))),
+    'num_threads': Param(1, 'torch threads (set at start)', (1, INT_MAX), True),
+    'autostart': Param(False, 'plan with the parameters as soon as a scene arrives'),
+    'min_standoff': Param(0.5, 'm from every scene point', (0.0, math.inf)),
+    'min_altitude': Param(0.3, 'm above the ground', (0.0, math.inf)),
+    'min_separation': Param(0.5, 'm between cameras', (0.0, math.inf)),
+    'fov': Param(math.pi / 2, 'horizontal field of view, rad', (0.0, math.pi), False, _OPEN),
+    'theta_match': Param(math.pi / 4, 'matching angle of the reward, rad', (0.0, math.pi), False, _OPEN),
+    'frame_id': Param('map', 'frame of the plans; the scene cloud must be in it', None, False, 'not empty'),
+    'scene_timeout': Param(10.0, 's a goal that arrives before the scene waits for it', (0.0, math.inf)),
 }
 
 
@@ -118,58 +124,12 @@ def check_parameters(values: dict) -> dict:
     return v
 
 
-def frustum_markers(cameras: np.ndarray, frame_id: str, stamp, fov: float,
-                    depth: float = 0.4, aspect: float = 4.0 / 3.0) -> MarkerArray:
-    """One LINE_LIST frustum (apex at c, far plane at ``depth`` along v) and a label a camera."""
-    out = MarkerArray()
-    clear = Marker()
-    clear.action = Marker.DELETEALL
-    out.markers.append(clear)
-    half_w = depth * math.tan(fov / 2.0)
-    half_h = half_w / aspect
-    for i, cam in enumerate(np.asarray(cameras, dtype=float)):
-        c = cam[:3]
-        rot = rotation_matrix(cam[3:6])  # columns: body x (optical axis), y (left), z (up)
-        x, y, z = rot[:, 0], rot[:, 1], rot[:, 2]
-        corners = [c + depth * x + sy * half_w * y + sz * half_h * z
-                   for sy, sz in ((1, 1), (-1, 1), (-1, -1), (1, -1))]
-        m = Marker()
-        m.header.frame_id = frame_id
-        m.header.stamp = stamp
-        m.ns = 'frustums'
-        m.id = i
-        m.type = Marker.LINE_LIST
-        m.action = Marker.ADD
-        m.pose.orientation.w = 1.0
-        m.scale.x = 0.01
-        m.color = ColorRGBA(r=1.0, g=0.55, b=0.0, a=1.0)
-        segments = []
-        for k in range(4):
-            segments += [c, corners[k], corners[k], corners[(k + 1) % 4]]
-        m.points = [Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in segments]
-        out.markers.append(m)
-        label = Marker()
-        label.header = m.header
-        label.ns = 'labels'
-        label.id = i
-        label.type = Marker.TEXT_VIEW_FACING
-        label.action = Marker.ADD
-        label.pose.position = Point(x=float(c[0]), y=float(c[1]), z=float(c[2]) + 0.1)
-        label.pose.orientation.w = 1.0
-        label.scale.z = 0.1
-        label.color = ColorRGBA(r=1.0, g=1.0, b=1.0, a=1.0)
-        label.text = f'cam {i}'
-        out.markers.append(label)
-    return out
-
-
 class PlannerNode(Node):
     """ROS 2 adapter: parameters and messages in, :func:`plan_views` calls, plans out."""
 
     def __init__(self) -> None:
         super().__init__('planner')
-        declare_typed(self, PARAMS)
-        check_parameters({n: self.get_parameter(n).value for n in PARAMS})  # ValueError: exit 2
+        declare_typed(self, PARAMS, check_parameters)  # ValueError: exit 2
         self.add_on_set_parameters_callback(self._on_set_parameters)
         torch.set_num_threads(self._param('num_threads'))  # leave the other cores to the recon
 
@@ -296,28 +256,12 @@ class PlannerNode(Node):
             arc_spacing=self._param('arc_spacing'), parts=self._param('parts'),
             lawnmower_overlap=self._param('lawnmower_overlap'), lawnmower_tilt=self._param('lawnmower_tilt'))
 
-    def _poses(self, cameras: np.ndarray) -> list:
-        out = []
-        for x, y, z, qx, qy, qz, qw in cameras_to_poses(cameras):
-            pose = Pose()
-            pose.position.x, pose.position.y, pose.position.z = float(x), float(y), float(z)
-            pose.orientation.x, pose.orientation.y = float(qx), float(qy)
-            pose.orientation.z, pose.orientation.w = float(qz), float(qw)
-            out.append(pose)
-        return out
-
     def _publish_plan(self, result: PlanResult) -> PoseArray:
         """/camera_plan/info first (so that a recon has the reward when the plan arrives), then
         /camera_plan and the markers: one header, one set of poses."""
-        msg = PoseArray()
-        msg.header.frame_id = self._param('frame_id')
-        msg.header.stamp = self.get_clock().now().to_msg()
-        msg.poses = self._poses(result.cameras)
-        info = CameraPlan()
-        info.header, info.poses = msg.header, msg.poses
-        info.reward, info.reward_model, info.method = float(result.reward), result.reward_model, result.method
-        info.evaluations, info.planning_time = int(result.evaluations), float(result.seconds)
-        self.info_pub.publish(info)
+        msg = cameras_to_pose_array(result.cameras, self._param('frame_id'), self.get_clock().now().to_msg())
+        self.info_pub.publish(camera_plan_msg(msg, result.reward, result.reward_model, result.method,
+                                              result.evaluations, result.seconds))
         self.plan_pub.publish(msg)
         self.marker_pub.publish(frustum_markers(result.cameras, msg.header.frame_id,
                                                 msg.header.stamp, self._param('fov')))

@@ -11,32 +11,34 @@ is ignored with a log line. Signals, exit codes and parameter types follow
 """
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
 from geometry_msgs.msg import PoseStamped
-from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
-from vp_planner.dispatcher_node import POSE_TYPES, topic_of
 from vp_planner.fleet import fly_toward
-from vp_scene.node_runtime import declare_typed, run_node, typed_values
+from vp_scene.messages import POSE_TYPES, drone_topic, pose_array, pose_report
+from vp_scene.node_runtime import Param, declare_typed, run_node, typed_values
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
+#: The node's parameters (:class:`vp_scene.node_runtime.Param`): all read once, at start (read_only).
 PARAMS = {
-    'drone': ('d0', 'the drone\'s name (the {drone} of the topic templates)'),
-    'goal_topic': ('/{drone}/goal_pose', 'goal topic template (as the dispatcher\'s)'),
-    'pose_topic': ('/{drone}/pose', 'pose topic template (as the dispatcher\'s)'),
-    'pose_type': ('pose', 'pose: geometry_msgs/PoseStamped | odometry: nav_msgs/Odometry'),
-    'frame_id': ('map', 'frame of the poses it publishes and of the goals it accepts'),
-    'x': (0.0, 'm, start position'),
-    'y': (0.0, 'm, start position'),
-    'z': (0.0, 'm, start position'),
-    'speed': (2.0, 'm/s'),
-    'rate': (20.0, 'Hz, pose reports'),
+    'drone': Param('d0', 'the drone\'s name (the {drone} of the topic templates)', None, True, 'not empty'),
+    'goal_topic': Param('/{drone}/goal_pose', 'goal topic template (as the dispatcher\'s)', None, True),
+    'pose_topic': Param('/{drone}/pose', 'pose topic template (as the dispatcher\'s)', None, True),
+    'pose_type': Param('pose', 'pose: geometry_msgs/PoseStamped | odometry: nav_msgs/Odometry', None, True,
+                       'one of ' + ', '.join(POSE_TYPES)),
+    'frame_id': Param('map', 'frame of the poses it publishes and of the goals it accepts', None, True, 'not empty'),
+    'x': Param(0.0, 'm, start position', None, True),
+    'y': Param(0.0, 'm, start position', None, True),
+    'z': Param(0.0, 'm, start position', None, True),
+    'speed': Param(2.0, 'm/s', (0.0, math.inf), True, '> 0'),
+    'rate': Param(20.0, 'Hz, pose reports', (0.0, math.inf), True, '> 0'),
 }
 
 
@@ -55,15 +57,13 @@ def check_parameters(values: dict) -> dict:
 class SimDroneNode(Node):
     def __init__(self) -> None:
         super().__init__('sim_drone')
-        declare_typed(self, PARAMS)
-        v = check_parameters({n: self.get_parameter(n).value for n in PARAMS})
+        v = declare_typed(self, PARAMS, check_parameters)
         self._v = v
         self._position = np.array([v['x'], v['y'], v['z']])
         self._goal = None  # (position (3,), quaternion (4,))
-        self._odometry = v['pose_type'] == 'odometry'
-        self._pub = self.create_publisher(Odometry if self._odometry else PoseStamped,
-                                          topic_of(v['pose_topic'], v['drone']), 10)
-        self.create_subscription(PoseStamped, topic_of(v['goal_topic'], v['drone']), self._on_goal, LATCHED)
+        self._pub = self.create_publisher(POSE_TYPES[v['pose_type']],
+                                          drone_topic(v['pose_topic'], v['drone']), 10)
+        self.create_subscription(PoseStamped, drone_topic(v['goal_topic'], v['drone']), self._on_goal, LATCHED)
         self._last = time.monotonic()
         self.create_timer(1.0 / v['rate'], self._tick)
         self.get_logger().info(f'sim drone {v["drone"]} at ({v["x"]:.2f}, {v["y"]:.2f}, {v["z"]:.2f}) '
@@ -73,9 +73,9 @@ class SimDroneNode(Node):
         if msg.header.frame_id != self._v['frame_id']:
             self.get_logger().error(f'ignoring a goal in frame {msg.header.frame_id!r} (mine: {self._v["frame_id"]!r})')
             return
-        p, q = msg.pose.position, msg.pose.orientation
-        self._goal = (np.array([p.x, p.y, p.z]), (q.x, q.y, q.z, q.w))
-        self.get_logger().info(f'goal ({p.x:.2f}, {p.y:.2f}, {p.z:.2f})')
+        goal = pose_array(msg.pose)
+        self._goal = (goal[:3], tuple(goal[3:]))
+        self.get_logger().info(f'goal ({goal[0]:.2f}, {goal[1]:.2f}, {goal[2]:.2f})')
 
     def _tick(self) -> None:
         now = time.monotonic()
@@ -84,14 +84,8 @@ class SimDroneNode(Node):
         if self._goal is not None:
             self._position = fly_toward(self._position, self._goal[0], self._v['speed'], dt)
             quat = self._goal[1]
-        msg = Odometry() if self._odometry else PoseStamped()
-        msg.header.stamp = self.get_clock().now().to_msg()
-        msg.header.frame_id = self._v['frame_id']
-        pose = msg.pose.pose if self._odometry else msg.pose
-        if self._odometry:
-            msg.child_frame_id = f'{self._v["drone"]}/base_link'
-        pose.position.x, pose.position.y, pose.position.z = (float(c) for c in self._position)
-        pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w = (float(c) for c in quat)
+        msg = pose_report(self._v['pose_type'], np.concatenate([self._position, quat]), self._v['frame_id'],
+                          self.get_clock().now().to_msg(), f'{self._v["drone"]}/base_link')
         self._pub.publish(msg)
 
 

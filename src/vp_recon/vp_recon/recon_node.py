@@ -63,42 +63,48 @@ from vp_recon.pipeline import (ReconCancelled, ReconConfig, ReconError, Realizat
                                reconstruct_plan)
 from vp_scene.build import build_noisy_scene
 from vp_scene.capture import IDEAL, REALISTIC, CaptureModel
-from vp_scene.camera import poses_to_cameras
-from vp_scene.cloud import numpy_to_pointcloud2, realizations_from_cloud
+from vp_scene.messages import (aggregate_score, error_score, numpy_to_pointcloud2, placements_of, plan_key,
+                               pose_array_to_cameras, realization_score, realizations_from_cloud, score_msg)
 from vp_scene.layout import Layout
-from vp_scene.node_runtime import declare_typed, run_node, typed_values
+from vp_scene.node_runtime import INT_MAX, Param, declare_typed, run_node, typed_values
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 Score = ReconstructionScore
 
-#: The node's parameters: name -> (default, description); the default's type is enforced.
+#: The node's parameters (:class:`vp_scene.node_runtime.Param`): default (its type is enforced),
+#: description, the range the node enforces; all are read for every plan.
+_M = (0.0, math.inf)
 PARAMS = {
-    'output_folder': (str(Path.home() / '.ros' / 'vp_recon'), 'a plan-<time> folder per plan goes here'),
-    'width': (2000, 'rendered image width, pixels'),
-    'height': (1500, 'rendered image height, pixels'),
-    'fov': (math.pi / 2, 'horizontal field of view, rad (the planner\'s)'),
-    'sparse_mode': ('auto', 'auto (incremental for a realistic capture, known_poses for the ideal one) | '
-                            'known_poses | incremental | refined_poses'),
-    'capture': ('realistic', 'realistic (hover and localization errors, sensor noise) | ideal (none)'),
-    'hover_position_sigma': (REALISTIC.hover_position_sigma, 'capture: hover error, m per axis'),
-    'hover_attitude_sigma': (REALISTIC.hover_attitude_sigma, 'capture: hover error of the optical axis, deg'),
-    'report_position_sigma': (REALISTIC.report_position_sigma, 'capture: localization error, m per axis'),
-    'report_attitude_sigma': (REALISTIC.report_attitude_sigma, 'capture: localization error, deg'),
-    'sensor_noise': (REALISTIC.sensor_noise, 'capture: image noise std, fraction of full scale'),
-    'capture_seed': (0, 'capture: seed of the draws'),
-    'dense': (True, 'CPU dense stereo (else the sparse cloud is scored)'),
-    'matching': ('auto', 'image pairs SIFT matches: auto (from the poses from 8 cameras up) | exhaustive | poses'),
-    'fscore_threshold': (DEFAULT_FSCORE_THRESHOLD, 'F-score distance threshold, m'),
-    'method': ('', 'label of the scores (default: the method from /camera_plan/info)'),
-    'max_realizations': (0, 'reconstruct only the first n realizations (0: all)'),
-    'scene_timeout': (10.0, 's a plan that arrives before the scene waits for it'),
-    'frame_id': ('map', 'frame of the plans and of the published clouds'),
+    'output_folder': Param(str(Path.home() / '.ros' / 'vp_recon'), 'a plan-<time> folder per plan goes here', None,
+                           False, 'not empty'),
+    'width': Param(2000, 'rendered image width, pixels', (16, INT_MAX)),
+    'height': Param(1500, 'rendered image height, pixels', (16, INT_MAX)),
+    'fov': Param(math.pi / 2, 'horizontal field of view, rad (the planner\'s)', (0.0, math.pi), False,
+                 'the ends are excluded'),
+    'sparse_mode': Param('auto', 'auto (incremental for a realistic capture, known_poses for the ideal one) | '
+                                 'known_poses | incremental | refined_poses'),
+    'capture': Param('realistic', 'realistic (hover and localization errors, sensor noise) | ideal (none)'),
+    'hover_position_sigma': Param(REALISTIC.hover_position_sigma, 'capture: hover error, m per axis', _M),
+    'hover_attitude_sigma': Param(REALISTIC.hover_attitude_sigma, 'capture: hover error of the optical axis, deg',
+                                  (0.0, 10.0)),
+    'report_position_sigma': Param(REALISTIC.report_position_sigma, 'capture: localization error, m per axis', _M),
+    'report_attitude_sigma': Param(REALISTIC.report_attitude_sigma, 'capture: localization error, deg', (0.0, 10.0)),
+    'sensor_noise': Param(REALISTIC.sensor_noise, 'capture: image noise std, fraction of full scale', (0.0, 0.5)),
+    'capture_seed': Param(0, 'capture: seed of the draws', (0, INT_MAX)),
+    'dense': Param(True, 'CPU dense stereo (else the sparse cloud is scored)'),
+    'matching': Param('auto', 'image pairs SIFT matches: auto (from the poses from 8 cameras up) | exhaustive | poses'),
+    'fscore_threshold': Param(DEFAULT_FSCORE_THRESHOLD, 'F-score distance threshold, m', _M, False, '> 0'),
+    'method': Param('', 'label of the scores (default: the method from /camera_plan/info)'),
+    'max_realizations': Param(0, 'reconstruct only the first n realizations (0: all)', (0, INT_MAX)),
+    'scene_timeout': Param(10.0, 's a plan that arrives before the scene waits for it', _M),
+    'frame_id': Param('map', 'frame of the plans and of the published clouds', None, False, 'not empty'),
     # beside the planner (1 thread by default) the reconstruction takes the other cores
-    'num_threads': (max(1, (os.cpu_count() or 2) - 1), 'threads of COLMAP, OpenCV and the renderer'),
-    'scheduler': ('', "Dask cluster the realizations reconstruct on in parallel: 'local' (workers processes "
-                      "here) or a scheduler address tcp://host:8786; '' (default): in this process"),
-    'workers': (max(1, (os.cpu_count() or 2) - 1), "worker processes of scheduler 'local', one thread each"),
+    'num_threads': Param(max(1, (os.cpu_count() or 2) - 1), 'threads of COLMAP, OpenCV and the renderer', (1, INT_MAX)),
+    'scheduler': Param('', "Dask cluster the realizations reconstruct on in parallel: 'local' (workers processes "
+                           "here) or a scheduler address tcp://host:8786; '' (default): in this process"),
+    'workers': Param(max(1, (os.cpu_count() or 2) - 1), "worker processes of scheduler 'local', one thread each",
+                     (1, INT_MAX)),
 }
 
 #: /camera_plan/info messages remembered to find the one of a plan.
@@ -141,21 +147,12 @@ def check_parameters(values: dict) -> dict:
     return v
 
 
-def _plan_key(header, poses) -> tuple:
-    """What identifies a plan across /camera_plan and /camera_plan/info: stamp, frame, poses."""
-    return (header.stamp.sec, header.stamp.nanosec, header.frame_id,
-            tuple(round(x, 9) for p in poses for x in (p.position.x, p.position.y, p.position.z,
-                                                       p.orientation.x, p.orientation.y, p.orientation.z,
-                                                       p.orientation.w)))
-
-
 class ReconNode(Node):
     """ROS 2 adapter: plans and scenes in, :func:`reconstruct_plan` calls, scores out."""
 
     def __init__(self) -> None:
         super().__init__('recon')
-        declare_typed(self, PARAMS)
-        check_parameters({n: self.get_parameter(n).value for n in PARAMS})  # ValueError: exit 2
+        declare_typed(self, PARAMS, check_parameters)  # ValueError: exit 2
         self.add_on_set_parameters_callback(self._on_set_parameters)
         # Mesa's llvmpipe renderer reads its thread count when the first context is created
         os.environ.setdefault('LP_NUM_THREADS', str(self._param('num_threads')))
@@ -237,13 +234,13 @@ class ReconNode(Node):
 
     def _on_info(self, msg: CameraPlan) -> None:
         with self._lock:
-            self._infos[_plan_key(msg.header, msg.poses)] = msg
+            self._infos[plan_key(msg.header, msg.poses)] = msg
             while len(self._infos) > _INFO_MEMORY:
                 self._infos.popitem(last=False)
 
     def _info_of(self, plan: PoseArray) -> Optional[CameraPlan]:
         with self._lock:
-            return self._infos.get(_plan_key(plan.header, plan.poses))
+            return self._infos.get(plan_key(plan.header, plan.poses))
 
     def _on_plan(self, msg: PoseArray) -> None:
         with self._lock:
@@ -289,8 +286,7 @@ class ReconNode(Node):
             folder = desc.models_folder
             try:  # from the plants' placements, not the scenario: no layout file needed here
                 layout = Layout.from_placements(
-                    desc.scenario or 'scene', [(p.model, p.yaw, p.scale, p.position.x, p.position.y)
-                                               for p in desc.plants], source='/scene/description')
+                    desc.scenario or 'scene', placements_of(desc), source='/scene/description')
                 scene, _ = build_noisy_scene(
                     scenario=layout, models=folder or None, seed=desc.seed,
                     points_per_plant=desc.points_per_plant, plant_spacing=desc.plant_spacing,
@@ -320,8 +316,7 @@ class ReconNode(Node):
         try:
             config = self._config()  # the parameters as they are now
             try:
-                cameras = poses_to_cameras([[p.position.x, p.position.y, p.position.z, p.orientation.x,
-                                             p.orientation.y, p.orientation.z, p.orientation.w] for p in plan.poses])
+                cameras = pose_array_to_cameras(plan.poses)
             except ValueError as exc:
                 raise ReconError(Score.EMPTY_PLAN, f'the plan has unusable poses: {exc}')
             if not np.all(np.isfinite(cameras)):
@@ -358,11 +353,7 @@ class ReconNode(Node):
             except (OSError, ValueError) as exc:
                 self.get_logger().error(f'could not write the outputs of realization {k}: {exc}')
             done.append(res)
-            msg = self._score(k, K, n_cams, plan)
-            msg.chamfer, msg.accuracy, msg.completeness = (100 * res.chamfer, 100 * res.accuracy,
-                                                           100 * res.completeness)
-            msg.chamfer_shape, msg.registered_images = 100 * res.chamfer_shape, int(res.images)
-            msg.fscore, msg.num_points = float(res.fscore), int(len(res.points))
+            msg = realization_score(self._score(k, K, n_cams, plan), res)
             self.score_pub.publish(msg)
             self._publish_clouds(done, frame)
             self.get_logger().info(f'realization {k}: Chamfer x100 {msg.chamfer:.3f}, {msg.num_points} points '
@@ -394,17 +385,9 @@ class ReconNode(Node):
                     else str(exc))
             self._publish_error(exc.code, text, Score.AGGREGATE, n_cams, plan, realizations=len(done))
             return
-        agg = self._score(Score.AGGREGATE, K, n_cams, plan)
-        per = result.realizations
-        agg.chamfer, agg.chamfer_std = 100 * result.chamfer_mean, 100 * result.chamfer_std
-        agg.chamfer_shape = 100 * result.chamfer_shape_mean
-        agg.registered_images = int(min(r.images for r in per))
-        agg.accuracy = float(np.mean([100 * r.accuracy for r in per]))
-        agg.completeness = float(np.mean([100 * r.completeness for r in per]))
-        agg.fscore = float(np.mean([r.fscore for r in per]))
-        agg.num_points = int(np.mean([len(r.points) for r in per]))
+        agg = aggregate_score(self._score(Score.AGGREGATE, K, n_cams, plan), result)
         self.get_logger().info(f'aggregate: Chamfer x100 {agg.chamfer:.3f} +- {agg.chamfer_std:.3f} '
-                               f'over {len(per)} realizations')
+                               f'over {len(result.realizations)} realizations')
         self.score_pub.publish(agg)
 
     # ---------------------------------------------------------------- outputs
@@ -417,25 +400,14 @@ class ReconNode(Node):
                                                      stamp=self.get_clock().now().to_msg()))
 
     def _score(self, realization: int, K: int, images: int, plan: Optional[PoseArray]) -> Score:
-        info = self._info_of(plan) if plan is not None else None
-        msg = Score()
-        msg.header.frame_id = self._param('frame_id')
-        msg.header.stamp = self.get_clock().now().to_msg()
-        msg.method = self._param('method') or (info.method if info is not None else '')
-        msg.realization, msg.realizations = int(realization), int(K)
-        msg.num_images = int(images)
-        msg.reward = float(info.reward) if info is not None else math.nan
-        msg.reward_model = info.reward_model if info is not None else ''
-        msg.fscore_threshold = float(self._param('fscore_threshold'))
-        msg.capture = self._param('capture')
-        return msg
+        return score_msg(self._param('frame_id'), self.get_clock().now().to_msg(), realization, K, images,
+                         self._param('fscore_threshold'), self._param('capture'), self._param('method'),
+                         self._info_of(plan) if plan is not None else None)
 
     def _publish_error(self, code: int, text: str, realization: int, images: int, plan: Optional[PoseArray],
                        realizations: int = 0) -> None:
         K = realizations if realization == Score.AGGREGATE else 1
-        msg = self._score(realization, K, images, plan)
-        msg.error_code, msg.error_msg = int(code), text
-        msg.chamfer = msg.accuracy = msg.completeness = msg.chamfer_shape = float('nan')
+        msg = error_score(self._score(realization, K, images, plan), code, text)
         where = 'plan' if realization == Score.AGGREGATE else f'realization {realization}'
         self.get_logger().error(f'{where}: {text}')
         self.score_pub.publish(msg)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import fnmatch
 import importlib
+import math
 import time
 from typing import Dict
 
@@ -22,12 +23,13 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from vp_recon.recording import RUN_TOPICS, RecordingError, RunRecording, qos_profiles_yaml
-from vp_scene.node_runtime import declare_typed, run_node, typed_values
+from vp_scene.node_runtime import Param, declare_typed, run_node, typed_values
 
+#: The node's parameters (:class:`vp_scene.node_runtime.Param`): all read once, at start (read_only).
 PARAMS = {
-    'output': ('run.mcap', 'the MCAP file to write (its folder is created)'),
-    'topics': (list(RUN_TOPICS), 'topic patterns to record (fnmatch: * also matches /)'),
-    'discovery_period': (0.5, 's between two looks at the graph for new topics'),
+    'output': Param('run.mcap', 'the MCAP file to write (its folder is created)', None, True, 'not empty'),
+    'topics': Param(list(RUN_TOPICS), 'topic patterns to record (fnmatch: * also matches /)', None, True),
+    'discovery_period': Param(0.5, 's between two looks at the graph for new topics', (0.0, math.inf), True, '> 0'),
 }
 
 
@@ -50,8 +52,7 @@ def get_message(type_name: str) -> type:
 class RecorderNode(Node):
     def __init__(self) -> None:
         super().__init__('recorder')
-        declare_typed(self, PARAMS)
-        v = check_parameters({n: self.get_parameter(n).value for n in PARAMS})
+        v = declare_typed(self, PARAMS, check_parameters)
         self._patterns = list(v['topics']) or list(RUN_TOPICS)
         try:
             self.recording = RunRecording(v['output'])

@@ -25,15 +25,16 @@ from sensor_msgs.msg import PointCloud2
 from vp_interfaces.msg import FleetAssignment
 
 from vp_recon.viewer import PlanViewer, ViewerError, show_message
-from vp_scene.node_runtime import declare_typed, run_node, typed_values
+from vp_scene.node_runtime import INT_MAX, Param, declare_typed, run_node, typed_values
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 POSE_TYPES = {'geometry_msgs/msg/PoseStamped': PoseStamped, 'nav_msgs/msg/Odometry': Odometry}
 
+#: The node's parameters (:class:`vp_scene.node_runtime.Param`): all read once, at start (read_only).
 PARAMS = {
-    'port': (8080, 'port of the viewer on 127.0.0.1'),
-    'max_points': (60000, 'points shown per cloud (a random subset of bigger ones)'),
-    'pose_topics': ('/*/pose', 'fnmatch pattern of the drones\' pose topics'),
+    'port': Param(8080, 'port of the viewer on 127.0.0.1', (1, 65535), True),
+    'max_points': Param(60000, 'points shown per cloud (a random subset of bigger ones)', (1, INT_MAX), True),
+    'pose_topics': Param('/*/pose', 'fnmatch pattern of the drones\' pose topics', None, True),
 }
 
 
@@ -49,8 +50,7 @@ def check_parameters(values: dict) -> dict:
 class ViewerNode(Node):
     def __init__(self) -> None:
         super().__init__('viewer')
-        declare_typed(self, PARAMS)
-        v = check_parameters({n: self.get_parameter(n).value for n in PARAMS})
+        v = declare_typed(self, PARAMS, check_parameters)
         try:
             self.viewer = PlanViewer(port=v['port'], max_points=v['max_points'])
         except ViewerError as exc:

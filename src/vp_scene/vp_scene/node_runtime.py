@@ -26,6 +26,16 @@ Typed parameters: every parameter is declared with ``dynamic_typing=True`` and c
 so that a wrong type is a one-line error like any other bad value (rclpy would raise
 InvalidParameterTypeException with a traceback), and an integer where a float is expected
 (``-p fov:=2``) is simply accepted.
+
+Parameter descriptors: a node's parameters are :class:`Param` entries (default, description,
+``range``, ``read_only``, ``constraints``), so that ``ros2 param describe`` on a stock install
+shows what the node enforces: the inclusive range as an IntegerRange (integer default) or a
+FloatingPointRange (float default), ``read_only`` where a change at run time would not be
+honoured, and the rules a range cannot say (choices, excluded ends) as additional constraints.
+rclpy refuses a ``set_parameters`` outside the range or of a read-only parameter before the
+node's own callback runs. At start, :func:`declare_typed` declares the parameters without ranges,
+runs the node's check (its own one-line messages), checks the ranges itself (a one-line
+ValueError, not rclpy's exception) and only then attaches the full descriptors.
 """
 from __future__ import annotations
 
@@ -35,10 +45,10 @@ import signal
 import sys
 import threading
 import traceback
-from typing import Any, Callable, Optional
+from typing import Any, Callable, NamedTuple, Optional
 
-__all__ = ["SHUTDOWN_DEADLINE", "EXIT_OK", "EXIT_CRASHED", "EXIT_BAD_PARAMETERS", "coerce",
-           "declare_typed", "typed_values", "run_node"]
+__all__ = ["SHUTDOWN_DEADLINE", "EXIT_OK", "EXIT_CRASHED", "EXIT_BAD_PARAMETERS", "INT_MAX", "Param", "coerce",
+           "declare_typed", "descriptor", "typed_values", "run_node"]
 
 #: Seconds from the first SIGINT/SIGTERM to the end of the process, at most.
 SHUTDOWN_DEADLINE = 5.0
@@ -48,6 +58,53 @@ SHUTDOWN_GRACE = 3.0
 EXIT_OK, EXIT_CRASHED, EXIT_BAD_PARAMETERS = 0, 1, 2
 
 _KINDS = {bool: "a boolean", int: "an integer", float: "a number", str: "a string"}
+
+#: Upper end of an IntegerRange for a parameter bounded below only (int64, the ROS integer).
+INT_MAX = 2 ** 63 - 1
+
+
+class Param(NamedTuple):
+    """One node parameter: its default (whose type is enforced), a description, the inclusive
+    ``range`` (lo, hi) the node enforces (``math.inf``/:data:`INT_MAX` for no upper end), whether
+    it is ``read_only`` (fixed at start: a change would not be honoured) and the
+    ``constraints`` a range cannot say (e.g. the choices of a string)."""
+
+    default: Any
+    description: str
+    range: Optional[tuple] = None
+    read_only: bool = False
+    constraints: str = ""
+
+
+def descriptor(name: str, spec: Any, limits: bool = True) -> Any:
+    """The rcl_interfaces ParameterDescriptor of ``spec`` (a :class:`Param` or a (default,
+    description) pair), dynamically typed; ``limits=False`` leaves out range and read_only."""
+    from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+
+    p = Param(*spec)
+    d = ParameterDescriptor(name=name, description=p.description, additional_constraints=p.constraints,
+                            dynamic_typing=True)
+    if limits:
+        d.read_only = p.read_only
+        if p.range is not None:
+            lo, hi = p.range
+            if isinstance(p.default, bool) or not isinstance(p.default, (int, float)):
+                raise TypeError(f"parameter '{name}': a range needs a numeric default")
+            if isinstance(p.default, int):
+                d.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi), step=1)]
+            else:
+                d.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
+    return d
+
+
+def _check_range(name: str, spec: Any, value: Any) -> None:
+    p = Param(*spec)
+    if p.range is None or isinstance(value, bool) or not isinstance(value, (int, float)):
+        return
+    lo, hi = p.range
+    if not lo <= value <= hi:
+        top = "" if hi in (math.inf, INT_MAX) else f" and <= {hi:g}"
+        raise ValueError(f"parameter '{name}' must be >= {lo:g}{top}, got {value!r}")
 
 
 def coerce(name: str, value: Any, kind: type) -> Any:
@@ -71,13 +128,24 @@ def coerce(name: str, value: Any, kind: type) -> Any:
     return value
 
 
-def declare_typed(node: Any, specs: dict) -> None:
-    """Declare ``specs`` = {name: (default, description)} on ``node``, dynamically typed (the
-    type of the default is enforced by :func:`typed_values` instead)."""
-    from rcl_interfaces.msg import ParameterDescriptor
-
-    for name, (default, description) in specs.items():
-        node.declare_parameter(name, default, ParameterDescriptor(description=description, dynamic_typing=True))
+def declare_typed(node: Any, specs: dict, check: Optional[Callable[[dict], dict]] = None) -> dict:
+    """Declare ``specs`` = {name: :class:`Param` or (default, description)} on ``node``,
+    dynamically typed (the type of the default is enforced by :func:`typed_values` instead), and
+    return the checked start values: ``check(values)`` (the node's rules, its own messages;
+    default :func:`typed_values`), then each range. ValueError names the first bad parameter.
+    The full descriptors (ranges, read_only) are attached after the checks (see the module
+    docstring), so rclpy enforces them from then on."""
+    for name, spec in specs.items():
+        node.declare_parameter(name, Param(*spec).default, descriptor(name, spec, limits=False))
+    values = {name: node.get_parameter(name).value for name in specs}
+    checked = check(values) if check is not None else typed_values(specs, values)
+    for name, spec in specs.items():
+        _check_range(name, spec, values[name])
+    for name, spec in specs.items():
+        p = Param(*spec)
+        if p.range is not None or p.read_only:
+            node.set_descriptor(name, descriptor(name, spec))
+    return checked
 
 
 def typed_values(specs: dict, values: dict) -> dict:

@@ -17,22 +17,22 @@ codes and parameter types follow :mod:`vp_scene.node_runtime`.
 """
 from __future__ import annotations
 
+import math
 import sys
 from pathlib import Path
 from typing import Any, Optional
 
 import numpy as np
-from geometry_msgs.msg import Point
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
-from vp_interfaces.msg import PlantPlacement, SceneDescription
+from vp_interfaces.msg import SceneDescription
 
 from .build import build_noisy_scene
-from .cloud import numpy_to_pointcloud2
-from .node_runtime import declare_typed, run_node, typed_values
+from .messages import numpy_to_pointcloud2, scene_description_msg
+from .node_runtime import INT_MAX, Param, declare_typed, run_node, typed_values
 from .wind import NoisyScene
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
@@ -64,7 +64,20 @@ _DESCRIPTIONS = {
     "row_spacing": "m between rows",
     "frame_id": "frame of the published clouds",
 }
-SPECS = {name: (default, _DESCRIPTIONS[name]) for name, default in DEFAULTS.items()}
+#: The ranges the scene enforces (its layout, wind and sampling rules); every parameter is read
+#: again on a change (the scene is rebuilt), none is read_only.
+_RANGES = {
+    "seed": (0, INT_MAX),
+    "levels": (1, INT_MAX),
+    "realizations": (1, INT_MAX),
+    "wind_variance": (0.0, math.inf),
+    "points_per_plant": (1, INT_MAX),
+    "plant_spacing": (0.0, math.inf),
+    "row_spacing": (0.0, math.inf),
+}
+_CONSTRAINTS = {"plant_spacing": "> 0", "row_spacing": "> 0", "frame_id": "not empty"}
+SPECS = {name: Param(default, _DESCRIPTIONS[name], _RANGES.get(name), False, _CONSTRAINTS.get(name, ""))
+         for name, default in DEFAULTS.items()}
 
 
 def check_params(values: dict[str, Any]) -> dict[str, Any]:
@@ -104,8 +117,7 @@ class SceneNode(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("scene", **kwargs)
-        declare_typed(self, SPECS)
-        self._values = check_params({n: self.get_parameter(n).value for n in DEFAULTS})
+        self._values = declare_typed(self, SPECS, check_params)
         self._noisy = build_from_params(self._values)          # raises before anything is published
         self._candidate: Optional[tuple[dict, NoisyScene]] = None  # validated, not yet set
         self._pub_points = self.create_publisher(PointCloud2, "/scene/points", LATCHED)
@@ -163,20 +175,7 @@ class SceneNode(Node):
         self._pub_noisy.publish(numpy_to_pointcloud2(
             noisy.points.reshape(-1, 3), np.tile(scene.colors, (k, 1)),
             realization=np.repeat(np.arange(k, dtype=np.uint16), p), frame_id=frame, stamp=stamp))
-        desc = SceneDescription()
-        desc.header.stamp, desc.header.frame_id = stamp, frame
-        desc.scenario = v["scenario"]  # the name or the layout file as given; the plants say where they stand
-        desc.models_folder = v["models_folder"]
-        desc.seed = v["seed"]
-        desc.points_per_plant = v["points_per_plant"]
-        desc.plant_spacing, desc.row_spacing = v["plant_spacing"], v["row_spacing"]
-        desc.levels, desc.realizations = noisy.config.levels, noisy.config.realizations
-        desc.wind_variance, desc.wind_direction = noisy.config.variance, noisy.config.direction
-        desc.n_wind = [float(w) for w in noisy.n_wind]
-        desc.plants = [PlantPlacement(model=pl.model_name, yaw=float(pl.yaw), scale=float(pl.scale),
-                                      position=Point(x=float(pl.position[0]), y=float(pl.position[1]),
-                                                     z=float(pl.position[2])))
-                       for pl in scene.plants]
+        desc = scene_description_msg(noisy, v, frame, stamp)
         self._pub_desc.publish(desc)
         self.get_logger().info(summary(noisy))
 

@@ -1,0 +1,273 @@
+"""The suite's ROS message conversions: one home, called by every node and tool (the science
+modules never see a message).
+
+* clouds: numpy <-> ``sensor_msgs/PointCloud2`` (the codec is :mod:`vp_scene.cloud`, re-exported);
+* poses: (N, 7) ``[x, y, z, qx, qy, qz, qw]`` <-> ``geometry_msgs/Pose`` lists, one pose
+  <-> ``Pose``, a position (3,) <-> ``geometry_msgs/Point``;
+* plans: cameras (N, 6) ``[c, v]`` <-> ``geometry_msgs/PoseArray`` (the body convention of
+  :mod:`vp_scene.camera`: +x of each pose = optical axis), a plan and its figures ->
+  ``vp_interfaces/CameraPlan``, a plan's identity across the two topics (:func:`plan_key`);
+* frustums: cameras -> ``visualization_msgs/MarkerArray`` (RViz);
+* scenes: a noisy scene -> ``vp_interfaces/SceneDescription``, and its plant placements back;
+* scores: a reconstruction's figures (one realization, the aggregate, or an error) ->
+  ``vp_interfaces/ReconstructionScore`` (distances x 100, as the message says), and back to a
+  plain record (:func:`score_record`);
+* drones: a pose report (``PoseStamped`` or ``nav_msgs/Odometry``, :data:`POSE_TYPES`) <-> a
+  position (3,) and a pose (7,); per-drone topics from a template (:func:`drone_topic`).
+
+Degenerate cases: an empty pose list gives a (0, 7) array and back; non-finite numbers pass
+through unchanged (the callers decide: the dispatcher refuses them, the recon reports them).
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Optional, Sequence
+
+import numpy as np
+from geometry_msgs.msg import Point, Pose, PoseArray, PoseStamped
+from nav_msgs.msg import Odometry
+from numpy.typing import ArrayLike, NDArray
+from std_msgs.msg import ColorRGBA
+from visualization_msgs.msg import Marker, MarkerArray
+
+from vp_interfaces.msg import CameraPlan, PlantPlacement, ReconstructionScore, SceneDescription
+
+from .camera import cameras_to_poses, poses_to_cameras, rotation_matrix
+from .cloud import numpy_to_pointcloud2, pack_rgb, pointcloud2_to_numpy, realizations_from_cloud, unpack_rgb
+
+__all__ = [
+    "numpy_to_pointcloud2", "pointcloud2_to_numpy", "realizations_from_cloud", "pack_rgb", "unpack_rgb",
+    "point_msg", "point_array", "pose_msg", "pose_array", "poses_to_msgs", "msgs_to_poses", "position_of",
+    "cameras_to_pose_array", "pose_array_to_cameras", "camera_plan_msg", "plan_key", "frustum_markers",
+    "scene_description_msg", "placements_of", "POSE_TYPES", "drone_topic", "pose_report",
+    "score_msg", "realization_score", "aggregate_score", "error_score", "score_record",
+]
+
+
+# ---------------------------------------------------------------- points and poses
+def point_msg(xyz: ArrayLike) -> Point:
+    """``geometry_msgs/Point`` of a position (3,)."""
+    x, y, z = (float(c) for c in np.asarray(xyz, dtype=np.float64).reshape(3))
+    return Point(x=x, y=y, z=z)
+
+
+def point_array(p: Point) -> NDArray[np.float64]:
+    """(3,) of a ``geometry_msgs/Point``."""
+    return np.array([p.x, p.y, p.z], dtype=np.float64)
+
+
+def pose_msg(pose: ArrayLike) -> Pose:
+    """``geometry_msgs/Pose`` of ``[x, y, z, qx, qy, qz, qw]``."""
+    x, y, z, qx, qy, qz, qw = (float(c) for c in np.asarray(pose, dtype=np.float64).reshape(7))
+    msg = Pose()
+    msg.position.x, msg.position.y, msg.position.z = x, y, z
+    msg.orientation.x, msg.orientation.y, msg.orientation.z, msg.orientation.w = qx, qy, qz, qw
+    return msg
+
+
+def pose_array(pose: Pose) -> NDArray[np.float64]:
+    """(7,) ``[x, y, z, qx, qy, qz, qw]`` of a ``geometry_msgs/Pose``."""
+    p, q = pose.position, pose.orientation
+    return np.array([p.x, p.y, p.z, q.x, q.y, q.z, q.w], dtype=np.float64)
+
+
+def poses_to_msgs(poses: ArrayLike) -> list:
+    """``geometry_msgs/Pose`` list of poses (N, 7)."""
+    return [pose_msg(p) for p in np.asarray(poses, dtype=np.float64).reshape(-1, 7)]
+
+
+def msgs_to_poses(poses: Sequence[Pose]) -> NDArray[np.float64]:
+    """Poses (N, 7) of a ``geometry_msgs/Pose`` sequence ((0, 7) when empty)."""
+    return np.array([pose_array(p) for p in poses], dtype=np.float64).reshape(-1, 7)
+
+
+# ---------------------------------------------------------------- drones
+#: A drone's pose reports (the dispatcher's and sim_drone's ``pose_type``) -> message class.
+POSE_TYPES = {"pose": PoseStamped, "odometry": Odometry}
+
+
+def drone_topic(template: str, drone: str) -> str:
+    """The topic of one drone: ``template`` with ``{drone}`` replaced by its name."""
+    return template.replace('{drone}', drone)
+
+
+def position_of(msg: Any) -> NDArray[np.float64]:
+    """Position (3,) of a drone's report: ``geometry_msgs/PoseStamped`` or ``nav_msgs/Odometry``."""
+    pose = msg.pose.pose if isinstance(msg, Odometry) else msg.pose
+    return point_array(pose.position)
+
+
+def pose_report(pose_type: str, pose: ArrayLike, frame_id: str, stamp: Any, child_frame_id: str = "") -> Any:
+    """A drone's report of its pose (7,): ``PoseStamped`` or ``Odometry`` (with ``child_frame_id``)."""
+    msg = POSE_TYPES[pose_type]()
+    msg.header.stamp, msg.header.frame_id = stamp, frame_id
+    if isinstance(msg, Odometry):
+        msg.child_frame_id = child_frame_id
+        msg.pose.pose = pose_msg(pose)
+    else:
+        msg.pose = pose_msg(pose)
+    return msg
+
+
+# ---------------------------------------------------------------- plans
+def cameras_to_pose_array(cameras: ArrayLike, frame_id: str, stamp: Any = None) -> PoseArray:
+    """``geometry_msgs/PoseArray`` of cameras (N, 6) = [c, v] (+x of each pose = optical axis)."""
+    msg = PoseArray()
+    msg.header.frame_id = frame_id
+    if stamp is not None:
+        msg.header.stamp = stamp
+    msg.poses = poses_to_msgs(cameras_to_poses(cameras))
+    return msg
+
+
+def pose_array_to_cameras(poses: Sequence[Pose]) -> NDArray[np.float64]:
+    """Cameras (N, 6) = [c, v] of a PoseArray's poses (ValueError for unusable quaternions)."""
+    return poses_to_cameras(msgs_to_poses(poses))
+
+
+def camera_plan_msg(plan: PoseArray, reward: float, reward_model: str, method: str, evaluations: int,
+                    planning_time: float) -> CameraPlan:
+    """``vp_interfaces/CameraPlan``: the plan's header and poses with the planner's figures."""
+    info = CameraPlan()
+    info.header, info.poses = plan.header, plan.poses
+    info.reward, info.reward_model, info.method = float(reward), reward_model, method
+    info.evaluations, info.planning_time = int(evaluations), float(planning_time)
+    return info
+
+
+def plan_key(header: Any, poses: Sequence[Pose]) -> tuple:
+    """What identifies a plan across ``/camera_plan`` and ``/camera_plan/info``: stamp, frame, poses
+    (rounded to 1e-9)."""
+    return (header.stamp.sec, header.stamp.nanosec, header.frame_id,
+            tuple(round(float(x), 9) for x in msgs_to_poses(poses).ravel()))
+
+
+def frustum_markers(cameras: ArrayLike, frame_id: str, stamp: Any, fov: float,
+                    depth: float = 0.4, aspect: float = 4.0 / 3.0) -> MarkerArray:
+    """One LINE_LIST frustum (apex at c, far plane at ``depth`` along v) and a label a camera,
+    after a DELETEALL that clears the previous plan's."""
+    out = MarkerArray()
+    clear = Marker()
+    clear.action = Marker.DELETEALL
+    out.markers.append(clear)
+    half_w = depth * math.tan(fov / 2.0)
+    half_h = half_w / aspect
+    for i, cam in enumerate(np.asarray(cameras, dtype=float)):
+        c = cam[:3]
+        rot = rotation_matrix(cam[3:6])  # columns: body x (optical axis), y (left), z (up)
+        x, y, z = rot[:, 0], rot[:, 1], rot[:, 2]
+        corners = [c + depth * x + sy * half_w * y + sz * half_h * z
+                   for sy, sz in ((1, 1), (-1, 1), (-1, -1), (1, -1))]
+        m = Marker()
+        m.header.frame_id = frame_id
+        m.header.stamp = stamp
+        m.ns = 'frustums'
+        m.id = i
+        m.type = Marker.LINE_LIST
+        m.action = Marker.ADD
+        m.pose.orientation.w = 1.0
+        m.scale.x = 0.01
+        m.color = ColorRGBA(r=1.0, g=0.55, b=0.0, a=1.0)
+        segments = []
+        for k in range(4):
+            segments += [c, corners[k], corners[k], corners[(k + 1) % 4]]
+        m.points = [point_msg(p) for p in segments]
+        out.markers.append(m)
+        label = Marker()
+        label.header = m.header
+        label.ns = 'labels'
+        label.id = i
+        label.type = Marker.TEXT_VIEW_FACING
+        label.action = Marker.ADD
+        label.pose.position = point_msg(c + np.array([0.0, 0.0, 0.1]))
+        label.pose.orientation.w = 1.0
+        label.scale.z = 0.1
+        label.color = ColorRGBA(r=1.0, g=1.0, b=1.0, a=1.0)
+        label.text = f'cam {i}'
+        out.markers.append(label)
+    return out
+
+
+# ---------------------------------------------------------------- scenes
+def scene_description_msg(noisy: Any, values: dict, frame_id: str, stamp: Any) -> SceneDescription:
+    """``vp_interfaces/SceneDescription`` of a :class:`vp_scene.wind.NoisyScene` built from the
+    scene node's parameter ``values`` (scenario as given, models_folder, seed, sampling)."""
+    scene, cfg = noisy.scene, noisy.config
+    desc = SceneDescription()
+    desc.header.stamp, desc.header.frame_id = stamp, frame_id
+    desc.scenario = values["scenario"]  # the name or the layout file as given; the plants say where they stand
+    desc.models_folder = values["models_folder"]
+    desc.seed = values["seed"]
+    desc.points_per_plant = values["points_per_plant"]
+    desc.plant_spacing, desc.row_spacing = values["plant_spacing"], values["row_spacing"]
+    desc.levels, desc.realizations = cfg.levels, cfg.realizations
+    desc.wind_variance, desc.wind_direction = cfg.variance, cfg.direction
+    desc.n_wind = [float(w) for w in noisy.n_wind]
+    desc.plants = [PlantPlacement(model=pl.model_name, yaw=float(pl.yaw), scale=float(pl.scale),
+                                  position=point_msg(pl.position))
+                   for pl in scene.plants]
+    return desc
+
+
+def placements_of(desc: SceneDescription) -> list:
+    """The plants of a SceneDescription as (model, yaw, scale, x, y) tuples
+    (:meth:`vp_scene.layout.Layout.from_placements`)."""
+    return [(p.model, p.yaw, p.scale, p.position.x, p.position.y) for p in desc.plants]
+
+
+# ---------------------------------------------------------------- scores
+def score_msg(frame_id: str, stamp: Any, realization: int, realizations: int, num_images: int,
+              fscore_threshold: float, capture: str, method: str = '',
+              info: Optional[CameraPlan] = None) -> ReconstructionScore:
+    """The head of a ``vp_interfaces/ReconstructionScore``: which plan and realization, the
+    settings; the plan's reward and reward model from its ``/camera_plan/info`` (NaN and '' when
+    unknown), the method from ``method`` or else from the info."""
+    msg = ReconstructionScore()
+    msg.header.frame_id, msg.header.stamp = frame_id, stamp
+    msg.method = method or (info.method if info is not None else '')
+    msg.realization, msg.realizations = int(realization), int(realizations)
+    msg.num_images = int(num_images)
+    msg.reward = float(info.reward) if info is not None else math.nan
+    msg.reward_model = info.reward_model if info is not None else ''
+    msg.fscore_threshold = float(fscore_threshold)
+    msg.capture = capture
+    return msg
+
+
+def realization_score(msg: ReconstructionScore, res: Any) -> ReconstructionScore:
+    """``msg`` with the figures of one realization's result (``chamfer``, ``accuracy``,
+    ``completeness``, ``chamfer_shape`` in metres, ``images``, ``fscore``, ``points``)."""
+    msg.chamfer, msg.accuracy, msg.completeness = 100 * res.chamfer, 100 * res.accuracy, 100 * res.completeness
+    msg.chamfer_shape, msg.registered_images = 100 * res.chamfer_shape, int(res.images)
+    msg.fscore, msg.num_points = float(res.fscore), int(len(res.points))
+    return msg
+
+
+def aggregate_score(msg: ReconstructionScore, result: Any) -> ReconstructionScore:
+    """``msg`` with the aggregate figures of a plan's result (``chamfer_mean``, ``chamfer_std``,
+    ``chamfer_shape_mean`` and its ``realizations``): means over the realizations, the fewest
+    registered images."""
+    per = result.realizations
+    msg.chamfer, msg.chamfer_std = 100 * result.chamfer_mean, 100 * result.chamfer_std
+    msg.chamfer_shape = 100 * result.chamfer_shape_mean
+    msg.registered_images = int(min(r.images for r in per))
+    msg.accuracy = float(np.mean([100 * r.accuracy for r in per]))
+    msg.completeness = float(np.mean([100 * r.completeness for r in per]))
+    msg.fscore = float(np.mean([r.fscore for r in per]))
+    msg.num_points = int(np.mean([len(r.points) for r in per]))
+    return msg
+
+
+def error_score(msg: ReconstructionScore, code: int, text: str) -> ReconstructionScore:
+    """``msg`` as a failure: ``error_code``, ``error_msg`` and NaN distances."""
+    msg.error_code, msg.error_msg = int(code), text
+    msg.chamfer = msg.accuracy = msg.completeness = msg.chamfer_shape = float('nan')
+    return msg
+
+
+def score_record(msg: ReconstructionScore) -> dict:
+    """A realization's score as a plain record (the run summary's ``per_realization`` entries)."""
+    return {'realization': msg.realization, 'chamfer': msg.chamfer, 'chamfer_shape': msg.chamfer_shape,
+            'registered_images': msg.registered_images, 'accuracy': msg.accuracy,
+            'completeness': msg.completeness, 'fscore': msg.fscore, 'points': msg.num_points,
+            'error_code': msg.error_code, 'error_msg': msg.error_msg}
