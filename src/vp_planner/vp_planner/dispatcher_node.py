@@ -39,7 +39,6 @@ from typing import Optional
 
 import numpy as np
 from geometry_msgs.msg import PoseArray, PoseStamped
-from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import PointCloud2
@@ -49,7 +48,7 @@ from vp_planner.fleet import (ASSIGNMENTS, ORIENTATIONS, AssignmentError, FleetT
                               plan_problems)
 from vp_scene.camera import poses_to_cameras
 from vp_scene.messages import POSE_TYPES, drone_topic, msgs_to_poses, point_msg, pose_msg, position_of, realizations_from_cloud
-from vp_scene.node_runtime import Param, declare_typed, run_node, typed_values
+from vp_scene.node_runtime import NewestWins, Param, declare_typed, refuse_bad_changes, run_node, typed_values
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -149,17 +148,16 @@ class DispatcherNode(Node):
     def __init__(self) -> None:
         super().__init__('dispatcher')
         v = declare_typed(self, PARAMS, check_parameters)  # ValueError: exit 2
-        self.add_on_set_parameters_callback(self._on_set_parameters)
+        refuse_bad_changes(self, PARAMS, check_parameters)
 
         self._drones: list[str] = list(v['drones'])
-        self._lock = threading.Condition()
-        self._pending: Optional[PoseArray] = None
+        self._plans = NewestWins()  # of the plans that arrive while one is dispatched, the newest waits
+        self._lock = self._plans.lock
         self._scene: Optional[np.ndarray] = None
         self._scene_problem = ''
         # drone -> (monotonic time of the report, frame_id, position (3,))
         self._reports: dict[str, tuple[float, str, np.ndarray]] = {}
         self._nonfinite: dict[str, tuple] = {}  # drone -> its latest position, when that was not finite
-        self._stop = False
         self._goal_pubs = {}
         pose_type = POSE_TYPES[v['pose_type']]
         for d in self._drones:
@@ -179,20 +177,9 @@ class DispatcherNode(Node):
     def _values(self) -> dict:
         return check_parameters({n: self.get_parameter(n).value for n in PARAMS})
 
-    def _on_set_parameters(self, params) -> SetParametersResult:
-        current = {n: self.get_parameter(n).value for n in PARAMS}
-        try:
-            check_parameters({**current, **{p.name: p.value for p in params}})
-        except ValueError as exc:
-            self.get_logger().warn(f'parameter change refused: {exc}')
-            return SetParametersResult(successful=False, reason=str(exc))
-        return SetParametersResult(successful=True)
-
     def on_shutdown(self, timeout: float) -> bool:
         """SIGINT/SIGTERM: the worker stops waiting; nothing else to wind down."""
-        with self._lock:
-            self._stop = True
-            self._lock.notify_all()
+        self._plans.stop()
         return True
 
     # ---------------------------------------------------------------- inputs
@@ -235,32 +222,23 @@ class DispatcherNode(Node):
                                f'{realizations.shape[1]} points (for the stand-off check)')
 
     def _on_plan(self, msg: PoseArray) -> None:
-        with self._lock:
-            if self._pending is not None:
-                self.get_logger().warn('a newer plan arrived: it replaces the one waiting to be dispatched')
-            self._pending = msg
-            self._lock.notify_all()
+        if self._plans.offer(msg):
+            self.get_logger().warn('a newer plan arrived: it replaces the one waiting to be dispatched')
         self.get_logger().info(f'plan received: {len(msg.poses)} poses (frame {msg.header.frame_id!r}, '
                                f'stamp {_stamp(msg.header.stamp)})')
 
     # ---------------------------------------------------------------- work
     def _work(self) -> None:
-        while True:
-            with self._lock:
-                while self._pending is None and not self._stop:
-                    self._lock.wait(0.5)
-                if self._stop:
-                    return
-                plan, self._pending = self._pending, None
+        while (plan := self._plans.take()) is not None:
             try:
                 self._dispatch(plan)
             except _Superseded:
-                if self._stop:
+                if self._plans.stopped:
                     return
                 self.get_logger().info(f'plan {_stamp(plan.header.stamp)} superseded by a newer one before it '
                                        'was dispatched')
             except Exception as exc:  # never let one plan kill the worker
-                if self._stop:
+                if self._plans.stopped:
                     return
                 self._fail(plan, Msg.UNKNOWN, f'{type(exc).__name__}: {exc}', self._values())
 
@@ -268,7 +246,7 @@ class DispatcherNode(Node):
         """Wait (lock held) until ``ready()``, ``timeout`` s, a newer plan (_Superseded) or shutdown."""
         deadline = time.monotonic() + timeout
         while not ready():
-            if self._pending is not None or self._stop:
+            if self._plans.pending is not None or self._plans.stopped:
                 raise _Superseded()
             left = deadline - time.monotonic()
             if left <= 0:
@@ -398,9 +376,7 @@ class DispatcherNode(Node):
             f'longest {result.max_distance:.2f} m): {", ".join(lines)}{spare}')
 
     def destroy_node(self) -> None:
-        with self._lock:
-            self._stop = True
-            self._lock.notify_all()
+        self._plans.stop()
         super().destroy_node()
 
 

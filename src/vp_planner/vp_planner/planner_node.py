@@ -25,7 +25,6 @@ from typing import Optional
 import numpy as np
 import torch
 from geometry_msgs.msg import PoseArray
-from rcl_interfaces.msg import SetParametersResult
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.node import Node
@@ -41,7 +40,8 @@ from vp_planner.optimizers import (MAX_CAMERAS, MAX_EVALUATIONS, METHODS, Budget
                                    check_lawnmower, plan_views, validate_request)
 from vp_planner.reward_models import DEFAULT_REWARD_MODEL, REWARD_MODELS, check_reward_model
 from vp_scene.messages import cameras_to_pose_array, camera_plan_msg, frustum_markers, realizations_from_cloud
-from vp_scene.node_runtime import INT_MAX, Param, declare_typed, run_node, typed_values
+from vp_scene.node_runtime import (INT_MAX, Param, declare_typed, parameter_value, refuse_bad_changes, run_node,
+                                   typed_values)
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -130,7 +130,7 @@ class PlannerNode(Node):
     def __init__(self) -> None:
         super().__init__('planner')
         declare_typed(self, PARAMS, check_parameters)  # ValueError: exit 2
-        self.add_on_set_parameters_callback(self._on_set_parameters)
+        refuse_bad_changes(self, PARAMS, check_parameters)
         torch.set_num_threads(self._param('num_threads'))  # leave the other cores to the recon
 
         self._realizations: Optional[np.ndarray] = None
@@ -153,18 +153,9 @@ class PlannerNode(Node):
         self.get_logger().info('planner ready: waiting for /scene/noisy_points, serving /plan_views')
 
     # ---------------------------------------------------------------- parameters
-    def _on_set_parameters(self, params) -> SetParametersResult:
-        try:
-            check_parameters({p.name: p.value for p in params})
-        except ValueError as exc:
-            return SetParametersResult(successful=False, reason=str(exc))
-        return SetParametersResult(successful=True)
-
     def _param(self, name: str):
-        """The parameter's value with the type of its default (an integer fov is a float)."""
-        return typed_values(PARAMS, {name: self.get_parameter(name).value})[name]
+        return parameter_value(self, PARAMS, name)
 
-    # ---------------------------------------------------------------- life cycle
     def _enter(self) -> None:
         with self._running_lock:
             self._running += 1

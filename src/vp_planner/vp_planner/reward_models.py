@@ -52,6 +52,7 @@ import torch
 
 from vp_scene.camera import CameraModel
 
+from .feasibility import check_realizations
 from .reward import DEFAULT_FOV, DEFAULT_THETA_MATCH, noisy_reward, prepare_points
 
 __all__ = ["REWARD_MODELS", "DEFAULT_REWARD_MODEL", "CoverageParams", "RewardFunction", "make_reward",
@@ -173,13 +174,7 @@ def coverage_reward(cameras: Any, realizations: Any, params: CoverageParams = Co
 
 
 def _points(realizations: Any, max_points: int, seed: int) -> torch.Tensor:
-    R = torch.as_tensor(np.asarray(realizations, dtype=np.float64))
-    if R.ndim == 2:
-        R = R[None]
-    if R.ndim != 3 or R.shape[-1] != 3:
-        raise ValueError(f"realizations must have shape (K, P, 3), got {tuple(R.shape)}")
-    if R.shape[0] == 0 or R.shape[1] == 0:
-        raise ValueError("the point cloud is empty")
+    R = torch.as_tensor(check_realizations(realizations))  # (K, P, 3), validated
     if max_points and R.shape[1] > max_points:
         idx = np.sort(np.random.default_rng(seed).choice(R.shape[1], size=max_points, replace=False))
         R = R[:, torch.as_tensor(idx)]

@@ -51,7 +51,6 @@ from typing import Optional
 
 import numpy as np
 from geometry_msgs.msg import PoseArray
-from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
@@ -66,7 +65,8 @@ from vp_scene.capture import IDEAL, REALISTIC, CaptureModel
 from vp_scene.messages import (aggregate_score, error_score, numpy_to_pointcloud2, placements_of, plan_key,
                                pose_array_to_cameras, realization_score, realizations_from_cloud, score_msg)
 from vp_scene.layout import Layout
-from vp_scene.node_runtime import INT_MAX, Param, declare_typed, run_node, typed_values
+from vp_scene.node_runtime import (INT_MAX, NewestWins, Param, declare_typed, parameter_value, refuse_bad_changes,
+                                   run_node, typed_values)
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -153,20 +153,19 @@ class ReconNode(Node):
     def __init__(self) -> None:
         super().__init__('recon')
         declare_typed(self, PARAMS, check_parameters)  # ValueError: exit 2
-        self.add_on_set_parameters_callback(self._on_set_parameters)
+        refuse_bad_changes(self, PARAMS, check_parameters)
         # Mesa's llvmpipe renderer reads its thread count when the first context is created
         os.environ.setdefault('LP_NUM_THREADS', str(self._param('num_threads')))
         # Importing pycolmap installs glog's SIGTERM handler (a stack trace, then death by the
         # signal); imported here, in the constructor, node_runtime puts its own handler back.
         import pycolmap  # noqa: F401
 
-        self._lock = threading.Condition()
-        self._pending: Optional[PoseArray] = None
+        self._plans = NewestWins()  # of the plans that arrive during a reconstruction, the newest waits
+        self._lock = self._plans.lock
         self._infos: OrderedDict = OrderedDict()  # plan key -> CameraPlan
         self._description: Optional[SceneDescription] = None
         self._truth: Optional[np.ndarray] = None
         self._scene = None  # rebuilt NoisyScene matching _description
-        self._stop = False
         self._run_dir: Optional[Path] = None  # the plan folder being filled (see on_shutdown)
         self.score_pub = self.create_publisher(Score, '/reconstruction/score', 10)
         self.points_pub = self.create_publisher(PointCloud2, '/reconstruction/points', LATCHED)
@@ -182,17 +181,7 @@ class ReconNode(Node):
 
     # ---------------------------------------------------------------- parameters
     def _param(self, name: str):
-        """The parameter's value with the type of its default."""
-        return typed_values(PARAMS, {name: self.get_parameter(name).value})[name]
-
-    def _on_set_parameters(self, params) -> SetParametersResult:
-        current = {n: self.get_parameter(n).value for n in PARAMS}
-        try:
-            check_parameters({**current, **{p.name: p.value for p in params}})
-        except ValueError as exc:
-            self.get_logger().warn(f'parameter change refused: {exc}')
-            return SetParametersResult(successful=False, reason=str(exc))
-        return SetParametersResult(successful=True)
+        return parameter_value(self, PARAMS, name)
 
     def _config(self) -> ReconConfig:
         """The reconstruction settings of the parameters now (read for every plan)."""
@@ -206,9 +195,8 @@ class ReconNode(Node):
         """SIGINT/SIGTERM: the worker abandons its plan at the next stage; nothing to wait for.
         The plan's folder goes with it when nothing was written into it yet (issue 19, item 4:
         an interrupted recon left an empty ``plan-<time>/``); what was written stays."""
-        with self._lock:
-            self._stop = True
-            self._lock.notify_all()
+        with self._lock:  # (the queue's lock: stopped and the folder read together)
+            self._plans.stop()
             run_dir = self._run_dir
         remove_if_empty(run_dir)
         return True
@@ -243,29 +231,20 @@ class ReconNode(Node):
             return self._infos.get(plan_key(plan.header, plan.poses))
 
     def _on_plan(self, msg: PoseArray) -> None:
-        with self._lock:
-            if self._pending is not None:
-                self.get_logger().warn('a newer plan arrived: it replaces the queued one')
-            self._pending = msg
-            self._lock.notify()
+        if self._plans.offer(msg):
+            self.get_logger().warn('a newer plan arrived: it replaces the queued one')
         self.get_logger().info(f'plan received: {len(msg.poses)} cameras (frame {msg.header.frame_id!r})')
 
     # ---------------------------------------------------------------- work
     def _work(self) -> None:
-        while True:
-            with self._lock:
-                while self._pending is None and not self._stop:
-                    self._lock.wait(0.5)
-                if self._stop:
-                    return
-                plan, self._pending = self._pending, None
+        while (plan := self._plans.take()) is not None:
             try:
                 self._reconstruct(plan)
             except ReconCancelled:
                 self.get_logger().info('shutting down: reconstruction abandoned')
                 return
             except Exception as exc:  # never let one plan kill the worker
-                if self._stop:  # the node is being torn down under the worker: nothing to report
+                if self._plans.stopped:  # the node is being torn down under the worker: nothing to report
                     return
                 self.get_logger().error(f'reconstruction crashed: {type(exc).__name__}: {exc}')
                 self._publish_error(Score.UNKNOWN, f'{type(exc).__name__}: {exc}', Score.AGGREGATE, 0, plan)
@@ -276,7 +255,7 @@ class ReconNode(Node):
         A plan that arrives before the scene waits up to ``scene_timeout`` seconds for it (latched
         topics from several nodes arrive in any order at start-up)."""
         with self._lock:
-            self._lock.wait_for(lambda: (self._description is not None and self._truth is not None) or self._stop,
+            self._lock.wait_for(lambda: (self._description is not None and self._truth is not None) or self._plans.stopped,
                                 timeout=self._param('scene_timeout'))
             desc, truth, scene = self._description, self._truth, self._scene
         if desc is None or truth is None:
@@ -342,7 +321,7 @@ class ReconNode(Node):
 
         def progress(stage: str, k: int) -> bool:
             self.get_logger().info(f'realization {k + 1}/{K}: {stage} done')
-            return not self._stop
+            return not self._plans.stopped
 
         def on_realization(res: RealizationResult) -> None:
             k = res.realization
@@ -413,9 +392,7 @@ class ReconNode(Node):
         self.score_pub.publish(msg)
 
     def destroy_node(self) -> None:
-        with self._lock:
-            self._stop = True
-            self._lock.notify_all()
+        self._plans.stop()
         super().destroy_node()
 
 

@@ -48,7 +48,8 @@ import traceback
 from typing import Any, Callable, NamedTuple, Optional
 
 __all__ = ["SHUTDOWN_DEADLINE", "EXIT_OK", "EXIT_CRASHED", "EXIT_BAD_PARAMETERS", "INT_MAX", "Param", "coerce",
-           "declare_typed", "descriptor", "typed_values", "run_node"]
+           "declare_typed", "descriptor", "typed_values", "parameter_value", "refuse_bad_changes", "NewestWins",
+           "run_node"]
 
 #: Seconds from the first SIGINT/SIGTERM to the end of the process, at most.
 SHUTDOWN_DEADLINE = 5.0
@@ -161,6 +162,64 @@ def typed_values(specs: dict, values: dict) -> dict:
             raise ValueError(f"parameter '{name}' must be a finite number, got {v!r}")
         out[name] = v
     return out
+
+
+def parameter_value(node: Any, specs: dict, name: str) -> Any:
+    """The node's parameter ``name`` now, with the type of its default (an integer fov is a float)."""
+    return typed_values(specs, {name: node.get_parameter(name).value})[name]
+
+
+def refuse_bad_changes(node: Any, specs: dict, check: Callable[[dict], dict]) -> None:
+    """Register the node's on-set-parameters callback: a change is applied only when the node's
+    values with the change pass ``check``; else it is refused with ``check``'s message (and a
+    warning in the log). rclpy has refused ranges and read-only parameters before."""
+    from rcl_interfaces.msg import SetParametersResult
+
+    def on_set(params: list) -> Any:
+        current = {n: node.get_parameter(n).value for n in specs}
+        try:
+            check({**current, **{p.name: p.value for p in params}})
+        except ValueError as exc:
+            node.get_logger().warn(f'parameter change refused: {exc}')
+            return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
+
+    node.add_on_set_parameters_callback(on_set)
+
+
+class NewestWins:
+    """A node's work queue where the newest item wins: one slot, a worker thread takes from it.
+
+    :meth:`offer` puts an item in the slot (replacing one that still waits: True), :meth:`take`
+    blocks until there is one or the queue is stopped (then None), :meth:`stop` wakes every
+    waiter. ``lock`` is a Condition the node may share for its other state (``pending`` and
+    ``stopped`` are read under it)."""
+
+    def __init__(self) -> None:
+        self.lock = threading.Condition()
+        self.pending: Any = None
+        self.stopped = False
+
+    def offer(self, item: Any) -> bool:
+        with self.lock:
+            replaced = self.pending is not None
+            self.pending = item
+            self.lock.notify_all()
+        return replaced
+
+    def take(self) -> Any:
+        with self.lock:
+            while self.pending is None and not self.stopped:
+                self.lock.wait(0.5)
+            if self.stopped:
+                return None
+            item, self.pending = self.pending, None
+            return item
+
+    def stop(self) -> None:
+        with self.lock:
+            self.stopped = True
+            self.lock.notify_all()
 
 
 def _exit(code: int) -> None:

@@ -63,15 +63,15 @@ class PlantModel:
     @property
     def z_min(self) -> float:
         """Lowest model-frame height of the plant (points and mesh vertices)."""
-        z = float(self.points[:, 2].min())
-        if self.mesh is not None and len(self.mesh.vertices):
-            z = min(z, float(np.asarray(self.mesh.vertices)[:, 2].min()))
-        return z
+        return self._z_range()[0]
 
     @property
     def z_max(self) -> float:
         """Highest model-frame height of the plant (points and mesh vertices)."""
-        z = float(self.points[:, 2].max())
+        return self._z_range()[1]
+
+    def _z_range(self) -> tuple[float, float]:
+        z = self.points[:, 2]
         if self.mesh is not None and len(self.mesh.vertices):
-            z = max(z, float(np.asarray(self.mesh.vertices)[:, 2].max()))
-        return z
+            z = np.concatenate([z, np.asarray(self.mesh.vertices)[:, 2]])
+        return float(z.min()), float(z.max())
