@@ -37,6 +37,8 @@ from common import (ROOT, SCENARIOS, add_capture, cached, capture_of, capture_ta
                     machine, models_tag, scene)
 
 CACHE = ROOT / 'results' / 'cache' / 'plan_quality'
+#: seed of the design/check split (issue 18: tune on the design half, report the check half)
+SPLIT_SEED = 0
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -50,7 +52,11 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument('--height', type=int, default=1500)
     ap.add_argument('--ground', action=argparse.BooleanOptionalAction, default=None,
                     help='render a textured soil plane under the plants (default: by the capture, as vp_recon.cli)')
-    ap.add_argument('--phase', default='all', choices=['plans', 'recon', 'analyze', 'all'])
+    ap.add_argument('--phase', default='all', choices=['plans', 'recon', 'analyze', 'all', 'check'],
+                    help="check: the design/check split and the check half's Spearman from the per-plan "
+                         "records already in --out's plan_quality.json (no cache needed)")
+    ap.add_argument('--split-seed', type=int, default=SPLIT_SEED,
+                    help='seed of the design/check split of the plans (stratified by family)')
     add_capture(ap)
     ap.add_argument('--variants', nargs='+', default=None,
                     help='analyze: variants to report (default: every one found in the cache)')
@@ -226,20 +232,58 @@ def run_recon(args, client, study: dict) -> dict:
 
 
 def load_study(scenario: str, models: str, variant: str) -> list[dict]:
-    """Plans with their reconstructions (realizations found in the cache) of one variant."""
+    """Every plan of the plan set with its reconstructions (realizations found in the cache) of one
+    variant; a plan without any record has ``recon == {}`` and is counted as skipped, never dropped."""
     folder = CACHE / models_tag(models) / scenario / variant
     out = []
     for p in plans_of(scenario, models):
         recs = {}
         for f in sorted(folder.glob(f'{p["id"]}-k*.json')):
             recs[int(f.stem.rsplit('-k', 1)[1])] = json.loads(f.read_text())
-        if recs:
-            out.append({**p, 'recon': recs})
+        out.append({**p, 'recon': recs})
+    return out
+
+
+def split_halves(plans: list[dict], seed: int = SPLIT_SEED) -> dict[str, str]:
+    """plan id -> 'design' | 'check': within each family the ids are shuffled (seeded) and the
+    first floor(n / 2) design, the rest check (a family of one plan is checked only), so both
+    halves hold every kind of plan. Tune reward models on the design half only."""
+    rng = np.random.default_rng(seed)
+    by_family: dict[str, list[str]] = {}
+    for p in plans:
+        by_family.setdefault(p['family'], []).append(p['id'])
+    half = {}
+    for family in sorted(by_family):
+        ids = sorted(by_family[family])
+        order = rng.permutation(len(ids))
+        for rank, i in enumerate(order):
+            half[ids[i]] = 'design' if rank < len(ids) // 2 else 'check'
+    return half
+
+
+def study_counts(plans: list[dict], chamfer: np.ndarray) -> dict:
+    """planned / reconstructed / failed / skipped of one scenario (skipped: no record at all)."""
+    recorded = np.array([bool(p['recon']) for p in plans], dtype=bool)
+    ok = np.isfinite(chamfer) & recorded
+    return {'planned': len(plans), 'reconstructed': int(ok.sum()), 'failed': int((recorded & ~ok).sum()),
+            'skipped': int((~recorded).sum())}
+
+
+def spearman_halves(ids: list[str], rewards: dict, chamfer: np.ndarray, half: dict[str, str]) -> dict:
+    """{'design': {model: rho}, 'check': {model: rho}} over the recorded plans of each half; a
+    failed reconstruction ranks last (Chamfer inf), a skipped plan is left out (and counted)."""
+    out = {}
+    for name in ('design', 'check'):
+        sel = np.array([half.get(i) == name for i in ids], dtype=bool) & ~np.isnan(chamfer)
+        out[name] = {m: spearman(np.asarray(r)[sel], -chamfer[sel]) for m, r in rewards.items()}
     return out
 
 
 def plan_chamfer(plan: dict, key: str = 'chamfer') -> float:
-    """Mean Chamfer (metres) over the reconstructed realizations; inf when any failed."""
+    """Mean Chamfer (metres) over the reconstructed realizations; inf when any failed; NaN when
+    the plan has no record (skipped)."""
+    if not plan['recon']:
+        return math.nan
     vals = []
     for r in plan['recon'].values():
         v = r.get(key)
@@ -298,7 +342,9 @@ def analyze(args) -> dict:
             vname = f'{variant}/{cloud}'
             vres: dict = {'plans': {}, 'spearman': {}, 'spearman_reconstructed': {}, 'failed': {}}
             for s in args.scenarios:
-                plans = load_study(s, args.models, variant)
+                every = load_study(s, args.models, variant)
+                half = split_halves(every, args.split_seed)
+                plans = [p for p in every if p['recon']]  # the skipped ones are counted, below
                 if not plans:
                     continue
                 rewards = score_models(s, args.models, plans, specs)
@@ -306,6 +352,12 @@ def analyze(args) -> dict:
                 ok = np.isfinite(ch)
                 vres['plans'][s] = len(plans)
                 vres['failed'][s] = int((~ok).sum())
+                vres.setdefault('counts', {})[s] = study_counts(every, np.array([plan_chamfer(p, key) for p in every]))
+                halves = spearman_halves([p['id'] for p in plans], {m: r['reward'] for m, r in rewards.items()},
+                                         ch, half)
+                vres.setdefault('spearman_design', {})[s] = halves['design']
+                vres.setdefault('spearman_check', {})[s] = halves['check']
+                vres.setdefault('split', {})[s] = half
                 vres['spearman'][s] = {m: spearman(r['reward'], -ch) for m, r in rewards.items()}
                 vres['spearman_reconstructed'][s] = {m: spearman(np.asarray(r['reward'])[ok], -ch[ok])
                                                      for m, r in rewards.items()}
@@ -324,6 +376,9 @@ def analyze(args) -> dict:
         mv = result['variants'][main_v]
         result['plans'], result['spearman'] = mv['plans'], mv['spearman']
         result['spearman_reconstructed'], result['failed'] = mv['spearman_reconstructed'], mv['failed']
+        for key in ('counts', 'spearman_design', 'spearman_check', 'split'):
+            result[key] = mv.get(key, {})
+        result['split_seed'] = args.split_seed
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / 'plan_quality.json').write_text(json.dumps(result, indent=1))
@@ -386,6 +441,45 @@ def plot(path: Path, per_plan: dict, variant: str, specs: dict) -> None:
     fig.savefig(path, dpi=110)
 
 
+def per_plan_chamfer(record: dict, key: str = 'chamfer') -> float:
+    """Mean Chamfer x 100 of a per-plan record of plan_quality.json (inf: a realization failed)."""
+    vals = []
+    for r in record['realizations'].values():
+        if r.get('error') or r.get(key) is None:
+            return math.inf
+        vals.append(r[key])
+    return float(np.mean(vals)) if vals else math.nan
+
+
+def check_from_records(args) -> dict:
+    """The split and the check half's Spearman from the per-plan records of an existing
+    ``plan_quality.json`` (its main variant): for a study whose reconstruction cache is gone."""
+    path = Path(args.out) / 'plan_quality.json'
+    result = json.loads(path.read_text())
+    main_v = f'{args.width}x{args.height}/dense'
+    if main_v not in result.get('variants', {}):
+        raise SystemExit(f'{path}: no variant {main_v} to split')
+    records = result['variants'][main_v]['per_plan']
+    result.update(counts={}, spearman_design={}, spearman_check={}, split={}, split_seed=args.split_seed)
+    for s in args.scenarios:
+        every = plans_of(s, args.models)
+        by_id = {r['id']: r for r in records.get(s, [])}
+        half = split_halves(every, args.split_seed)
+        recorded = [by_id[p['id']] for p in every if p['id'] in by_id]
+        ch_all = np.array([per_plan_chamfer(by_id[p['id']]) if p['id'] in by_id else math.nan for p in every])
+        result['counts'][s] = study_counts([{**p, 'recon': p['id'] in by_id} for p in every], ch_all)
+        ch = np.array([per_plan_chamfer(r) for r in recorded])
+        rewards = {m: [r['reward'][m] for r in recorded] for m in recorded[0]['reward']} if recorded else {}
+        halves = spearman_halves([r['id'] for r in recorded], rewards, ch, half)
+        result['spearman_design'][s], result['spearman_check'][s] = halves['design'], halves['check']
+        result['split'][s] = half
+        print(f'{s}: {result["counts"][s]}')
+        for m in rewards:
+            print(f'  {m:32s} design {halves["design"][m]:+.3f}   check {halves["check"][m]:+.3f}')
+    path.write_text(json.dumps(result, indent=1))
+    return result
+
+
 def print_table(result: dict) -> None:
     for vname, v in result['variants'].items():
         print(f'\n## {vname}')
@@ -405,6 +499,8 @@ def main(argv=None) -> int:
                 run_recon(args, client, study)
     if args.phase in ('analyze', 'all'):
         analyze(args)
+    if args.phase == 'check':
+        check_from_records(args)
     return 0
 
 
