@@ -265,18 +265,20 @@ class PlannerNode(Node):
             fixed_cameras=fixed_cameras, reconstruction=reconstruction, tau=self._param('tau'),
             reconstructed_weight=self._param('reconstructed_weight'))
 
-    def _publish_plan(self, result: PlanResult) -> PoseArray:
-        """/camera_plan/info first (so that a recon has the reward when the plan arrives), then
-        /camera_plan and the markers: one header, one set of poses."""
+    def _publish_plan(self, result: PlanResult, fixed: Optional[np.ndarray] = None) -> PoseArray:
+        """/camera_plan/info first (so that a recon has the reward, and the cameras already flown
+        of a second sortie, when the plan arrives), then /camera_plan and the markers: one header,
+        one set of poses."""
         msg = cameras_to_pose_array(result.cameras, self._param('frame_id'), self.get_clock().now().to_msg())
         self.info_pub.publish(camera_plan_msg(msg, result.reward, result.reward_model, result.method,
-                                              result.evaluations, result.seconds))
+                                              result.evaluations, result.seconds, fixed))
         self.plan_pub.publish(msg)
         self.marker_pub.publish(frustum_markers(result.cameras, msg.header.frame_id,
                                                 msg.header.stamp, self._param('fov')))
         self.get_logger().info(
-            f'published /camera_plan: {len(msg.poses)} cameras, {result.reward_model} reward {result.reward:.4f} '
-            f'({result.method}, {result.evaluations} evaluations'
+            f'published /camera_plan: {len(msg.poses)} cameras, {result.reward_model} reward {result.reward:.4f}'
+            + (f' with {result.fixed_cameras} cameras already flown' if result.fixed_cameras else '')
+            + f' ({result.method}, {result.evaluations} evaluations'
             + (f', by {len(result.parts)} parts of ' + '+'.join(str(p['cameras']) for p in result.parts) + ' cameras'
                if result.parts else '') + f', {result.seconds:.1f} s)')
         return msg
@@ -411,7 +413,7 @@ class PlannerNode(Node):
                 result.evaluations = int(plan.evaluations)
                 self.get_logger().info(text)
                 return finish(PlanViews.Result.CANCELED, text)
-            msg = self._publish_plan(plan)
+            msg = self._publish_plan(plan, fixed)
             result.plan = msg
             result.cameras = [float(x) for x in np.asarray(plan.cameras).ravel()]
             result.reward = float(plan.reward)
