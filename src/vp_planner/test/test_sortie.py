@@ -148,7 +148,7 @@ CLI = ["--scenario", "one_plant", "--points-per-plant", "500", "--realizations",
        "--no-progress", "--seed", "1"]
 
 
-def test_cli_plans_a_second_sortie_and_records_it(tmp_path: Path) -> None:
+def test_cli_plans_a_second_sortie_and_records_it(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     assert main(CLI + ["--method", "circle", "--cameras", "3", "--evals", "4", "--out", str(tmp_path / "s1")]) == 0
     first = json.loads((tmp_path / "s1" / "plan.json").read_text())
     noisy = np.load(tmp_path / "s1" / "noisy_points.npy")
@@ -166,6 +166,9 @@ def test_cli_plans_a_second_sortie_and_records_it(tmp_path: Path) -> None:
     expected = make_reward("coverage", noisy, fixed_cameras=first["cameras"], point_weights=W)(
         np.asarray(second["cameras"]))
     assert second["reward"] == pytest.approx(float(expected), rel=1e-6)
+    # `plan score` scores it as it was planned: with the flown cameras and the reconstruction
+    assert main(["score", "--plan", str(tmp_path / "s2" / "plan.json")]) == 0
+    assert float(capsys.readouterr().out.split()[-1]) == pytest.approx(second["reward"], abs=1e-6)
 
 
 def test_cli_bad_fixed_cameras_exit_2_and_nothing_planned(tmp_path: Path) -> None:

@@ -23,7 +23,8 @@ dict) and its top-level ``scenario`` the layout's name.
 
 ``score`` rebuilds the scene of a plan file (its ``scene``, or ``--scenario``/``--models``/...
 for a flight plan without one; ``cameras`` or ``poses``) and prints the plan's reward under the
-chosen model as the last number on stdout.
+chosen model as the last number on stdout (a second sortie's with its recorded cameras already
+flown and reconstruction, as it was planned).
 
 Errors: one line on stderr and exit code 2.
 """
@@ -311,6 +312,22 @@ def plan(args: argparse.Namespace) -> dict:
     return data
 
 
+def _sortie_of(data: dict, realizations: np.ndarray) -> tuple[Optional[np.ndarray], Optional[np.ndarray]]:
+    """A second sortie's plan file: its cameras already flown and the point weights of its
+    recorded reconstruction (read again from its PLY), as it was planned; (None, None) else."""
+    from .reward_models import reconstructed_weights
+
+    fixed = np.asarray(data.get("fixed_cameras") or np.zeros((0, 6)), dtype=np.float64)
+    rec = data.get("reconstructed")
+    if not rec:
+        return fixed, None
+    try:
+        points = reconstruction_of(rec["path"])
+        return fixed, reconstructed_weights(realizations, points, float(rec["tau"]), float(rec["reconstructed_weight"]))
+    except (KeyError, TypeError) as exc:
+        raise CliError(f"the plan's 'reconstructed' record is malformed ({exc})") from None
+
+
 def score(args: argparse.Namespace) -> float:
     """The reward of the plan file under ``--reward`` (default: the file's reward_model, else
     the default model) on the plan's scene."""
@@ -331,7 +348,9 @@ def score(args: argparse.Namespace) -> float:
     theta = args.theta_match if args.theta_match is not None else pf.theta_match
     image = CameraModel(*_image_size(args, pf.image_size or (2000, 1500)), fov)
     realizations = build_scene(scene)
-    value = float(np.asarray(make_reward(model, realizations, fov, theta, image)(pf.cameras[None]))[0])
+    fixed, weights = _sortie_of(pf.data, realizations)
+    value = float(np.asarray(make_reward(model, realizations, fov, theta, image, fixed_cameras=fixed,
+                                         point_weights=weights)(pf.cameras[None]))[0])
     print(f"plan score: {model} reward of {args.plan} ({len(pf.cameras)} cameras, "
           f"{resolve_layout(scene['scenario']).name}):",
           file=sys.stderr)
