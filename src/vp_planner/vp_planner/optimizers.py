@@ -68,7 +68,8 @@ from numpy.typing import NDArray
 
 from .methods import BAYESIAN, MAX_EVALUATIONS, METHODS
 from .reward import DEFAULT_FOV, DEFAULT_THETA_MATCH
-from .reward_models import DEFAULT_REWARD_MODEL, check_fixed_cameras, check_reward_model
+from .reward_models import (DEFAULT_RECONSTRUCTED_WEIGHT, DEFAULT_REWARD_MODEL, DEFAULT_TAU, check_fixed_cameras,
+                            check_reward_model)
 from .space import (
     NoFeasiblePlanError,
     Objective,
@@ -729,8 +730,8 @@ def plan_views(
     lawnmower_tilt: float = 0.0,
     fixed_cameras: Any = None,
     reconstruction: Any = None,
-    tau: float = 0.03,
-    reconstructed_weight: float = 0.1,
+    tau: float = DEFAULT_TAU,
+    reconstructed_weight: float = DEFAULT_RECONSTRUCTED_WEIGHT,
 ) -> PlanResult:
     """Plan ``num_cameras`` views of the noisy scene with ``method`` (one of :data:`METHODS`).
 
@@ -775,7 +776,8 @@ def plan_views(
         hold, :func:`check_memory`; BudgetTooLargeError, an InvalidBudgetError, for a budget above
         :data:`MAX_EVALUATIONS` or one the memory cannot hold, :func:`check_budget_memory`);
         InvalidFixedCamerasError, InvalidReconstructionError (ValueError) for bad cameras already
-        flown or a bad reconstruction (nothing planned); NoFeasiblePlanError (ValueError) when no feasible plan was found.
+        flown or a bad reconstruction (nothing planned); NoFeasiblePlanError (ValueError) when no
+        feasible plan was found.
     """
     validate_request(method, num_cameras, evaluations, initial_evaluations)
     check_reward_model(reward)
