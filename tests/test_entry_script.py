@@ -112,6 +112,20 @@ def test_two_sorties(ros_env, tmp_path) -> None:
                                np.asarray(first["cameras"])[:, :3], atol=1e-9)
 
 
+def test_the_reconstruction_goes_to_the_planner_thinned() -> None:
+    """A first sortie's cloud (millions of points in a field) goes into the second goal as the
+    mean of every occupied 5 mm voxel, in its frame."""
+    import run_suite
+    from vp_scene.messages import numpy_to_pointcloud2, pointcloud2_to_numpy
+
+    rng = np.random.default_rng(0)
+    points = np.concatenate([rng.uniform(0.0, 0.004, (500, 3)), rng.uniform(1.0, 1.004, (500, 3))])
+    thin = run_suite.thinned_cloud(numpy_to_pointcloud2(points, frame_id="map"))
+    got, _colors, _ = pointcloud2_to_numpy(thin)
+    assert thin.header.frame_id == "map" and len(got) == 2
+    np.testing.assert_allclose(sorted(got[:, 0]), [points[:500, 0].mean(), points[500:, 0].mean()], atol=1e-6)
+
+
 def read_recording(path: Path) -> tuple[dict, dict, dict]:
     """(topic -> schema name, topic -> decoded messages, the file's summary statistics) of an MCAP
     file, read with mcap's seeking reader (it needs the summary that closing writes) and

@@ -57,6 +57,11 @@ ROOT = Path(__file__).resolve().parent.parent
 #: The run's topics as a ROS 2 bag (MCAP), in the output folder (README "Looking at a plan").
 RECORDING = 'run.mcap'
 
+#: m: the first sortie's reconstruction goes to the planner thinned to its mean point a voxel of this
+#: edge (a field's clouds are millions of points, tens of MB in one goal; a point moves by at most
+#: the voxel's diagonal, 8.7 mm, against the planner's tau of 30 mm).
+RECONSTRUCTION_VOXEL = 0.005
+
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_NODE_DIED, EXIT_TIMEOUT, EXIT_INTERRUPTED = 0, 1, 2, 3, 4, 130
 
 
@@ -277,6 +282,19 @@ class NodeDied(RuntimeError):
         self.node_name, self.code = name, code
 
 
+def thinned_cloud(msg, voxel: float = RECONSTRUCTION_VOXEL):
+    """A PointCloud2 of the mean point (and colour) of every occupied voxel of ``msg``'s cloud, in
+    its frame (:func:`vp_recon.dense.voxel_downsample`)."""
+    import numpy as np
+    from vp_recon.dense import voxel_downsample
+    from vp_scene.messages import numpy_to_pointcloud2, pointcloud2_to_numpy
+
+    points, colors, _ = pointcloud2_to_numpy(msg)
+    colors = np.zeros((len(points), 3), np.uint8) if colors is None else colors
+    points, colors = voxel_downsample(points, colors, voxel)
+    return numpy_to_pointcloud2(points, colors, frame_id=msg.header.frame_id, stamp=msg.header.stamp)
+
+
 def fly_sortie(mission: Mission, nodes: List[NodeProcess], deadline: float, args: argparse.Namespace,
                num_cameras: int, outcome: List[str], fixed=None, reconstruction=None) -> Optional[dict]:
     """One sortie: the goal (a second one's with the cameras already flown and their
@@ -421,9 +439,10 @@ def run(args: argparse.Namespace) -> int:
         rounds.append(sortie)
         if args.rounds == 2 and sortie['agg'].error_code == 0:
             flown = sortie['result'].plan
-            reconstruction = sortie['cloud']
+            reconstruction = thinned_cloud(sortie['cloud'])
             print(f'second sortie: {args.cameras2} cameras given the {len(flown.poses)} flown and their '
-                  f'reconstruction ({reconstruction.width * reconstruction.height} points)', flush=True)
+                  f'reconstruction ({reconstruction.width * reconstruction.height} points, one a '
+                  f'{1000 * RECONSTRUCTION_VOXEL:g} mm voxel)', flush=True)
             sortie = fly_sortie(mission, nodes, deadline, args, args.cameras2, outcome, flown, reconstruction)
             if sortie is None:
                 return EXIT_FAILED
