@@ -16,6 +16,9 @@ SCENE_TAG = $(basename $(notdir $(SCENE_ARG)))
 METHOD   ?= egp
 CAMERAS  ?= 4
 DRONES   ?= $(CAMERAS)
+# make run ROUNDS=2 CAMERAS=N CAMERAS2=M: a second sortie of M given the first (README "A second sortie")
+ROUNDS   ?= 1
+CAMERAS2 ?= 0
 EVALS    ?= 100
 SEED     ?= 0
 REWARD   ?=
@@ -42,7 +45,7 @@ test: setup
 run: setup
 	@$(ENV) python tools/run_suite.py --scenario $(SCENE_ARG) --method $(METHOD) --cameras $(CAMERAS) \
 	  --evals $(EVALS) --seed $(SEED) --out $(OUT) --drones $(DRONES) $(if $(MODELS),--models $(MODELS)) \
-	  $(if $(REWARD),--reward $(REWARD))
+	  $(if $(REWARD),--reward $(REWARD)) --rounds $(ROUNDS) --cameras2 $(CAMERAS2)
 
 plan: setup
 	@$(ENV) python -m vp_planner.cli --scenario $(SCENE_ARG) --method $(METHOD) --cameras $(CAMERAS) \

@@ -85,6 +85,47 @@ def test_end_to_end_small_mission(ros_env, tmp_path) -> None:
         assert not alive(pid)
 
 
+def test_two_sorties(ros_env, tmp_path) -> None:
+    """Issue 21: --rounds 2 plans a second sortie of M cameras given the N flown and their
+    reconstruction (the goal's fixed_cameras and reconstruction), and the recon reconstructs from
+    all N + M images; summary.json has one record per sortie."""
+    out = tmp_path / "run"
+    proc = subprocess.run([sys.executable, str(SCRIPT), *SMALL, "--realizations", "1", "--method", "circle",
+                           "--evals", "16", "--rounds", "2", "--cameras2", "2", "--out", str(out),
+                           "--timeout", "500"], env=ros_env, capture_output=True, text=True, timeout=560)
+    log = proc.stdout + proc.stderr
+    assert proc.returncode == 0, log[-6000:]
+    assert "second sortie: 2 cameras given the 4 flown" in log
+    assert "with 4 cameras already flown" in log  # the planner counted them
+    summary = json.loads((out / "summary.json").read_text())
+    first, second = summary["rounds"]
+    assert (first["num_cameras"], first["fixed_cameras"], first["images"]) == (4, 0, 4)
+    assert (second["num_cameras"], second["fixed_cameras"], second["images"]) == (2, 4, 6)
+    assert len(first["cameras"]) == 4 and len(second["cameras"]) == 2
+    for r in (first, second):
+        assert 0 < r["reward"] <= 1 and math.isfinite(r["chamfer_mean"]) and r["chamfer_mean"] > 0 and r["seconds"] > 0
+    assert summary["chamfer_mean"] == second["chamfer_mean"] and summary["cameras"] == second["cameras"]
+    types, messages, _stats = read_recording(out / "run.mcap")
+    infos = messages["/camera_plan/info"]
+    assert [len(m.fixed_poses) for m in infos] == [0, 4]  # the second plan names the cameras flown
+    np.testing.assert_allclose([[p.position.x, p.position.y, p.position.z] for p in infos[1].fixed_poses],
+                               np.asarray(first["cameras"])[:, :3], atol=1e-9)
+
+
+def test_the_reconstruction_goes_to_the_planner_thinned() -> None:
+    """A first sortie's cloud (millions of points in a field) goes into the second goal as the
+    mean of every occupied 5 mm voxel, in its frame."""
+    import run_suite
+    from vp_scene.messages import numpy_to_pointcloud2, pointcloud2_to_numpy
+
+    rng = np.random.default_rng(0)
+    points = np.concatenate([rng.uniform(0.0, 0.004, (500, 3)), rng.uniform(1.0, 1.004, (500, 3))])
+    thin = run_suite.thinned_cloud(numpy_to_pointcloud2(points, frame_id="map"))
+    got, _colors, _ = pointcloud2_to_numpy(thin)
+    assert thin.header.frame_id == "map" and len(got) == 2
+    np.testing.assert_allclose(sorted(got[:, 0]), [points[:500, 0].mean(), points[500:, 0].mean()], atol=1e-6)
+
+
 def read_recording(path: Path) -> tuple[dict, dict, dict]:
     """(topic -> schema name, topic -> decoded messages, the file's summary statistics) of an MCAP
     file, read with mcap's seeking reader (it needs the summary that closing writes) and

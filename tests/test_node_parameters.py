@@ -64,7 +64,8 @@ DESCRIBED = {
         "num_cameras": (INT, 2, 100, False), "evaluations": (INT, 1, 100000, False),
         "fov": (DOUBLE, 0.0, math.pi, False), "lawnmower_overlap": (DOUBLE, 0.0, 0.95, False),
         "lawnmower_tilt": (DOUBLE, 0.0, math.radians(60.0), False), "num_threads": (INT, 1, INT64_MAX, True),
-        "min_standoff": (DOUBLE, 0.0, math.inf, False), "method": None},
+        "min_standoff": (DOUBLE, 0.0, math.inf, False), "method": None,
+        "tau": (DOUBLE, 0.0, math.inf, False), "reconstructed_weight": (DOUBLE, 0.0, 1.0, False)},
         ("num_cameras", 101), ("num_threads", 2)),
     "dispatcher": ("vp_planner", "dispatcher", {"drones": ["d0", "d1"]}, {
         "pose_timeout": (DOUBLE, 0.0, math.inf, False), "min_separation": (DOUBLE, 0.0, math.inf, False),

@@ -250,3 +250,50 @@ def test_goal_reward_model(system) -> None:
     assert r.reward == pytest.approx(float(noisy_reward(cams, noisy.points)), abs=1e-9)
     _, res = send(client, action, goal(method="random", evaluations=6))  # '' = the node's parameter
     assert res.result.reward_model == "coverage" and res.result.reward != pytest.approx(r.reward)
+
+
+def sortie_goal(fixed: np.ndarray, frame: str = "map", reconstruction: np.ndarray | None = None,
+                cloud_frame: str = "map") -> PlanViews.Goal:
+    """A second sortie's goal: 2 random cameras given the cameras already flown and (optionally)
+    what they reconstructed."""
+    from vp_scene.messages import cameras_to_pose_array
+
+    g = goal(num_cameras=2, method="random", evaluations=6)
+    g.fixed_cameras = cameras_to_pose_array(fixed, frame)
+    if reconstruction is not None:
+        g.reconstruction = numpy_to_pointcloud2(reconstruction, frame_id=cloud_frame)
+    return g
+
+
+def test_second_sortie_goal(system) -> None:
+    """Issue 21: a goal's fixed_cameras and reconstruction enter the reward the plan maximizes;
+    bad ones are named errors and nothing is planned."""
+    from vp_planner.reward_models import reconstructed_weights
+
+    client, action, _, planner = system
+    assert client.spin_until(lambda: "scene received" in planner.output(), TIMEOUT), planner.output()
+    _, first = send(client, action, goal(num_cameras=3, method="circle", evaluations=4))
+    fixed = np.asarray(first.result.cameras).reshape(-1, 6)
+    noisy, _ = build_noisy_scene(**SCENE)
+    rec = noisy.points[0, ::4]
+    _, res = send(client, action, sortie_goal(fixed, reconstruction=rec))
+    r = res.result
+    assert r.error_code == PlanViews.Result.NONE, r.error_msg
+    W = reconstructed_weights(noisy.points, rec, 0.03, 0.1)  # the node's tau and reconstructed_weight
+    unit = fixed.copy()
+    unit[:, 3:] /= np.linalg.norm(unit[:, 3:], axis=1, keepdims=True)  # the poses carry unit directions
+    fresh = make_reward("coverage", noisy.points, fixed_cameras=unit, point_weights=W)(
+        np.asarray(r.cameras).reshape(1, -1, 6))[0]
+    assert r.reward == pytest.approx(float(fresh), rel=1e-6)
+    bad_cams = fixed.copy()
+    bad_cams[0, 0] = np.nan
+    for g, code, text in [
+        (sortie_goal(bad_cams), "INVALID_FIXED_CAMERAS", "not finite"),
+        (sortie_goal(fixed, frame="odom"), "INVALID_FIXED_CAMERAS", "'odom'"),
+        (sortie_goal(fixed, reconstruction=np.array([[0.0, np.nan, 0.0]])), "INVALID_RECONSTRUCTION", "non-finite"),
+        (sortie_goal(fixed, reconstruction=rec, cloud_frame="odom"), "INVALID_RECONSTRUCTION", "'odom'"),
+    ]:
+        _, res = send(client, action, g)
+        assert res.result.error_code == getattr(PlanViews.Result, code), res.result.error_msg
+        assert text in res.result.error_msg and res.result.evaluations == 0 and not res.result.plan.poses
+    assert planner.alive()

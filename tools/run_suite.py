@@ -14,6 +14,13 @@ SIGKILL (parent-death signal, tools/node_process.py). While the nodes are stoppe
 goes to ``<out>/<node>.log`` only, so the outcome (or the error, with the dead node's last line)
 is the last thing printed.
 
+With ``--rounds 2`` the mission flies a second sortie (README "A second sortie"): after the first
+plan of ``--cameras`` N is reconstructed, the planner gets a goal for ``--cameras2`` M more with
+the N cameras already flown (``fixed_cameras``) and their reconstruction (the last cloud on
+``/reconstruction/points``); the recon then reconstructs from all N + M images. summary.json's
+``rounds`` holds one record per sortie (its cameras, reward, the Chamfer distance of the
+reconstruction after it, seconds); its top-level plan fields are the last sortie's.
+
 Exit codes: 0 success, 1 the plan or the reconstruction failed (the error is printed),
 2 bad arguments or missing build, 3 a node died, 4 timed out, 130 interrupted.
 
@@ -50,6 +57,11 @@ ROOT = Path(__file__).resolve().parent.parent
 #: The run's topics as a ROS 2 bag (MCAP), in the output folder (README "Looking at a plan").
 RECORDING = 'run.mcap'
 
+#: m: the first sortie's reconstruction goes to the planner thinned to its mean point a voxel of this
+#: edge (a field's clouds are millions of points, tens of MB in one goal; a point moves by at most
+#: the voxel's diagonal, 8.7 mm, against the planner's tau of 30 mm).
+RECONSTRUCTION_VOXEL = 0.005
+
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_NODE_DIED, EXIT_TIMEOUT, EXIT_INTERRUPTED = 0, 1, 2, 3, 4, 130
 
 
@@ -78,6 +90,10 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
                     help='start the dispatcher and this many simulated drones (0: none; else at least --cameras)')
     ap.add_argument('--assignment', default='min_total', choices=['min_total', 'min_max'],
                     help="the dispatcher's assignment objective")
+    ap.add_argument('--rounds', type=int, default=1, choices=(1, 2),
+                    help="sorties: 2 plans a second one given the first one's cameras and reconstruction")
+    ap.add_argument('--cameras2', type=int, default=0,
+                    help='cameras M of the second sortie (0: half of --cameras, at least 2)')
     ap.add_argument('--timeout', type=float, default=3600.0, help='seconds for the whole mission')
     ap.add_argument('--domain-id', type=int, default=None,
                     help='ROS_DOMAIN_ID of this run (default: $ROS_DOMAIN_ID, else derived from the process id)')
@@ -86,6 +102,11 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
         ap.error('--cameras must be >= 2')
     if args.evals < 1:
         ap.error('--evals must be >= 1')
+    if args.cameras2 < 0 or args.cameras2 == 1:
+        ap.error('--cameras2 must be 0 (half of --cameras) or >= 2')
+    args.cameras2 = args.cameras2 or max(2, args.cameras // 2)
+    if args.drones and args.rounds == 2 and args.drones < args.cameras2:
+        ap.error(f'--drones must be 0 or at least --cameras2 ({args.cameras2}): every camera pose needs a drone')
     if args.drones and args.drones < args.cameras:
         ap.error(f'--drones must be 0 or at least --cameras ({args.cameras}): every camera pose needs a drone')
     if args.drones < 0:
@@ -135,6 +156,8 @@ class Mission:
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.scene_ready = threading.Event()
         self.scores: List[object] = []
+        self.clouds: List[object] = []  # /reconstruction/points, one a realization done
+        self.node.create_subscription(PointCloud2, '/reconstruction/points', self.clouds.append, latched)
         self.aggregate = threading.Event()
         self.node.create_subscription(PointCloud2, '/scene/noisy_points',
                                       lambda _m: self.scene_ready.set(), latched)
@@ -176,13 +199,19 @@ class Mission:
             post['w'] = ' '.join(f'{m}:{w:.2f}' for m, w in zip(fb.ensemble_models, fb.ensemble_weights))
         self.progress.set_postfix(post, refresh=True)
 
-    def send_goal(self):
-        """Send the goal; (the future of its goal handle, its goal id)."""
+    def send_goal(self, num_cameras: int = 0, fixed=None, reconstruction=None):
+        """Send the goal for ``num_cameras`` (0: ``--cameras``; a second sortie's with the PoseArray of the cameras
+        already flown and the PointCloud2 of their reconstruction); (the future of its goal handle,
+        its goal id)."""
         from unique_identifier_msgs.msg import UUID
         import uuid
 
         goal = self.PlanViews.Goal()
-        goal.num_cameras = self.args.cameras
+        goal.num_cameras = num_cameras or self.args.cameras
+        if fixed is not None:
+            goal.fixed_cameras = fixed
+        if reconstruction is not None:
+            goal.reconstruction = reconstruction
         goal.method = self.args.method
         goal.evaluations = self.args.evals
         goal.initial_evaluations = min(self.args.init, self.args.evals)
@@ -253,6 +282,94 @@ class NodeDied(RuntimeError):
         self.node_name, self.code = name, code
 
 
+def thinned_cloud(msg, voxel: float = RECONSTRUCTION_VOXEL):
+    """A PointCloud2 of the mean point (and colour) of every occupied voxel of ``msg``'s cloud, in
+    its frame (:func:`vp_recon.dense.voxel_downsample`)."""
+    import numpy as np
+    from vp_recon.dense import voxel_downsample
+    from vp_scene.messages import numpy_to_pointcloud2, pointcloud2_to_numpy
+
+    points, colors, _ = pointcloud2_to_numpy(msg)
+    colors = np.zeros((len(points), 3), np.uint8) if colors is None else colors
+    points, colors = voxel_downsample(points, colors, voxel)
+    return numpy_to_pointcloud2(points, colors, frame_id=msg.header.frame_id, stamp=msg.header.stamp)
+
+
+def fly_sortie(mission: Mission, nodes: List[NodeProcess], deadline: float, args: argparse.Namespace,
+               num_cameras: int, outcome: List[str], fixed=None, reconstruction=None) -> Optional[dict]:
+    """One sortie: the goal (a second one's with the cameras already flown and their
+    reconstruction), the plan printed, the fleet's assignment (with drones), the reconstruction's
+    aggregate score and the last cloud on /reconstruction/points. A dict (result, fleet, agg, per,
+    cloud, record: the summary's ``rounds`` entry), or None with the error in ``outcome``."""
+    from vp_scene.messages import msgs_to_poses
+
+    started = time.monotonic()
+    first_score, first_cloud = len(mission.scores), len(mission.clouds)
+    mission.aggregate.clear()
+    mission.feedback_seen = False
+    goal_future, goal_id = mission.send_goal(num_cameras, fixed, reconstruction)
+    wait_for(lambda: goal_future.done() or mission.feedback_seen, nodes, deadline,
+             'the planner to accept the goal')
+    if goal_future.done():
+        handle = goal_future.result()
+    else:  # executing (its feedback arrives), but the goal response was lost: ask for the result
+        print('note: the planner accepted the goal but its answer was lost in DDS discovery; '
+              'asking for the result directly', flush=True)
+        handle = mission.accepted_handle(goal_id)
+    if not handle.accepted:
+        outcome.append('error: the planner rejected the goal')
+        return None
+    result_future = handle.get_result_async()
+    wait_for(result_future.done, nodes, deadline, 'the plan')
+    result = result_future.result().result
+    if mission.progress is not None:
+        mission.progress.close()
+        mission.progress = None
+    if result.error_code != 0:
+        outcome.append(f'error: planning failed (error_code {result.error_code}): {result.error_msg}')
+        return None
+    poses = msgs_to_poses(result.plan.poses).tolist()
+    cameras = [list(result.cameras[i:i + 6]) for i in range(0, len(result.cameras), 6)]
+    print(f'plan: {result.reward_model} reward {result.reward:.4f} after {result.evaluations} evaluations '
+          f'({result.planning_time:.1f} s)', flush=True)
+    for i, pose in enumerate(poses):
+        print(f'  cam {i}: position ({pose[0]:+.3f}, {pose[1]:+.3f}, {pose[2]:+.3f}) m  '
+              f'quaternion ({pose[3]:+.3f}, {pose[4]:+.3f}, {pose[5]:+.3f}, {pose[6]:+.3f})',
+              flush=True)
+
+    fleet = None
+    if args.drones:
+        stamp = result.plan.header.stamp
+
+        def dispatched():
+            return [a for a in mission.assignments if a.plan_stamp == stamp]
+        wait_for(dispatched, nodes, deadline, 'the dispatcher\'s answer on /fleet/assignment')
+        fleet = dispatched()[-1]
+        if fleet.error_code != 0:
+            outcome.append(f'error: the dispatcher refused the plan (error_code {fleet.error_code}): '
+                           f'{fleet.error_msg}')
+            return None
+        for line in assignment_lines(fleet):
+            print(line, flush=True)
+
+    def aggregate_now():
+        return [s for s in mission.scores[first_score:] if s.realization == mission.Score.AGGREGATE]
+    wait_for(aggregate_now, nodes, deadline, 'the aggregate reconstruction score')
+    agg = aggregate_now()[-1]
+    per = [s for s in mission.scores[first_score:] if s.realization != mission.Score.AGGREGATE]
+    cloud = None
+    if agg.error_code == 0:  # one cloud a realization done, the last holds them all
+        wait_for(lambda: len(mission.clouds) - first_cloud >= agg.realizations, nodes, deadline,
+                 'the reconstruction on /reconstruction/points')
+        cloud = mission.clouds[-1]
+    record = {'cameras': cameras, 'num_cameras': len(result.plan.poses), 'fixed_cameras': 0 if fixed is None else len(fixed.poses),
+              'images': agg.num_images, 'reward': result.reward,
+              'chamfer_mean': None if agg.error_code else agg.chamfer,
+              'chamfer_std': None if agg.error_code else agg.chamfer_std,
+              'error_code': agg.error_code, 'seconds': time.monotonic() - started}
+    return {'result': result, 'fleet': fleet, 'agg': agg, 'per': per, 'cloud': cloud, 'record': record}
+
+
 def run(args: argparse.Namespace) -> int:
     from vp_scene.messages import msgs_to_poses, point_array, pose_array, score_record  # conversions' one home
 
@@ -315,54 +432,24 @@ def run(args: argparse.Namespace) -> int:
         wait_for(lambda: mission.client.server_is_ready(), nodes, deadline, 'the /plan_views server')
         settled = time.monotonic() + SETTLE_S
         wait_for(lambda: time.monotonic() > settled, nodes, deadline, 'the action\'s reply paths')
-        goal_future, goal_id = mission.send_goal()
-        wait_for(lambda: goal_future.done() or mission.feedback_seen, nodes, deadline,
-                 'the planner to accept the goal')
-        if goal_future.done():
-            handle = goal_future.result()
-        else:  # executing (its feedback arrives), but the goal response was lost: ask for the result
-            print('note: the planner accepted the goal but its answer was lost in DDS discovery; '
-                  'asking for the result directly', flush=True)
-            handle = mission.accepted_handle(goal_id)
-        if not handle.accepted:
-            outcome.append('error: the planner rejected the goal')
+        rounds: List[dict] = []
+        sortie = fly_sortie(mission, nodes, deadline, args, args.cameras, outcome)
+        if sortie is None:
             return EXIT_FAILED
-        result_future = handle.get_result_async()
-        wait_for(result_future.done, nodes, deadline, 'the plan')
-        result = result_future.result().result
-        if mission.progress is not None:
-            mission.progress.close()
-            mission.progress = None
-        if result.error_code != 0:
-            outcome.append(f'error: planning failed (error_code {result.error_code}): {result.error_msg}')
-            return EXIT_FAILED
+        rounds.append(sortie)
+        if args.rounds == 2 and sortie['agg'].error_code == 0:
+            flown = sortie['result'].plan
+            reconstruction = thinned_cloud(sortie['cloud'])
+            print(f'second sortie: {args.cameras2} cameras given the {len(flown.poses)} flown and their '
+                  f'reconstruction ({reconstruction.width * reconstruction.height} points, one a '
+                  f'{1000 * RECONSTRUCTION_VOXEL:g} mm voxel)', flush=True)
+            sortie = fly_sortie(mission, nodes, deadline, args, args.cameras2, outcome, flown, reconstruction)
+            if sortie is None:
+                return EXIT_FAILED
+            rounds.append(sortie)
+        result, fleet, agg, per = sortie['result'], sortie['fleet'], sortie['agg'], sortie['per']
         poses = msgs_to_poses(result.plan.poses).tolist()
         cameras = [list(result.cameras[i:i + 6]) for i in range(0, len(result.cameras), 6)]
-        print(f'plan: {result.reward_model} reward {result.reward:.4f} after {result.evaluations} evaluations '
-              f'({result.planning_time:.1f} s)', flush=True)
-        for i, pose in enumerate(poses):
-            print(f'  cam {i}: position ({pose[0]:+.3f}, {pose[1]:+.3f}, {pose[2]:+.3f}) m  '
-                  f'quaternion ({pose[3]:+.3f}, {pose[4]:+.3f}, {pose[5]:+.3f}, {pose[6]:+.3f})',
-                  flush=True)
-
-        fleet = None
-        if args.drones:
-            stamp = result.plan.header.stamp
-
-            def dispatched():
-                return [a for a in mission.assignments if a.plan_stamp == stamp]
-            wait_for(dispatched, nodes, deadline, 'the dispatcher\'s answer on /fleet/assignment')
-            fleet = dispatched()[-1]
-            if fleet.error_code != 0:
-                outcome.append(f'error: the dispatcher refused the plan (error_code {fleet.error_code}): '
-                               f'{fleet.error_msg}')
-                return EXIT_FAILED
-            for line in assignment_lines(fleet):
-                print(line, flush=True)
-
-        wait_for(mission.aggregate.is_set, nodes, deadline, 'the aggregate reconstruction score')
-        agg = [s for s in mission.scores if s.realization == mission.Score.AGGREGATE][-1]
-        per = [s for s in mission.scores if s.realization != mission.Score.AGGREGATE]
         summary = {
             'scenario': args.scenario_name, 'scenario_file': args.scenario_file,
             'method': args.method, 'cameras': cameras,
@@ -375,6 +462,7 @@ def run(args: argparse.Namespace) -> int:
             'evaluations': result.evaluations, 'trace': list(result.trace), 'seed': args.seed,
             'error_code': agg.error_code, 'error_msg': agg.error_msg,
             'per_realization': [score_record(s) for s in per],
+            'rounds': [r['record'] for r in rounds],
         }
         if fleet is not None:
             summary['fleet'] = {

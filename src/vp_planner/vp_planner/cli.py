@@ -4,6 +4,12 @@
         --init 50 --seed 0 --out out/run [--reward coverage] [--models FOLDER] [...]
     python -m vp_planner.cli score --plan out/run/plan.json [--reward paper]
 
+A second sortie: ``--fixed PLAN.json`` (repeatable) gives the cameras already flown, which every
+reward model counts with the plan, and ``--reconstructed PLY`` what they reconstructed (points of
+the planning cloud within ``--tau`` of it weigh ``--reconstructed-weight``); plan.json records
+them (``fixed_cameras``, ``fixed_from``, ``reconstructed``) and its ``reward`` is the plan's
+together with the fixed cameras (README "A second sortie").
+
 ``plan`` (the default command) writes ``OUT/plan.json`` (scenario, method, reward_model,
 cameras [[cx,cy,cz,vx,vy,vz], ...], poses [[x,y,z,qx,qy,qz,qw], ...], reward, trace,
 evaluations, initial_evaluations, seed, seconds, scene (every argument needed to rebuild the
@@ -17,7 +23,8 @@ dict) and its top-level ``scenario`` the layout's name.
 
 ``score`` rebuilds the scene of a plan file (its ``scene``, or ``--scenario``/``--models``/...
 for a flight plan without one; ``cameras`` or ``poses``) and prints the plan's reward under the
-chosen model as the last number on stdout.
+chosen model as the last number on stdout (a second sortie's with its recorded cameras already
+flown and reconstruction, as it was planned).
 
 Errors: one line on stderr and exit code 2.
 """
@@ -123,6 +130,16 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
                        help="lawnmower: image overlap along and across the flight lines (0..0.95)")
         p.add_argument("--lawnmower-tilt", type=float, default=0.0,
                        help="lawnmower: camera tilt from nadir, rad (0: nadir; oblique up to 60 degrees)")
+        p.add_argument("--fixed", action="append", default=[], metavar="PLAN.json",
+                       help="cameras already flown (a plan file; repeatable): the reward counts them with "
+                            "the plan (README 'A second sortie')")
+        p.add_argument("--reconstructed", default=None, metavar="PLY",
+                       help="what an earlier sortie reconstructed (a PLY in the scene's frame): planning-cloud "
+                            "points within --tau of it weigh --reconstructed-weight")
+        p.add_argument("--tau", type=float, default=0.03, help="m: a point this close to the reconstruction "
+                                                                "counts as reconstructed (0.03)")
+        p.add_argument("--reconstructed-weight", type=float, default=0.1,
+                       help="weight in [0, 1] of a reconstructed point in the reward (others 1; 0.1)")
         p.add_argument("--threads", type=int, default=1,
                        help="torch threads (default 1: leaves the other cores to a reconstruction beside it)")
         p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -176,6 +193,34 @@ def _image_size(args: argparse.Namespace, default: tuple[int, int] = (2000, 1500
     return int(w), int(h)
 
 
+def fixed_cameras_of(paths: Sequence[str]) -> np.ndarray:
+    """The cameras (M, 6) of the plan files given with ``--fixed`` (in order), CliError naming a
+    bad file."""
+    from vp_scene.planfile import PlanFileError, load_plan
+
+    cams = [np.zeros((0, 6))]
+    for path in paths:
+        try:
+            cams.append(load_plan(path, require_scene=False).cameras)
+        except PlanFileError as exc:
+            raise CliError(f"--fixed: {exc}") from None
+    return np.concatenate(cams)
+
+
+def reconstruction_of(path: Optional[str]) -> Optional[np.ndarray]:
+    """The points (Q, 3) of the ``--reconstructed`` PLY (None without one), CliError naming a bad
+    file."""
+    if path is None:
+        return None
+    from vp_scene.plants import PlantModelError
+    from vp_scene.ply import load_points
+
+    try:
+        return load_points(path)
+    except PlantModelError as exc:
+        raise CliError(f"--reconstructed: {exc}") from None
+
+
 def plan(args: argparse.Namespace) -> dict:
     """Plan views; write OUT/plan.json and OUT/noisy_points.npy; return the plan dict."""
     from vp_scene.camera import cameras_to_poses
@@ -191,6 +236,8 @@ def plan(args: argparse.Namespace) -> dict:
     if args.parts < 0:
         raise CliError(f"--parts must be >= 0 (0: automatic), got {args.parts}")
     check_lawnmower(args.lawnmower_overlap, args.lawnmower_tilt)
+    fixed = fixed_cameras_of(args.fixed)
+    reconstruction = reconstruction_of(args.reconstructed)
     set_threads(args.threads)
     out = Path(args.out)
     image_size = _image_size(args)
@@ -217,7 +264,9 @@ def plan(args: argparse.Namespace) -> dict:
                          theta_match=args.theta_match, callback=progress, structured_init=args.structured_init,
                          reward=args.reward, image_size=image_size, bo_mode=args.bo_mode,
                          arc_spacing=args.arc_spacing, parts=args.parts,
-                         lawnmower_overlap=args.lawnmower_overlap, lawnmower_tilt=args.lawnmower_tilt)
+                         lawnmower_overlap=args.lawnmower_overlap, lawnmower_tilt=args.lawnmower_tilt,
+                         fixed_cameras=fixed, reconstruction=reconstruction, tau=args.tau,
+                         reconstructed_weight=args.reconstructed_weight)
     finally:
         if bar is not None:
             bar.close()
@@ -250,12 +299,33 @@ def plan(args: argparse.Namespace) -> dict:
                         "min_separation": args.min_separation},
         "ensemble_weights": res.ensemble_weights,
         "model_names": res.model_names,
+        "fixed_cameras": [[float(x) for x in row] for row in fixed],
+        "fixed_from": [str(Path(f).resolve()) for f in args.fixed],
+        "reconstructed": None if reconstruction is None else {
+            "path": str(Path(args.reconstructed).resolve()), "points": int(len(reconstruction)), "tau": args.tau,
+            "reconstructed_weight": args.reconstructed_weight, "fraction": res.reconstructed_fraction},
         "scene": scene,
     }
     out.mkdir(parents=True, exist_ok=True)
     np.save(out / "noisy_points.npy", realizations)
     write_plan(out / "plan.json", data)
     return data
+
+
+def _sortie_of(data: dict, realizations: np.ndarray) -> tuple[Optional[np.ndarray], Optional[np.ndarray]]:
+    """A second sortie's plan file: its cameras already flown and the point weights of its
+    recorded reconstruction (read again from its PLY), as it was planned; (None, None) else."""
+    from .reward_models import reconstructed_weights
+
+    fixed = np.asarray(data.get("fixed_cameras") or np.zeros((0, 6)), dtype=np.float64)
+    rec = data.get("reconstructed")
+    if not rec:
+        return fixed, None
+    try:
+        points = reconstruction_of(rec["path"])
+        return fixed, reconstructed_weights(realizations, points, float(rec["tau"]), float(rec["reconstructed_weight"]))
+    except (KeyError, TypeError) as exc:
+        raise CliError(f"the plan's 'reconstructed' record is malformed ({exc})") from None
 
 
 def score(args: argparse.Namespace) -> float:
@@ -278,7 +348,9 @@ def score(args: argparse.Namespace) -> float:
     theta = args.theta_match if args.theta_match is not None else pf.theta_match
     image = CameraModel(*_image_size(args, pf.image_size or (2000, 1500)), fov)
     realizations = build_scene(scene)
-    value = float(np.asarray(make_reward(model, realizations, fov, theta, image)(pf.cameras[None]))[0])
+    fixed, weights = _sortie_of(pf.data, realizations)
+    value = float(np.asarray(make_reward(model, realizations, fov, theta, image, fixed_cameras=fixed,
+                                         point_weights=weights)(pf.cameras[None]))[0])
     print(f"plan score: {model} reward of {args.plan} ({len(pf.cameras)} cameras, "
           f"{resolve_layout(scene['scenario']).name}):",
           file=sys.stderr)

@@ -68,7 +68,8 @@ from numpy.typing import NDArray
 
 from .methods import BAYESIAN, MAX_EVALUATIONS, METHODS
 from .reward import DEFAULT_FOV, DEFAULT_THETA_MATCH
-from .reward_models import DEFAULT_REWARD_MODEL, check_reward_model
+from .reward_models import (DEFAULT_RECONSTRUCTED_WEIGHT, DEFAULT_REWARD_MODEL, DEFAULT_TAU, check_fixed_cameras,
+                            check_reward_model)
 from .space import (
     NoFeasiblePlanError,
     Objective,
@@ -92,6 +93,9 @@ __all__ = [
     "MAX_EVALUATIONS",
     "estimate_run_memory",
     "InvalidSceneError",
+    "InvalidFixedCamerasError",
+    "InvalidReconstructionError",
+    "sortie_weights",
     "NoFeasiblePlanError",
 ]
 
@@ -136,6 +140,44 @@ class InvalidSceneError(ValueError):
     """Empty or non-finite point cloud, or a wrong shape."""
 
 
+class InvalidFixedCamerasError(ValueError):
+    """Cameras already flown that are not finite (M, 6) cameras with a viewing direction, or
+    more than the memory holds together with the plan (:func:`check_memory` of N + M)."""
+
+
+class InvalidReconstructionError(ValueError):
+    """A reconstruction (of an earlier sortie) with non-finite points, more points than the
+    memory holds, or a tau / reconstructed_weight out of range."""
+
+
+#: Bytes a reconstruction point costs the hole weighting (the points and their KD-tree).
+RECONSTRUCTION_POINT_BYTES = 64
+
+
+def sortie_weights(realizations: NDArray[np.float64], reconstruction: Any, tau: float, reconstructed_weight: float,
+                   available: Optional[int] = None) -> tuple[NDArray[np.float64], float]:
+    """Point weights (K, P) of a second sortie (:func:`vp_planner.reward_models.reconstructed_weights`)
+    and the fraction of points reconstructed; InvalidReconstructionError for a bad reconstruction,
+    tau or weight, or a reconstruction the memory cannot hold."""
+    from .reward_models import reconstructed_mask
+
+    Q = np.asarray(reconstruction, dtype=np.float64)
+    if Q.size % 3 or (Q.ndim == 2 and Q.shape[1] != 3) or Q.ndim > 2:
+        raise InvalidReconstructionError(f"the reconstruction must be (Q, 3) points, got shape {Q.shape}")
+    need = Q.size // 3 * RECONSTRUCTION_POINT_BYTES
+    have = available_memory() if available is None else int(available)
+    if have is not None and need > 0.8 * have:
+        raise InvalidReconstructionError(f"the reconstruction's {Q.size // 3} points need about "
+                                         f"{need / 2**30:.1f} GiB; {have / 2**30:.1f} GiB are available")
+    if not (math.isfinite(reconstructed_weight) and 0.0 <= reconstructed_weight <= 1.0):
+        raise InvalidReconstructionError(f"reconstructed_weight must be in [0, 1], got {reconstructed_weight}")
+    try:
+        mask = reconstructed_mask(realizations, Q, tau)
+    except ValueError as exc:
+        raise InvalidReconstructionError(str(exc)) from None
+    return np.where(mask, float(reconstructed_weight), 1.0), float(mask.mean())
+
+
 @dataclass
 class PlanResult:
     """Outcome of :func:`plan_views`.
@@ -159,6 +201,9 @@ class PlanResult:
             the part plans, before the joint refinement).
         parts: egp/gp by parts: one record per part (cameras, points, evaluations, the part's own
             reward and its initial design's best); None otherwise.
+        fixed_cameras: M, the cameras already flown the reward counted (0: a first sortie).
+        reconstructed_fraction: with a reconstruction, the fraction of the planning cloud's
+            points within tau of it (weighed ``reconstructed_weight``); else None.
     """
 
     method: str
@@ -175,6 +220,8 @@ class PlanResult:
     steps: Optional[list] = None
     initial_best: Optional[float] = None
     parts: Optional[list] = None
+    fixed_cameras: int = 0
+    reconstructed_fraction: Optional[float] = None
 
     def simple_regret(self, optimum: float = 1.0) -> NDArray[np.float64]:
         """SR(t) = r~(z*) - max_{tau <= t} r~(z_tau) (paper Sec. V-B), with r~(z*) = ``optimum``."""
@@ -621,7 +668,9 @@ def _bo_by_parts(space: ViewSpace, obj: Objective, evaluations: int, initial_eva
         sub = ViewSpace(R[:, labels == g], int(counts[g]), min_standoff=space.min_standoff,
                         min_altitude=space.min_altitude, min_separation=space.min_separation, fov=space.fov,
                         theta_match=space.theta_match, reward_model=space.reward_model,
-                        image_size=(space.image.width, space.image.height), obstacles=R, fixed_positions=fixed)
+                        image_size=(space.image.width, space.image.height), obstacles=R, fixed_positions=fixed,
+                        fixed_cameras=space.fixed_cameras,
+                        point_weights=None if space.point_weights is None else space.point_weights[:, labels == g])
         part_obj = Objective(sub, evaluations, dtype=obj.dtype, should_stop=obj.should_stop,
                              callback=_forward(obj))
         info = _bo(sub, part_obj, evaluations, initial_evaluations, seed + g, np.random.default_rng([seed, g]),
@@ -679,6 +728,10 @@ def plan_views(
     parts: int = 0,
     lawnmower_overlap: float = 0.7,
     lawnmower_tilt: float = 0.0,
+    fixed_cameras: Any = None,
+    reconstruction: Any = None,
+    tau: float = DEFAULT_TAU,
+    reconstructed_weight: float = DEFAULT_RECONSTRUCTED_WEIGHT,
 ) -> PlanResult:
     """Plan ``num_cameras`` views of the noisy scene with ``method`` (one of :data:`METHODS`).
 
@@ -710,13 +763,21 @@ def plan_views(
             result); 0: :func:`vp_planner.parts.auto_parts` (1 for N <= 7); 1: one space.
         lawnmower_overlap, lawnmower_tilt: lawnmower: image overlap in [0, 0.95] and camera
             tilt from nadir in [0, 60 degrees] (rad).
+        fixed_cameras: (M, 6) cameras already flown (an earlier sortie): every method's reward
+            counts them with the plan (pairs with them like pairs within it); the plan need not
+            keep min_separation from them (README "A second sortie").
+        reconstruction: (Q, 3) points an earlier sortie reconstructed: the realizations' points
+            within ``tau`` (m) of them weigh ``reconstructed_weight`` in [0, 1] in the reward,
+            the others 1 (:func:`vp_planner.reward_models.reconstructed_weights`).
 
     Raises:
         UnknownMethodError, InvalidNumCamerasError, InvalidBudgetError, InvalidSceneError (all
         ValueError) for bad arguments (InvalidNumCamerasError also for a plan the memory cannot
         hold, :func:`check_memory`; BudgetTooLargeError, an InvalidBudgetError, for a budget above
         :data:`MAX_EVALUATIONS` or one the memory cannot hold, :func:`check_budget_memory`);
-        NoFeasiblePlanError (ValueError) when no feasible plan was found.
+        InvalidFixedCamerasError, InvalidReconstructionError (ValueError) for bad cameras already
+        flown or a bad reconstruction (nothing planned); NoFeasiblePlanError (ValueError) when no
+        feasible plan was found.
     """
     validate_request(method, num_cameras, evaluations, initial_evaluations)
     check_reward_model(reward)
@@ -727,6 +788,13 @@ def plan_views(
     except ValueError as exc:
         raise InvalidSceneError(str(exc)) from None
     check_memory(num_cameras, R.shape, reward)
+    try:
+        F = check_fixed_cameras(fixed_cameras)
+        if len(F):
+            check_memory(num_cameras + len(F), R.shape, reward)
+    except ValueError as exc:
+        raise InvalidFixedCamerasError(f"fixed cameras: {exc}") from None
+    W, done = (None, None) if reconstruction is None else sortie_weights(R, reconstruction, tau, reconstructed_weight)
     n_parts = _check_parts(parts, method, R, num_cameras)
     check_lawnmower(lawnmower_overlap, lawnmower_tilt)
     budget = total_evaluations(method, evaluations, n_parts)
@@ -734,7 +802,7 @@ def plan_views(
     start = time.perf_counter()
     space = ViewSpace(R, num_cameras, min_standoff=min_standoff, min_altitude=min_altitude,
                       min_separation=min_separation, fov=fov, theta_match=theta_match, shell_depth=shell_depth,
-                      reward_model=reward, image_size=image_size)
+                      reward_model=reward, image_size=image_size, fixed_cameras=F, point_weights=W)
     obj = Objective(space, budget, callback=callback, dtype=dtype, should_stop=should_stop)
     rng = np.random.default_rng(seed)
     torch.manual_seed(seed)
@@ -785,4 +853,6 @@ def plan_views(
         steps=info.get("steps"),
         initial_best=info.get("initial_best"),
         parts=info.get("parts"),
+        fixed_cameras=len(F),
+        reconstructed_fraction=done,
     )

@@ -9,6 +9,12 @@ reward, reward model and method, for the recon node) and camera frustums on
 ``/camera_plan/markers`` for RViz. With ``autostart`` it plans with its parameters as soon as a
 scene arrives.
 
+A goal may carry a second sortie's context (README "A second sortie"): ``fixed_cameras``, the
+cameras already flown, which every reward model counts with the plan, and ``reconstruction``,
+what they reconstructed (its points mark the scene points within ``tau`` as reconstructed,
+weighed ``reconstructed_weight``); both in ``frame_id`` (else INVALID_FIXED_CAMERAS /
+INVALID_RECONSTRUCTION, as for NaN or more than the memory holds).
+
 Goals are validated in the execute callback and aborted with a named ``error_code`` and an
 ``error_msg`` (as nav2's planner servers do); one goal runs at a time, a second one while
 planning is rejected. Cancel is honoured within one reward evaluation, and inside the
@@ -36,10 +42,13 @@ from vp_interfaces.action import PlanViews
 from vp_interfaces.msg import CameraPlan
 from vp_planner.gp import MODEL_NAMES
 from vp_planner.optimizers import (MAX_CAMERAS, MAX_EVALUATIONS, METHODS, BudgetTooLargeError, InvalidBudgetError,
-                                   InvalidNumCamerasError, InvalidSceneError, NoFeasiblePlanError, PlanResult, UnknownMethodError,
+                                   InvalidFixedCamerasError, InvalidNumCamerasError, InvalidReconstructionError,
+                                   InvalidSceneError, NoFeasiblePlanError, PlanResult, UnknownMethodError,
                                    check_lawnmower, plan_views, validate_request)
-from vp_planner.reward_models import DEFAULT_REWARD_MODEL, REWARD_MODELS, check_reward_model
-from vp_scene.messages import cameras_to_pose_array, camera_plan_msg, frustum_markers, realizations_from_cloud
+from vp_planner.reward_models import (DEFAULT_RECONSTRUCTED_WEIGHT, DEFAULT_REWARD_MODEL, DEFAULT_TAU, REWARD_MODELS,
+                                      check_reward_model)
+from vp_scene.messages import (cameras_to_pose_array, camera_plan_msg, frustum_markers, pose_array_to_cameras,
+                               pointcloud2_to_numpy, realizations_from_cloud)
 from vp_scene.node_runtime import (INT_MAX, Param, declare_typed, parameter_value, refuse_bad_changes, run_node,
                                    typed_values)
 
@@ -80,6 +89,10 @@ PARAMS = {
     'theta_match': Param(math.pi / 4, 'matching angle of the reward, rad', (0.0, math.pi), False, _OPEN),
     'frame_id': Param('map', 'frame of the plans; the scene cloud must be in it', None, False, 'not empty'),
     'scene_timeout': Param(10.0, 's a goal that arrives before the scene waits for it', (0.0, math.inf)),
+    'tau': Param(DEFAULT_TAU, 'm: a scene point this close to a goal\'s reconstruction counts as reconstructed',
+                 (0.0, math.inf)),
+    'reconstructed_weight': Param(DEFAULT_RECONSTRUCTED_WEIGHT,
+                                  'reward weight of a reconstructed scene point (the others weigh 1)', (0.0, 1.0)),
 }
 
 
@@ -116,7 +129,9 @@ def check_parameters(values: dict) -> dict:
     for name in ('fov', 'theta_match'):
         if not 0.0 < v.get(name, 1.0) < math.pi:
             raise ValueError(f'{name} must be in (0, pi) rad')
-    for name in ('min_standoff', 'min_altitude', 'min_separation', 'scene_timeout'):
+    if not 0.0 <= v.get('reconstructed_weight', 0.0) <= 1.0:
+        raise ValueError('reconstructed_weight must be in [0, 1]')
+    for name in ('min_standoff', 'min_altitude', 'min_separation', 'scene_timeout', 'tau'):
         if v.get(name, 0.0) < 0.0:
             raise ValueError(f'{name} must be >= 0')
     if v.get('frame_id', 'map') == '':
@@ -231,7 +246,8 @@ class PlannerNode(Node):
 
     # ---------------------------------------------------------------- planning
     def _plan(self, method: str, num_cameras: int, evaluations: int, initial: int, seed: int, reward: str,
-              progress, should_stop) -> PlanResult:
+              progress, should_stop, fixed_cameras: Optional[np.ndarray] = None,
+              reconstruction: Optional[np.ndarray] = None) -> PlanResult:
         realizations = self._realizations
         assert realizations is not None
         self.get_logger().info(f'planning {num_cameras} cameras with {method} ({reward} reward): '
@@ -245,20 +261,24 @@ class PlannerNode(Node):
             image_size=(self._param('image_width'), self._param('image_height')),
             bo_mode=self._param('bo_mode'), structured_init=self._param('structured_init'),
             arc_spacing=self._param('arc_spacing'), parts=self._param('parts'),
-            lawnmower_overlap=self._param('lawnmower_overlap'), lawnmower_tilt=self._param('lawnmower_tilt'))
+            lawnmower_overlap=self._param('lawnmower_overlap'), lawnmower_tilt=self._param('lawnmower_tilt'),
+            fixed_cameras=fixed_cameras, reconstruction=reconstruction, tau=self._param('tau'),
+            reconstructed_weight=self._param('reconstructed_weight'))
 
-    def _publish_plan(self, result: PlanResult) -> PoseArray:
-        """/camera_plan/info first (so that a recon has the reward when the plan arrives), then
-        /camera_plan and the markers: one header, one set of poses."""
+    def _publish_plan(self, result: PlanResult, fixed: Optional[np.ndarray] = None) -> PoseArray:
+        """/camera_plan/info first (so that a recon has the reward, and the cameras already flown
+        of a second sortie, when the plan arrives), then /camera_plan and the markers: one header,
+        one set of poses."""
         msg = cameras_to_pose_array(result.cameras, self._param('frame_id'), self.get_clock().now().to_msg())
         self.info_pub.publish(camera_plan_msg(msg, result.reward, result.reward_model, result.method,
-                                              result.evaluations, result.seconds))
+                                              result.evaluations, result.seconds, fixed))
         self.plan_pub.publish(msg)
         self.marker_pub.publish(frustum_markers(result.cameras, msg.header.frame_id,
                                                 msg.header.stamp, self._param('fov')))
         self.get_logger().info(
-            f'published /camera_plan: {len(msg.poses)} cameras, {result.reward_model} reward {result.reward:.4f} '
-            f'({result.method}, {result.evaluations} evaluations'
+            f'published /camera_plan: {len(msg.poses)} cameras, {result.reward_model} reward {result.reward:.4f}'
+            + (f' with {result.fixed_cameras} cameras already flown' if result.fixed_cameras else '')
+            + f' ({result.method}, {result.evaluations} evaluations'
             + (f', by {len(result.parts)} parts of ' + '+'.join(str(p['cameras']) for p in result.parts) + ' cameras'
                if result.parts else '') + f', {result.seconds:.1f} s)')
         return msg
@@ -283,6 +303,28 @@ class PlannerNode(Node):
                 break
             self._scene_arrived.wait(min(0.1, left))
         return self._realizations is not None
+
+    def _goal_fixed_cameras(self, msg: PoseArray) -> Optional[np.ndarray]:
+        """A goal's cameras already flown (M, 6), None when it has none; ValueError for another
+        frame or unusable poses (the library refuses NaN and too many)."""
+        if not msg.poses:
+            return None
+        frame = self._param('frame_id')
+        if msg.header.frame_id != frame:
+            raise ValueError(f'fixed_cameras are in frame {msg.header.frame_id!r}, the planner plans in {frame!r} '
+                             f'(frame_id); no transform is applied')
+        return pose_array_to_cameras(msg.poses)
+
+    def _goal_reconstruction(self, msg: PointCloud2) -> Optional[np.ndarray]:
+        """A goal's reconstruction (Q, 3), None when empty; ValueError for another frame or an
+        unreadable cloud (the library refuses NaN and too many points)."""
+        if int(msg.width) * int(msg.height) == 0:
+            return None
+        frame = self._param('frame_id')
+        if msg.header.frame_id != frame:
+            raise ValueError(f'the reconstruction is in frame {msg.header.frame_id!r}, the planner plans in {frame!r} '
+                             f'(frame_id); no transform is applied')
+        return pointcloud2_to_numpy(msg)[0]
 
     def _execute(self, goal_handle) -> PlanViews.Result:
         self._enter()
@@ -331,6 +373,14 @@ class PlannerNode(Node):
             check_reward_model(reward)
         except ValueError as exc:
             return abort(PlanViews.Result.UNKNOWN_REWARD_MODEL, str(exc))
+        try:
+            fixed = self._goal_fixed_cameras(goal.fixed_cameras)
+        except ValueError as exc:
+            return abort(PlanViews.Result.INVALID_FIXED_CAMERAS, str(exc))
+        try:
+            reconstruction = self._goal_reconstruction(goal.reconstruction)
+        except ValueError as exc:
+            return abort(PlanViews.Result.INVALID_RECONSTRUCTION, str(exc))
         if not self._wait_for_scene():
             if self._stopping():
                 return abort(PlanViews.Result.CANCELED, 'the planner is shutting down')
@@ -355,14 +405,15 @@ class PlannerNode(Node):
 
         try:
             start = time.monotonic()
-            plan = self._plan(method, num_cameras, evaluations, initial, seed, reward, progress, should_stop)
+            plan = self._plan(method, num_cameras, evaluations, initial, seed, reward, progress, should_stop,
+                              fixed, reconstruction)
             if plan.stopped:
                 why = 'cancelled' if goal_handle.is_cancel_requested else 'the planner is shutting down'
                 text = f'{why} after {plan.evaluations} evaluations'
                 result.evaluations = int(plan.evaluations)
                 self.get_logger().info(text)
                 return finish(PlanViews.Result.CANCELED, text)
-            msg = self._publish_plan(plan)
+            msg = self._publish_plan(plan, fixed)
             result.plan = msg
             result.cameras = [float(x) for x in np.asarray(plan.cameras).ravel()]
             result.reward = float(plan.reward)
@@ -379,6 +430,10 @@ class PlannerNode(Node):
             return abort(PlanViews.Result.NO_FEASIBLE_PLAN, str(exc))
         except InvalidSceneError as exc:
             return abort(PlanViews.Result.NO_SCENE, f'unusable scene: {exc}')
+        except InvalidFixedCamerasError as exc:  # NaN, or more than the memory holds with the plan
+            return abort(PlanViews.Result.INVALID_FIXED_CAMERAS, str(exc))
+        except InvalidReconstructionError as exc:
+            return abort(PlanViews.Result.INVALID_RECONSTRUCTION, str(exc))
         except Exception as exc:  # keep serving whatever happened inside the optimizer
             return abort(PlanViews.Result.PLANNER_FAILED, f'{type(exc).__name__}: {exc}')
         finally:

@@ -93,16 +93,18 @@ class PreparedPoints:
     """A point cloud laid out for :func:`_reward_core` (reusable across calls).
 
     p_aug = [x, y, z, |p|^2, 1]^T (5, P) of the points centred on ``centre`` (the centroid of the
-    finite points), ``scale2`` = max |p - centre|^2 over the finite points.
+    finite points), ``scale2`` = max |p - centre|^2 over the finite points. ``weights`` (P,) or
+    None: point weights w_p of the weighted eq. 2 (see :func:`prepare_points`).
     """
 
     p_aug: torch.Tensor
     centre: torch.Tensor
     scale2: float
     num_points: int
+    weights: "torch.Tensor | None" = None
 
     @classmethod
-    def of(cls, pts: torch.Tensor) -> "PreparedPoints":
+    def of(cls, pts: torch.Tensor, weights: "torch.Tensor | None" = None) -> "PreparedPoints":
         dtype = pts.dtype
         P = pts.shape[0]
         if bool(torch.isfinite(pts).all()):
@@ -117,7 +119,7 @@ class PreparedPoints:
             sq = (p * p).sum(dim=1, keepdim=True)
             scale2 = float(sq[finite].max()) if bool(finite.any()) else 1.0
         p_aug = torch.cat([p, sq, torch.ones(P, 1, dtype=dtype)], dim=1).T.contiguous()
-        return cls(p_aug, centre, scale2, P)
+        return cls(p_aug, centre, scale2, P, weights)
 
 
 def _reward_core(
@@ -153,7 +155,9 @@ def _reward_core(
 
     ii, jj = torch.triu_indices(N, N, offset=1)
     cos_match = math.cos(theta_match)
-    denom = float(P * S)
+    wts = prep.weights
+    # eq. 2 with point weights w_p: 1 / (S sum_p w_p) sum_p w_p sum_{i<j} f g (w_p = 1: the paper's)
+    denom = float(P * S) if wts is None else float(S) * max(float(wts.sum()), 1e-300)
     # A camera closer than this to a point does not see it (the direction is undefined).
     eps = torch.finfo(dtype).eps
     scale2 = max(prep.scale2, float((c * c).sum(-1).max()), 1e-300)
@@ -226,24 +230,37 @@ def _reward_core(
                     g = vis[:, a] & vis[:, b] & (cos2 >= cos_match)
                 # eq. 4: f = |a x b| / (|a||b|) = sin(phi_2) = sqrt(1 - cos^2(phi_2))
                 f = cos2.square_().neg_().add_(1.0).clamp_min_(0.0).sqrt_()
-                acc[:, s0:s0 + len(a)] += torch.where(g, f, zero).sum(dim=2)
+                fg = torch.where(g, f, zero)
+                if wts is not None:
+                    fg *= wts[p0:p0 + pb]
+                acc[:, s0:s0 + len(a)] += fg.sum(dim=2)
         # Coincident cameras: f = 0 exactly (sqrt(1 - cos^2) would leave ~1e-8 of round-off).
         out[b0:b1] = (acc * distinct).sum(dim=1) / denom  # eq. 2: 1 / (P S) sum_p sum_{i<j} f g
     return out
 
 
-def prepare_points(points: Any, dtype: Any = torch.float64) -> PreparedPoints:
+def prepare_points(points: Any, dtype: Any = torch.float64, weights: Any = None) -> PreparedPoints:
     """Lay out a (P, 3) cloud, or (K, P, 3) realizations (flattened, see :func:`noisy_reward`),
-    once for repeated :func:`reward` / :func:`noisy_reward` calls (pass it as ``points``)."""
+    once for repeated :func:`reward` / :func:`noisy_reward` calls (pass it as ``points``).
+
+    ``weights``: None (the paper's eq. 2), or one weight w_p >= 0 a point, of the points' shape
+    without the last axis ((P,) or (K, P)); the reward is then the weighted mean over points,
+    1 / (S sum_p w_p) sum_p w_p sum_{i<j} f g (a second sortie weighs points already
+    reconstructed less, README "A second sortie")."""
     dt = _resolve_dtype(dtype)
     pts = _as_tensor(points, dt)
+    w = None if weights is None else _as_tensor(weights, dt)
+    if w is not None and tuple(w.shape) != tuple(pts.shape[:-1]):
+        raise ValueError(f"weights must have shape {tuple(pts.shape[:-1])} (one a point), got {tuple(w.shape)}")
+    if w is not None and not (bool(torch.isfinite(w).all()) and bool((w >= 0).all())):
+        raise ValueError("point weights must be finite and >= 0")
     if pts.ndim == 3 and pts.shape[-1] == 3:
         pts = pts.reshape(-1, 3)
     if pts.ndim != 2 or pts.shape[-1] != 3:
         raise ValueError(f"points must have shape (P, 3), got {tuple(pts.shape)}")
     if pts.shape[0] == 0:
         raise ValueError("the point cloud is empty")
-    return PreparedPoints.of(pts)
+    return PreparedPoints.of(pts, None if w is None else w.reshape(-1))
 
 
 def _prepare(cameras: Any, points: Any, dtype: torch.dtype) -> tuple[torch.Tensor, PreparedPoints, tuple[int, ...]]:

@@ -34,6 +34,13 @@ mean over the K realizations of its reward on each one.
       pairs from the same side do not count ten times (the paper's sum does).
 
 Each ingredient can be switched off (``ablations()``), which is how the study measures it.
+
+A second sortie (README "A second sortie"): every model takes the cameras already flown,
+``fixed_cameras`` (M, 6), and scores a plan z together with them, R(z | F) = R(z ∪ F): pairs
+between a new and a fixed camera count like pairs within the plan. It also takes point weights
+w_p (:func:`reconstructed_weights`: ``reconstructed_weight`` for a point within ``tau`` of the
+first sortie's reconstruction, 1 for the others); the averages over points become weighted
+means, 1/(sum_p w_p) sum_p w_p cov(p) (and eq. 2 likewise), so the next views go to the holes.
 Degenerate cases: a camera on a point or with a zero viewing vector sees nothing; an empty
 cloud is refused; N < 2 is refused (no pairs).
 
@@ -45,7 +52,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields, replace
-from typing import Any, Callable, Union
+from typing import Any, Callable, Optional, Union
 
 import numpy as np
 import torch
@@ -56,7 +63,14 @@ from .feasibility import check_realizations
 from .reward import DEFAULT_FOV, DEFAULT_THETA_MATCH, noisy_reward, prepare_points
 
 __all__ = ["REWARD_MODELS", "DEFAULT_REWARD_MODEL", "CoverageParams", "RewardFunction", "make_reward",
-           "coverage_reward", "point_coverage", "ablations", "check_reward_model"]
+           "coverage_reward", "point_coverage", "ablations", "check_reward_model", "reconstructed_weights", "reconstructed_mask",
+           "DEFAULT_TAU", "DEFAULT_RECONSTRUCTED_WEIGHT", "check_fixed_cameras"]
+
+#: A planning-cloud point within this distance (m) of the first sortie's reconstruction counts as
+#: reconstructed (README "A second sortie").
+DEFAULT_TAU: float = 0.03
+#: The weight w_p of a reconstructed point (the others weigh 1).
+DEFAULT_RECONSTRUCTED_WEIGHT: float = 0.1
 
 #: Reward models by name (``reward`` parameter, PlanViews goal field, ``--reward``).
 REWARD_MODELS: tuple[str, ...] = ("paper", "coverage")
@@ -146,9 +160,11 @@ def _window(theta_deg: torch.Tensor, p: CoverageParams) -> torch.Tensor:
 
 def coverage_reward(cameras: Any, realizations: Any, params: CoverageParams = CoverageParams(),
                     image: CameraModel = CameraModel(), *, max_elements: int = 1 << 22,
-                    dtype: torch.dtype = torch.float32, seed: int = 0) -> np.ndarray:
+                    dtype: torch.dtype = torch.float32, seed: int = 0, weights: Any = None) -> np.ndarray:
     """The ``coverage`` model (module docstring) of plans (..., N, 6) on realizations (K, P, 3).
 
+    ``weights``: None, or (K, P) point weights w_p >= 0 (the weighted mean over points; taken as
+    they are, so give them for the points after any subsampling: ``params.max_points = 0``).
     Returns rewards of shape ``cameras.shape[:-2]`` (a float for one (N, 6) plan).
     """
     cams = torch.as_tensor(np.asarray(cameras, dtype=np.float64)).to(dtype)
@@ -160,6 +176,10 @@ def coverage_reward(cameras: Any, realizations: Any, params: CoverageParams = Co
         raise ValueError(f"the reward needs at least 2 cameras (pairs), got N = {N}")
     pts = _points(realizations, params.max_points, seed).to(dtype)  # (K, P, 3)
     K, P, _ = pts.shape
+    w = None
+    if weights is not None:
+        w = torch.as_tensor(_check_weights(weights, (K, P))).reshape(-1).to(dtype)
+        w = w / max(float(w.sum()), 1e-300)
     cams = cams.reshape(-1, N, 6)
     B = cams.shape[0]
     out = torch.zeros(B, dtype=torch.float64)
@@ -168,17 +188,82 @@ def coverage_reward(cameras: Any, realizations: Any, params: CoverageParams = Co
     chunk = max(1, max_elements // max(1, per_plan))
     for b0 in range(0, B, chunk):
         cov = _point_coverage(cams[b0:b0 + chunk], pts, params, image, max_elements)
-        out[b0:b0 + chunk] = cov.mean(-1).to(torch.float64)   # 1/(K P) sum_k sum_p (eq. 7)
+        # 1/(K P) sum_k sum_p (eq. 7), or the w_p-weighted mean
+        out[b0:b0 + chunk] = (cov.mean(-1) if w is None else cov @ w).to(torch.float64)
     res = out.numpy()
     return res.reshape(batch_shape) if batch_shape else float(res.reshape(-1)[0])
 
 
+def _subsample(num_points: int, max_points: int, seed: int) -> Optional[np.ndarray]:
+    """The indices of the points kept (sorted), or None when all are."""
+    if max_points and num_points > max_points:
+        return np.sort(np.random.default_rng(seed).choice(num_points, size=max_points, replace=False))
+    return None
+
+
 def _points(realizations: Any, max_points: int, seed: int) -> torch.Tensor:
     R = torch.as_tensor(check_realizations(realizations))  # (K, P, 3), validated
-    if max_points and R.shape[1] > max_points:
-        idx = np.sort(np.random.default_rng(seed).choice(R.shape[1], size=max_points, replace=False))
-        R = R[:, torch.as_tensor(idx)]
-    return R
+    idx = _subsample(R.shape[1], max_points, seed)
+    return R if idx is None else R[:, torch.as_tensor(idx)]
+
+
+def _check_weights(weights: Any, shape: tuple) -> np.ndarray:
+    """Point weights of the given (K, P) shape, finite and >= 0 (a (P,) vector is repeated over K)."""
+    w = np.asarray(weights, dtype=np.float64)
+    if w.ndim == 1 and len(shape) == 2:
+        w = np.broadcast_to(w, shape)
+    if w.shape != tuple(shape):
+        raise ValueError(f"point weights must have shape {tuple(shape)} (one a point), got {w.shape}")
+    if not (np.all(np.isfinite(w)) and np.all(w >= 0)):
+        raise ValueError("point weights must be finite and >= 0")
+    return w
+
+
+def check_fixed_cameras(fixed_cameras: Any) -> np.ndarray:
+    """Cameras already flown as a finite (M, 6) array with non-zero viewing vectors (M may be 0);
+    ValueError otherwise."""
+    F = np.zeros((0, 6)) if fixed_cameras is None else np.asarray(fixed_cameras, dtype=np.float64)
+    if F.size == 0:
+        return np.zeros((0, 6))
+    if F.ndim != 2 or F.shape[1] != 6:
+        raise ValueError(f"fixed cameras must have shape (M, 6) [cx cy cz vx vy vz], got {F.shape}")
+    bad = ~np.isfinite(F).all(axis=1) | (np.linalg.norm(np.nan_to_num(F[:, 3:]), axis=1) == 0)
+    if bad.any():
+        raise ValueError(f"fixed camera {int(np.flatnonzero(bad)[0])} of {len(F)} is not finite or has a zero "
+                         f"viewing direction")
+    return F
+
+
+def reconstructed_mask(realizations: Any, reconstruction: Any, tau: float = DEFAULT_TAU) -> np.ndarray:
+    """(K, P) True where a point of the planning cloud is reconstructed: min_q |p - q| <= tau over
+    the reconstruction's points q (a KD-tree; each realization's points on their own).
+    ValueError for a non-finite reconstruction or tau < 0; an empty reconstruction marks nothing."""
+    R = check_realizations(realizations)
+    if not (math.isfinite(tau) and tau >= 0):
+        raise ValueError(f"tau must be finite and >= 0, got {tau}")
+    Q = np.asarray(reconstruction, dtype=np.float64).reshape(-1, 3)
+    if not np.all(np.isfinite(Q)):
+        raise ValueError("the reconstruction contains non-finite coordinates")
+    if not len(Q):
+        return np.zeros(R.shape[:2], dtype=bool)
+    from scipy.spatial import cKDTree
+
+    reach = tau * (1 + 1e-12) + 1e-15
+    dist, _ = cKDTree(Q).query(R.reshape(-1, 3), k=1, distance_upper_bound=reach)
+    return (dist <= reach).reshape(R.shape[:2])
+
+
+def reconstructed_weights(realizations: Any, reconstruction: Any, tau: float = DEFAULT_TAU,
+                          reconstructed_weight: float = DEFAULT_RECONSTRUCTED_WEIGHT) -> np.ndarray:
+    """Point weights w_p (K, P) of the planning cloud given what a sortie reconstructed::
+
+        w_p = reconstructed_weight   if min_q |p - q| <= tau (:func:`reconstructed_mask`)
+        w_p = 1                      otherwise (a hole)
+
+    ValueError as :func:`reconstructed_mask`, or for a weight outside [0, 1]."""
+    if not (math.isfinite(reconstructed_weight) and 0.0 <= reconstructed_weight <= 1.0):
+        raise ValueError(f"reconstructed_weight must be in [0, 1], got {reconstructed_weight}")
+    return np.where(reconstructed_mask(realizations, reconstruction, tau), float(reconstructed_weight), 1.0)
 
 
 def _point_coverage(cams: torch.Tensor, pts: torch.Tensor, p: CoverageParams, image: CameraModel,
@@ -254,30 +339,45 @@ def point_coverage(cameras: Any, realizations: Any, params: CoverageParams = Cov
 
 def make_reward(spec: Union[str, tuple], realizations: Any, fov: float = DEFAULT_FOV,
                 theta_match: float = DEFAULT_THETA_MATCH, image: CameraModel | None = None,
-                dtype: torch.dtype = torch.float64) -> RewardFunction:
+                dtype: torch.dtype = torch.float64, fixed_cameras: Any = None,
+                point_weights: Any = None) -> RewardFunction:
     """A function cams (..., N, 6) -> rewards of the named model on these realizations.
 
     ``spec`` is a name of :data:`REWARD_MODELS` or ``("coverage", CoverageParams)``. ``image``
     gives the image size the resolution term uses (default 2000 x 1500, the paper's) and its
-    field of view is ``fov``.
+    field of view is ``fov``. ``fixed_cameras`` (M, 6): cameras already flown, scored with every
+    plan (R(z ∪ F), module docstring); ``point_weights`` (K, P): w_p of every point (None: 1).
     """
     name, params = (spec, None) if isinstance(spec, str) else spec
     check_reward_model(name)
+    F = check_fixed_cameras(fixed_cameras)
+    R = check_realizations(realizations)
+    W = None if point_weights is None else _check_weights(point_weights, R.shape[:2])
+
+    def with_fixed(cams: Any) -> np.ndarray:
+        """The plans (..., N, 6) with the fixed cameras appended: (..., N + M, 6)."""
+        z = np.asarray(cams, dtype=np.float64)
+        if not len(F) or z.ndim < 2:
+            return z
+        return np.concatenate([z, np.broadcast_to(F, z.shape[:-2] + F.shape)], axis=-2)
+
     if name == "paper":
-        prep = prepare_points(realizations, dtype)
+        prep = prepare_points(R, dtype, W)
 
         def paper(cams: Any) -> np.ndarray:
-            return np.asarray(noisy_reward(np.asarray(cams, dtype=np.float64), prep, fov, theta_match, dtype=dtype))
+            return np.asarray(noisy_reward(with_fixed(cams), prep, fov, theta_match, dtype=dtype))
         return paper
     cam_model = image or CameraModel(fov=fov)
     if abs(cam_model.fov - fov) > 1e-12:
         cam_model = CameraModel(cam_model.width, cam_model.height, fov)
     params = params or CoverageParams()
-    R = np.asarray(realizations, dtype=np.float64)
-    pts = _points(R, params.max_points, 0).numpy()
+    idx = _subsample(R.shape[1], params.max_points, 0)
+    pts = R if idx is None else R[:, idx]
+    w = None if W is None else (W if idx is None else W[:, idx])
 
     def coverage(cams: Any) -> np.ndarray:
-        return np.asarray(coverage_reward(cams, pts, replace(params, max_points=0), cam_model))
+        return np.asarray(coverage_reward(with_fixed(cams), pts, replace(params, max_points=0), cam_model,
+                                          weights=w))
     return coverage
 
 

@@ -54,7 +54,7 @@ from vp_scene.camera import CameraModel
 
 from .feasibility import FeasibilityRules, check_minima, check_realizations
 from .reward import DEFAULT_FOV, DEFAULT_THETA_MATCH
-from .reward_models import DEFAULT_REWARD_MODEL, RewardFunction, make_reward
+from .reward_models import DEFAULT_REWARD_MODEL, RewardFunction, check_fixed_cameras, make_reward
 
 __all__ = [
     "SceneExtent",
@@ -134,6 +134,11 @@ class ViewSpace:
             part's points but keeps its cameras clear of every plant of the field.
         fixed_positions: (M, 3) positions of cameras planned elsewhere (another part of the
             field) that every camera of this space must keep ``min_separation`` from.
+        fixed_cameras: (M, 6) cameras already flown (an earlier sortie): every reward model
+            scores a plan together with them (pairs with them count like pairs within the
+            plan); no separation from them is required (they flew at another time).
+        point_weights: (K, P) weights w_p of the realizations' points in the reward (None: 1;
+            :func:`vp_planner.reward_models.reconstructed_weights`).
     """
 
     def __init__(
@@ -152,6 +157,8 @@ class ViewSpace:
         image_size: tuple[int, int] = (2000, 1500),
         obstacles: Any = None,
         fixed_positions: Any = None,
+        fixed_cameras: Any = None,
+        point_weights: Any = None,
     ) -> None:
         if int(num_cameras) != num_cameras or num_cameras < 2:
             raise ValueError(f"num_cameras must be an integer >= 2, got {num_cameras}")
@@ -187,6 +194,8 @@ class ViewSpace:
         self.obstacles = None if obstacles is None else self.rules.obstacles
         self.fixed_positions = self.rules.fixed_positions
         self.reward_model = reward_model
+        self.fixed_cameras = check_fixed_cameras(fixed_cameras)
+        self.point_weights = None if point_weights is None else np.asarray(point_weights, dtype=np.float64)
         self.image = CameraModel(int(image_size[0]), int(image_size[1]), self.fov)
         self._rewards: dict = {}
 
@@ -284,12 +293,13 @@ class ViewSpace:
         """This space's reward model on its realizations (built once per dtype)."""
         if dtype not in self._rewards:
             self._rewards[dtype] = make_reward(self.reward_model, self.realizations, self.fov, self.theta_match,
-                                               self.image, dtype=dtype)
+                                               self.image, dtype=dtype, fixed_cameras=self.fixed_cameras,
+                                               point_weights=self.point_weights)
         return self._rewards[dtype]
 
     def reward(self, cams: Any, dtype: torch.dtype = torch.float64) -> Any:
         """Reward (averaged over the wind realizations, eq. 7) of plans (..., N, 6) under this
-        space's reward model, fov and theta_match."""
+        space's reward model, fov and theta_match (with its fixed cameras and point weights)."""
         return self.reward_function(dtype)(cams)
 
     # ------------------------------------------------------------------ feasibility

@@ -13,7 +13,9 @@ Subscribes (all reliable, TRANSIENT_LOCAL, as the scene and planner nodes publis
   transform is applied);
 * ``/camera_plan/info`` (vp_interfaces/CameraPlan): what the planner knows about its plan (the
   same header and poses): the reward and reward model copied into the scores (NaN and '' for a
-  plan that came without it). The node has no reward code of its own.
+  plan that came without it). The node has no reward code of its own. A second sortie's plan
+  carries the cameras already flown (``fixed_poses``): the node reconstructs from their images
+  and the new ones together (README "A second sortie"; in simulation both are rendered).
 
 For every plan it renders, reconstructs and scores each wind realization (one loop, one failure
 rule: :func:`vp_recon.pipeline.reconstruct_plan`, the first failing realization stops the plan)
@@ -109,6 +111,9 @@ PARAMS = {
 
 #: /camera_plan/info messages remembered to find the one of a plan.
 _INFO_MEMORY = 16
+#: s a plan waits for its /camera_plan/info (its reward, a second sortie's cameras already flown);
+#: a plan without one (another planner) is reconstructed as it is after that.
+INFO_WAIT_S = 2.0
 
 
 #: The parameters of the capture model (a realistic capture's figures; ignored by the ideal one).
@@ -225,10 +230,15 @@ class ReconNode(Node):
             self._infos[plan_key(msg.header, msg.poses)] = msg
             while len(self._infos) > _INFO_MEMORY:
                 self._infos.popitem(last=False)
+            self._lock.notify_all()
 
-    def _info_of(self, plan: PoseArray) -> Optional[CameraPlan]:
+    def _info_of(self, plan: PoseArray, wait: float = 0.0) -> Optional[CameraPlan]:
+        """The plan's /camera_plan/info, waiting up to ``wait`` seconds for it (the planner sends
+        it first, but two topics keep no order between them)."""
+        key = plan_key(plan.header, plan.poses)
         with self._lock:
-            return self._infos.get(plan_key(plan.header, plan.poses))
+            self._lock.wait_for(lambda: key in self._infos or self._plans.stopped, timeout=wait)
+            return self._infos.get(key)
 
     def _on_plan(self, msg: PoseArray) -> None:
         if self._plans.offer(msg):
@@ -298,6 +308,15 @@ class ReconNode(Node):
                 cameras = pose_array_to_cameras(plan.poses)
             except ValueError as exc:
                 raise ReconError(Score.EMPTY_PLAN, f'the plan has unusable poses: {exc}')
+            info = self._info_of(plan, INFO_WAIT_S)
+            if info is not None and info.fixed_poses:  # a second sortie: the images of both
+                try:
+                    cameras = np.concatenate([pose_array_to_cameras(info.fixed_poses), cameras])
+                except ValueError as exc:
+                    raise ReconError(Score.EMPTY_PLAN, f'the plan\'s cameras already flown are unusable: {exc}')
+                self.get_logger().info(f'a second sortie: {len(info.fixed_poses)} cameras already flown and '
+                                       f'{n_cams} new ones')
+                n_cams = len(cameras)
             if not np.all(np.isfinite(cameras)):
                 raise ReconError(Score.EMPTY_PLAN, 'the plan has non-finite poses')
             scene = self._scene_now()

@@ -126,12 +126,15 @@ def pose_array_to_cameras(poses: Sequence[Pose]) -> NDArray[np.float64]:
 
 
 def camera_plan_msg(plan: PoseArray, reward: float, reward_model: str, method: str, evaluations: int,
-                    planning_time: float) -> CameraPlan:
-    """``vp_interfaces/CameraPlan``: the plan's header and poses with the planner's figures."""
+                    planning_time: float, fixed_cameras: Optional[ArrayLike] = None) -> CameraPlan:
+    """``vp_interfaces/CameraPlan``: the plan's header and poses with the planner's figures, and
+    the cameras (M, 6) already flown that it completes (a second sortie) as ``fixed_poses``."""
     info = CameraPlan()
     info.header, info.poses = plan.header, plan.poses
     info.reward, info.reward_model, info.method = float(reward), reward_model, method
     info.evaluations, info.planning_time = int(evaluations), float(planning_time)
+    if fixed_cameras is not None and len(fixed_cameras):
+        info.fixed_poses = poses_to_msgs(cameras_to_poses(fixed_cameras))
     return info
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 import io
 import re
 from dataclasses import dataclass
+from typing import Any
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +21,7 @@ import trimesh
 
 from .plants import PathLike, PlantModel, PlantModelError
 
-__all__ = ["MAX_MODEL_COORDINATE", "MIN_PLANT_HEIGHT", "check_plant_size", "load_ply", "load_models"]
+__all__ = ["MAX_MODEL_COORDINATE", "MIN_PLANT_HEIGHT", "check_plant_size", "load_ply", "load_models", "load_points"]
 
 #: A loaded model must look like a plant in the Corn50 model frame (metres, stalk through the
 #: origin, about 2 m tall): every coordinate within this many metres of the origin ...
@@ -88,7 +89,7 @@ def _parse_header(raw: bytes, path: Path) -> list[_Element]:
     return elements
 
 
-def _vertex_element(raw: bytes, path: Path) -> _Element:
+def _vertex_element(raw: bytes, path: Path, colour_needed: bool = True) -> _Element:
     """The checked vertex element of a PLY header.
 
     trimesh decodes the data (:func:`load_ply`); this strict look at the header is what it does
@@ -105,7 +106,7 @@ def _vertex_element(raw: bytes, path: Path) -> _Element:
     for axis in ("x", "y", "z"):
         if axis not in types:
             raise PlantModelError(f"{path}: the PLY vertex element has no '{axis}' property")
-    colour = ("red", "green", "blue")
+    colour = ("red", "green", "blue") if colour_needed else tuple(c for c in ("red", "green", "blue") if c in types)
     if not all(c in types for c in colour):
         raise PlantModelError(f"{path}: the PLY has no per-vertex colour (needs red, green, blue properties; "
                               f"has {', '.join(types)})")
@@ -134,6 +135,42 @@ def check_plant_size(points: np.ndarray, where: object) -> None:
             f"within {MAX_MODEL_COORDINATE:g} m of it and at least {MIN_PLANT_HEIGHT:g} m tall")
 
 
+def _read_vertices(path: PathLike, colour_needed: bool) -> tuple[Any, np.ndarray]:
+    """The trimesh object of a PLY file and its (V, 3) finite vertices; PlantModelError naming
+    the file and the problem (missing, not a PLY, corrupt, truncated, no vertices, NaN)."""
+    path = Path(path)
+    if not path.is_file():
+        raise PlantModelError(f"{path}: PLY file not found")
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise PlantModelError(f"{path}: cannot read the PLY file ({exc.strerror or exc})") from None
+    vertex = _vertex_element(raw, path, colour_needed)
+    try:
+        loaded = trimesh.load(io.BytesIO(raw), file_type="ply", process=False)
+    except Exception as exc:  # noqa: BLE001 - whatever the parser says, name the file
+        text = " ".join(str(exc).split())
+        if "unexpected length" in text:
+            raise PlantModelError(f"{path}: truncated PLY: the data are shorter than the header declares "
+                                  f"({vertex.count} vertices)") from None
+        raise PlantModelError(f"{path}: corrupt PLY data ({type(exc).__name__}: {text})") from None
+    points = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))), dtype=np.float64)
+    if len(points) != vertex.count:
+        raise PlantModelError(f"{path}: truncated PLY: the header declares {vertex.count} vertices, "
+                              f"the file has {len(points)}")
+    bad = int(np.count_nonzero(~np.isfinite(points).all(axis=1)))
+    if bad:
+        raise PlantModelError(f"{path}: {bad} of {len(points)} points have NaN or infinite coordinates")
+    return loaded, points
+
+
+def load_points(path: PathLike) -> np.ndarray:
+    """The (V, 3) points of any PLY point cloud or mesh (a reconstruction: colour optional, any
+    size, the file's frame); PlantModelError as :func:`load_ply` for a missing, corrupt,
+    truncated or empty file or non-finite coordinates."""
+    return _read_vertices(path, False)[1]
+
+
 def load_ply(path: PathLike) -> PlantModel:
     """Load a coloured PLY point cloud (binary little/big endian or ASCII) as a :class:`PlantModel`.
 
@@ -149,32 +186,11 @@ def load_ply(path: PathLike) -> PlantModel:
             file and the problem.
     """
     path = Path(path)
-    if not path.is_file():
-        raise PlantModelError(f"{path}: PLY file not found")
-    try:
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise PlantModelError(f"{path}: cannot read the PLY file ({exc.strerror or exc})") from None
-    vertex = _vertex_element(raw, path)
-    try:
-        loaded = trimesh.load(io.BytesIO(raw), file_type="ply", process=False)
-    except Exception as exc:  # noqa: BLE001 - whatever the parser says, name the file
-        text = " ".join(str(exc).split())
-        if "unexpected length" in text:
-            raise PlantModelError(f"{path}: truncated PLY: the data are shorter than the header declares "
-                                  f"({vertex.count} vertices)") from None
-        raise PlantModelError(f"{path}: corrupt PLY data ({type(exc).__name__}: {text})") from None
-    points = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))), dtype=np.float64)
+    loaded, points = _read_vertices(path, True)
     if isinstance(loaded, trimesh.Trimesh):
         colors = np.asarray(loaded.visual.vertex_colors)
     else:
         colors = np.asarray(getattr(loaded, "colors", np.zeros((0, 4))))
-    if len(points) != vertex.count:
-        raise PlantModelError(f"{path}: truncated PLY: the header declares {vertex.count} vertices, "
-                              f"the file has {len(points)}")
-    bad = int(np.count_nonzero(~np.isfinite(points).all(axis=1)))
-    if bad:
-        raise PlantModelError(f"{path}: {bad} of {len(points)} points have NaN or infinite coordinates")
     if colors.shape[0] != len(points):
         raise PlantModelError(f"{path}: the PLY colours could not be read")
     check_plant_size(points, path)

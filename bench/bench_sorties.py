@@ -1,0 +1,182 @@
+#!/usr/bin/env python3
+"""The second sortie (issue 21, README "A second sortie"): Chamfer x100 after two sorties.
+
+Per scenario (:data:`SORTIES`: one_plant 4 + 2, three_row 6 + 3, six_rect 6 + 3, grid_3x3 8 + 4
+cameras) sortie 1 is an egp plan of N cameras, reconstructed; then, reconstructing from all
+N + M images in the first ``--realizations`` wind realizations:
+
+* ``a``: one sortie of N + M cameras planned with egp (what a single bigger fleet gets: the reference);
+* ``b``: sortie 2 = an egp plan of M that ignores sortie 1;
+* ``c-circle``, ``c-arc``: sortie 2 = the tuned circle / arc of M;
+* ``d``: sortie 2 = egp given sortie 1's cameras (``fixed_cameras``);
+* ``e``: sortie 2 = egp given sortie 1's cameras and its reconstruction (the points within tau
+  weigh ``reconstructed_weight``).
+
+Target: ``e`` beats ``b`` and ``c`` in every scenario and comes within 5 % of ``a``; the table
+says where it does not. Writes ``results/bench_sorties.{md,json}``; every plan and
+reconstruction is cached as JSON under ``<out>/cache`` (a re-run resumes). Plants: Corn50 from
+``../shared/data/corn50`` when present (``--models``), else procedural.
+
+This runs for hours on 2 cores at the defaults (13 plans and 7 reconstructions a scenario); a
+smoke slice: ``--scenarios one_plant --evals 8 --init 6 --realizations 1 --width 800 --height 600
+--capture ideal --out /tmp/sorties``.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import (ROOT, add_capture, cached, capture_of, capture_tag, chamfer_text, default_models,  # noqa: E402
+                    machine, models_tag, plan_cell, reconstruct_record, scene, write_json)
+
+#: scenario -> (N cameras of sortie 1, M cameras of sortie 2).
+SORTIES = {'one_plant': (4, 2), 'three_row': (6, 3), 'six_rect': (6, 3), 'grid_3x3': (8, 4)}
+#: The cases after sortie 2, in the table's order (module docstring).
+CASES = ('a', 'b', 'c-circle', 'c-arc', 'd', 'e')
+#: How close to ``a`` (relative Chamfer) ``e`` should come.
+TARGET = 0.05
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    ap.add_argument('--models', default=default_models(),
+                    help="folder of PLY plant models (default: ../shared/data/corn50 if present; '' procedural)")
+    ap.add_argument('--scenarios', nargs='+', default=list(SORTIES), choices=list(SORTIES))
+    ap.add_argument('--evals', type=int, default=100)
+    ap.add_argument('--init', type=int, default=50)
+    ap.add_argument('--seed', type=int, default=0)
+    ap.add_argument('--realizations', type=int, default=2, help='wind realizations reconstructed')
+    ap.add_argument('--width', type=int, default=2000)
+    ap.add_argument('--height', type=int, default=1500)
+    ap.add_argument('--threads', type=int, default=0, help='threads of the reconstruction (0: all cores)')
+    ap.add_argument('--tau', type=float, default=0.03)
+    ap.add_argument('--reconstructed-weight', type=float, default=0.1)
+    ap.add_argument('--out', default=str(ROOT / 'results'))
+    add_capture(ap)
+    return ap.parse_args(argv)
+
+
+def sortie2_cell(cache: Path, scenario: str, first: dict, m: int, args, reconstruction=None) -> dict:
+    """An egp plan of M cameras given sortie 1's cameras (d), and its reconstruction (e); cached."""
+    from vp_planner.optimizers import plan_views
+
+    case = 'e' if reconstruction is not None else 'd'
+    tag = (f'{models_tag(args.models)}-{scenario}-sortie2-{case}-m{m}-seed{args.seed}-e{args.evals}-i{args.init}'
+           + (f'-tau{args.tau:g}-w{args.reconstructed_weight:g}-{args.width}x{args.height}'
+              f'{capture_tag(capture_of(args))}-k{args.realizations}' if reconstruction is not None else ''))
+
+    def compute() -> dict:
+        import torch
+
+        torch.set_num_threads(1)  # as the planner node and CLI
+        noisy, _ = scene(scenario, args.models)
+        res = plan_views('egp', noisy.points, m, evaluations=args.evals, initial_evaluations=args.init,
+                         seed=args.seed, fixed_cameras=first['cameras'], reconstruction=reconstruction,
+                         tau=args.tau, reconstructed_weight=args.reconstructed_weight)
+        return {'cameras': np.asarray(res.cameras).tolist(), 'reward': float(res.reward), 'seconds': float(res.seconds),
+                'reconstructed_fraction': res.reconstructed_fraction}
+    return cached(cache / 'plans' / f'{tag}.json', compute)
+
+
+def recon_cell(cache: Path, out: Path, scenario: str, name: str, cameras, args) -> dict:
+    """Reconstruct cameras (all of both sorties) in the first ``--realizations`` realizations; cached."""
+    from vp_recon.pipeline import ReconConfig
+
+    tag = (f'{models_tag(args.models)}-{scenario}-{name}-seed{args.seed}-e{args.evals}-{args.width}x{args.height}'
+           f'{capture_tag(capture_of(args))}-k{args.realizations}')
+
+    def compute() -> dict:
+        noisy, _ = scene(scenario, args.models)
+        cfg = ReconConfig(width=args.width, height=args.height, num_threads=args.threads, capture=capture_of(args))
+        record = reconstruct_record(noisy, np.asarray(cameras), cfg, out / 'recon' / tag,
+                                    range(min(args.realizations, len(noisy.points))))
+        record['folder'] = str(out / 'recon' / tag)
+        return record
+    return cached(cache / 'recon' / f'{tag}.json', compute)
+
+
+def reconstruction_points(record: dict) -> np.ndarray:
+    """The points of every realization a reconstruction record wrote (its recon_<k>.ply)."""
+    from vp_scene.ply import load_points
+
+    clouds = [load_points(p) for p in sorted(Path(record['folder']).glob('recon_*.ply'))]
+    return np.concatenate(clouds) if clouds else np.zeros((0, 3))
+
+
+def run_scenario(cache: Path, out: Path, scenario: str, args) -> dict:
+    """Sortie 1 and every case of sortie 2 of one scenario: plans, rewards, Chamfer x100."""
+    n, m = SORTIES[scenario]
+    kw = dict(evals=args.evals, init=args.init, models=args.models)
+    first = plan_cell(cache, scenario, 'egp', args.seed, num_cameras=n, **kw)
+    first_rec = recon_cell(cache, out, scenario, f'sortie1-egp-n{n}', first['cameras'], args)
+    row = {'n': n, 'm': m, 'sortie1': {'reward': first['reward'], 'chamfer': first_rec}, 'cases': {}}
+    plans = {
+        'a': plan_cell(cache, scenario, 'egp', args.seed, num_cameras=n + m, **kw),
+        'b': plan_cell(cache, scenario, 'egp', args.seed, num_cameras=m, **kw),
+        'c-circle': plan_cell(cache, scenario, 'circle', args.seed, num_cameras=m, **kw),
+        'c-arc': plan_cell(cache, scenario, 'arc', args.seed, num_cameras=m, **kw),
+        'd': sortie2_cell(cache, scenario, first, m, args),
+    }
+    if first_rec.get('chamfer_mean') is not None:
+        plans['e'] = sortie2_cell(cache, scenario, first, m, args, reconstruction_points(first_rec))
+    for case in CASES:
+        if case not in plans:
+            row['cases'][case] = {'error': 'sortie 1 did not reconstruct', 'chamfer_mean': None}
+            continue
+        cams = plans[case]['cameras'] if case == 'a' else np.concatenate([first['cameras'], plans[case]['cameras']])
+        rec = recon_cell(cache, out, scenario, f'{case}-n{n}-m{m}', np.asarray(cams).tolist(), args)
+        row['cases'][case] = {'reward': plans[case]['reward'], 'plan_seconds': plans[case].get('seconds'), **rec}
+    return row
+
+
+def verdict(row: dict) -> str:
+    """Whether e beats b and both c and comes within TARGET of a (lower Chamfer is better)."""
+    c = {k: v.get('chamfer_mean') for k, v in row['cases'].items()}
+    if c.get('e') is None:
+        return 'e failed'
+    notes = [f'e {"beats" if c[k] is None or c["e"] < c[k] else "does not beat"} {k}' for k in ('b', 'c-circle', 'c-arc')]
+    if c.get('a') is not None:
+        gap = c['e'] / c['a'] - 1.0
+        notes.append(f'{100 * gap:+.1f} % of a ({"within" if gap <= TARGET else "beyond"} {100 * TARGET:.0f} %)')
+    return '; '.join(notes)
+
+
+def write_results(args, out: Path, rows: dict) -> None:
+    head = '| scenario | N + M | sortie 1 | ' + ' | '.join(CASES) + ' | verdict |'
+    lines = ['# The second sortie: Chamfer x100 after sortie 2 (mean +- std over realizations)', '',
+             f'{machine()}; {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC; plants {models_tag(args.models)}; '
+             f'egp {args.evals} evaluations ({args.init} initial), seed {args.seed}; {args.realizations} wind '
+             f'realizations, {args.width} x {args.height} images, capture {capture_of(args).kind}; tau {args.tau} m, '
+             f'reconstructed weight {args.reconstructed_weight}.', '',
+             'a: one sortie of N + M (egp); b: sortie 2 egp ignoring sortie 1; c: circle / arc of M; '
+             'd: egp given the flown cameras; e: egp given the flown cameras and their reconstruction.', '',
+             head, '|' + '---|' * (len(CASES) + 4)]
+    for scenario, row in rows.items():
+        cells = [chamfer_text(row['cases'][c]) for c in CASES]
+        lines.append(f"| {scenario} | {row['n']} + {row['m']} | {chamfer_text(row['sortie1']['chamfer'])} | "
+                     + ' | '.join(cells) + f' | {verdict(row)} |')
+    (out / 'bench_sorties.md').write_text('\n'.join(lines) + '\n')
+    write_json(out / 'bench_sorties.json', {'args': vars(args), 'machine': machine(), 'rows': rows})
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    rows = {}
+    for scenario in args.scenarios:
+        rows[scenario] = run_scenario(out / 'cache', out, scenario, args)
+        print(f'{scenario}: {verdict(rows[scenario])}', flush=True)
+        write_results(args, out, rows)  # after every scenario: a long run leaves what it has
+    print(json.dumps({s: {c: r['cases'][c].get('chamfer_mean') for c in CASES} for s, r in rows.items()}), flush=True)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

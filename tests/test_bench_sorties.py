@@ -1,0 +1,34 @@
+"""bench/bench_sorties.py (issue 21, part 3): the verdict against the issue's target and the
+files it writes (the benchmark itself runs for hours; its smoke slice is in the README)."""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+import bench_sorties  # noqa: E402  (bench/bench_sorties.py)
+
+
+def row(**chamfer) -> dict:
+    cases = {c: {"chamfer_mean": chamfer.get(c.replace("-", "_")), "chamfer_std": 0.0} for c in bench_sorties.CASES}
+    return {"n": 4, "m": 2, "sortie1": {"reward": 0.5, "chamfer": {"chamfer_mean": 2.0, "chamfer_std": 0.0}},
+            "cases": cases}
+
+
+def test_verdict_against_the_target() -> None:
+    good = row(a=1.0, b=1.2, c_circle=1.3, c_arc=1.25, d=1.1, e=1.04)
+    assert bench_sorties.verdict(good) == ("e beats b; e beats c-circle; e beats c-arc; +4.0 % of a (within 5 %)")
+    bad = row(a=1.0, b=1.05, c_circle=1.3, c_arc=1.25, d=1.1, e=1.08)
+    assert bench_sorties.verdict(bad) == ("e does not beat b; e beats c-circle; e beats c-arc; +8.0 % of a (beyond 5 %)")
+    assert bench_sorties.verdict(row(a=1.0)) == "e failed"
+
+
+def test_results_files(tmp_path: Path) -> None:
+    args = bench_sorties.parse_args(["--models", "", "--out", str(tmp_path), "--capture", "ideal"])
+    bench_sorties.write_results(args, tmp_path, {"one_plant": row(a=1.0, b=1.2, c_circle=1.3, c_arc=1.25, d=1.1,
+                                                                  e=1.04)})
+    md = (tmp_path / "bench_sorties.md").read_text()
+    assert "| one_plant | 4 + 2 | 2.000 +- 0.000 | 1.000 +- 0.000 |" in md and "within 5 %" in md
+    data = json.loads((tmp_path / "bench_sorties.json").read_text())
+    assert data["rows"]["one_plant"]["cases"]["e"]["chamfer_mean"] == 1.04
