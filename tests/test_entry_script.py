@@ -66,6 +66,9 @@ def test_end_to_end_small_mission(ros_env, tmp_path) -> None:
     assert math.isfinite(summary["chamfer_mean"]) and summary["chamfer_mean"] > 0
     assert summary["capture"] == "ideal" and summary["chamfer_shape_mean"] > 0  # issue 18: the capture recorded
     assert 0 < summary["reward"] <= 1
+    no_truth = summary["no_truth"]  # issue 20, part 4: what a real flight can check
+    assert no_truth["registered_images"] >= 2 and 0 < no_truth["coverage_of_prior"] <= 1
+    assert no_truth["mean_reprojection_error"] > 0 and no_truth["mean_track_length"] >= 2
     assert "Chamfer distance x100" in log and "[planner]" in log and "[recon]" in log
     echoed = json.loads(echo_out.read_text())
     assert echoed["frame_id"] == "map"

@@ -99,6 +99,9 @@ def test_plan_becomes_scores_and_clouds(recon_system, tmp_path) -> None:
     assert agg.chamfer == pytest.approx(agg.accuracy + agg.completeness, rel=1e-6)
     assert all(s.reward == pytest.approx(0.4321) and s.reward_model == "coverage" for s in scores)
     assert 0 <= agg.fscore <= 1
+    # the metrics without a ground truth (issue 20, part 4) travel in the score, appended fields
+    assert agg.mean_reprojection_error > 0 and agg.mean_track_length >= 2 and agg.coverage_tau > 0
+    assert 0 < agg.coverage_of_prior <= 1 and len(agg.coverage_of_prior_per_plant) == 1
 
     late = client.add_node("late_subscriber")
     late_clouds = client.subscribe(PointCloud2, "/reconstruction/points", LATCHED, node=late)

@@ -375,6 +375,10 @@ def run(args: argparse.Namespace) -> int:
             'evaluations': result.evaluations, 'trace': list(result.trace), 'seed': args.seed,
             'error_code': agg.error_code, 'error_msg': agg.error_msg,
             'per_realization': [score_record(s) for s in per],
+            # what a real flight can check (README "From a real flight"): the aggregate's metrics without a truth
+            'no_truth': {k: v for k, v in score_record(agg).items()
+                         if k in ('registered_images', 'mean_reprojection_error', 'mean_track_length', 'points',
+                                  'coverage_of_prior', 'coverage_of_prior_per_plant', 'coverage_tau')},
         }
         if fleet is not None:
             summary['fleet'] = {
