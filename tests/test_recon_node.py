@@ -117,6 +117,13 @@ def test_plan_becomes_scores_and_clouds(recon_system, tmp_path) -> None:
     sheet = cv2.imread(str(out[0] / "views_0.png"))
     assert sheet.shape[:2] == (2 * 300, 3 * 400)  # 6 views of the new size, not 640 x 480
     assert not list(out[0].glob("realization_*"))  # COLMAP workspaces are cleaned up
+    # issue 20: every realization's capture set is a flight folder that `make recon IMAGES=...` reads
+    from vp_recon.flight import read_flight
+
+    for k in (0, 1):
+        views = read_flight(out[0] / "captures" / f"realization_{k}")
+        assert len(views.images) == 6 and views.size == (400, 300) and views.realization == k
+        np.testing.assert_allclose(views.reported[:, :3], ring()[:, :3], atol=1e-9)  # ideal: the planned poses
 
 
 def test_realizations_on_a_local_dask_cluster(recon_system) -> None:

@@ -248,6 +248,8 @@ class RealizationResult:
         mean_track_length, mean_reprojection_error: of the sparse model (images a point is seen
             in; pixels): metrics without a ground truth (issue 20, part 4).
         coverage: :class:`vp_recon.metrics.Coverage` of the planning cloud (no truth read).
+        reported, K: the poses the drones reported (N, 6) and the intrinsics: with ``rendered``,
+            the capture set (:meth:`captured_views`).
     """
 
     realization: int
@@ -280,6 +282,19 @@ class RealizationResult:
     mean_track_length: float = math.nan
     mean_reprojection_error: float = math.nan
     coverage: object = None
+    reported: Optional[NDArray[np.float64]] = field(default=None, repr=False)
+    K: Optional[NDArray[np.float64]] = field(default=None, repr=False)
+
+    def captured_views(self) -> object:
+        """The capture set this realization was reconstructed from
+        (:class:`vp_recon.flight.CapturedViews`: its images, the poses reported, K), for
+        :func:`vp_recon.flight.write_flight`; None when its images were not kept."""
+        from .flight import CapturedViews
+
+        if not self.rendered or self.reported is None:
+            return None
+        return CapturedViews(names=[f"view_{i:03d}.png" for i in range(len(self.rendered))], images=self.rendered,
+                             reported=self.reported, K=self.K, realization=self.realization)
 
 
 @dataclass
@@ -626,7 +641,8 @@ def reconstruct_realization(noisy_scene: object, k: int, cameras: ArrayLike, con
         dense_pairs=list(dn.pairs) if dn is not None else [], dense_pair_points=list(dn.pair_points) if dn is not None else [],
         rendered=views.images if cfg.keep_images else [], seconds=seconds, chamfer_shape=shape.chamfer,
         capture=cfg.capture.to_dict(), sparse_mode=vr.mode, mean_track_length=sp.mean_track_length,
-        mean_reprojection_error=sp.mean_reprojection_error, coverage=vr.coverage)
+        mean_reprojection_error=sp.mean_reprojection_error, coverage=vr.coverage,
+        reported=np.asarray(views.reported, dtype=np.float64), K=np.asarray(views.K, dtype=np.float64))
 
 
 def _realization_task(noisy_scene: object, k: int, cams: NDArray[np.float64], cfg: ReconConfig,

@@ -27,7 +27,9 @@ and publishes
   that a late subscriber gets every finished realization in the one message it receives.
 
 Images and PLY files go to a new folder ``<output_folder>/plan-<time>[-n]`` per plan (never one
-that exists). The rendering and scoring parameters are read anew for every plan; a change to a
+that exists); with ``record_captures`` each realization's capture set (the images, the poses
+the drones reported, the camera) goes to its ``captures/realization_<k>`` as a flight folder
+(:func:`vp_recon.flight.write_flight`; README "From a real flight"). The rendering and scoring parameters are read anew for every plan; a change to a
 bad value is refused with the reason.
 
 The work runs on a worker thread, so the node's callbacks keep running. Queueing policy: the
@@ -56,6 +58,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
 
 from vp_interfaces.msg import CameraPlan, ReconstructionScore, SceneDescription
+from vp_recon.flight import write_flight
 from vp_recon.metrics import DEFAULT_FSCORE_THRESHOLD
 from vp_recon.outputs import contact_sheet, new_run_folder, remove_if_empty, write_image, write_ply
 from vp_recon.pipeline import (ReconCancelled, ReconConfig, ReconError, RealizationResult, ensure_writable_dir,
@@ -96,6 +99,8 @@ PARAMS = {
     'matching': Param('auto', 'image pairs SIFT matches: auto (from the poses from 8 cameras up) | exhaustive | poses'),
     'fscore_threshold': Param(DEFAULT_FSCORE_THRESHOLD, 'F-score distance threshold, m', _M, False, '> 0'),
     'method': Param('', 'label of the scores (default: the method from /camera_plan/info)'),
+    'record_captures': Param(True, 'write each realization\'s capture set (images, poses.csv, COLMAP text model) '
+                                   'to <plan folder>/captures/realization_<k>: `make recon IMAGES=...` re-runs it'),
     'max_realizations': Param(0, 'reconstruct only the first n realizations (0: all)', (0, INT_MAX)),
     'scene_timeout': Param(10.0, 's a plan that arrives before the scene waits for it', _M),
     'frame_id': Param('map', 'frame of the plans and of the published clouds', None, False, 'not empty'),
@@ -323,12 +328,17 @@ class ReconNode(Node):
             self.get_logger().info(f'realization {k + 1}/{K}: {stage} done')
             return not self._plans.stopped
 
+        record = self._param('record_captures')
+
         def on_realization(res: RealizationResult) -> None:
             k = res.realization
             try:
                 write_ply(run_dir / f'recon_{k}.ply', res.points, res.colors)
                 if res.rendered:
                     write_image(run_dir / f'views_{k}.png', contact_sheet(res.rendered))
+                if record and res.captured_views() is not None:
+                    write_flight(res.captured_views(), run_dir / 'captures' / f'realization_{k}',
+                                 meta={'capture': res.capture})
             except (OSError, ValueError) as exc:
                 self.get_logger().error(f'could not write the outputs of realization {k}: {exc}')
             done.append(res)
