@@ -151,6 +151,13 @@ def test_bad_flight_folders_are_refused_naming_the_file(tmp_path: Path, capsys) 
     _edit_poses(f, 1, "frame", "odom")
     _refused(tmp_path, f, capsys, "im0.png", "odom")
 
+    f = _small_flight(tmp_path)  # a camera turned 10 degrees about its optical axis (x of the body frame)
+    _edit_poses(f, 2, "qx", "0.0871557")
+    _edit_poses(f, 2, "qy", "0.0")
+    _edit_poses(f, 2, "qz", "0.0")
+    _edit_poses(f, 2, "qw", "0.9961947")
+    _refused(tmp_path, f, capsys, "poses.csv (im1.png)", "roll of 10.0 deg")
+
     f = _small_flight(tmp_path, n=2)
     (f / POSES_FILE).write_text("".join((f / POSES_FILE).read_text().splitlines(keepends=True)[:2]))
     (f / "im1.png").unlink()

@@ -28,8 +28,10 @@ photogrammetry tools; read when there is no poses.csv): cameras of model ``PINHO
 ``SIMPLE_PINHOLE`` (COLMAP's pixel convention: centres at +0.5), image poses as COLMAP's
 ``cam_from_world`` (QW QX QY QZ TX TY TZ, optical frame), in ``map``.
 
-The suite's cameras have no roll (a gimbal levels them, :mod:`vp_scene.camera`): a pose's roll
-is dropped. :func:`write_flight` writes both files (and an empty ``points3D.txt``, so that
+The suite's cameras have no roll (a gimbal levels them, :mod:`vp_scene.camera`): a pose with
+more than :data:`MAX_ROLL_DEG` of roll about its optical axis is refused (a camera looking
+straight down has the convention's yaw: its image x axis along world -y).
+:func:`write_flight` writes both files (and an empty ``points3D.txt``, so that
 COLMAP reads the model), plus ``flight.json`` (what is known of a simulated flight: its wind
 realization and capture model). Every problem of a folder is a :class:`FlightError` with one
 line naming the file.
@@ -51,9 +53,10 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
-from vp_scene.camera import cameras_to_poses, poses_to_cameras, principal_point_gl, world_to_camera
+from vp_scene.camera import (body_from_optical, cameras_to_poses, poses_to_cameras, principal_point_gl, roll_of,
+                             world_to_camera)
 
-__all__ = ["POSES_FILE", "POSES_COLUMNS", "IMAGE_SUFFIXES", "FRAME", "FlightError", "CapturedViews",
+__all__ = ["POSES_FILE", "POSES_COLUMNS", "IMAGE_SUFFIXES", "FRAME", "MAX_ROLL_DEG", "FlightError", "CapturedViews",
            "write_flight", "read_flight"]
 
 POSES_FILE = "poses.csv"
@@ -61,6 +64,11 @@ POSES_COLUMNS = ("image", "x", "y", "z", "qx", "qy", "qz", "qw", "frame", "fx", 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 #: The one frame of the suite.
 FRAME = "map"
+#: degrees: a pose with more roll about its optical axis is refused. The suite's cameras are
+#: levelled (no roll, :mod:`vp_scene.camera`) and the registration to ``map`` uses the reported
+#: attitudes: a roll dropped silently would turn the whole reconstruction by it. A gimbal holds
+#: about 0.01 degree; 2 degrees leaves room for a drone's attitude estimate.
+MAX_ROLL_DEG = 2.0
 
 PathLike = Union[str, os.PathLike]
 
@@ -268,7 +276,7 @@ def _read_colmap_text(folder: Path) -> tuple[list, NDArray[np.float64], list]:
             raise FlightError(f"{where} ({name}): the quaternion is zero")
         R_cw = Rotation.from_quat([qx, qy, qz, qw]).as_matrix()
         c = -R_cw.T @ np.array([tx, ty, tz])
-        poses.append(cameras_to_poses(np.concatenate([c, R_cw[2]])))  # optical axis z_o in the world
+        poses.append(np.concatenate([c, body_from_optical(R_cw)]))
         names.append(name)
         intr.append(cams[f[8]])
     return names, np.array(poses, dtype=np.float64).reshape(-1, 7), intr
@@ -295,6 +303,11 @@ def read_flight(folder: PathLike) -> CapturedViews:
         raise FlightError(f"{d / unposed[0]}: no pose in {source.name} (missing pose)")
     if len(names) < 2:
         raise FlightError(f"{source}: {len(names)} image(s); a reconstruction needs at least 2")
+    roll = np.degrees(roll_of(poses))
+    if len(roll) and np.max(np.abs(roll)) > MAX_ROLL_DEG:
+        i = int(np.argmax(np.abs(roll)))
+        raise FlightError(f"{source} ({names[i]}): roll of {roll[i]:.1f} deg about the optical axis; the suite's "
+                          f"cameras are levelled (at most {MAX_ROLL_DEG:g} deg, README 'From a real flight')")
     if any(k != intr[0] for k in intr):
         i = next(i for i, k in enumerate(intr) if k != intr[0])
         raise FlightError(f"{source} ({names[i]}): intrinsics differ from {names[0]}'s (one camera per flight)")
