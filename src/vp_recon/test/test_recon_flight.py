@@ -88,6 +88,24 @@ def test_a_rendered_flight_written_as_a_folder_reconstructs_again(scene, tmp_pat
     np.testing.assert_allclose(back2.K, back.K, atol=1e-9)
 
 
+def test_a_drone_rendering_its_own_camera_sees_what_the_plan_render_gives_it(scene) -> None:
+    """render_flight of camera i alone (indices=[i], as a simulated drone holding pose i would)
+    gives the whole plan's image and reported pose of camera i bit for bit (realistic capture:
+    hover and localization errors and sensor noise seeded by realization and camera index)."""
+    cfg = ReconConfig(width=320, height=240, num_threads=1)
+    cams = ring()
+    full = render_flight(scene, 1, cams, cfg)
+    one = render_flight(scene, 1, cams[[4]], cfg, indices=[4])
+    assert one.names == ["view_004.png"] and np.array_equal(one.images[0], full.images[4])
+    np.testing.assert_array_equal(one.reported[0], full.reported[4])
+    other = render_flight(scene, 1, cams[[4]], cfg, indices=[0])  # another index: other draws
+    assert not np.array_equal(other.reported[0], one.reported[0])
+    from vp_recon.pipeline import ReconError
+
+    with pytest.raises(ReconError, match="indices"):
+        render_flight(scene, 1, cams[:2], cfg, indices=[3, 3])
+
+
 def _small_flight(tmp_path: Path, n: int = 3) -> Path:
     rng = np.random.default_rng(0)
     views = CapturedViews(names=[f"im{i}.png" for i in range(n)],

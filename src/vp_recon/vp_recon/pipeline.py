@@ -438,19 +438,30 @@ class ViewsResult:
     seconds: dict = field(default_factory=dict)
 
 
-def render_flight(noisy_scene: object, k: int, cameras: ArrayLike, config: Optional[ReconConfig] = None) -> object:
+def render_flight(noisy_scene: object, k: int, cameras: ArrayLike, config: Optional[ReconConfig] = None,
+                  indices: Optional[Sequence[int]] = None) -> object:
     """Realization ``k`` of a plan flown under ``config.capture``: a
     :class:`vp_recon.flight.CapturedViews` of the images rendered from the actual poses (with
     sensor noise) and the poses the drones report. The ideal capture keeps the renderer's masks
     (an oracle: the capture before issue 18); a flight's masks come from its images alone
     (:func:`reconstruct_views`). ``views.seconds``: mesh, render. ReconError UNKNOWN when
-    meshing or rendering fails."""
+    meshing or rendering fails.
+
+    ``indices``: the cameras' indices i in their plan (default 0..N-1), which seed their capture
+    draws: a simulated drone holding camera i of a plan renders ``render_flight(scene, k,
+    [camera_i], config, indices=[i])`` and gets exactly the image and reported pose the whole
+    plan's render gives camera i (tested), so the fleet and the render source see one flight."""
     from .flight import CapturedViews
     from .meshing import scene_meshes
     from .render import RenderError, Renderer
 
+    from vp_scene.camera import check_cameras
+
     cfg = (config or ReconConfig()).validate()
-    cams = validate_cameras(cameras)
+    try:  # one camera is a capture too (a drone's own)
+        cams = check_cameras(cameras)
+    except ValueError as exc:
+        raise ReconError(EMPTY_PLAN, str(exc)) from None
     seconds = {}
     t0 = time.perf_counter()
     try:
@@ -460,16 +471,22 @@ def render_flight(noisy_scene: object, k: int, cameras: ArrayLike, config: Optio
     seconds["mesh"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     capture = cfg.capture
-    flight = capture.fly(cams, k)  # ideal: the planned cameras, flown and reported exactly
+    ids = list(range(len(cams))) if indices is None else [int(i) for i in indices]
+    if len(ids) != len(cams) or len(set(ids)) != len(ids) or min(ids) < 0:
+        raise ReconError(EMPTY_PLAN, f"indices must be {len(cams)} distinct camera indices >= 0, got {ids}")
+    # ideal: the planned cameras, flown and reported exactly
+    flown = [capture.fly_camera(c, k, i) for c, i in zip(cams, ids)]
+    actual = np.array([a for a, _ in flown]).reshape(-1, 6)
+    reported = np.array([r for _, r in flown]).reshape(-1, 6)
     try:
         renderer = Renderer(cfg.width, cfg.height, cfg.fov)
-        images, masks, _ = renderer.render(meshes, flight.actual, ground=cfg.ground_used)
+        images, masks, _ = renderer.render(meshes, actual, ground=cfg.ground_used)
     except RenderError as exc:
         raise ReconError(UNKNOWN, str(exc)) from exc
-    images = [capture.expose(im, k, i) for i, im in enumerate(images)]
+    images = [capture.expose(im, k, i) for i, im in zip(ids, images)]
     seconds["render"] = time.perf_counter() - t0
-    return CapturedViews(names=[f"view_{i:03d}.png" for i in range(len(images))], images=images,
-                         reported=flight.reported, K=renderer.K, masks=masks if capture.ideal else None,
+    return CapturedViews(names=[f"view_{i:03d}.png" for i in ids], images=images,
+                         reported=reported, K=renderer.K, masks=masks if capture.ideal else None,
                          fov=cfg.fov, realization=k, seconds=seconds)
 
 
