@@ -187,6 +187,11 @@ def test_bad_flight_folders_are_refused_naming_the_file(tmp_path: Path, capsys) 
     _refused(tmp_path, f, capsys, "cameras.txt line 1", "PINHOLE")
     (f / "cameras.txt").unlink()
     _refused(tmp_path, f, capsys, "no poses.csv")
+    with pytest.raises(SystemExit) as ei:  # the options of rendering a plan do not apply to a folder
+        main(["--images", str(f), "--out", str(tmp_path / "never"), "--width", "640", "--realizations", "0"])
+    err = capsys.readouterr().err
+    assert ei.value.code == 2 and "--width, --realizations go(es) with --plan" in err and err.count("\n") == 1
+    assert not (tmp_path / "never").exists()
     with pytest.raises(FlightError, match="not a folder"):
         read_flight(tmp_path / "nowhere")
 

@@ -97,8 +97,8 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
                    help="with --images: plan.json whose scene is the planning cloud (coverage_of_prior, crop box, "
                         "pairs; Chamfer when flight.json names the realization)")
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--width", type=int, default=2000, help="image width, pixels (paper: 2000)")
-    p.add_argument("--height", type=int, default=1500, help="image height, pixels (paper: 1500)")
+    p.add_argument("--width", type=int, default=None, help="--plan: rendered image width, pixels (default and paper: 2000)")
+    p.add_argument("--height", type=int, default=None, help="--plan: rendered image height, pixels (default and paper: 1500)")
     p.add_argument("--realizations", default=None, help="comma-separated realization indices (default: all)")
     p.add_argument("--sparse-only", action="store_true", help="score the sparse cloud (no dense stereo)")
     p.add_argument("--sparse-mode", default="auto", choices=("auto",) + MODES,
@@ -133,6 +133,11 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
         p.error(f"--workers must be >= 1, got {args.workers}")
     if args.prior and not args.images:
         p.error("--prior goes with --images (a plan brings its own scene)")
+    if args.images:  # a flight folder has its own images: the options of rendering a plan do not apply
+        given = [f for f, v in (("--width", args.width), ("--height", args.height), ("--realizations", args.realizations),
+                                ("--mesh-cache", args.mesh_cache), ("--scheduler", args.scheduler)) if v]
+        if given:
+            p.error(f"{', '.join(given)} go(es) with --plan, not --images (the folder's images are what they are)")
     return args
 
 
@@ -163,7 +168,7 @@ def run(args: argparse.Namespace) -> dict:
     except ReconError as exc:
         raise CliError(f"{args.plan}: {exc}") from None
     try:
-        config = ReconConfig(width=args.width, height=args.height, fov=plan.fov, dense=not args.sparse_only,
+        config = ReconConfig(width=args.width or 2000, height=args.height or 1500, fov=plan.fov, dense=not args.sparse_only,
                              sparse_mode=args.sparse_mode, fscore_threshold=args.fscore_threshold,
                              voxel=args.voxel, mesh_cache=args.mesh_cache, keep_workdir=args.keep_workdir,
                              ground=args.ground, num_threads=args.threads, matching=args.matching,
