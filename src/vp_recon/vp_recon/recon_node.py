@@ -63,11 +63,9 @@ from vp_recon.metrics import DEFAULT_FSCORE_THRESHOLD
 from vp_recon.outputs import contact_sheet, new_run_folder, remove_if_empty, write_image, write_ply
 from vp_recon.pipeline import (ReconCancelled, ReconConfig, ReconError, RealizationResult, ensure_writable_dir,
                                reconstruct_plan)
-from vp_scene.build import build_noisy_scene
 from vp_scene.capture import IDEAL, REALISTIC, CaptureModel
-from vp_scene.messages import (aggregate_score, error_score, numpy_to_pointcloud2, placements_of, plan_key,
-                               pose_array_to_cameras, realization_score, realizations_from_cloud, score_msg)
-from vp_scene.layout import Layout
+from vp_scene.messages import (aggregate_score, error_score, numpy_to_pointcloud2, plan_key, pose_array_to_cameras,
+                               realization_score, realizations_from_cloud, scene_of_description, score_msg)
 from vp_scene.node_runtime import (INT_MAX, NewestWins, Param, declare_typed, parameter_value, refuse_bad_changes,
                                    run_node, typed_values)
 
@@ -267,15 +265,8 @@ class ReconNode(Node):
             missing = [n for n, v in (('/scene/description', desc), ('/scene/noisy_points', truth)) if v is None]
             raise ReconError(Score.NO_SCENE, f'no scene yet: nothing received on {" and ".join(missing)}')
         if scene is None:
-            folder = desc.models_folder
             try:  # from the plants' placements, not the scenario: no layout file needed here
-                layout = Layout.from_placements(
-                    desc.scenario or 'scene', placements_of(desc), source='/scene/description')
-                scene, _ = build_noisy_scene(
-                    scenario=layout, models=folder or None, seed=desc.seed,
-                    points_per_plant=desc.points_per_plant, plant_spacing=desc.plant_spacing,
-                    row_spacing=desc.row_spacing, levels=desc.levels, realizations=desc.realizations,
-                    wind_variance=desc.wind_variance, wind_direction=desc.wind_direction)
+                scene = scene_of_description(desc)
             except (ValueError, OSError) as exc:
                 raise ReconError(Score.NO_SCENE, f'cannot rebuild the scene from /scene/description: {exc}')
             if scene.points.shape != truth.shape or np.abs(scene.points - truth).max() > 1e-4:

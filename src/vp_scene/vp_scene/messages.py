@@ -44,7 +44,7 @@ __all__ = [
     "numpy_to_pointcloud2", "pointcloud2_to_numpy", "realizations_from_cloud", "pack_rgb", "unpack_rgb",
     "point_msg", "point_array", "pose_msg", "pose_array", "poses_to_msgs", "msgs_to_poses", "position_of",
     "cameras_to_pose_array", "pose_array_to_cameras", "camera_plan_msg", "plan_key", "frustum_markers",
-    "scene_description_msg", "placements_of", "POSE_TYPES", "drone_topic", "pose_report",
+    "scene_description_msg", "placements_of", "scene_of_description", "POSE_TYPES", "drone_topic", "pose_report",
     "score_msg", "realization_score", "aggregate_score", "error_score", "score_record",
     "image_msg", "image_array", "compressed_image_msg", "compressed_image_array", "camera_info_msg",
     "camera_info_intrinsics",
@@ -220,6 +220,22 @@ def placements_of(desc: SceneDescription) -> list:
     """The plants of a SceneDescription as (model, yaw, scale, x, y) tuples
     (:meth:`vp_scene.layout.Layout.from_placements`)."""
     return [(p.model, p.yaw, p.scale, p.position.x, p.position.y) for p in desc.plants]
+
+
+def scene_of_description(desc: SceneDescription) -> Any:
+    """The :class:`vp_scene.wind.NoisyScene` a SceneDescription describes, rebuilt from the
+    plants' placements (model, yaw, scale, position: no layout file needed), the models folder,
+    seed, points per plant and wind. ValueError / OSError when it cannot be rebuilt."""
+    from .build import build_noisy_scene
+    from .layout import Layout
+
+    layout = Layout.from_placements(desc.scenario or 'scene', placements_of(desc), source='/scene/description')
+    scene, _ = build_noisy_scene(
+        scenario=layout, models=desc.models_folder or None, seed=desc.seed,
+        points_per_plant=desc.points_per_plant, plant_spacing=desc.plant_spacing,
+        row_spacing=desc.row_spacing, levels=desc.levels, realizations=desc.realizations,
+        wind_variance=desc.wind_variance, wind_direction=desc.wind_direction)
+    return scene
 
 
 # ---------------------------------------------------------------- scores
