@@ -61,9 +61,10 @@ from .metrics import DEFAULT_FSCORE_THRESHOLD, CloudScore, EmptyCloudError, cham
 
 __all__ = [
     "NONE", "UNKNOWN", "EMPTY_PLAN", "NO_SCENE", "NOTHING_VISIBLE", "RECONSTRUCTION_FAILED",
-    "OUTPUT_NOT_WRITABLE", "WRONG_FRAME", "ERROR_NAMES", "STAGES", "ReconError", "ReconCancelled", "ReconConfig",
+    "OUTPUT_NOT_WRITABLE", "WRONG_FRAME", "CAPTURE_MISSING", "ERROR_NAMES", "STAGES", "ReconError", "ReconCancelled", "ReconConfig",
     "RealizationResult", "PlanReconResult", "MATCHINGS", "MATCH_POSES_FROM", "matching_method", "validate_cameras",
     "ensure_writable_dir", "crop_box", "Prior", "ViewsResult", "render_flight", "reconstruct_views",
+    "reconstruct_captured", "plan_result",
     "reconstruct_realization", "reconstruct_plan",
 ]
 
@@ -76,9 +77,11 @@ NOTHING_VISIBLE = 4
 RECONSTRUCTION_FAILED = 5
 OUTPUT_NOT_WRITABLE = 6
 WRONG_FRAME = 7
+CAPTURE_MISSING = 8
 ERROR_NAMES = {NONE: "NONE", UNKNOWN: "UNKNOWN", EMPTY_PLAN: "EMPTY_PLAN", NO_SCENE: "NO_SCENE",
                NOTHING_VISIBLE: "NOTHING_VISIBLE", RECONSTRUCTION_FAILED: "RECONSTRUCTION_FAILED",
-               OUTPUT_NOT_WRITABLE: "OUTPUT_NOT_WRITABLE", WRONG_FRAME: "WRONG_FRAME"}
+               OUTPUT_NOT_WRITABLE: "OUTPUT_NOT_WRITABLE", WRONG_FRAME: "WRONG_FRAME",
+               CAPTURE_MISSING: "CAPTURE_MISSING"}
 
 #: Stages reported to the progress callback, in order.
 STAGES = ("render", "sparse", "dense", "score")
@@ -622,11 +625,26 @@ def reconstruct_realization(noisy_scene: object, k: int, cameras: ArrayLike, con
     truth_all = _check_scene(noisy_scene)
     if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 0 <= int(k) < truth_all.shape[0]:
         raise ReconError(NO_SCENE, f"realization {k!r} does not exist (the scene has {truth_all.shape[0]})")
+    views = render_flight(noisy_scene, int(k), cams, cfg)
+    return reconstruct_captured(noisy_scene, views, cfg, workdir=workdir, progress=progress)
+
+
+def reconstruct_captured(noisy_scene: object, views: object, config: Optional[ReconConfig] = None,
+                         workdir: Optional[PathLike] = None, progress: Optional[ProgressFn] = None
+                         ) -> RealizationResult:
+    """Reconstruct a capture set of realization ``views.realization`` of ``noisy_scene`` (rendered
+    by :func:`render_flight`, or sent by the fleet) and score it against that realization's
+    truth: :func:`reconstruct_views` with the scene as the prior, then Chamfer, ``chamfer_shape``
+    and the sparse cloud's score. Arguments and errors as :func:`reconstruct_realization`."""
+    cfg = (config or ReconConfig()).validate()
+    truth_all = _check_scene(noisy_scene)
+    k = views.realization
+    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 0 <= int(k) < truth_all.shape[0]:
+        raise ReconError(NO_SCENE, f"realization {k!r} does not exist (the scene has {truth_all.shape[0]})")
     k = int(k)
     temp = workdir is None
     wd = Path(tempfile.mkdtemp(prefix="vp_recon_")) if temp else ensure_writable_dir(workdir)
     try:
-        views = render_flight(noisy_scene, k, cams, cfg)
         seconds = dict(views.seconds)
         prior = Prior.of_scene(noisy_scene)
         # pairs: ideal: as before the capture model (realization k's truth); a flight: the planning cloud
@@ -651,7 +669,7 @@ def reconstruct_realization(noisy_scene: object, k: int, cameras: ArrayLike, con
     return RealizationResult(
         realization=k, chamfer=score.chamfer, accuracy=score.accuracy, completeness=score.completeness,
         fscore=score.fscore, precision=score.precision, recall=score.recall, fscore_threshold=score.threshold,
-        points=vr.points, colors=vr.colors, images=sp.registered, num_images=len(cams),
+        points=vr.points, colors=vr.colors, images=sp.registered, num_images=len(views.images),
         visible_images=len(vr.seeing), source=vr.source, sparse_points=len(sp.points), sparse_score=sparse_score,
         pair_inliers=dict(sp.pair_inliers), matching=vr.matching, matched_pairs=sp.matched_pairs,
         sparse_seconds={"pairs": vr.t_pairs, **sp.seconds},
@@ -660,6 +678,16 @@ def reconstruct_realization(noisy_scene: object, k: int, cameras: ArrayLike, con
         capture=cfg.capture.to_dict(), sparse_mode=vr.mode, mean_track_length=sp.mean_track_length,
         mean_reprojection_error=sp.mean_reprojection_error, coverage=vr.coverage,
         reported=np.asarray(views.reported, dtype=np.float64), K=np.asarray(views.K, dtype=np.float64))
+
+
+def plan_result(results: Sequence[RealizationResult], seconds: Optional[dict] = None) -> PlanReconResult:
+    """The :class:`PlanReconResult` of the realizations' results (Chamfer mean, population std,
+    shape mean; ``seconds`` summed per stage, plus ``total`` when given)."""
+    ch = np.array([r.chamfer for r in results])
+    secs = {s: float(sum(r.seconds.get(s, 0.0) for r in results)) for s in ("mesh",) + STAGES}
+    secs.update(seconds or {})
+    return PlanReconResult(realizations=list(results), chamfer_mean=float(ch.mean()), chamfer_std=float(ch.std()),
+                           seconds=secs, chamfer_shape_mean=float(np.mean([r.chamfer_shape for r in results])))
 
 
 def _realization_task(noisy_scene: object, k: int, cams: NDArray[np.float64], cfg: ReconConfig,
@@ -775,8 +803,4 @@ def reconstruct_plan(noisy_scene: object, cameras: ArrayLike, config: Optional[R
         if n > 0:
             res.rendered = []
         results.append(res)
-    ch = np.array([r.chamfer for r in results])
-    seconds = {s: float(sum(r.seconds.get(s, 0.0) for r in results)) for s in ("mesh",) + STAGES}
-    seconds["total"] = time.perf_counter() - t_all
-    return PlanReconResult(realizations=results, chamfer_mean=float(ch.mean()), chamfer_std=float(ch.std()),
-                           seconds=seconds, chamfer_shape_mean=float(np.mean([r.chamfer_shape for r in results])))
+    return plan_result(results, {"total": time.perf_counter() - t_all})

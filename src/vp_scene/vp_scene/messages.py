@@ -241,7 +241,7 @@ def scene_of_description(desc: SceneDescription) -> Any:
 # ---------------------------------------------------------------- scores
 def score_msg(frame_id: str, stamp: Any, realization: int, realizations: int, num_images: int,
               fscore_threshold: float, capture: str, method: str = '',
-              info: Optional[CameraPlan] = None) -> ReconstructionScore:
+              info: Optional[CameraPlan] = None, source: str = 'render') -> ReconstructionScore:
     """The head of a ``vp_interfaces/ReconstructionScore``: which plan and realization, the
     settings; the plan's reward and reward model from its ``/camera_plan/info`` (NaN and '' when
     unknown), the method from ``method`` or else from the info."""
@@ -253,7 +253,7 @@ def score_msg(frame_id: str, stamp: Any, realization: int, realizations: int, nu
     msg.reward = float(info.reward) if info is not None else math.nan
     msg.reward_model = info.reward_model if info is not None else ''
     msg.fscore_threshold = float(fscore_threshold)
-    msg.capture = capture
+    msg.capture, msg.source = capture, source
     return msg
 
 
