@@ -11,6 +11,7 @@ import pytest
 
 from geometry_msgs.msg import PoseStamped
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import Image
 from vp_interfaces.msg import DroneAssignment, FleetAssignment, SceneDescription
 from vp_interfaces.msg import ReconstructionScore as Score
 
@@ -45,7 +46,8 @@ def test_fleet_images_reconstruct_as_the_render_source_and_a_silent_drone_is_nam
     """Four drones photograph the plan (ideal capture, 640 x 480): per realization one capture
     set, reconstructed to the render source's Chamfer (the same images and poses: to 1e-6);
     the score says source fleet; a plan whose drone d9 does not exist gives CAPTURE_MISSING
-    naming d9, and the node keeps running."""
+    naming d9, an image of d0 stamped before the trigger is dropped with a log line, and the
+    node keeps running."""
     cams = ring()
     drones = ["d0", "d1", "d2", "d3"]
     start_node("vp_scene", "scene", SCENE, ros_env)
@@ -85,10 +87,15 @@ def test_fleet_images_reconstruct_as_the_render_source_and_a_silent_drone_is_nam
         assert s.chamfer == pytest.approx(100 * ref.chamfer, rel=1e-6) and s.num_points == len(ref.points)
 
     scores.clear()
+    stale = Image(height=1, width=1, encoding="rgb8", step=3, data=b"abc")  # a capture of long ago
+    stale.header.stamp.sec = 1
+    stale_pub = client.node.create_publisher(Image, "/d0/camera/image_raw", LATCHED)
+    stale_pub.publish(stale)
     fleet_pub.publish(assignment(8, ["d0", "d1", "d2", "d9"], cams))
     plan.header.stamp.sec = 8
     plan_pub.publish(plan)
     assert client.spin_until(lambda: aggregates(), TIMEOUT), recon.output()[-4000:]
     agg = aggregates()[0]
     assert agg.error_code == Score.CAPTURE_MISSING and "d9" in agg.error_msg and "d0" not in agg.error_msg
+    assert "capture of d0 stamped 1000000000 ns is older than capture 0 of this plan: ignored" in recon.output()
     assert recon.poll() is None
