@@ -26,6 +26,8 @@ OUT      ?= out/$(SCENE_TAG)-$(METHOD)-$(CAMERAS)cams-seed$(SEED)
 MODELS   ?=
 PLAN     ?= $(OUT)/plan.json
 RECON_ARGS ?=
+IMAGES   ?=
+PRIOR    ?=
 # make view RUN=out/<run folder> [PORT=8080]: the run's recording in the browser (README "Looking at a plan")
 RUN      ?= $(OUT)
 PORT     ?= 8080
@@ -51,8 +53,10 @@ plan: setup
 	@$(ENV) python -m vp_planner.cli --scenario $(SCENE_ARG) --method $(METHOD) --cameras $(CAMERAS) \
 	  --evals $(EVALS) --seed $(SEED) --out $(OUT) $(if $(MODELS),--models $(MODELS)) $(if $(REWARD),--reward $(REWARD))
 
+# make recon IMAGES=DIR [PRIOR=plan.json]: a flight folder (README "From a real flight") into
+# DIR-recon (or OUT=... given on the command line); without IMAGES: render and reconstruct PLAN
 recon: setup
-	@$(ENV) python -m vp_recon.cli --plan $(PLAN) --out $(OUT) $(RECON_ARGS)
+	@$(ENV) python -m vp_recon.cli $(if $(IMAGES),--images $(IMAGES) --out $(if $(filter file,$(origin OUT)),$(patsubst %/,%,$(IMAGES))-recon,$(OUT)) $(if $(PRIOR),--prior $(PRIOR)),--plan $(PLAN) --out $(OUT)) $(RECON_ARGS)
 
 score: setup
 	@$(ENV) python -m vp_planner.cli score --plan $(PLAN) $(if $(REWARD),--reward $(REWARD))

@@ -99,6 +99,9 @@ def test_plan_becomes_scores_and_clouds(recon_system, tmp_path) -> None:
     assert agg.chamfer == pytest.approx(agg.accuracy + agg.completeness, rel=1e-6)
     assert all(s.reward == pytest.approx(0.4321) and s.reward_model == "coverage" for s in scores)
     assert 0 <= agg.fscore <= 1
+    # the metrics without a ground truth (issue 20, part 4) travel in the score, appended fields
+    assert agg.mean_reprojection_error > 0 and agg.mean_track_length >= 2 and agg.coverage_tau > 0
+    assert 0 < agg.coverage_of_prior <= 1 and len(agg.coverage_of_prior_per_plant) == 1
 
     late = client.add_node("late_subscriber")
     late_clouds = client.subscribe(PointCloud2, "/reconstruction/points", LATCHED, node=late)
@@ -114,6 +117,13 @@ def test_plan_becomes_scores_and_clouds(recon_system, tmp_path) -> None:
     sheet = cv2.imread(str(out[0] / "views_0.png"))
     assert sheet.shape[:2] == (2 * 300, 3 * 400)  # 6 views of the new size, not 640 x 480
     assert not list(out[0].glob("realization_*"))  # COLMAP workspaces are cleaned up
+    # issue 20: every realization's capture set is a flight folder that `make recon IMAGES=...` reads
+    from vp_recon.flight import read_flight
+
+    for k in (0, 1):
+        views = read_flight(out[0] / "captures" / f"realization_{k}")
+        assert len(views.images) == 6 and views.size == (400, 300) and views.realization == k
+        np.testing.assert_allclose(views.reported[:, :3], ring()[:, :3], atol=1e-9)  # ideal: the planned poses
 
 
 def test_realizations_on_a_local_dask_cluster(recon_system) -> None:

@@ -6,7 +6,9 @@ and streams their logs, asks the planner for a plan through the ``/plan_views`` 
 progress bar from its feedback), waits for the recon node's aggregate score on
 ``/reconstruction/score`` and writes ``<out>/summary.json``. With ``--drones N`` it also starts
 the dispatcher with drones d0..d<N-1> and N simulated drones (``vp_planner sim_drone``, on a
-launch row 5 m south of the plot) and prints which drone goes where (``/fleet/assignment``).
+launch row 5 m south of the plot) and prints which drone goes where (``/fleet/assignment``);
+the drones then photograph the plan and the recon node reconstructs their images
+(``--source fleet``, the default with drones; ``--source render``: it renders the plan itself).
 A ``recorder`` node (vp_recon) writes the run's topics to ``<out>/run.mcap`` (a ROS 2 bag that
 ``ros2 bag info``/``play`` and Foxglove open); it is started first and stopped last. Everything is shut down on success,
 on Ctrl-C and when any node dies; the nodes die with this script even when it is killed with
@@ -88,6 +90,9 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
     ap.add_argument('--out', default='out/run', help='output folder')
     ap.add_argument('--drones', type=int, default=0,
                     help='start the dispatcher and this many simulated drones (0: none; else at least --cameras)')
+    ap.add_argument('--source', choices=('render', 'fleet'), default=None,
+                    help='what the recon node reconstructs: fleet (the simulated drones photograph the plan; the '
+                         'default with --drones) or render (it renders the plan itself; the default without)')
     ap.add_argument('--assignment', default='min_total', choices=['min_total', 'min_max'],
                     help="the dispatcher's assignment objective")
     ap.add_argument('--rounds', type=int, default=1, choices=(1, 2),
@@ -111,6 +116,15 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
         ap.error(f'--drones must be 0 or at least --cameras ({args.cameras}): every camera pose needs a drone')
     if args.drones < 0:
         ap.error('--drones must be >= 0')
+    if args.source is None:
+        # a second sortie reconstructs from both sorties' images: the recon node does not keep the
+        # fleet's first capture sets yet, so two sorties render (README "A second sortie")
+        args.source = 'fleet' if args.drones and args.rounds == 1 else 'render'
+    if args.source == 'fleet' and not args.drones:
+        ap.error('--source fleet needs --drones (the drones take the pictures)')
+    if args.source == 'fleet' and args.rounds == 2:
+        ap.error('--source fleet with --rounds 2: the first sortie\'s fleet images are not kept for the '
+                 'second reconstruction yet; use --source render')
     if args.models:
         if not Path(args.models).is_dir():
             ap.error(f'--models: no such folder: {args.models}')
@@ -417,15 +431,17 @@ def run(args: argparse.Namespace) -> int:
             {**env, 'OMP_NUM_THREADS': '1'}, out))
         nodes.append(start_node('recon', 'vp_recon', 'recon', {
             'output_folder': str(out), 'width': args.width, 'height': args.height,
-            'method': args.method, 'num_threads': recon_threads, 'capture': args.capture},
+            'method': args.method, 'num_threads': recon_threads, 'capture': args.capture, 'source': args.source},
             {**env, 'OMP_NUM_THREADS': str(recon_threads)}, out))
         if args.drones:
             drones = [f'd{k}' for k in range(args.drones)]
             nodes.append(start_node('dispatcher', 'vp_planner', 'dispatcher', {
                 'drones': drones, 'assignment': args.assignment}, {**env, 'OMP_NUM_THREADS': '1'}, out))
             for name, (x, y, z) in zip(drones, launch_row(args.drones)):
+                camera = {'camera': True, 'width': args.width, 'height': args.height, 'capture': args.capture} \
+                    if args.source == 'fleet' else {}
                 nodes.append(start_node(f'sim_{name}', 'vp_planner', 'sim_drone', {
-                    'drone': name, 'x': x, 'y': y, 'z': z}, {**env, 'OMP_NUM_THREADS': '1'}, out))
+                    'drone': name, 'x': x, 'y': y, 'z': z, **camera}, {**env, 'OMP_NUM_THREADS': '1'}, out))
         mission = Mission(args)
 
         wait_for(mission.scene_ready.is_set, nodes, deadline, 'the scene on /scene/noisy_points')
@@ -457,12 +473,17 @@ def run(args: argparse.Namespace) -> int:
             'chamfer_mean': None if agg.error_code else agg.chamfer,
             'chamfer_std': None if agg.error_code else agg.chamfer_std,
             'chamfer_shape_mean': None if agg.error_code else agg.chamfer_shape,
-            'capture': agg.capture or args.capture, 'registered_images': agg.registered_images,
+            'capture': agg.capture or args.capture, 'source': agg.source or args.source,
+            'registered_images': agg.registered_images,
             'poses': poses, 'seconds': time.monotonic() - start,
             'evaluations': result.evaluations, 'trace': list(result.trace), 'seed': args.seed,
             'error_code': agg.error_code, 'error_msg': agg.error_msg,
             'per_realization': [score_record(s) for s in per],
             'rounds': [r['record'] for r in rounds],
+            # what a real flight can check (README "From a real flight"): the aggregate's metrics without a truth
+            'no_truth': {k: v for k, v in score_record(agg).items()
+                         if k in ('registered_images', 'mean_reprojection_error', 'mean_track_length', 'points',
+                                  'coverage_of_prior', 'coverage_of_prior_per_plant', 'coverage_tau')},
         }
         if fleet is not None:
             summary['fleet'] = {

@@ -8,6 +8,23 @@ second, in ``frame_id``: its position (:func:`vp_planner.fleet.fly_toward`, exac
 arrival) and the goal's orientation (identity before the first goal). A goal in another frame
 is ignored with a log line. Signals, exit codes and parameter types follow
 :mod:`vp_scene.node_runtime`.
+
+With ``camera:=true`` the drone also takes pictures (issue 20, part 1): on a
+``vp_interfaces/CaptureTrigger`` on ``/fleet/capture`` for a plan in which ``/fleet/assignment``
+gives it pose i, once it has settled at its goal, it flies camera i of the plan under the
+capture model (``capture``: realistic | ideal, seeded by ``capture_seed``, realization and i:
+:func:`vp_recon.pipeline.render_flight` with ``indices=[i]``, so its image and reported pose are
+exactly those the recon node's render source gives camera i), renders the scene of
+``/scene/description`` at the trigger's wind realization from its actual pose and publishes,
+all with one stamp,
+
+* ``{camera_topic}/image_raw`` (sensor_msgs/Image, rgb8) and ``{camera_topic}/image_raw/compressed``
+  (sensor_msgs/CompressedImage, PNG), frame ``{drone}/camera_optical``;
+* ``{camera_topic}/camera_info`` (sensor_msgs/CameraInfo: K from ``fov`` and the size, plumb_bob
+  with zero distortion);
+* ``{camera_topic}/pose`` (geometry_msgs/PoseStamped, ``frame_id``): the pose it reports.
+
+A trigger for a plan that gives it no pose is ignored with a log line; one trigger, one capture.
 """
 from __future__ import annotations
 
@@ -20,7 +37,8 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from vp_planner.fleet import fly_toward
-from vp_scene.messages import POSE_TYPES, drone_topic, pose_array, pose_report
+from vp_scene.messages import (POSE_TYPES, camera_info_msg, compressed_image_msg, drone_topic, image_msg, pose_array,
+                               pose_report, scene_of_description)
 from vp_scene.node_runtime import Param, declare_typed, run_node, typed_values
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
@@ -39,6 +57,14 @@ PARAMS = {
     'z': Param(0.0, 'm, start position', None, True),
     'speed': Param(2.0, 'm/s', (0.0, math.inf), True, '> 0'),
     'rate': Param(20.0, 'Hz, pose reports', (0.0, math.inf), True, '> 0'),
+    'camera': Param(False, 'take pictures on /fleet/capture (README "From a real flight")', None, True),
+    'camera_topic': Param('/{drone}/camera', 'camera topics template: image_raw, image_raw/compressed, '
+                                             'camera_info, pose', None, True),
+    'width': Param(2000, 'camera image width, pixels', (16, 100000), True),
+    'height': Param(1500, 'camera image height, pixels', (16, 100000), True),
+    'fov': Param(math.pi / 2, 'camera horizontal field of view, rad', (0.0, math.pi), True, 'the ends are excluded'),
+    'capture': Param('realistic', 'capture model: realistic (RTK multirotor defaults) | ideal', None, True),
+    'capture_seed': Param(0, 'seed of the capture draws (as the recon node\'s)', (0, 2 ** 31 - 1), True),
 }
 
 
@@ -51,6 +77,8 @@ def check_parameters(values: dict) -> dict:
         raise ValueError('speed and rate must be > 0')
     if not v.get('drone', 'd') or not v.get('frame_id', 'map'):
         raise ValueError('drone and frame_id must not be empty')
+    if v.get('capture', 'realistic') not in ('realistic', 'ideal'):
+        raise ValueError(f"capture must be realistic or ideal, got {v['capture']!r}")
     return v
 
 
@@ -65,6 +93,7 @@ class SimDroneNode(Node):
                                           drone_topic(v['pose_topic'], v['drone']), 10)
         self.create_subscription(PoseStamped, drone_topic(v['goal_topic'], v['drone']), self._on_goal, LATCHED)
         self._last = time.monotonic()
+        self._camera = _Camera(self, v) if v['camera'] else None
         self.create_timer(1.0 / v['rate'], self._tick)
         self.get_logger().info(f'sim drone {v["drone"]} at ({v["x"]:.2f}, {v["y"]:.2f}, {v["z"]:.2f}) '
                                f'in {v["frame_id"]!r}, {v["speed"]:g} m/s')
@@ -87,6 +116,83 @@ class SimDroneNode(Node):
         msg = pose_report(self._v['pose_type'], np.concatenate([self._position, quat]), self._v['frame_id'],
                           self.get_clock().now().to_msg(), f'{self._v["drone"]}/base_link')
         self._pub.publish(msg)
+        if self._camera is not None and self._goal is not None and np.array_equal(self._position, self._goal[0]):
+            self._camera.settled(np.concatenate([self._position, self._goal[1]]))
+
+
+class _Camera:
+    """The drone's camera (module docstring): triggers wait here until the drone has settled."""
+
+    def __init__(self, node: Node, v: dict) -> None:
+        from sensor_msgs.msg import CameraInfo, CompressedImage, Image
+        from vp_interfaces.msg import CaptureTrigger, FleetAssignment, SceneDescription
+
+        self._node, self._v = node, v
+        self._description = None
+        self._scene = None
+        self._assignments: dict = {}  # plan stamp -> pose index of this drone (None: no pose)
+        self._pending = None          # the trigger waiting for the drone to settle
+        base = drone_topic(v['camera_topic'], v['drone'])
+        self._image = node.create_publisher(Image, f'{base}/image_raw', LATCHED)
+        self._compressed = node.create_publisher(CompressedImage, f'{base}/image_raw/compressed', LATCHED)
+        self._info = node.create_publisher(CameraInfo, f'{base}/camera_info', LATCHED)
+        self._pose = node.create_publisher(PoseStamped, f'{base}/pose', LATCHED)
+        node.create_subscription(SceneDescription, '/scene/description', self._on_description, LATCHED)
+        node.create_subscription(FleetAssignment, '/fleet/assignment', self._on_assignment, LATCHED)
+        node.create_subscription(CaptureTrigger, '/fleet/capture', self._on_trigger, LATCHED)
+
+    @staticmethod
+    def _key(stamp) -> tuple:
+        return (int(stamp.sec), int(stamp.nanosec))
+
+    def _on_description(self, msg) -> None:
+        self._description, self._scene = msg, None
+
+    def _on_assignment(self, msg) -> None:
+        mine = [e.pose_index for e in msg.entries if e.drone == self._v['drone']]
+        self._assignments[self._key(msg.plan_stamp)] = int(mine[0]) if mine else None
+
+    def _on_trigger(self, msg) -> None:
+        key = self._key(msg.plan_stamp)
+        if self._assignments.get(key) is None:
+            self._node.get_logger().info(f'capture of plan {key} ignored: no pose of it is mine')
+            return
+        self._pending = (msg, self._assignments[key])
+
+    def settled(self, pose: np.ndarray) -> None:
+        """The drone is at its goal ``pose`` (7,): take the pending picture, if any."""
+        if self._pending is None:
+            return
+        trigger, i = self._pending
+        self._pending = None
+        try:
+            self._capture(trigger, i, pose)
+        except Exception as exc:  # noqa: BLE001 - a failed capture is logged, the drone flies on
+            self._node.get_logger().error(f'capture failed: {type(exc).__name__}: {exc}')
+
+    def _capture(self, trigger, i: int, pose: np.ndarray) -> None:
+        from vp_recon.pipeline import ReconConfig, render_flight
+        from vp_scene.camera import cameras_to_poses, poses_to_cameras
+        from vp_scene.capture import CaptureModel
+
+        v = self._v
+        if self._description is None:
+            raise ValueError('no /scene/description yet: nothing to photograph')
+        if self._scene is None:
+            self._scene = scene_of_description(self._description)
+        config = ReconConfig(width=v['width'], height=v['height'], fov=v['fov'], num_threads=1,
+                             capture=CaptureModel.named(v['capture'], seed=v['capture_seed']))
+        views = render_flight(self._scene, int(trigger.realization), poses_to_cameras(pose)[None], config, indices=[i])
+        stamp = self._node.get_clock().now().to_msg()
+        optical = f'{v["drone"]}/camera_optical'
+        image = views.images[0]
+        self._image.publish(image_msg(image, optical, stamp))
+        self._compressed.publish(compressed_image_msg(image, optical, stamp))
+        self._info.publish(camera_info_msg(views.K, v['width'], v['height'], optical, stamp))
+        self._pose.publish(pose_report('pose', cameras_to_poses(views.reported[0]), v['frame_id'], stamp,
+                                       f'{v["drone"]}/base_link'))
+        self._node.get_logger().info(f'captured pose {i} of plan ({trigger.plan_stamp.sec}, '
+                                     f'{trigger.plan_stamp.nanosec}), realization {trigger.realization}')
 
 
 def main(args=None) -> int:

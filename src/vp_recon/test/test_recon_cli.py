@@ -43,6 +43,12 @@ def test_cli_writes_outputs(tmp_path: Path) -> None:
     assert r["chamfer"] == pytest.approx(r["accuracy"] + r["completeness"])
     assert len(load_ply(out / "recon_1.ply").points) == r["points"]
     assert (out / "views.png").stat().st_size > 1000
+    # the metrics without a ground truth (issue 20, part 4), per realization and over them
+    assert r["registered_images"] == r["images"] and 0 < r["mean_reprojection_error"] < 2.0
+    assert r["mean_track_length"] >= 2.0 and 0.2 < r["coverage_of_prior"] <= 1.0
+    assert len(r["coverage_of_prior_per_plant"]) == 1 and r["coverage_tau"] == 0.02
+    assert data["no_truth"]["coverage_of_prior"] == r["coverage_of_prior"]
+    assert (out / "uncovered_1.png").stat().st_size > 1000
 
 
 def test_cli_matching_option(tmp_path: Path, capsys) -> None:

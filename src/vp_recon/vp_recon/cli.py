@@ -1,5 +1,6 @@
 """Command line reconstruction of a plan: render, reconstruct and score every wind realization.
 
+    python -m vp_recon.cli --images DIR --out OUT [--prior plan.json] [--sparse-only] [...]
     python -m vp_recon.cli --plan out/run/plan.json --out out/run [--width 2000 --height 1500]
         [--realizations 0,1] [--sparse-only] [--sparse-mode known_poses|incremental]
         [--matching auto|exhaustive|poses]
@@ -10,9 +11,21 @@ Rebuilds the scene from plan.json's ``scene`` dict (vp_scene.build.build_noisy_s
 
 * ``OUT/recon.json``: chamfer_mean, chamfer_std (metres x 100, as paper Table I),
   per_realization [{chamfer, accuracy, completeness (x 100), fscore, points, images, matching,
-  matched_pairs, ...}], seconds, units, plan, method, reward, matching (as asked);
+  matched_pairs, and the metrics without a ground truth: registered_images,
+  mean_reprojection_error (px), mean_track_length, coverage_of_prior (+ per plant, tau), ...}],
+  no_truth (their aggregate), seconds, units, plan, method, reward, matching (as asked);
 * ``OUT/recon_<k>.ply``: the reconstructed coloured cloud of realization k (metres);
-* ``OUT/views.png``: contact sheet of the first realization's rendered views.
+* ``OUT/views.png``: contact sheet of the first realization's rendered views;
+* ``OUT/uncovered_<k>.png``: the planning cloud's points the reconstruction of realization k
+  does not cover (red; coverage_of_prior, no truth read).
+
+``--images DIR`` reconstructs a flight folder instead (images + poses.csv or COLMAP's text model,
+:mod:`vp_recon.flight`; README "From a real flight") on the same path
+(:func:`vp_recon.pipeline.reconstruct_views`) and writes ``OUT/recon.json`` (the metrics without
+a ground truth: registered images, mean reprojection error, mean track length, points and, with
+``--prior plan.json``, coverage_of_prior per plant; Chamfer when the folder's flight.json names
+the realization of the prior's scene it flew), ``OUT/recon.ply``, ``OUT/views.png`` and, with a
+prior, ``OUT/uncovered.png``. Every input is checked before OUT is made.
 
 With ``--scheduler`` the realizations reconstruct in parallel on a Dask cluster
 (:mod:`vp_scene.cluster`; the same records as in this process).
@@ -76,10 +89,16 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     from .sparse import MODES
 
     p = _Parser(prog=PROG, description="Render, reconstruct (COLMAP on CPU + SGBM) and score a view plan.")
-    p.add_argument("--plan", required=True, help="plan.json written by the planner (make plan)")
+    what = p.add_mutually_exclusive_group(required=True)
+    what.add_argument("--plan", help="plan.json written by the planner (make plan): render its flight and reconstruct")
+    what.add_argument("--images", help="a flight folder: images + poses.csv or COLMAP cameras.txt/images.txt "
+                                       "(README 'From a real flight')")
+    p.add_argument("--prior", default=None,
+                   help="with --images: plan.json whose scene is the planning cloud (coverage_of_prior, crop box, "
+                        "pairs; Chamfer when flight.json names the realization)")
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--width", type=int, default=2000, help="image width, pixels (paper: 2000)")
-    p.add_argument("--height", type=int, default=1500, help="image height, pixels (paper: 1500)")
+    p.add_argument("--width", type=int, default=None, help="--plan: rendered image width, pixels (default and paper: 2000)")
+    p.add_argument("--height", type=int, default=None, help="--plan: rendered image height, pixels (default and paper: 1500)")
     p.add_argument("--realizations", default=None, help="comma-separated realization indices (default: all)")
     p.add_argument("--sparse-only", action="store_true", help="score the sparse cloud (no dense stereo)")
     p.add_argument("--sparse-mode", default="auto", choices=("auto",) + MODES,
@@ -112,6 +131,13 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     args = p.parse_args(argv)
     if args.workers < 1:
         p.error(f"--workers must be >= 1, got {args.workers}")
+    if args.prior and not args.images:
+        p.error("--prior goes with --images (a plan brings its own scene)")
+    if args.images:  # a flight folder has its own images: the options of rendering a plan do not apply
+        given = [f for f, v in (("--width", args.width), ("--height", args.height), ("--realizations", args.realizations),
+                                ("--mesh-cache", args.mesh_cache), ("--scheduler", args.scheduler)) if v]
+        if given:
+            p.error(f"{', '.join(given)} go(es) with --plan, not --images (the folder's images are what they are)")
     return args
 
 
@@ -129,7 +155,7 @@ def run(args: argparse.Namespace) -> dict:
     from vp_scene.build import build_noisy_scene
     from vp_scene.planfile import PlanFileError, load_plan
 
-    from .outputs import contact_sheet, summary, write_image, write_json, write_ply
+    from .outputs import contact_sheet, summary, uncovered_image, write_image, write_json, write_ply
     from .pipeline import STAGES, ReconConfig, ReconError, ensure_writable_dir, validate_cameras
 
     try:
@@ -142,7 +168,7 @@ def run(args: argparse.Namespace) -> dict:
     except ReconError as exc:
         raise CliError(f"{args.plan}: {exc}") from None
     try:
-        config = ReconConfig(width=args.width, height=args.height, fov=plan.fov, dense=not args.sparse_only,
+        config = ReconConfig(width=args.width or 2000, height=args.height or 1500, fov=plan.fov, dense=not args.sparse_only,
                              sparse_mode=args.sparse_mode, fscore_threshold=args.fscore_threshold,
                              voxel=args.voxel, mesh_cache=args.mesh_cache, keep_workdir=args.keep_workdir,
                              ground=args.ground, num_threads=args.threads, matching=args.matching,
@@ -195,12 +221,84 @@ def run(args: argparse.Namespace) -> dict:
     finally:
         for b in bars.values():
             b.close()
+    prior = None
     for r in result.realizations:
         write_ply(out / f"recon_{r.realization}.ply", r.points, r.colors)
+        if r.coverage is not None:
+            prior = noisy.points.reshape(-1, 3) if prior is None else prior
+            write_image(out / f"uncovered_{r.realization}.png", uncovered_image(prior, r.coverage))
     first = result.realizations[0]
     if first.rendered:
         write_image(out / "views.png", contact_sheet(first.rendered))
     data = summary(result, extra=info)
+    write_json(out / "recon.json", data)
+    return data
+
+
+def _prior_scene(path: str) -> object:
+    """The noisy scene of a plan.json (CliError naming the file)."""
+    from vp_scene.build import build_noisy_scene
+    from vp_scene.planfile import PlanFileError, load_plan
+
+    try:
+        plan = load_plan(path)
+        return build_noisy_scene(**plan.scene)[0]
+    except PlanFileError as exc:
+        raise CliError(str(exc)) from None
+    except (TypeError, ValueError, OSError) as exc:
+        raise CliError(f"cannot rebuild the scene of {path}: {exc}") from None
+
+
+def run_images(args: argparse.Namespace) -> dict:
+    """Reconstruct a flight folder (``--images``); returns the recon.json dict (also written)."""
+    from .flight import FlightError, read_flight
+    from .metrics import chamfer, chamfer_after_icp
+    from .outputs import contact_sheet, no_truth_metrics, uncovered_image, write_image, write_json, write_ply
+    from .pipeline import Prior, ReconConfig, ReconError, ensure_writable_dir, reconstruct_views
+
+    try:  # every input checked before OUT is made: nothing half-written
+        views = read_flight(args.images)
+    except FlightError as exc:
+        raise CliError(str(exc)) from None
+    noisy = _prior_scene(args.prior) if args.prior else None
+    width, height = views.size
+    try:
+        config = ReconConfig(width=width, height=height, fov=views.horizontal_fov, dense=not args.sparse_only,
+                             sparse_mode=args.sparse_mode, fscore_threshold=args.fscore_threshold,
+                             voxel=args.voxel, keep_workdir=args.keep_workdir, ground=args.ground,
+                             num_threads=args.threads, matching=args.matching,
+                             capture=capture_from_args(args)).validate()
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    k = views.realization
+    truth = None
+    if noisy is not None and isinstance(k, int) and 0 <= k < noisy.points.shape[0]:
+        truth = noisy.points[k]
+    out = ensure_writable_dir(args.out)
+    info = {"source": "images", "images": str(Path(args.images).resolve()), "num_images": len(views.images),
+            "prior": str(Path(args.prior).resolve()) if args.prior else None, "realization": k,
+            "width": width, "height": height, "fov": config.fov, "dense": config.dense, "ground": config.ground_used,
+            "sparse_mode": config.sparse_mode_used, "matching": config.matching,
+            "capture": config.capture.to_dict(),
+            "units": "chamfer, chamfer_shape: metres x 100 (paper Table I); mean_reprojection_error: pixels; "
+                     "coverage_tau: metres"}
+    try:
+        vr = reconstruct_views(views, config, workdir=out / "work" if args.keep_workdir else None,
+                               prior=Prior.of_scene(noisy) if noisy is not None else None)
+    except ReconError as exc:
+        write_json(out / "recon.json", {**info, "chamfer_mean": None,
+                                        "error": {"code": exc.code, "name": exc.name, "message": str(exc)}})
+        raise
+    write_ply(out / "recon.ply", vr.points, vr.colors)
+    write_image(out / "views.png", contact_sheet(views.images))
+    sp = vr.sparse
+    data = {**info, **no_truth_metrics(sp.registered, sp.mean_reprojection_error, sp.mean_track_length,
+                                       len(vr.points), vr.coverage), "cloud": vr.source, "chamfer_mean": None}
+    if vr.coverage is not None:
+        write_image(out / "uncovered.png", uncovered_image(noisy.points, vr.coverage))
+    if truth is not None:
+        data["chamfer_mean"] = chamfer(vr.points, truth, config.fscore_threshold).chamfer * 100.0
+        data["chamfer_shape_mean"] = chamfer_after_icp(vr.points, truth, config.fscore_threshold).chamfer * 100.0
     write_json(out / "recon.json", data)
     return data
 
@@ -219,7 +317,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
 
     signal.signal(signal.SIGTERM, _terminate)  # SIGTERM ends the run as Ctrl-C does: exit 130
     try:
-        data = run(args)
+        data = run_images(args) if args.images else run(args)
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted", file=sys.stderr)
         return 130
@@ -232,6 +330,13 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     except (ValueError, OSError) as exc:
         print(f"{PROG}: error: {' '.join(str(exc).split())}", file=sys.stderr)
         return 2
+    if args.images:
+        cov = data.get("coverage_of_prior")
+        print(f"{PROG}: {data['registered_images']} of {data['num_images']} images registered, {data['points']} points"
+              + (f", coverage of the prior {cov:.3f}" if cov is not None else "")
+              + (f", chamfer x100 {data['chamfer_mean']:.3f}" if data.get("chamfer_mean") is not None else "")
+              + f" -> {Path(args.out) / 'recon.json'}", file=sys.stderr)
+        return 0
     print(f"{PROG}: chamfer x100 {data['chamfer_mean']:.3f} +- {data['chamfer_std']:.3f} over "
           f"{data['realizations']} realization(s) ({data['seconds']['total']:.1f} s) -> "
           f"{Path(args.out) / 'recon.json'}", file=sys.stderr)

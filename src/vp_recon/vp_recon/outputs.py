@@ -16,7 +16,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["TABLE_SCALE", "write_ply", "new_run_folder", "contact_sheet", "write_image", "summary", "write_json"]
+__all__ = ["TABLE_SCALE", "write_ply", "new_run_folder", "contact_sheet", "write_image", "summary", "write_json",
+           "no_truth_metrics", "uncovered_image"]
 
 #: Table I reports distances in metres x 100.
 TABLE_SCALE = 100.0
@@ -107,6 +108,49 @@ def write_image(path: PathLike, rgb: NDArray[np.uint8]) -> None:
         raise OSError(f"cannot write image {path}")
 
 
+def no_truth_metrics(registered: int, mean_reprojection_error: float, mean_track_length: float, points: int,
+                     coverage: Any = None) -> dict:
+    """The metrics a practitioner can check after a real flight (no ground truth; issue 20,
+    part 4): registered images, mean reprojection error (pixels), mean track length (images a
+    sparse point is seen in), points of the cloud and, with a prior, coverage_of_prior (overall
+    and per plant, at coverage_tau metres; :func:`vp_recon.metrics.coverage_of_prior`)."""
+    out = {"registered_images": int(registered), "mean_reprojection_error": float(mean_reprojection_error),
+           "mean_track_length": float(mean_track_length), "points": int(points),
+           "coverage_of_prior": None, "coverage_of_prior_per_plant": None, "coverage_tau": None}
+    if coverage is not None:
+        out.update(coverage_of_prior=coverage.fraction, coverage_of_prior_per_plant=list(coverage.per_plant),
+                   coverage_tau=coverage.tau)
+    return out
+
+
+def uncovered_image(prior: NDArray[np.float64], coverage: Any, size: int = 600,
+                    margin: int = 20) -> NDArray[np.uint8]:
+    """A picture (RGB) of the uncovered points of the prior's best-covered realization
+    (``coverage``: :class:`vp_recon.metrics.Coverage` of ``prior``, (K P, 3) or (K, P, 3)): a top
+    view (x right, y up) beside a side view (x right, z up), same scale; covered points grey,
+    uncovered red (drawn last)."""
+    allp = np.asarray(prior, dtype=np.float64).reshape(-1, 3)
+    flags = np.asarray(coverage.covered, dtype=bool).reshape(-1)
+    if len(flags) != len(allp):
+        raise ValueError(f"{len(flags)} coverage flags for {len(allp)} prior points")
+    lo_i, hi_i = coverage.block
+    p, cov = allp[lo_i:hi_i], flags[lo_i:hi_i]
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    scale = (size - 2 * margin) / max(float(np.max(hi - lo)), 1e-9)
+    panels = []
+    for a, b, title in ((0, 1, "top (x, y)"), (0, 2, "side (x, z)")):
+        img = np.full((size, size, 3), 255, np.uint8)
+        u = (margin + (p[:, a] - lo[a]) * scale).astype(int)
+        v = (size - margin - (p[:, b] - lo[b]) * scale).astype(int)
+        for sel, colour in ((cov, (190, 190, 190)), (~cov, (220, 30, 30))):
+            img[np.clip(v[sel], 0, size - 1), np.clip(u[sel], 0, size - 1)] = colour
+        cv2.putText(img, f"{title}, prior realization {coverage.realization}: {int((~cov).sum())} of {len(cov)} "
+                    "uncovered", (8, 16),
+                    cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 0), 1, cv2.LINE_AA)
+        panels.append(img)
+    return np.concatenate(panels, axis=1)
+
+
 def summary(result: Any, extra: Optional[dict] = None) -> dict:
     """The recon.json dict of a :class:`vp_recon.pipeline.PlanReconResult` (distances x 100)."""
     s = TABLE_SCALE
@@ -120,6 +164,7 @@ def summary(result: Any, extra: Optional[dict] = None) -> dict:
             "visible_images": int(r.visible_images), "source": r.source, "sparse_points": int(r.sparse_points),
             "matching": r.matching, "matched_pairs": int(r.matched_pairs),
             "seconds": {k: float(v) for k, v in r.seconds.items()},
+            **no_truth_metrics(r.images, r.mean_reprojection_error, r.mean_track_length, len(r.points), r.coverage),
         })
     out = {
         "units": "chamfer, chamfer_std, chamfer_shape, accuracy, completeness: metres x 100 (paper Table I); "
@@ -131,9 +176,21 @@ def summary(result: Any, extra: Optional[dict] = None) -> dict:
         "realizations": len(result.realizations),
         "per_realization": per,
         "seconds": {k: float(v) for k, v in result.seconds.items()},
+        "no_truth": _mean_no_truth(per),
     }
     if extra:
         out.update(extra)
+    return out
+
+
+def _mean_no_truth(per: Sequence[dict]) -> dict:
+    """The no-truth metrics over the realizations: registered images the fewest, the rest means."""
+    if not per:
+        return {}
+    out = {"registered_images": min(r["registered_images"] for r in per)}
+    for key in ("mean_reprojection_error", "mean_track_length", "points", "coverage_of_prior"):
+        vals = [r[key] for r in per if r[key] is not None]
+        out[key] = float(np.mean(vals)) if vals else None
     return out
 
 

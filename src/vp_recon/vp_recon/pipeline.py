@@ -61,9 +61,10 @@ from .metrics import DEFAULT_FSCORE_THRESHOLD, CloudScore, EmptyCloudError, cham
 
 __all__ = [
     "NONE", "UNKNOWN", "EMPTY_PLAN", "NO_SCENE", "NOTHING_VISIBLE", "RECONSTRUCTION_FAILED",
-    "OUTPUT_NOT_WRITABLE", "WRONG_FRAME", "ERROR_NAMES", "STAGES", "ReconError", "ReconCancelled", "ReconConfig",
+    "OUTPUT_NOT_WRITABLE", "WRONG_FRAME", "CAPTURE_MISSING", "ERROR_NAMES", "STAGES", "ReconError", "ReconCancelled", "ReconConfig",
     "RealizationResult", "PlanReconResult", "MATCHINGS", "MATCH_POSES_FROM", "matching_method", "validate_cameras",
-    "ensure_writable_dir", "crop_box",
+    "ensure_writable_dir", "crop_box", "Prior", "ViewsResult", "render_flight", "reconstruct_views",
+    "reconstruct_captured", "plan_result",
     "reconstruct_realization", "reconstruct_plan",
 ]
 
@@ -76,9 +77,11 @@ NOTHING_VISIBLE = 4
 RECONSTRUCTION_FAILED = 5
 OUTPUT_NOT_WRITABLE = 6
 WRONG_FRAME = 7
+CAPTURE_MISSING = 8
 ERROR_NAMES = {NONE: "NONE", UNKNOWN: "UNKNOWN", EMPTY_PLAN: "EMPTY_PLAN", NO_SCENE: "NO_SCENE",
                NOTHING_VISIBLE: "NOTHING_VISIBLE", RECONSTRUCTION_FAILED: "RECONSTRUCTION_FAILED",
-               OUTPUT_NOT_WRITABLE: "OUTPUT_NOT_WRITABLE", WRONG_FRAME: "WRONG_FRAME"}
+               OUTPUT_NOT_WRITABLE: "OUTPUT_NOT_WRITABLE", WRONG_FRAME: "WRONG_FRAME",
+               CAPTURE_MISSING: "CAPTURE_MISSING"}
 
 #: Stages reported to the progress callback, in order.
 STAGES = ("render", "sparse", "dense", "score")
@@ -245,6 +248,11 @@ class RealizationResult:
             shape alone, registration error removed).
         capture: the capture model's :meth:`~vp_scene.capture.CaptureModel.to_dict`.
         sparse_mode: the sparse step that ran (``'known_poses'`` or ``'incremental'``).
+        mean_track_length, mean_reprojection_error: of the sparse model (images a point is seen
+            in; pixels): metrics without a ground truth (issue 20, part 4).
+        coverage: :class:`vp_recon.metrics.Coverage` of the planning cloud (no truth read).
+        reported, K: the poses the drones reported (N, 6) and the intrinsics: with ``rendered``,
+            the capture set (:meth:`captured_views`).
     """
 
     realization: int
@@ -274,6 +282,22 @@ class RealizationResult:
     chamfer_shape: float = math.nan
     capture: dict = field(default_factory=dict)
     sparse_mode: str = "known_poses"
+    mean_track_length: float = math.nan
+    mean_reprojection_error: float = math.nan
+    coverage: object = None
+    reported: Optional[NDArray[np.float64]] = field(default=None, repr=False)
+    K: Optional[NDArray[np.float64]] = field(default=None, repr=False)
+
+    def captured_views(self) -> object:
+        """The capture set this realization was reconstructed from
+        (:class:`vp_recon.flight.CapturedViews`: its images, the poses reported, K), for
+        :func:`vp_recon.flight.write_flight`; None when its images were not kept."""
+        from .flight import CapturedViews
+
+        if not self.rendered or self.reported is None:
+            return None
+        return CapturedViews(names=[f"view_{i:03d}.png" for i in range(len(self.rendered))], images=self.rendered,
+                             reported=self.reported, K=self.K, realization=self.realization)
 
 
 @dataclass
@@ -349,8 +373,9 @@ def ensure_writable_dir(path: PathLike) -> Path:
 
 def crop_box(noisy_scene: object, margin: float) -> NDArray[np.float64]:
     """(2, 3) [lo, hi]: bounding box of all realizations' points (the scene's extent under any
-    of its winds, not realization k's truth alone) grown by ``margin``; lo z >= -margin."""
-    pts = np.asarray(noisy_scene.points, dtype=np.float64).reshape(-1, 3)
+    of its winds, not realization k's truth alone; or of any (..., 3) cloud given instead of a
+    scene) grown by ``margin``."""
+    pts = np.asarray(getattr(noisy_scene, "points", noisy_scene), dtype=np.float64).reshape(-1, 3)
     return np.stack([pts.min(axis=0) - margin, pts.max(axis=0) + margin])
 
 
@@ -366,86 +391,173 @@ def _tick(progress: Optional[ProgressFn], stage: str, k: int) -> None:
         raise ReconCancelled(f"cancelled after {stage} of realization {k}")
 
 
-def reconstruct_realization(noisy_scene: object, k: int, cameras: ArrayLike, config: Optional[ReconConfig] = None,
-                            workdir: Optional[PathLike] = None, progress: Optional[ProgressFn] = None
-                            ) -> RealizationResult:
-    """Render, reconstruct and score realization ``k`` of ``noisy_scene`` seen by ``cameras`` (N, 6).
+@dataclass
+class Prior:
+    """The planning cloud (the noisy scene the planner saw): every realization's points, (M, 3)
+    in ``map``, and which plant each belongs to (``plant``, (M,) int), K ``realizations`` blocks of the same points. It chooses image pairs
+    (``matching='poses'``), crops the reconstruction to the scene's box and is what
+    ``coverage_of_prior`` is measured on (:func:`vp_recon.metrics.coverage_of_prior`)."""
+
+    points: NDArray[np.float64]
+    plant: NDArray[np.int64]
+    realizations: int = 1
+
+    @classmethod
+    def of_scene(cls, noisy_scene: object) -> "Prior":
+        """All K realizations of a :class:`vp_scene.wind.NoisyScene` (the planner's cloud), in K
+        blocks of the scene's P points."""
+        pts = _check_scene(noisy_scene)
+        plant = np.asarray(noisy_scene.scene.plant_index, dtype=np.int64)
+        return cls(points=pts.reshape(-1, 3), plant=np.tile(plant, pts.shape[0]), realizations=int(pts.shape[0]))
+
+
+@dataclass
+class ViewsResult:
+    """What :func:`reconstruct_views` makes of a capture set (distances metres; no truth read).
+
+    Attributes:
+        points, colors: the scored cloud (dense, else the cleaned sparse one), world / RGB.
+        source: ``'dense'`` or ``'sparse'``.
+        sparse: the :class:`vp_recon.sparse.SparseResult` (registered images, mean track length,
+            mean reprojection error, ...); sparse_clean: its cloud cropped and silhouette-filtered.
+        dense: the dense result (None when ``config.dense`` is off).
+        seeing: indices of the images whose plant mask has >= ``min_foreground`` pixels.
+        matching, mode: the matching and sparse step that ran; t_pairs: seconds choosing pairs.
+        coverage: :class:`vp_recon.metrics.Coverage` of the prior (None without a prior).
+        seconds: wall time of ``sparse`` and ``dense``.
+    """
+
+    points: NDArray[np.float64]
+    colors: NDArray[np.uint8]
+    source: str
+    sparse: object
+    sparse_clean: NDArray[np.float64]
+    dense: object
+    seeing: NDArray[np.int64]
+    matching: str
+    mode: str
+    t_pairs: float
+    coverage: object = None
+    seconds: dict = field(default_factory=dict)
+
+
+def render_flight(noisy_scene: object, k: int, cameras: ArrayLike, config: Optional[ReconConfig] = None,
+                  indices: Optional[Sequence[int]] = None) -> object:
+    """Realization ``k`` of a plan flown under ``config.capture``: a
+    :class:`vp_recon.flight.CapturedViews` of the images rendered from the actual poses (with
+    sensor noise) and the poses the drones report. The ideal capture keeps the renderer's masks
+    (an oracle: the capture before issue 18); a flight's masks come from its images alone
+    (:func:`reconstruct_views`). ``views.seconds``: mesh, render. ReconError UNKNOWN when
+    meshing or rendering fails.
+
+    ``indices``: the cameras' indices i in their plan (default 0..N-1), which seed their capture
+    draws: a simulated drone holding camera i of a plan renders ``render_flight(scene, k,
+    [camera_i], config, indices=[i])`` and gets exactly the image and reported pose the whole
+    plan's render gives camera i (tested), so the fleet and the render source see one flight."""
+    from .flight import CapturedViews
+    from .meshing import scene_meshes
+    from .render import RenderError, Renderer
+
+    from vp_scene.camera import check_cameras
+
+    cfg = (config or ReconConfig()).validate()
+    try:  # one camera is a capture too (a drone's own)
+        cams = check_cameras(cameras)
+    except ValueError as exc:
+        raise ReconError(EMPTY_PLAN, str(exc)) from None
+    seconds = {}
+    t0 = time.perf_counter()
+    try:
+        meshes = scene_meshes(noisy_scene, k, cfg.mesh_cache)
+    except (RuntimeError, ValueError) as exc:
+        raise ReconError(UNKNOWN, f"cannot mesh the plants: {exc}") from exc
+    seconds["mesh"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    capture = cfg.capture
+    ids = list(range(len(cams))) if indices is None else [int(i) for i in indices]
+    if len(ids) != len(cams) or len(set(ids)) != len(ids) or min(ids) < 0:
+        raise ReconError(EMPTY_PLAN, f"indices must be {len(cams)} distinct camera indices >= 0, got {ids}")
+    # ideal: the planned cameras, flown and reported exactly
+    flown = [capture.fly_camera(c, k, i) for c, i in zip(cams, ids)]
+    actual = np.array([a for a, _ in flown]).reshape(-1, 6)
+    reported = np.array([r for _, r in flown]).reshape(-1, 6)
+    try:
+        renderer = Renderer(cfg.width, cfg.height, cfg.fov)
+        images, masks, _ = renderer.render(meshes, actual, ground=cfg.ground_used)
+    except RenderError as exc:
+        raise ReconError(UNKNOWN, str(exc)) from exc
+    images = [capture.expose(im, k, i) for i, im in zip(ids, images)]
+    seconds["render"] = time.perf_counter() - t0
+    return CapturedViews(names=[f"view_{i:03d}.png" for i in ids], images=images,
+                         reported=reported, K=renderer.K, masks=masks if capture.ideal else None,
+                         fov=cfg.fov, realization=k, seconds=seconds)
+
+
+def reconstruct_views(views: object, config: Optional[ReconConfig] = None, workdir: Optional[PathLike] = None,
+                      prior: Optional[Prior] = None, pair_cloud: Optional[NDArray[np.float64]] = None,
+                      progress: Optional[ProgressFn] = None, k: int = 0) -> ViewsResult:
+    """Reconstruct a capture set (:class:`vp_recon.flight.CapturedViews`: images, reported poses,
+    one pinhole camera): the one path of rendered plans, flight folders and the fleet.
+
+    Masks: ``views.masks`` when given (the ideal capture's renderer masks), else from each image
+    alone (:func:`vp_recon.render.image_mask`, by ``config.ground_used``). Sparse step
+    ``config.sparse_mode_used`` with the reported centres as pose priors (incremental, unless the
+    capture is ideal); the sparse cloud is cropped to the prior's box (+ ``crop_margin``; without
+    a prior: the box of its points on plant pixels) and silhouette-filtered, then dense stereo.
 
     Args:
-        workdir: COLMAP workspace (created; kept). None: a temporary folder, deleted afterwards.
-        progress: called as ``progress(stage, k)`` after each of :data:`STAGES`; False cancels.
+        workdir: the COLMAP workspace (created, kept); None: a temporary one, deleted.
+        prior: the planning cloud: pairs (``matching='poses'``), crop box, coverage of the prior.
+        pair_cloud: the cloud pairs are chosen from (default: the prior's points).
+        progress, k: ``progress(stage, k)`` after render (the images checked), sparse and dense.
 
     Raises:
-        ReconError: EMPTY_PLAN (no / malformed cameras), NO_SCENE, NOTHING_VISIBLE (fewer than 2
-            images see a plant), RECONSTRUCTION_FAILED (nothing matched / triangulated),
-            OUTPUT_NOT_WRITABLE (workdir), UNKNOWN (rendering or meshing failed).
-        ReconCancelled: the progress callback returned False.
+        ReconError: NOTHING_VISIBLE, RECONSTRUCTION_FAILED, OUTPUT_NOT_WRITABLE (workdir).
     """
     from vp_scene.camera import CameraModel
 
     from .dense import crop_to_box, dense_reconstruct, silhouette_filter
-    from .meshing import scene_meshes
+    from .metrics import coverage_of_prior
     from .pairs import select_pairs
-    from .render import RenderError, Renderer, image_mask
+    from .render import image_mask
     from .sparse import SparseError, sparse_reconstruct
 
     cfg = (config or ReconConfig()).validate()
-    cams = validate_cameras(cameras)
-    truth_all = _check_scene(noisy_scene)
     set_threads(cfg.num_threads)
-    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 0 <= int(k) < truth_all.shape[0]:
-        raise ReconError(NO_SCENE, f"realization {k!r} does not exist (the scene has {truth_all.shape[0]})")
-    k = int(k)
+    views.validate()
+    images, reported, K = views.images, views.reported, views.K
+    n = len(images)
+    masks = views.masks if views.masks is not None else [image_mask(im, cfg.ground_used) for im in images]
+    fg = np.array([int(m.sum()) for m in masks])
+    seeing = np.flatnonzero(fg >= cfg.min_foreground)
+    if len(seeing) == 0:
+        raise ReconError(NOTHING_VISIBLE, f"none of the {n} cameras sees a plant "
+                                          f"(at most {int(fg.max())} plant pixels in an image)")
+    if len(seeing) < 2:
+        raise ReconError(NOTHING_VISIBLE, f"only camera {int(seeing[0])} of {n} sees a plant; "
+                                          "a reconstruction needs at least 2 views of it")
+    _tick(progress, "render", k)
     temp = workdir is None
-    wd = Path(tempfile.mkdtemp(prefix="vp_recon_")) if temp else ensure_writable_dir(workdir)
+    wd = Path(tempfile.mkdtemp(prefix="vp_recon_")) if temp else Path(workdir)
     seconds: dict = {}
     try:
         t0 = time.perf_counter()
-        try:
-            meshes = scene_meshes(noisy_scene, k, cfg.mesh_cache)
-        except (RuntimeError, ValueError) as exc:
-            raise ReconError(UNKNOWN, f"cannot mesh the plants: {exc}") from exc
-        seconds["mesh"] = time.perf_counter() - t0
-
-        t0 = time.perf_counter()
-        capture = cfg.capture
-        flight = capture.fly(cams, k)  # ideal: the planned cameras, flown and reported exactly
-        try:
-            renderer = Renderer(cfg.width, cfg.height, cfg.fov)
-            images, masks, _ = renderer.render(meshes, flight.actual, ground=cfg.ground_used)
-        except RenderError as exc:
-            raise ReconError(UNKNOWN, str(exc)) from exc
-        images = [capture.expose(im, k, i) for i, im in enumerate(images)]
-        if not capture.ideal:
-            # a flight has no segmentation pass: plant pixels from its (noisy) image alone
-            masks = [image_mask(im, cfg.ground_used) for im in images]
-        reported = flight.reported  # ideal: the planned cameras themselves
-        seconds["render"] = time.perf_counter() - t0
-        fg = np.array([int(m.sum()) for m in masks])
-        seeing = np.flatnonzero(fg >= cfg.min_foreground)
-        if len(seeing) == 0:
-            raise ReconError(NOTHING_VISIBLE, f"none of the {len(cams)} cameras sees a plant "
-                                              f"(at most {int(fg.max())} plant pixels in an image)")
-        if len(seeing) < 2:
-            raise ReconError(NOTHING_VISIBLE, f"only camera {int(seeing[0])} of {len(cams)} sees a plant; "
-                                              "a reconstruction needs at least 2 views of it")
-        _tick(progress, "render", k)
-
-        t0 = time.perf_counter()
-        matching = matching_method(cfg.matching, len(cams))
+        matching = matching_method(cfg.matching, n)
+        cloud = pair_cloud if pair_cloud is not None else (prior.points if prior is not None else None)
+        if matching == "poses" and cloud is None:
+            matching = "exhaustive"  # no scene to choose pairs from (a flight folder without a prior)
         pairs = None
         if matching == "poses":
-            # ideal: as before the capture model (realization k's truth); a flight: the planning cloud
-            cloud = truth_all[k] if capture.ideal else truth_all.reshape(-1, 3)
-            pairs = select_pairs(reported, cloud, CameraModel(cfg.width, cfg.height, cfg.fov))
+            pairs = select_pairs(reported, cloud, CameraModel(*views.size, views.horizontal_fov))
             if not pairs:
-                raise ReconError(RECONSTRUCTION_FAILED, f"no two of the {len(cams)} cameras see a common part of "
+                raise ReconError(RECONSTRUCTION_FAILED, f"no two of the {n} cameras see a common part of "
                                                         "the scene: no image pair to match (matching 'poses')")
         t_pairs = time.perf_counter() - t0
+        capture = cfg.capture
         try:
             mode = cfg.sparse_mode_used
             priors = None if capture.ideal or mode != "incremental" else reported[:, :3]
-            sp = sparse_reconstruct(images, reported, renderer.K, wd / f"realization_{k}", mode=mode,
+            sp = sparse_reconstruct(images, reported, K, wd, mode=mode,
                                     masks=masks if cfg.sift_masks else None, max_features=cfg.max_features,
                                     num_threads=cfg.num_threads or -1, pairs=pairs, prior_centres=priors,
                                     prior_sigma=max(capture.report_position_sigma, 0.01))
@@ -457,28 +569,93 @@ def reconstruct_realization(noisy_scene: object, k: int, cameras: ArrayLike, con
         _tick(progress, "sparse", k)
 
         t0 = time.perf_counter()
-        box = crop_box(noisy_scene, cfg.crop_margin)
         # the poses the sparse step knows: the reported ones, or SfM's (in map) where registered
         # (ideal: the planned poses whatever the mode, as before the capture model)
         geo = reported if capture.ideal or mode == "known_poses" else \
             np.where(np.isfinite(sp.cameras), sp.cameras, reported)
-        keep = crop_to_box(sp.points, box[0], box[1])
-        keep[keep] = silhouette_filter(sp.points[keep], geo, renderer.K, masks)
+        if prior is not None:
+            box = crop_box(prior.points, cfg.crop_margin)
+            keep = crop_to_box(sp.points, box[0], box[1])
+            keep[keep] = silhouette_filter(sp.points[keep], geo, K, masks)
+        else:
+            keep = silhouette_filter(sp.points, geo, K, masks)
+            if not keep.any():
+                raise ReconError(RECONSTRUCTION_FAILED, f"none of the {len(sp.points)} sparse points lies on "
+                                                        "plant pixels in every view that sees it")
+            box = crop_box(sp.points[keep], cfg.crop_margin)
         points, colors, source = sp.points[keep], sp.colors[keep], "sparse"
-        sparse_score = chamfer(points, truth_all[k], cfg.fscore_threshold) if len(points) else None
+        clean = points
         dn = None
         if cfg.dense:
-            dn = dense_reconstruct(images, masks, geo, renderer.K, box, guide=sp.points,
+            dn = dense_reconstruct(images, masks, geo, K, box, guide=sp.points,
                                    neighbours=cfg.neighbours, voxel=cfg.voxel, pair_inliers=sp.pair_inliers)
             if len(dn.points):
                 points, colors, source = dn.points, dn.colors, "dense"
         seconds["dense"] = time.perf_counter() - t0
         _tick(progress, "dense", k)
+    finally:
+        if temp:
+            shutil.rmtree(wd, ignore_errors=True)
+    coverage = coverage_of_prior(points, prior.points, prior.plant, realizations=prior.realizations) \
+        if prior is not None and len(points) else None
+    return ViewsResult(points=points, colors=colors, source=source, sparse=sp, sparse_clean=clean, dense=dn,
+                       seeing=seeing, matching=matching, mode=mode, t_pairs=t_pairs, coverage=coverage,
+                       seconds=seconds)
 
+
+def reconstruct_realization(noisy_scene: object, k: int, cameras: ArrayLike, config: Optional[ReconConfig] = None,
+                            workdir: Optional[PathLike] = None, progress: Optional[ProgressFn] = None
+                            ) -> RealizationResult:
+    """Render, reconstruct and score realization ``k`` of ``noisy_scene`` seen by ``cameras`` (N, 6):
+    :func:`render_flight`, :func:`reconstruct_views` (the path of every capture set), then the
+    scores against realization k's truth.
+
+    Args:
+        workdir: COLMAP workspace (created; kept). None: a temporary folder, deleted afterwards.
+        progress: called as ``progress(stage, k)`` after each of :data:`STAGES`; False cancels.
+
+    Raises:
+        ReconError: EMPTY_PLAN (no / malformed cameras), NO_SCENE, NOTHING_VISIBLE (fewer than 2
+            images see a plant), RECONSTRUCTION_FAILED (nothing matched / triangulated),
+            OUTPUT_NOT_WRITABLE (workdir), UNKNOWN (rendering or meshing failed).
+        ReconCancelled: the progress callback returned False.
+    """
+    cfg = (config or ReconConfig()).validate()
+    cams = validate_cameras(cameras)
+    truth_all = _check_scene(noisy_scene)
+    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 0 <= int(k) < truth_all.shape[0]:
+        raise ReconError(NO_SCENE, f"realization {k!r} does not exist (the scene has {truth_all.shape[0]})")
+    views = render_flight(noisy_scene, int(k), cams, cfg)
+    return reconstruct_captured(noisy_scene, views, cfg, workdir=workdir, progress=progress)
+
+
+def reconstruct_captured(noisy_scene: object, views: object, config: Optional[ReconConfig] = None,
+                         workdir: Optional[PathLike] = None, progress: Optional[ProgressFn] = None
+                         ) -> RealizationResult:
+    """Reconstruct a capture set of realization ``views.realization`` of ``noisy_scene`` (rendered
+    by :func:`render_flight`, or sent by the fleet) and score it against that realization's
+    truth: :func:`reconstruct_views` with the scene as the prior, then Chamfer, ``chamfer_shape``
+    and the sparse cloud's score. Arguments and errors as :func:`reconstruct_realization`."""
+    cfg = (config or ReconConfig()).validate()
+    truth_all = _check_scene(noisy_scene)
+    k = views.realization
+    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 0 <= int(k) < truth_all.shape[0]:
+        raise ReconError(NO_SCENE, f"realization {k!r} does not exist (the scene has {truth_all.shape[0]})")
+    k = int(k)
+    temp = workdir is None
+    wd = Path(tempfile.mkdtemp(prefix="vp_recon_")) if temp else ensure_writable_dir(workdir)
+    try:
+        seconds = dict(views.seconds)
+        prior = Prior.of_scene(noisy_scene)
+        # pairs: ideal: as before the capture model (realization k's truth); a flight: the planning cloud
+        vr = reconstruct_views(views, cfg, wd / f"realization_{k}", prior=prior,
+                               pair_cloud=truth_all[k] if cfg.capture.ideal else None, progress=progress, k=k)
+        seconds.update(vr.seconds)
         t0 = time.perf_counter()
+        sparse_score = chamfer(vr.sparse_clean, truth_all[k], cfg.fscore_threshold) if len(vr.sparse_clean) else None
         try:
-            score = chamfer(points, truth_all[k], cfg.fscore_threshold)
-            shape = chamfer_after_icp(points, truth_all[k], cfg.fscore_threshold)
+            score = chamfer(vr.points, truth_all[k], cfg.fscore_threshold)
+            shape = chamfer_after_icp(vr.points, truth_all[k], cfg.fscore_threshold)
         except EmptyCloudError as exc:
             raise ReconError(RECONSTRUCTION_FAILED, f"the reconstruction is empty: {exc}") from exc
         seconds["score"] = time.perf_counter() - t0
@@ -488,15 +665,29 @@ def reconstruct_realization(noisy_scene: object, k: int, cameras: ArrayLike, con
             shutil.rmtree(wd / f"realization_{k}", ignore_errors=True)
             if temp:
                 shutil.rmtree(wd, ignore_errors=True)
+    sp, dn = vr.sparse, vr.dense
     return RealizationResult(
         realization=k, chamfer=score.chamfer, accuracy=score.accuracy, completeness=score.completeness,
         fscore=score.fscore, precision=score.precision, recall=score.recall, fscore_threshold=score.threshold,
-        points=points, colors=colors, images=sp.registered, num_images=len(cams), visible_images=len(seeing),
-        source=source, sparse_points=len(sp.points), sparse_score=sparse_score, pair_inliers=dict(sp.pair_inliers),
-        matching=matching, matched_pairs=sp.matched_pairs, sparse_seconds={"pairs": t_pairs, **sp.seconds},
+        points=vr.points, colors=vr.colors, images=sp.registered, num_images=len(views.images),
+        visible_images=len(vr.seeing), source=vr.source, sparse_points=len(sp.points), sparse_score=sparse_score,
+        pair_inliers=dict(sp.pair_inliers), matching=vr.matching, matched_pairs=sp.matched_pairs,
+        sparse_seconds={"pairs": vr.t_pairs, **sp.seconds},
         dense_pairs=list(dn.pairs) if dn is not None else [], dense_pair_points=list(dn.pair_points) if dn is not None else [],
-        rendered=images if cfg.keep_images else [], seconds=seconds, chamfer_shape=shape.chamfer,
-        capture=capture.to_dict(), sparse_mode=mode)
+        rendered=views.images if cfg.keep_images else [], seconds=seconds, chamfer_shape=shape.chamfer,
+        capture=cfg.capture.to_dict(), sparse_mode=vr.mode, mean_track_length=sp.mean_track_length,
+        mean_reprojection_error=sp.mean_reprojection_error, coverage=vr.coverage,
+        reported=np.asarray(views.reported, dtype=np.float64), K=np.asarray(views.K, dtype=np.float64))
+
+
+def plan_result(results: Sequence[RealizationResult], seconds: Optional[dict] = None) -> PlanReconResult:
+    """The :class:`PlanReconResult` of the realizations' results (Chamfer mean, population std,
+    shape mean; ``seconds`` summed per stage, plus ``total`` when given)."""
+    ch = np.array([r.chamfer for r in results])
+    secs = {s: float(sum(r.seconds.get(s, 0.0) for r in results)) for s in ("mesh",) + STAGES}
+    secs.update(seconds or {})
+    return PlanReconResult(realizations=list(results), chamfer_mean=float(ch.mean()), chamfer_std=float(ch.std()),
+                           seconds=secs, chamfer_shape_mean=float(np.mean([r.chamfer_shape for r in results])))
 
 
 def _realization_task(noisy_scene: object, k: int, cams: NDArray[np.float64], cfg: ReconConfig,
@@ -612,8 +803,4 @@ def reconstruct_plan(noisy_scene: object, cameras: ArrayLike, config: Optional[R
         if n > 0:
             res.rendered = []
         results.append(res)
-    ch = np.array([r.chamfer for r in results])
-    seconds = {s: float(sum(r.seconds.get(s, 0.0) for r in results)) for s in ("mesh",) + STAGES}
-    seconds["total"] = time.perf_counter() - t_all
-    return PlanReconResult(realizations=results, chamfer_mean=float(ch.mean()), chamfer_std=float(ch.std()),
-                           seconds=seconds, chamfer_shape_mean=float(np.mean([r.chamfer_shape for r in results])))
+    return plan_result(results, {"total": time.perf_counter() - t_all})

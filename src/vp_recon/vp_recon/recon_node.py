@@ -29,7 +29,9 @@ and publishes
   that a late subscriber gets every finished realization in the one message it receives.
 
 Images and PLY files go to a new folder ``<output_folder>/plan-<time>[-n]`` per plan (never one
-that exists). The rendering and scoring parameters are read anew for every plan; a change to a
+that exists); with ``record_captures`` each realization's capture set (the images, the poses
+the drones reported, the camera) goes to its ``captures/realization_<k>`` as a flight folder
+(:func:`vp_recon.flight.write_flight`; README "From a real flight"). The rendering and scoring parameters are read anew for every plan; a change to a
 bad value is refused with the reason.
 
 The work runs on a worker thread, so the node's callbacks keep running. Queueing policy: the
@@ -58,15 +60,16 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
 
 from vp_interfaces.msg import CameraPlan, ReconstructionScore, SceneDescription
+from vp_recon.flight import write_flight
 from vp_recon.metrics import DEFAULT_FSCORE_THRESHOLD
 from vp_recon.outputs import contact_sheet, new_run_folder, remove_if_empty, write_image, write_ply
-from vp_recon.pipeline import (ReconCancelled, ReconConfig, ReconError, RealizationResult, ensure_writable_dir,
-                               reconstruct_plan)
-from vp_scene.build import build_noisy_scene
+from vp_recon.pipeline import (CAPTURE_MISSING, ReconCancelled, ReconConfig, ReconError, RealizationResult,
+                               ensure_writable_dir, plan_result, reconstruct_captured, reconstruct_plan)
 from vp_scene.capture import IDEAL, REALISTIC, CaptureModel
-from vp_scene.messages import (aggregate_score, error_score, numpy_to_pointcloud2, placements_of, plan_key,
-                               pose_array_to_cameras, realization_score, realizations_from_cloud, score_msg)
-from vp_scene.layout import Layout
+from vp_scene.camera import poses_to_cameras
+from vp_scene.messages import (aggregate_score, camera_info_intrinsics, drone_topic, error_score, image_array,
+                               numpy_to_pointcloud2, plan_key, pose_array, pose_array_to_cameras, realization_score,
+                               realizations_from_cloud, scene_of_description, score_msg)
 from vp_scene.node_runtime import (INT_MAX, NewestWins, Param, declare_typed, parameter_value, refuse_bad_changes,
                                    run_node, typed_values)
 
@@ -98,6 +101,13 @@ PARAMS = {
     'matching': Param('auto', 'image pairs SIFT matches: auto (from the poses from 8 cameras up) | exhaustive | poses'),
     'fscore_threshold': Param(DEFAULT_FSCORE_THRESHOLD, 'F-score distance threshold, m', _M, False, '> 0'),
     'method': Param('', 'label of the scores (default: the method from /camera_plan/info)'),
+    'source': Param('render', 'render: the node renders each plan under the capture model | fleet: the drones\' '
+                              'images (/fleet/capture, README "From a real flight")'),
+    'capture_timeout': Param(60.0, 's source fleet: how long a capture set may take to arrive', _M),
+    'camera_topic': Param('/{drone}/camera', 'source fleet: the drones\' camera topics (image_raw, camera_info, '
+                                             'pose)'),
+    'record_captures': Param(True, 'write each realization\'s capture set (images, poses.csv, COLMAP text model) '
+                                   'to <plan folder>/captures/realization_<k>: `make recon IMAGES=...` re-runs it'),
     'max_realizations': Param(0, 'reconstruct only the first n realizations (0: all)', (0, INT_MAX)),
     'scene_timeout': Param(10.0, 's a plan that arrives before the scene waits for it', _M),
     'frame_id': Param('map', 'frame of the plans and of the published clouds', None, False, 'not empty'),
@@ -141,6 +151,10 @@ def check_parameters(values: dict) -> dict:
     if v.get('num_threads', 1) < 1 or v.get('workers', 1) < 1:
         raise ValueError(f'num_threads and workers must be >= 1, got {v.get("num_threads", 1)}, '
                          f'{v.get("workers", 1)}')
+    if v.get('source', 'render') not in ('render', 'fleet'):
+        raise ValueError(f"source must be render or fleet, got {v['source']!r}")
+    if v.get('capture_timeout', 1.0) <= 0.0:
+        raise ValueError(f'capture_timeout must be > 0 s, got {v["capture_timeout"]}')
     if v.get('output_folder', 'x') == '' or v.get('frame_id', 'x') == '':
         raise ValueError('output_folder and frame_id must not be empty')
     config_keys = ('width', 'height', 'fov', 'sparse_mode', 'dense', 'matching', 'fscore_threshold')
@@ -178,6 +192,7 @@ class ReconNode(Node):
         self.create_subscription(PointCloud2, '/scene/noisy_points', self._on_truth, LATCHED)
         self.create_subscription(CameraPlan, '/camera_plan/info', self._on_info, LATCHED)
         self.create_subscription(PoseArray, '/camera_plan', self._on_plan, LATCHED)
+        self._fleet = FleetCaptures(self, self._lock)
         self._worker = threading.Thread(target=self._work, name='recon-worker', daemon=True)
         self._worker.start()
         self.get_logger().info(
@@ -272,15 +287,8 @@ class ReconNode(Node):
             missing = [n for n, v in (('/scene/description', desc), ('/scene/noisy_points', truth)) if v is None]
             raise ReconError(Score.NO_SCENE, f'no scene yet: nothing received on {" and ".join(missing)}')
         if scene is None:
-            folder = desc.models_folder
             try:  # from the plants' placements, not the scenario: no layout file needed here
-                layout = Layout.from_placements(
-                    desc.scenario or 'scene', placements_of(desc), source='/scene/description')
-                scene, _ = build_noisy_scene(
-                    scenario=layout, models=folder or None, seed=desc.seed,
-                    points_per_plant=desc.points_per_plant, plant_spacing=desc.plant_spacing,
-                    row_spacing=desc.row_spacing, levels=desc.levels, realizations=desc.realizations,
-                    wind_variance=desc.wind_variance, wind_direction=desc.wind_direction)
+                scene = scene_of_description(desc)
             except (ValueError, OSError) as exc:
                 raise ReconError(Score.NO_SCENE, f'cannot rebuild the scene from /scene/description: {exc}')
             if scene.points.shape != truth.shape or np.abs(scene.points - truth).max() > 1e-4:
@@ -342,12 +350,17 @@ class ReconNode(Node):
             self.get_logger().info(f'realization {k + 1}/{K}: {stage} done')
             return not self._plans.stopped
 
+        record = self._param('record_captures')
+
         def on_realization(res: RealizationResult) -> None:
             k = res.realization
             try:
                 write_ply(run_dir / f'recon_{k}.ply', res.points, res.colors)
                 if res.rendered:
                     write_image(run_dir / f'views_{k}.png', contact_sheet(res.rendered))
+                if record and res.captured_views() is not None:
+                    write_flight(res.captured_views(), run_dir / 'captures' / f'realization_{k}',
+                                 meta={'capture': res.capture})
             except (OSError, ValueError) as exc:
                 self.get_logger().error(f'could not write the outputs of realization {k}: {exc}')
             done.append(res)
@@ -368,8 +381,15 @@ class ReconNode(Node):
                                                              quiet=True))
                     self.get_logger().info(f'realizations in parallel on Dask ({self._param("scheduler")}, '
                                            f'dashboard {client.dashboard_link})')
-                result = reconstruct_plan(scene, cameras, config, out_dir=run_dir, realizations=range(K),
-                                          progress=progress, on_realization=on_realization, client=client)
+                if self._param('source') == 'fleet':
+                    if info is not None and info.fixed_poses:
+                        self.get_logger().warning(
+                            f'source fleet: the {len(info.fixed_poses)} cameras already flown are not in this '
+                            'capture set (their images are not kept yet); reconstructing the new sortie alone')
+                    result = self._from_fleet(plan, scene, config, K, run_dir, progress, on_realization)
+                else:
+                    result = reconstruct_plan(scene, cameras, config, out_dir=run_dir, realizations=range(K),
+                                              progress=progress, on_realization=on_realization, client=client)
         except OSError as exc:  # the cluster: no scheduler at that address, workers that cannot start
             remove_if_empty(run_dir)
             self._publish_error(Score.UNKNOWN, f'the Dask cluster {self._param("scheduler")!r} failed: {exc}',
@@ -400,7 +420,28 @@ class ReconNode(Node):
     def _score(self, realization: int, K: int, images: int, plan: Optional[PoseArray]) -> Score:
         return score_msg(self._param('frame_id'), self.get_clock().now().to_msg(), realization, K, images,
                          self._param('fscore_threshold'), self._param('capture'), self._param('method'),
-                         self._info_of(plan) if plan is not None else None)
+                         self._info_of(plan) if plan is not None else None, source=self._param('source'))
+
+    def _from_fleet(self, plan: PoseArray, scene: object, config: ReconConfig, K: int, run_dir: Path,
+                    progress, on_realization) -> object:
+        """Source fleet: for each realization k, one capture set of the plan from the drones
+        (:class:`FleetCaptures`), reconstructed on the library path of every capture set
+        (:func:`vp_recon.pipeline.reconstruct_captured`); the first that fails stops the plan."""
+        t0 = time.perf_counter()
+        results = []
+        for k in range(K):
+            try:
+                views = self._fleet.capture(plan.header.stamp, len(plan.poses), k, self._param('capture_timeout'),
+                                            self._param('camera_topic'), lambda: self._plans.stopped)
+                if views is None:
+                    raise ReconCancelled('stopped while waiting for the fleet')
+                res = reconstruct_captured(scene, views, config, progress=progress)
+            except ReconError as exc:
+                exc.realization = k
+                raise
+            on_realization(res)
+            results.append(res)
+        return plan_result(results, {'total': time.perf_counter() - t0})
 
     def _publish_error(self, code: int, text: str, realization: int, images: int, plan: Optional[PoseArray],
                        realizations: int = 0) -> None:
@@ -413,6 +454,123 @@ class ReconNode(Node):
     def destroy_node(self) -> None:
         self._plans.stop()
         super().destroy_node()
+
+
+class FleetCaptures:
+    """The drones' capture sets (source fleet; README "From a real flight").
+
+    ``/fleet/assignment`` says which drone holds which pose of a plan; for each drone named there
+    the node subscribes ``{camera_topic}/image_raw`` (sensor_msgs/Image), ``camera_info`` and
+    ``pose`` (the reported PoseStamped). Every message received is kept by its stamp until a
+    capture set takes it (nothing received is lost, also what arrives while a set is being
+    reconstructed); a capture older than the trigger asking for it belongs to an older plan or
+    realization and is ignored with a log line."""
+
+    def __init__(self, node: Node, lock: threading.Condition) -> None:
+        from vp_interfaces.msg import CaptureTrigger, FleetAssignment
+
+        self._node, self._lock = node, lock
+        self._assignments: OrderedDict = OrderedDict()  # plan stamp key -> FleetAssignment
+        self._got: dict = {}  # drone -> {stamp ns: {kind: msg}}
+        self._subscribed: set = set()
+        self._topic = ''
+        self._trigger = node.create_publisher(CaptureTrigger, '/fleet/capture', LATCHED)
+        self._trigger_type = CaptureTrigger
+        node.create_subscription(FleetAssignment, '/fleet/assignment', self._on_assignment, LATCHED)
+
+    @staticmethod
+    def _ns(stamp) -> int:
+        return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+    def _on_assignment(self, msg) -> None:
+        with self._lock:
+            self._assignments[self._ns(msg.plan_stamp)] = msg
+            while len(self._assignments) > _INFO_MEMORY:
+                self._assignments.popitem(last=False)
+            self._lock.notify_all()
+
+    def _subscribe(self, drone: str, topic: str) -> None:
+        from geometry_msgs.msg import PoseStamped
+        from sensor_msgs.msg import CameraInfo, Image
+
+        if drone in self._subscribed:
+            return
+        self._subscribed.add(drone)
+        base = drone_topic(topic, drone)
+        for kind, t, name in (('image', Image, 'image_raw'), ('info', CameraInfo, 'camera_info'),
+                              ('pose', PoseStamped, 'pose')):
+            self._node.create_subscription(t, f'{base}/{name}', lambda m, d=drone, k=kind: self._on(d, k, m), LATCHED)
+
+    def _on(self, drone: str, kind: str, msg) -> None:
+        with self._lock:
+            self._got.setdefault(drone, {}).setdefault(self._ns(msg.header.stamp), {})[kind] = msg
+            self._lock.notify_all()
+
+    def capture(self, plan_stamp, num_poses: int, k: int, timeout: float, topic: str, stopped) -> object:
+        """The capture set of realization ``k`` of the plan: trigger, then one image, camera_info
+        and pose with one stamp (not older than the trigger) from every drone of the plan's
+        assignment, as :class:`vp_recon.flight.CapturedViews` in pose order; None when
+        ``stopped()``. ReconError CAPTURE_MISSING naming the drones that sent nothing."""
+        from .flight import CapturedViews, FlightError
+
+        key = self._ns(plan_stamp)
+        deadline = time.monotonic() + timeout
+        with self._lock:
+            self._lock.wait_for(lambda: key in self._assignments or stopped(), timeout=timeout)
+            fleet = self._assignments.get(key)
+        if stopped():
+            return None
+        if fleet is None:
+            raise ReconError(CAPTURE_MISSING, f'no /fleet/assignment for the plan within capture_timeout {timeout:g} s')
+        if fleet.error_code or len(fleet.entries) != num_poses:
+            raise ReconError(CAPTURE_MISSING, f'the dispatcher sent no drone to {num_poses - len(fleet.entries)} of '
+                                              f'the {num_poses} poses: {fleet.error_msg or "no assignment"}')
+        entries = sorted(fleet.entries, key=lambda e: e.pose_index)
+        drones = [e.drone for e in entries]
+        for d in drones:
+            self._subscribe(d, topic)
+        asked = self.now_ns()
+        trigger = self._trigger_type(realization=int(k), plan_stamp=plan_stamp)
+        trigger.header.frame_id = fleet.header.frame_id
+        trigger.header.stamp = self._node.get_clock().now().to_msg()
+        self._trigger.publish(trigger)
+        self._node.get_logger().info(f'capture {k} of the plan asked of {", ".join(drones)}')
+
+        def complete(d: str):
+            sets = [(t, m) for t, m in self._got.get(d, {}).items() if t >= asked and len(m) == 3]
+            return min(sets)[1] if sets else None
+
+        with self._lock:
+            self._lock.wait_for(lambda: stopped() or all(complete(d) for d in drones),
+                                timeout=max(0.0, deadline - time.monotonic()))
+            if stopped():
+                return None
+            sets = {d: complete(d) for d in drones}
+            for d in drones:  # older captures: another plan or realization's
+                for t in [t for t in self._got.get(d, {}) if t < asked]:
+                    self._node.get_logger().info(f'capture of {d} stamped {t} ns is older than capture {k} '
+                                                 'of this plan: ignored')
+                    del self._got[d][t]
+                for t in [t for t, m in self._got.get(d, {}).items() if sets[d] is m]:
+                    del self._got[d][t]  # taken
+        missing = [d for d in drones if sets[d] is None]
+        if missing:
+            raise ReconError(CAPTURE_MISSING, f'no capture from drone(s) {", ".join(missing)} within capture_timeout '
+                                              f'{timeout:g} s (capture {k})')
+        try:
+            intr = [camera_info_intrinsics(sets[d]['info']) for d in drones]
+            if any(not np.allclose(a[0], intr[0][0]) or a[1:] != intr[0][1:] for a in intr):
+                raise ValueError('the drones\' cameras differ (one camera model per flight)')
+            return CapturedViews(
+                names=[f'view_{e.pose_index:03d}.png' for e in entries],
+                images=[image_array(sets[d]['image']) for d in drones],
+                reported=poses_to_cameras(np.array([pose_array(sets[d]['pose'].pose) for d in drones])),
+                K=intr[0][0], realization=int(k)).validate()
+        except (ValueError, FlightError) as exc:
+            raise ReconError(CAPTURE_MISSING, f'capture {k} from the fleet is unusable: {exc}') from None
+
+    def now_ns(self) -> int:
+        return self._ns(self._node.get_clock().now().to_msg())
 
 
 def main(args=None) -> int:

@@ -57,6 +57,8 @@ class SparseResult:
         keypoints: SIFT keypoints per image.
         verified_pairs: image pairs with geometrically verified matches.
         mean_track_length: mean number of images observing a point.
+        mean_reprojection_error: mean reprojection error of the model's points, pixels
+            (COLMAP's ``compute_mean_reprojection_error``; a metric without a ground truth).
         pair_inliers: verified inlier matches per image pair (i, j), i < j (indices of ``images``).
         matched_pairs: image pairs handed to the matcher (N (N - 1) / 2 when exhaustive).
         seconds: wall time of ``extract``, ``match`` and ``triangulate`` (the model, either mode).
@@ -75,6 +77,7 @@ class SparseResult:
     matched_pairs: int = 0
     seconds: dict = field(default_factory=dict)
     cameras: Optional[NDArray[np.float64]] = None
+    mean_reprojection_error: float = float("nan")
 
 
 def _write_pairs(pairs: Sequence[tuple[int, int]], names: Sequence[str], path: Path) -> None:
@@ -282,9 +285,11 @@ def _sparse(pycolmap: object, images: Sequence[NDArray[np.uint8]], cameras: NDAr
     if len(xyz) == 0:
         raise SparseError(f"no 3D point triangulated ({verified} verified image pairs, keypoints {keypoints})")
     seconds["triangulate"] = time.perf_counter() - t0
+    reprojection = float(rec.compute_mean_reprojection_error())
     return SparseResult(points=xyz, colors=rgb, registered=int(seen), keypoints=[int(k) for k in keypoints],
                         verified_pairs=verified, mean_track_length=track, pair_inliers=pair_inliers,
-                        matched_pairs=matched, seconds=seconds, cameras=cams.copy() if mode == "known_poses" else est)
+                        matched_pairs=matched, seconds=seconds, cameras=cams.copy() if mode == "known_poses" else est,
+                        mean_reprojection_error=reprojection)
 
 
 def _known_pose_model(pycolmap: object, db_cameras: list, db_images: dict, names: Sequence[str],

@@ -107,3 +107,20 @@ def test_intrinsics_and_projection() -> None:
     assert uv[1, 0] < 319.5  # +y (left) is to the left in the image
     assert uv[2, 1] < 239.5  # up is up
     assert inside.tolist() == [True, True, True, False]
+
+
+def test_roll_and_the_optical_frame_back_to_the_body() -> None:
+    """roll_of: 0 for the convention's poses (nadir included), the angle of a turn about the
+    optical axis otherwise; body_from_optical inverts world_to_camera's rotation (issue 20: a
+    flight's poses read from COLMAP keep their roll, so that it can be refused)."""
+    from scipy.spatial.transform import Rotation
+
+    from vp_scene.camera import body_from_optical, cameras_to_poses, roll_of, world_to_camera
+
+    cams = np.array([[1, 0, 1, -1, 0, -0.3], [0, 2, 1, 0, -1, 0], [0, 0, 3, 0, 0, -1], [1, 1, 1, 0.2, 0.1, 0.9]])
+    poses = cameras_to_poses(cams)
+    np.testing.assert_allclose(roll_of(poses), 0.0, atol=1e-12)
+    np.testing.assert_allclose(body_from_optical(world_to_camera(cams)[0]), poses[:, 3:], atol=1e-12)
+    for deg in (10.0, -35.0):
+        turned = (Rotation.from_quat(poses[:, 3:]) * Rotation.from_euler("x", deg, degrees=True)).as_quat()
+        np.testing.assert_allclose(np.degrees(roll_of(np.hstack([poses[:, :3], turned]))), deg, atol=1e-9)

@@ -78,9 +78,11 @@ def test_drone_reports(pose_type: str) -> None:
 
 def test_scores() -> None:
     res = [SimpleNamespace(chamfer=0.01, accuracy=0.004, completeness=0.006, chamfer_shape=0.008, images=4,
-                           fscore=0.7, points=np.zeros((100, 3))),
+                           fscore=0.7, points=np.zeros((100, 3)), mean_reprojection_error=0.5, mean_track_length=3.0,
+                           coverage=SimpleNamespace(fraction=0.8, per_plant=(0.7, 0.9), tau=0.02)),
            SimpleNamespace(chamfer=0.03, accuracy=0.01, completeness=0.02, chamfer_shape=0.02, images=3,
-                           fscore=0.5, points=np.zeros((300, 3)))]
+                           fscore=0.5, points=np.zeros((300, 3)), mean_reprojection_error=0.7, mean_track_length=2.0,
+                           coverage=SimpleNamespace(fraction=0.6, per_plant=(0.5, 0.7), tau=0.02))]
     info = SimpleNamespace(method="egp", reward=0.4, reward_model="paper")
     head = m.score_msg("map", PoseStamped().header.stamp, 0, 1, 4, 0.005, "ideal", "", info)
     one = m.realization_score(head, res[0])
@@ -92,10 +94,17 @@ def test_scores() -> None:
     assert agg.method == "ring" and math.isnan(agg.reward) and agg.reward_model == ""
     assert agg.chamfer == pytest.approx(2.0) and agg.registered_images == 3 and agg.num_points == 200
     assert agg.accuracy == pytest.approx(0.7) and agg.fscore == pytest.approx(0.6)
+    # the metrics without a ground truth (issue 20, part 4): the realization's, the aggregate's means
+    assert (one.mean_reprojection_error, one.mean_track_length, one.coverage_of_prior, one.coverage_tau) == \
+        (0.5, 3.0, 0.8, 0.02) and list(one.coverage_of_prior_per_plant) == [0.7, 0.9]
+    assert agg.mean_reprojection_error == pytest.approx(0.6) and agg.mean_track_length == pytest.approx(2.5)
+    assert agg.coverage_of_prior == pytest.approx(0.7)
+    np.testing.assert_allclose(agg.coverage_of_prior_per_plant, [0.6, 0.8])
     err = m.error_score(m.score_msg("map", PoseStamped().header.stamp, -1, 1, 0, 0.005, "ideal"), 3, "no scene")
     assert (err.error_code, err.error_msg) == (3, "no scene") and math.isnan(err.chamfer)
     rec = m.score_record(one)
     assert rec["chamfer"] == one.chamfer and rec["points"] == 100 and rec["error_code"] == 0
+    assert rec["coverage_of_prior"] == 0.8 and rec["coverage_of_prior_per_plant"] == [0.7, 0.9]
 
 
 def test_scene_description_round_trip() -> None:
@@ -124,3 +133,49 @@ def test_no_conversion_code_left_in_the_node_files() -> None:
     found = [f"{p.relative_to(SRC)}:{k}: {line.strip()}" for p in nodes
              for k, line in enumerate(p.read_text().splitlines(), 1) if HAND_CONVERSION.search(line)]
     assert not found, "\n".join(found)
+
+
+def test_images_and_camera_info_round_trip() -> None:
+    """Image (rgb8, and bgr8 / mono8 / padded rows read), CompressedImage (PNG lossless, JPEG
+    close), CameraInfo (K, zero plumb_bob) -> numpy and back (issue 20, part 1)."""
+    from sensor_msgs.msg import Image
+
+    from vp_scene.camera import intrinsics
+
+    stamp = PoseStamped().header.stamp
+    rgb = np.random.default_rng(0).integers(0, 256, (5, 7, 3), dtype=np.uint8)
+    msg = m.image_msg(rgb, "d0/camera_optical", stamp)
+    assert (msg.encoding, msg.width, msg.height, msg.step, msg.header.frame_id) == \
+        ("rgb8", 7, 5, 21, "d0/camera_optical")
+    np.testing.assert_array_equal(m.image_array(msg), rgb)
+    padded = Image(height=5, width=7, encoding="bgr8", step=24,
+                   data=np.pad(rgb[..., ::-1].reshape(5, 21), ((0, 0), (0, 3))).tobytes())
+    np.testing.assert_array_equal(m.image_array(padded), rgb)
+    mono = Image(height=5, width=7, encoding="mono8", step=7, data=rgb[..., 0].tobytes())
+    np.testing.assert_array_equal(m.image_array(mono), np.repeat(rgb[..., :1], 3, axis=2))
+    with pytest.raises(ValueError, match="16UC1"):
+        m.image_array(Image(height=1, width=1, encoding="16UC1", step=2, data=b"ab"))
+    with pytest.raises(ValueError, match="bytes"):
+        m.image_array(Image(height=5, width=7, encoding="rgb8", step=21, data=b"short"))
+    with pytest.raises(ValueError, match="RGB uint8"):
+        m.image_msg(rgb[..., 0], "f", stamp)
+
+    png = m.compressed_image_msg(rgb, "d0/camera_optical", stamp)
+    assert png.format == "rgb8; png compressed bgr8"
+    np.testing.assert_array_equal(m.compressed_image_array(png), rgb)
+    smooth = np.tile(np.linspace(0, 255, 64, dtype=np.uint8)[None, :, None], (48, 1, 3))
+    jpeg = m.compressed_image_msg(smooth, "f", stamp, fmt="jpeg")
+    assert "jpeg" in jpeg.format and np.abs(m.compressed_image_array(jpeg).astype(int) - smooth).max() < 8
+    png.data = b"not an image"
+    with pytest.raises(ValueError, match="does not decode"):
+        m.compressed_image_array(png)
+
+    K = intrinsics(2000, 1500)
+    info = m.camera_info_msg(K, 2000, 1500, "d0/camera_optical", stamp)
+    assert info.distortion_model == "plumb_bob" and list(info.d) == [0.0] * 5 and info.p[3] == 0.0
+    K2, w, h = m.camera_info_intrinsics(info)
+    np.testing.assert_array_equal(K2, K)
+    assert (w, h) == (2000, 1500)
+    info.d = [0.1, 0, 0, 0, 0]
+    with pytest.raises(ValueError, match="undistort"):
+        m.camera_info_intrinsics(info)

@@ -50,6 +50,8 @@ __all__ = [
     "rotation_matrix",
     "cameras_to_poses",
     "poses_to_cameras",
+    "roll_of",
+    "body_from_optical",
     "optical_orientation",
     "look_at",
     "intrinsics",
@@ -135,6 +137,31 @@ def poses_to_cameras(poses: ArrayLike) -> NDArray[np.float64]:
         raise ValueError(f"poses must have shape (..., 7), got {p.shape}")
     R = _rotations(p[..., 3:])
     return np.concatenate([p[..., :3], R[..., :, 0]], axis=-1)
+
+
+def roll_of(poses: ArrayLike) -> NDArray[np.float64]:
+    """Roll (..., ) in radians, (-pi, pi], of poses (..., 7): the angle about the optical axis
+    x_b from the levelled body frame of the convention (:func:`rotation_matrix` of the pose's x_b)
+    to the pose's own, atan2(y_b . z_level, y_b . y_level). A camera of the suite has none (a
+    pose's roll is dropped by :func:`poses_to_cameras`); a camera looking straight down has its
+    yaw here (the convention puts its y_b on world +y)."""
+    p = np.asarray(poses, dtype=np.float64)
+    if p.shape[-1] != 7:
+        raise ValueError(f"poses must have shape (..., 7), got {p.shape}")
+    R = _rotations(p[..., 3:])
+    level = rotation_matrix(R[..., :, 0])
+    y = R[..., :, 1]
+    return np.arctan2(np.einsum("...i,...i->...", y, level[..., :, 2]), np.einsum("...i,...i->...", y, level[..., :, 1]))
+
+
+def body_from_optical(R_cw: ArrayLike) -> NDArray[np.float64]:
+    """Body-frame quaternions (..., 4) (x, y, z, w; qw >= 0) of cameras given by their
+    world-to-optical rotations R_cw (..., 3, 3) (OpenCV / COLMAP ``cam_from_world``): x_b = z_o,
+    y_b = -x_o, z_b = -y_o, roll kept (:func:`roll_of`)."""
+    R_wc = np.swapaxes(np.asarray(R_cw, dtype=np.float64), -1, -2)  # columns x_o, y_o, z_o in the world
+    body = np.stack([R_wc[..., :, 2], -R_wc[..., :, 0], -R_wc[..., :, 1]], axis=-1)
+    q = Rotation.from_matrix(body.reshape(-1, 3, 3)).as_quat().reshape(body.shape[:-2] + (4,))
+    return _canonical(q)
 
 
 def optical_orientation(quaternions: ArrayLike) -> NDArray[np.float64]:

@@ -13,7 +13,11 @@ modules never see a message).
   ``vp_interfaces/ReconstructionScore`` (distances x 100, as the message says), and back to a
   plain record (:func:`score_record`);
 * drones: a pose report (``PoseStamped`` or ``nav_msgs/Odometry``, :data:`POSE_TYPES`) <-> a
-  position (3,) and a pose (7,); per-drone topics from a template (:func:`drone_topic`).
+  position (3,) and a pose (7,); per-drone topics from a template (:func:`drone_topic`);
+* images: an RGB image (H, W, 3) uint8 <-> ``sensor_msgs/Image`` (``rgb8``; ``bgr8`` and
+  ``mono8`` read too) and ``sensor_msgs/CompressedImage`` (PNG or JPEG, the image_transport
+  convention), intrinsics K (3x3, OpenCV pixel convention) and the image size <->
+  ``sensor_msgs/CameraInfo`` (``plumb_bob``, zero distortion, REP-104).
 
 Degenerate cases: an empty pose list gives a (0, 7) array and back; non-finite numbers pass
 through unchanged (the callers decide: the dispatcher refuses them, the recon reports them).
@@ -26,6 +30,7 @@ from typing import Any, Optional, Sequence
 import numpy as np
 from geometry_msgs.msg import Point, Pose, PoseArray, PoseStamped
 from nav_msgs.msg import Odometry
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 from numpy.typing import ArrayLike, NDArray
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
@@ -39,8 +44,10 @@ __all__ = [
     "numpy_to_pointcloud2", "pointcloud2_to_numpy", "realizations_from_cloud", "pack_rgb", "unpack_rgb",
     "point_msg", "point_array", "pose_msg", "pose_array", "poses_to_msgs", "msgs_to_poses", "position_of",
     "cameras_to_pose_array", "pose_array_to_cameras", "camera_plan_msg", "plan_key", "frustum_markers",
-    "scene_description_msg", "placements_of", "POSE_TYPES", "drone_topic", "pose_report",
+    "scene_description_msg", "placements_of", "scene_of_description", "POSE_TYPES", "drone_topic", "pose_report",
     "score_msg", "realization_score", "aggregate_score", "error_score", "score_record",
+    "image_msg", "image_array", "compressed_image_msg", "compressed_image_array", "camera_info_msg",
+    "camera_info_intrinsics",
 ]
 
 
@@ -218,10 +225,26 @@ def placements_of(desc: SceneDescription) -> list:
     return [(p.model, p.yaw, p.scale, p.position.x, p.position.y) for p in desc.plants]
 
 
+def scene_of_description(desc: SceneDescription) -> Any:
+    """The :class:`vp_scene.wind.NoisyScene` a SceneDescription describes, rebuilt from the
+    plants' placements (model, yaw, scale, position: no layout file needed), the models folder,
+    seed, points per plant and wind. ValueError / OSError when it cannot be rebuilt."""
+    from .build import build_noisy_scene
+    from .layout import Layout
+
+    layout = Layout.from_placements(desc.scenario or 'scene', placements_of(desc), source='/scene/description')
+    scene, _ = build_noisy_scene(
+        scenario=layout, models=desc.models_folder or None, seed=desc.seed,
+        points_per_plant=desc.points_per_plant, plant_spacing=desc.plant_spacing,
+        row_spacing=desc.row_spacing, levels=desc.levels, realizations=desc.realizations,
+        wind_variance=desc.wind_variance, wind_direction=desc.wind_direction)
+    return scene
+
+
 # ---------------------------------------------------------------- scores
 def score_msg(frame_id: str, stamp: Any, realization: int, realizations: int, num_images: int,
               fscore_threshold: float, capture: str, method: str = '',
-              info: Optional[CameraPlan] = None) -> ReconstructionScore:
+              info: Optional[CameraPlan] = None, source: str = 'render') -> ReconstructionScore:
     """The head of a ``vp_interfaces/ReconstructionScore``: which plan and realization, the
     settings; the plan's reward and reward model from its ``/camera_plan/info`` (NaN and '' when
     unknown), the method from ``method`` or else from the info."""
@@ -233,7 +256,7 @@ def score_msg(frame_id: str, stamp: Any, realization: int, realizations: int, nu
     msg.reward = float(info.reward) if info is not None else math.nan
     msg.reward_model = info.reward_model if info is not None else ''
     msg.fscore_threshold = float(fscore_threshold)
-    msg.capture = capture
+    msg.capture, msg.source = capture, source
     return msg
 
 
@@ -243,6 +266,21 @@ def realization_score(msg: ReconstructionScore, res: Any) -> ReconstructionScore
     msg.chamfer, msg.accuracy, msg.completeness = 100 * res.chamfer, 100 * res.accuracy, 100 * res.completeness
     msg.chamfer_shape, msg.registered_images = 100 * res.chamfer_shape, int(res.images)
     msg.fscore, msg.num_points = float(res.fscore), int(len(res.points))
+    return _no_truth(msg, [res])
+
+
+def _no_truth(msg: ReconstructionScore, per: Any) -> ReconstructionScore:
+    """``msg`` with the metrics without a ground truth of the realizations ``per`` (means;
+    NaN and no per-plant entries where a realization has no coverage of the prior)."""
+    msg.mean_reprojection_error = float(np.mean([r.mean_reprojection_error for r in per]))
+    msg.mean_track_length = float(np.mean([r.mean_track_length for r in per]))
+    cov = [r.coverage for r in per]
+    if all(c is not None for c in cov):
+        msg.coverage_of_prior = float(np.mean([c.fraction for c in cov]))
+        msg.coverage_of_prior_per_plant = [float(x) for x in np.mean([c.per_plant for c in cov], axis=0)]
+        msg.coverage_tau = float(cov[0].tau)
+    else:
+        msg.coverage_of_prior = msg.coverage_tau = math.nan
     return msg
 
 
@@ -258,13 +296,14 @@ def aggregate_score(msg: ReconstructionScore, result: Any) -> ReconstructionScor
     msg.completeness = float(np.mean([100 * r.completeness for r in per]))
     msg.fscore = float(np.mean([r.fscore for r in per]))
     msg.num_points = int(np.mean([len(r.points) for r in per]))
-    return msg
+    return _no_truth(msg, per)
 
 
 def error_score(msg: ReconstructionScore, code: int, text: str) -> ReconstructionScore:
     """``msg`` as a failure: ``error_code``, ``error_msg`` and NaN distances."""
     msg.error_code, msg.error_msg = int(code), text
     msg.chamfer = msg.accuracy = msg.completeness = msg.chamfer_shape = float('nan')
+    msg.mean_reprojection_error = msg.mean_track_length = msg.coverage_of_prior = msg.coverage_tau = float('nan')
     return msg
 
 
@@ -273,4 +312,95 @@ def score_record(msg: ReconstructionScore) -> dict:
     return {'realization': msg.realization, 'chamfer': msg.chamfer, 'chamfer_shape': msg.chamfer_shape,
             'registered_images': msg.registered_images, 'accuracy': msg.accuracy,
             'completeness': msg.completeness, 'fscore': msg.fscore, 'points': msg.num_points,
-            'error_code': msg.error_code, 'error_msg': msg.error_msg}
+            'mean_reprojection_error': msg.mean_reprojection_error, 'mean_track_length': msg.mean_track_length,
+            'coverage_of_prior': msg.coverage_of_prior,
+            'coverage_of_prior_per_plant': [float(x) for x in msg.coverage_of_prior_per_plant],
+            'coverage_tau': msg.coverage_tau, 'error_code': msg.error_code, 'error_msg': msg.error_msg}
+
+
+# ---------------------------------------------------------------- images
+def _rgb(image: ArrayLike) -> NDArray[np.uint8]:
+    a = np.asarray(image)
+    if a.dtype != np.uint8 or a.ndim != 3 or a.shape[2] != 3 or a.shape[0] < 1 or a.shape[1] < 1:
+        raise ValueError(f"an image must be RGB uint8 (H, W, 3), got {a.dtype} {a.shape}")
+    return np.ascontiguousarray(a)
+
+
+def image_msg(image: ArrayLike, frame_id: str, stamp: Any) -> Image:
+    """``sensor_msgs/Image`` (``rgb8``, rows packed) of an RGB image (H, W, 3) uint8."""
+    a = _rgb(image)
+    msg = Image(height=a.shape[0], width=a.shape[1], encoding='rgb8', is_bigendian=0, step=3 * a.shape[1])
+    msg.header.frame_id, msg.header.stamp = frame_id, stamp
+    msg.data = a.tobytes()
+    return msg
+
+
+def image_array(msg: Image) -> NDArray[np.uint8]:
+    """RGB (H, W, 3) uint8 of a ``sensor_msgs/Image`` in ``rgb8``, ``bgr8`` or ``mono8`` (rows
+    may be padded: ``step``); ValueError naming the problem for another encoding or a short buffer."""
+    channels = {'rgb8': 3, 'bgr8': 3, 'mono8': 1}
+    if msg.encoding not in channels:
+        raise ValueError(f"image encoding {msg.encoding!r} is not read (rgb8, bgr8, mono8)")
+    c, h, w, step = channels[msg.encoding], int(msg.height), int(msg.width), int(msg.step)
+    data = np.frombuffer(bytes(msg.data), dtype=np.uint8)
+    if step < c * w or len(data) < step * h or h < 1 or w < 1:
+        raise ValueError(f"image of {w}x{h} {msg.encoding} with step {step} has {len(data)} bytes")
+    a = data[:step * h].reshape(h, step)[:, :c * w].reshape(h, w, c)
+    if msg.encoding == 'bgr8':
+        a = a[..., ::-1]
+    elif c == 1:
+        a = np.repeat(a, 3, axis=2)
+    return np.ascontiguousarray(a)
+
+
+def compressed_image_msg(image: ArrayLike, frame_id: str, stamp: Any, fmt: str = 'png') -> CompressedImage:
+    """``sensor_msgs/CompressedImage`` of an RGB image, ``fmt`` ``png`` (lossless) or ``jpeg``;
+    ``format`` as image_transport's compressed plugin writes it (``rgb8; png compressed bgr8``)."""
+    import cv2
+
+    if fmt not in ('png', 'jpeg'):
+        raise ValueError(f"compressed image format must be png or jpeg, got {fmt!r}")
+    ok, buf = cv2.imencode('.' + fmt, cv2.cvtColor(_rgb(image), cv2.COLOR_RGB2BGR))
+    if not ok:
+        raise ValueError(f"cannot encode the image as {fmt}")
+    msg = CompressedImage(format=f'rgb8; {fmt} compressed bgr8')
+    msg.header.frame_id, msg.header.stamp = frame_id, stamp
+    msg.data = buf.tobytes()
+    return msg
+
+
+def compressed_image_array(msg: CompressedImage) -> NDArray[np.uint8]:
+    """RGB (H, W, 3) uint8 of a ``sensor_msgs/CompressedImage`` (PNG or JPEG); ValueError when it
+    does not decode."""
+    import cv2
+
+    a = cv2.imdecode(np.frombuffer(bytes(msg.data), dtype=np.uint8), cv2.IMREAD_COLOR)
+    if a is None:
+        raise ValueError(f"compressed image ({msg.format or 'no format'}, {len(msg.data)} bytes) does not decode")
+    return np.ascontiguousarray(a[..., ::-1])
+
+
+def camera_info_msg(K: ArrayLike, width: int, height: int, frame_id: str, stamp: Any) -> CameraInfo:
+    """``sensor_msgs/CameraInfo`` of a pinhole camera: ``k`` = K (OpenCV pixel convention, as
+    REP-104), ``plumb_bob`` with zero distortion, ``r`` identity, ``p`` = [K | 0]."""
+    k = np.asarray(K, dtype=np.float64).reshape(3, 3)
+    msg = CameraInfo(width=int(width), height=int(height), distortion_model='plumb_bob', d=[0.0] * 5)
+    msg.header.frame_id, msg.header.stamp = frame_id, stamp
+    msg.k = [float(x) for x in k.reshape(-1)]
+    msg.r = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+    msg.p = [float(x) for x in np.hstack([k, np.zeros((3, 1))]).reshape(-1)]
+    return msg
+
+
+def camera_info_intrinsics(msg: CameraInfo) -> tuple[NDArray[np.float64], int, int]:
+    """(K 3x3, width, height) of a ``sensor_msgs/CameraInfo``; ValueError for a distortion other
+    than zero (undistort first), a K that is not a pinhole's, or no size."""
+    if any(float(x) != 0.0 for x in msg.d):
+        raise ValueError(f"camera_info has a non-zero {msg.distortion_model or 'distortion'} "
+                         f"({list(msg.d)}): undistort the images first")
+    k = np.asarray(msg.k, dtype=np.float64).reshape(3, 3)
+    if not (np.all(np.isfinite(k)) and k[0, 0] > 0 and k[1, 1] > 0 and k[2, 2] == 1.0):
+        raise ValueError(f"camera_info K is not a pinhole camera's: {k.reshape(-1).tolist()}")
+    if msg.width < 1 or msg.height < 1:
+        raise ValueError(f"camera_info has no image size ({msg.width}x{msg.height})")
+    return k, int(msg.width), int(msg.height)

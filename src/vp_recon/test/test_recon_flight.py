@@ -1,0 +1,216 @@
+"""A flight folder (issue 20, part 3): write_flight / read_flight, ``--images DIR`` on the path of
+rendered plans, one-line errors (exit 2, nothing written) for every bad input; the metrics
+without a ground truth (part 4)."""
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from vp_scene.capture import IDEAL
+
+from vp_recon.cli import main
+from vp_recon.flight import POSES_FILE, CapturedViews, FlightError, read_flight, write_flight
+from vp_recon.metrics import coverage_of_prior
+from vp_recon.pipeline import Prior, ReconConfig, reconstruct_views, render_flight
+
+SCENE = {"scenario": "one_plant", "models": None, "seed": 0, "points_per_plant": 2000, "plant_spacing": 0.6,
+         "row_spacing": 0.76, "levels": 10, "realizations": 2, "wind_variance": 0.002, "wind_direction": 0.0}
+
+
+def ring(n: int = 6, radius: float = 1.6, height: float = 1.3, arc: float = math.radians(150)) -> np.ndarray:
+    az = np.linspace(0.0, arc, n)
+    c = np.stack([radius * np.cos(az), radius * np.sin(az), np.full(n, height)], axis=1)
+    return np.concatenate([c, np.array([0.0, 0.0, 0.9]) - c], axis=1)
+
+
+@pytest.fixture(scope="module")
+def scene():
+    from vp_scene.build import build_noisy_scene
+
+    return build_noisy_scene(**SCENE)[0]
+
+
+def _plan(tmp_path: Path) -> Path:
+    p = tmp_path / "plan.json"
+    p.write_text(json.dumps({"scenario": "one_plant", "method": "ring", "cameras": ring().tolist(),
+                             "fov": math.pi / 2, "scene": SCENE}))
+    return p
+
+
+def test_a_rendered_flight_written_as_a_folder_reconstructs_again(scene, tmp_path: Path, capsys) -> None:
+    """Round trip: write_flight of a rendered flight -> ``--images`` gives what the library path
+    gives for the same views (same images, the poses through poses.csv), and COLMAP reads the
+    text model it wrote."""
+    import pycolmap
+
+    cfg = ReconConfig(width=640, height=480, num_threads=1, capture=IDEAL)
+    views = render_flight(scene, 1, ring(), cfg)
+    folder = write_flight(views, tmp_path / "flight", meta={"capture": IDEAL.to_dict()})
+    assert {p.name for p in folder.iterdir()} >= {POSES_FILE, "cameras.txt", "images.txt", "flight.json",
+                                                   "view_000.png"}
+    back = read_flight(folder)
+    assert back.names == views.names and back.realization == 1
+    assert all(np.array_equal(a, b) for a, b in zip(back.images, views.images))  # PNG: lossless
+    np.testing.assert_allclose(back.K, views.K)
+    np.testing.assert_allclose(back.reported[:, :3], views.reported[:, :3], atol=1e-12)
+    unit = views.reported[:, 3:] / np.linalg.norm(views.reported[:, 3:], axis=1, keepdims=True)
+    np.testing.assert_allclose(back.reported[:, 3:], unit, atol=1e-12)
+    rec = pycolmap.Reconstruction()
+    rec.read_text(str(folder))
+    centres = {im.name: np.asarray(im.projection_center()) for im in rec.images.values()}
+    for name, c in zip(views.names, views.reported[:, :3]):
+        np.testing.assert_allclose(centres[name], c, atol=1e-9)
+
+    direct = reconstruct_views(views, cfg, prior=Prior.of_scene(scene))
+    out = tmp_path / "out"
+    rc = main(["--images", str(folder), "--out", str(out), "--prior", str(_plan(tmp_path)), "--capture", "ideal",
+               "--threads", "1", "--no-progress"])
+    assert rc == 0, capsys.readouterr().err
+    data = json.loads((out / "recon.json").read_text())
+    assert data["source"] == "images" and data["registered_images"] == direct.sparse.registered == 6
+    assert data["points"] == len(direct.points)
+    assert data["coverage_of_prior"] == pytest.approx(direct.coverage.fraction)
+    assert 0.2 < data["coverage_of_prior"] <= 1.0 and len(data["coverage_of_prior_per_plant"]) == 1
+    assert 0 < data["mean_reprojection_error"] < 2.0 and data["mean_track_length"] >= 2.0
+    assert data["realization"] == 1 and 0.1 < data["chamfer_mean"] < 10.0  # the prior's realization 1: scored
+    assert (out / "recon.ply").is_file() and (out / "uncovered.png").stat().st_size > 1000
+
+    # the same folder through COLMAP's text model alone
+    (folder / POSES_FILE).unlink()
+    back2 = read_flight(folder)
+    np.testing.assert_allclose(back2.reported, back.reported, atol=1e-9)
+    np.testing.assert_allclose(back2.K, back.K, atol=1e-9)
+
+
+def test_a_drone_rendering_its_own_camera_sees_what_the_plan_render_gives_it(scene) -> None:
+    """render_flight of camera i alone (indices=[i], as a simulated drone holding pose i would)
+    gives the whole plan's image and reported pose of camera i bit for bit (realistic capture:
+    hover and localization errors and sensor noise seeded by realization and camera index)."""
+    cfg = ReconConfig(width=320, height=240, num_threads=1)
+    cams = ring()
+    full = render_flight(scene, 1, cams, cfg)
+    one = render_flight(scene, 1, cams[[4]], cfg, indices=[4])
+    assert one.names == ["view_004.png"] and np.array_equal(one.images[0], full.images[4])
+    np.testing.assert_array_equal(one.reported[0], full.reported[4])
+    other = render_flight(scene, 1, cams[[4]], cfg, indices=[0])  # another index: other draws
+    assert not np.array_equal(other.reported[0], one.reported[0])
+    from vp_recon.pipeline import ReconError
+
+    with pytest.raises(ReconError, match="indices"):
+        render_flight(scene, 1, cams[:2], cfg, indices=[3, 3])
+
+
+def _small_flight(tmp_path: Path, n: int = 3) -> Path:
+    rng = np.random.default_rng(0)
+    views = CapturedViews(names=[f"im{i}.png" for i in range(n)],
+                          images=[rng.integers(0, 255, (48, 64, 3), dtype=np.uint8) for _ in range(n)],
+                          reported=ring(n), K=np.array([[32.0, 0, 31.5], [0, 32.0, 23.5], [0, 0, 1]]))
+    folder = tmp_path / f"flight{len(list(tmp_path.glob('flight*')))}"  # a fresh folder each time
+    return write_flight(views, folder)
+
+
+def _edit_poses(folder: Path, row: int, column: str, value: str) -> None:
+    rows = list(csv.reader(open(folder / POSES_FILE)))
+    rows[row][rows[0].index(column)] = value
+    with open(folder / POSES_FILE, "w", newline="") as f:
+        csv.writer(f).writerows(rows)
+
+
+def _refused(tmp_path: Path, folder: Path, capsys, *names: str) -> str:
+    out = tmp_path / "never"
+    rc = main(["--images", str(folder), "--out", str(out), "--no-progress"])
+    err = capsys.readouterr().err
+    assert rc == 2, err
+    assert err.startswith("recon: error:") and err.count("\n") == 1, err
+    for name in names:
+        assert name in err, (name, err)
+    assert not out.exists()  # nothing half-written
+    return err
+
+
+def test_bad_flight_folders_are_refused_naming_the_file(tmp_path: Path, capsys) -> None:
+    f = _small_flight(tmp_path)
+    assert read_flight(f).size == (64, 48)
+    (f / "im1.png").write_bytes(b"not a png at all")
+    _refused(tmp_path, f, capsys, "im1.png", "corrupt")
+
+    f = _small_flight(tmp_path)
+    cv2.imwrite(str(f / "im2.png"), np.zeros((40, 60, 3), np.uint8))
+    _refused(tmp_path, f, capsys, "im2.png", "60x40", "64x48")
+
+    f = _small_flight(tmp_path)
+    _edit_poses(f, 2, "qz", "nan")
+    _refused(tmp_path, f, capsys, "poses.csv line 3", "im1.png", "NaN")
+
+    f = _small_flight(tmp_path)
+    _edit_poses(f, 1, "x", "")
+    _refused(tmp_path, f, capsys, "poses.csv line 2", "im0.png", "missing pose")
+
+    f = _small_flight(tmp_path)
+    cv2.imwrite(str(f / "extra.jpg"), np.zeros((48, 64, 3), np.uint8))  # an image without a pose
+    _refused(tmp_path, f, capsys, "extra.jpg", "missing pose")
+
+    f = _small_flight(tmp_path)
+    _edit_poses(f, 3, "image", "im0.png")
+    (f / "im2.png").unlink()
+    _refused(tmp_path, f, capsys, "poses.csv line 4", "duplicate", "im0.png")
+
+    f = _small_flight(tmp_path)
+    (f / "im2.png").unlink()
+    _refused(tmp_path, f, capsys, "im2.png", "missing")
+
+    f = _small_flight(tmp_path)
+    _edit_poses(f, 1, "frame", "odom")
+    _refused(tmp_path, f, capsys, "im0.png", "odom")
+
+    f = _small_flight(tmp_path)  # a camera turned 10 degrees about its optical axis (x of the body frame)
+    _edit_poses(f, 2, "qx", "0.0871557")
+    _edit_poses(f, 2, "qy", "0.0")
+    _edit_poses(f, 2, "qz", "0.0")
+    _edit_poses(f, 2, "qw", "0.9961947")
+    _refused(tmp_path, f, capsys, "poses.csv (im1.png)", "roll of 10.0 deg")
+
+    f = _small_flight(tmp_path, n=2)
+    (f / POSES_FILE).write_text("".join((f / POSES_FILE).read_text().splitlines(keepends=True)[:2]))
+    (f / "im1.png").unlink()
+    _refused(tmp_path, f, capsys, "poses.csv", "at least 2")
+
+    f = _small_flight(tmp_path)
+    (f / POSES_FILE).unlink()
+    (f / "cameras.txt").write_text("1 OPENCV 64 48 32 32 31.5 23.5 0.1 0 0 0\n")
+    _refused(tmp_path, f, capsys, "cameras.txt line 1", "PINHOLE")
+    (f / "cameras.txt").unlink()
+    _refused(tmp_path, f, capsys, "no poses.csv")
+    with pytest.raises(SystemExit) as ei:  # the options of rendering a plan do not apply to a folder
+        main(["--images", str(f), "--out", str(tmp_path / "never"), "--width", "640", "--realizations", "0"])
+    err = capsys.readouterr().err
+    assert ei.value.code == 2 and "--width, --realizations go(es) with --plan" in err and err.count("\n") == 1
+    assert not (tmp_path / "never").exists()
+    with pytest.raises(FlightError, match="not a folder"):
+        read_flight(tmp_path / "nowhere")
+
+
+def test_coverage_of_prior_per_plant_in_the_best_covered_realization() -> None:
+    """Two plants, two realizations of the prior: in realization 1 half of plant 0 is within tau
+    and all of plant 1 (0.75); realization 0 is covered less (0.25): the wind of the moment is
+    unknown, the coverage is the best realization's; per plant each plant's best."""
+    base = np.array([[0, 0, 0], [1, 0, 0], [5, 0, 0], [6, 0, 0]], float)
+    plant = np.array([0, 0, 1, 1])
+    prior = np.stack([base + [0, 0.5, 0], base])  # realization 0 blown 0.5 m off, then the one flown
+    recon = np.array([[0, 0, 0.01], [5, 0, 0], [6.0, 0.015, 0], [1, 0.5, 0]])
+    c = coverage_of_prior(recon, prior, plant, tau=0.02, realizations=2)
+    assert (c.fraction, c.realization, c.block) == (0.75, 1, (4, 8))
+    assert c.per_plant == (0.5, 1.0)
+    assert c.covered.tolist() == [False, True, False, False, True, False, True, True]
+    whole = coverage_of_prior(recon, prior.reshape(-1, 3), np.tile(plant, 2), tau=0.02)  # one block
+    assert whole.fraction == 0.5 and whole.realization == 0
+    with pytest.raises(ValueError, match="plant index"):
+        coverage_of_prior(recon, base, plant[:2])
+    with pytest.raises(ValueError, match="realizations"):
+        coverage_of_prior(recon, base, plant, realizations=3)

@@ -1,0 +1,339 @@
+"""A capture set (images + the poses the drones reported + one pinhole camera) and its folder.
+
+:class:`CapturedViews` is what a flight hands to the reconstruction
+(:func:`vp_recon.pipeline.reconstruct_views`), whether it was rendered from a plan
+(:func:`vp_recon.pipeline.render_flight`), read from a flight folder (:func:`read_flight`) or,
+later, received from the fleet.
+
+The flight folder (README "From a real flight")
+------------------------------------------------
+A folder ``DIR`` holds the images (PNG or JPEG, RGB, one camera for all) and a pose file:
+
+``DIR/poses.csv`` (first choice), a header line then one row per image::
+
+    image,x,y,z,qx,qy,qz,qw,frame,fx,fy,cx,cy,width,height
+    view_000.png,1.4,0.0,1.2,0.0,0.12,0.0,0.99,map,1000.0,1000.0,999.5,749.5,2000,1500
+
+* ``image``: the file name in DIR (no folders, unique);
+* ``x y z``: the camera centre in ``frame``, metres; ``qx qy qz qw``: the camera's attitude as
+  a ``geometry_msgs/Pose`` of the suite (the REP-103 *body* frame: x along the optical axis,
+  y left, z up; :mod:`vp_scene.camera`), so a drone's reported ``PoseStamped`` goes in as is;
+* ``frame``: ``map`` (the suite's frame; anything else is refused);
+* ``fx fy cx cy``: pinhole intrinsics in pixels, OpenCV / ``sensor_msgs/CameraInfo`` convention
+  (pixel centres at integers: cx = (width - 1) / 2 for a centred principal point), no
+  distortion (undistort first); ``width height``: the image size, which must match the file.
+
+``DIR/cameras.txt`` + ``DIR/images.txt`` (COLMAP's text model, the interchange format of
+photogrammetry tools; read when there is no poses.csv): cameras of model ``PINHOLE`` or
+``SIMPLE_PINHOLE`` (COLMAP's pixel convention: centres at +0.5), image poses as COLMAP's
+``cam_from_world`` (QW QX QY QZ TX TY TZ, optical frame), in ``map``.
+
+The suite's cameras have no roll (a gimbal levels them, :mod:`vp_scene.camera`): a pose with
+more than :data:`MAX_ROLL_DEG` of roll about its optical axis is refused (a camera looking
+straight down has the convention's yaw: its image x axis along world -y).
+:func:`write_flight` writes both files (and an empty ``points3D.txt``, so that
+COLMAP reads the model), plus ``flight.json`` (what is known of a simulated flight: its wind
+realization and capture model). Every problem of a folder is a :class:`FlightError` with one
+line naming the file.
+
+ROS-free: numpy, OpenCV, scipy.
+"""
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Optional, Sequence, Union
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
+
+from vp_scene.camera import (body_from_optical, cameras_to_poses, poses_to_cameras, principal_point_gl, roll_of,
+                             world_to_camera)
+
+__all__ = ["POSES_FILE", "POSES_COLUMNS", "IMAGE_SUFFIXES", "FRAME", "MAX_ROLL_DEG", "FlightError", "CapturedViews",
+           "write_flight", "read_flight"]
+
+POSES_FILE = "poses.csv"
+POSES_COLUMNS = ("image", "x", "y", "z", "qx", "qy", "qz", "qw", "frame", "fx", "fy", "cx", "cy", "width", "height")
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
+#: The one frame of the suite.
+FRAME = "map"
+#: degrees: a pose with more roll about its optical axis is refused. The suite's cameras are
+#: levelled (no roll, :mod:`vp_scene.camera`) and the registration to ``map`` uses the reported
+#: attitudes: a roll dropped silently would turn the whole reconstruction by it. A gimbal holds
+#: about 0.01 degree; 2 degrees leaves room for a drone's attitude estimate.
+MAX_ROLL_DEG = 2.0
+
+PathLike = Union[str, os.PathLike]
+
+
+class FlightError(ValueError):
+    """A flight folder (or capture set) that cannot be reconstructed; the message names the file."""
+
+
+@dataclass
+class CapturedViews:
+    """N images of one pinhole camera with the poses the drones reported.
+
+    Attributes:
+        names: N unique image file names.
+        images: N RGB uint8 (H, W, 3), all of one size.
+        reported: (N, 6) reported cameras [c, v] in ``map`` (:mod:`vp_scene.camera`).
+        K: 3x3 intrinsics, OpenCV pixel convention.
+        masks: N plant masks (H, W) bool, or None: from the images (the reconstruction's choice).
+        fov: the horizontal field of view, rad (None: from K).
+        realization: the wind realization of a simulated flight (None: unknown, a real one).
+        seconds: time it took to make them (mesh, render), when rendered.
+    """
+
+    names: list
+    images: list
+    reported: NDArray[np.float64]
+    K: NDArray[np.float64]
+    masks: Optional[list] = None
+    fov: Optional[float] = None
+    realization: Optional[int] = None
+    seconds: dict = field(default_factory=dict)
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """(width, height) of the images."""
+        h, w = np.asarray(self.images[0]).shape[:2]
+        return int(w), int(h)
+
+    @property
+    def horizontal_fov(self) -> float:
+        """``fov``, else 2 atan(W / (2 fx))."""
+        return float(self.fov) if self.fov is not None else 2.0 * math.atan(0.5 * self.size[0] / float(self.K[0, 0]))
+
+    def validate(self) -> "CapturedViews":
+        """FlightError naming the first problem (count, names, sizes, poses); returns self."""
+        n = len(self.images)
+        if n < 2:
+            raise FlightError(f"a reconstruction needs at least 2 images, the capture set has {n}")
+        if len(self.names) != n or len(set(self.names)) != n:
+            raise FlightError(f"{n} images need {n} unique names, got {list(self.names)}")
+        rep = np.asarray(self.reported, dtype=np.float64)
+        if rep.shape != (n, 6) or not np.all(np.isfinite(rep)):
+            raise FlightError(f"reported poses must be {n} finite [c, v] rows, got shape {rep.shape}")
+        size = self.size
+        for name, im in zip(self.names, self.images):
+            a = np.asarray(im)
+            if a.dtype != np.uint8 or a.ndim != 3 or a.shape[2] != 3 or (a.shape[1], a.shape[0]) != size:
+                raise FlightError(f"{name}: must be RGB uint8 of {size[0]}x{size[1]}, got {a.dtype} {a.shape}")
+        if self.masks is not None and len(self.masks) != n:
+            raise FlightError(f"{len(self.masks)} masks for {n} images")
+        return self
+
+
+def _intrinsics_row(K: NDArray[np.float64], width: int, height: int) -> list:
+    return [repr(float(K[0, 0])), repr(float(K[1, 1])), repr(float(K[0, 2])), repr(float(K[1, 2])),
+            str(int(width)), str(int(height))]
+
+
+def write_flight(views: CapturedViews, folder: PathLike, meta: Optional[dict] = None) -> Path:
+    """Write a capture set as a flight folder (module docstring): the images (PNG, lossless),
+    ``poses.csv``, COLMAP's ``cameras.txt`` / ``images.txt`` / ``points3D.txt`` and
+    ``flight.json`` (``meta`` and the realization). Every file is written under a temporary
+    name and renamed, the pose files last: a folder that has poses.csv is complete."""
+    views.validate()
+    out = Path(folder)
+    out.mkdir(parents=True, exist_ok=True)
+    w, h = views.size
+    K = np.asarray(views.K, dtype=np.float64)
+
+    def atomic(name: str, write) -> None:
+        tmp = out / f".{name}.tmp"
+        write(tmp)
+        tmp.replace(out / name)
+
+    for name, im in zip(views.names, views.images):
+        suffix = Path(name).suffix or ".png"
+
+        def write_image(tmp: Path, im=im, suffix=suffix) -> None:
+            ok, buf = cv2.imencode(suffix, cv2.cvtColor(np.asarray(im, np.uint8), cv2.COLOR_RGB2BGR))
+            if not ok:
+                raise OSError(f"cannot encode {name}")
+            tmp.write_bytes(buf.tobytes())
+
+        atomic(name, write_image)
+    poses = cameras_to_poses(views.reported)
+    R, t = world_to_camera(views.reported)
+    cx, cy = principal_point_gl(K)
+    meta = {**(meta or {}), "realization": views.realization, "frame": FRAME, "images": list(views.names)}
+    atomic("flight.json", lambda p: p.write_text(json.dumps(meta, indent=1)))
+    atomic("cameras.txt", lambda p: p.write_text(
+        "# Camera list with one line of data per camera:\n#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]\n"
+        f"1 PINHOLE {w} {h} " + " ".join(repr(float(v)) for v in (K[0, 0], K[1, 1], cx, cy)) + "\n"))
+    lines = ["# Image list with two lines of data per image:",
+             "#   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME", "#   POINTS2D[] as (X, Y, POINT3D_ID)"]
+    for i, name in enumerate(views.names):
+        qx, qy, qz, qw = Rotation.from_matrix(R[i]).as_quat()
+        lines += [" ".join([str(i + 1)] + [repr(float(v)) for v in (qw, qx, qy, qz, *t[i])] + ["1", name]), ""]
+    atomic("images.txt", lambda p: p.write_text("\n".join(lines) + "\n"))
+    atomic("points3D.txt", lambda p: p.write_text("# 3D point list (empty: poses only)\n"))
+
+    def write_poses(p: Path) -> None:
+        with open(p, "w", newline="") as f:
+            wr = csv.writer(f)
+            wr.writerow(POSES_COLUMNS)
+            for name, pose in zip(views.names, poses):
+                wr.writerow([name] + [repr(float(v)) for v in pose] + [FRAME] + _intrinsics_row(K, w, h))
+
+    atomic(POSES_FILE, write_poses)
+    return out
+
+
+def _number(text: str, where: str, what: str) -> float:
+    if not text.strip():
+        raise FlightError(f"{where}: {what} is empty (missing pose)")
+    try:
+        v = float(text)
+    except (TypeError, ValueError):
+        raise FlightError(f"{where}: {what} {text!r} is not a number") from None
+    if not math.isfinite(v):
+        raise FlightError(f"{where}: {what} is {text} (missing or NaN pose)")
+    return v
+
+
+def _read_poses_csv(path: Path) -> tuple[list, NDArray[np.float64], list]:
+    """(names, poses (N, 7), intrinsics rows [fx, fy, cx, cy, w, h]) of poses.csv."""
+    names, poses, intr = [], [], []
+    try:
+        with open(path, newline="") as f:
+            rows = list(csv.reader(f))
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise FlightError(f"{path}: cannot read: {exc}") from None
+    if not rows or [c.strip() for c in rows[0]] != list(POSES_COLUMNS):
+        raise FlightError(f"{path}: the first line must be the header {','.join(POSES_COLUMNS)}")
+    for line, row in enumerate(rows[1:], start=2):
+        if not row or not "".join(row).strip():
+            continue
+        where = f"{path} line {line}"
+        if len(row) != len(POSES_COLUMNS):
+            raise FlightError(f"{where}: {len(row)} columns, expected {len(POSES_COLUMNS)} ({','.join(POSES_COLUMNS)})")
+        row = [c.strip() for c in row]
+        name = row[0]
+        if not name or Path(name).name != name:
+            raise FlightError(f"{where}: image {name!r} must be a file name in the folder")
+        if name in names:
+            raise FlightError(f"{where}: duplicate image name {name}")
+        pose = [_number(v, f"{where} ({name})", c) for v, c in zip(row[1:8], POSES_COLUMNS[1:8])]
+        if row[8] != FRAME:
+            raise FlightError(f"{where} ({name}): frame {row[8]!r}; poses must be in {FRAME!r}")
+        k = [_number(v, f"{where} ({name})", c) for v, c in zip(row[9:], POSES_COLUMNS[9:])]
+        if np.linalg.norm(pose[3:]) < 1e-9:
+            raise FlightError(f"{where} ({name}): the quaternion is zero")
+        names.append(name)
+        poses.append(pose)
+        intr.append(k)
+    return names, np.array(poses, dtype=np.float64).reshape(-1, 7), intr
+
+
+def _read_colmap_text(folder: Path) -> tuple[list, NDArray[np.float64], list]:
+    """(names, poses (N, 7) in the suite's body convention, intrinsics rows) of COLMAP's text model."""
+    cams: dict = {}
+    path = folder / "cameras.txt"
+    for line, text in enumerate(path.read_text(errors="replace").splitlines(), start=1):
+        f = text.split()
+        if not f or f[0].startswith("#"):
+            continue
+        where = f"{path} line {line}"
+        if len(f) < 5 or f[1] not in ("PINHOLE", "SIMPLE_PINHOLE"):
+            raise FlightError(f"{where}: only PINHOLE and SIMPLE_PINHOLE cameras (no distortion) are read, "
+                              f"got {' '.join(f[:2])!r}")
+        w, h = (_number(v, where, "size") for v in f[2:4])
+        p = [_number(v, where, "parameter") for v in f[4:]]
+        if len(p) != (4 if f[1] == "PINHOLE" else 3):
+            raise FlightError(f"{where}: {f[1]} has {4 if f[1] == 'PINHOLE' else 3} parameters, got {len(p)}")
+        fx, fy, cx, cy = p if f[1] == "PINHOLE" else (p[0], p[0], p[1], p[2])
+        cams[f[0]] = [fx, fy, cx - 0.5, cy - 0.5, w, h]  # COLMAP's pixel centres at +0.5 -> OpenCV's
+    path = folder / "images.txt"
+    names, poses, intr = [], [], []
+    data = [(n, t) for n, t in enumerate(path.read_text(errors="replace").splitlines(), start=1)
+            if t.strip() and not t.lstrip().startswith("#")]
+    # two lines an image (the second, its 2D points, may be empty and then was dropped above)
+    for line, text in data:
+        f = text.split()
+        if len(f) != 10 or not f[0].isdigit():
+            continue  # a POINTS2D line
+        where = f"{path} line {line}"
+        name = f[9]
+        if Path(name).name != name:
+            raise FlightError(f"{where}: image {name!r} must be a file name in the folder")
+        if name in names:
+            raise FlightError(f"{where}: duplicate image name {name}")
+        qw, qx, qy, qz, tx, ty, tz = (_number(v, f"{where} ({name})", "pose") for v in f[1:8])
+        if f[8] not in cams:
+            raise FlightError(f"{where} ({name}): camera {f[8]} is not in cameras.txt")
+        if math.hypot(qw, qx, qy, qz) < 1e-9:
+            raise FlightError(f"{where} ({name}): the quaternion is zero")
+        R_cw = Rotation.from_quat([qx, qy, qz, qw]).as_matrix()
+        c = -R_cw.T @ np.array([tx, ty, tz])
+        poses.append(np.concatenate([c, body_from_optical(R_cw)]))
+        names.append(name)
+        intr.append(cams[f[8]])
+    return names, np.array(poses, dtype=np.float64).reshape(-1, 7), intr
+
+
+def read_flight(folder: PathLike) -> CapturedViews:
+    """The capture set of a flight folder (module docstring); FlightError naming the file for a
+    missing or corrupt image, a size not matching its intrinsics, a missing or NaN pose, an
+    image without a pose, duplicate names, intrinsics that differ, or fewer than 2 images."""
+    d = Path(folder)
+    if not d.is_dir():
+        raise FlightError(f"{d}: not a folder")
+    if (d / POSES_FILE).is_file():
+        names, poses, intr = _read_poses_csv(d / POSES_FILE)
+        source = d / POSES_FILE
+    elif (d / "cameras.txt").is_file() and (d / "images.txt").is_file():
+        names, poses, intr = _read_colmap_text(d)
+        source = d / "images.txt"
+    else:
+        raise FlightError(f"{d}: no {POSES_FILE} (or COLMAP cameras.txt + images.txt) with the poses")
+    present = sorted(p.name for p in d.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)
+    unposed = sorted(set(present) - set(names))
+    if unposed:
+        raise FlightError(f"{d / unposed[0]}: no pose in {source.name} (missing pose)")
+    if len(names) < 2:
+        raise FlightError(f"{source}: {len(names)} image(s); a reconstruction needs at least 2")
+    roll = np.degrees(roll_of(poses))
+    if len(roll) and np.max(np.abs(roll)) > MAX_ROLL_DEG:
+        i = int(np.argmax(np.abs(roll)))
+        raise FlightError(f"{source} ({names[i]}): roll of {roll[i]:.1f} deg about the optical axis; the suite's "
+                          f"cameras are levelled (at most {MAX_ROLL_DEG:g} deg, README 'From a real flight')")
+    if any(k != intr[0] for k in intr):
+        i = next(i for i, k in enumerate(intr) if k != intr[0])
+        raise FlightError(f"{source} ({names[i]}): intrinsics differ from {names[0]}'s (one camera per flight)")
+    fx, fy, cx, cy, w, h = intr[0]
+    if not (fx > 0 and fy > 0 and w >= 16 and h >= 16 and w == int(w) and h == int(h)):
+        raise FlightError(f"{source}: bad intrinsics fx {fx} fy {fy} size {w}x{h}")
+    images = []
+    for name in names:
+        path = d / name
+        if not path.is_file():
+            raise FlightError(f"{path}: missing (listed in {source.name})")
+        im = cv2.imread(str(path), cv2.IMREAD_COLOR)
+        if im is None:
+            raise FlightError(f"{path}: cannot read the image (corrupt or not an image)")
+        if (im.shape[1], im.shape[0]) != (int(w), int(h)):
+            raise FlightError(f"{path}: {im.shape[1]}x{im.shape[0]} pixels, but {source.name} gives "
+                              f"{int(w)}x{int(h)}")
+        images.append(cv2.cvtColor(im, cv2.COLOR_BGR2RGB))
+    K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+    realization = None
+    if (d / "flight.json").is_file():
+        try:
+            realization = json.loads((d / "flight.json").read_text()).get("realization")
+        except (ValueError, AttributeError):
+            raise FlightError(f"{d / 'flight.json'}: not a JSON object") from None
+    return CapturedViews(names=list(names), images=images, reported=poses_to_cameras(poses), K=K,
+                         realization=realization).validate()
+
+

@@ -1,0 +1,101 @@
+"""The recon node reconstructs what the fleet sent (issue 20, part 2): the real scene node, recon
+node (``source: fleet``) and four simulated drones with cameras over DDS; the test plays the
+planner and the dispatcher (/camera_plan, /fleet/assignment, the goals). Every wait has a deadline.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from geometry_msgs.msg import PoseStamped
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import Image
+from vp_interfaces.msg import DroneAssignment, FleetAssignment, SceneDescription
+from vp_interfaces.msg import ReconstructionScore as Score
+
+from vp_recon.pipeline import ReconConfig, reconstruct_realization
+from vp_scene.camera import cameras_to_poses, look_at
+from vp_scene.capture import IDEAL
+from vp_scene.messages import cameras_to_pose_array, pose_msg, scene_of_description
+
+LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+SCENE = dict(scenario="one_plant", points_per_plant=2000, realizations=2, levels=5, seed=3)
+SIZE = dict(width=640, height=480)
+TIMEOUT = 240.0
+
+
+def ring(n: int = 4) -> np.ndarray:
+    az = np.linspace(0.0, math.radians(150), n)
+    c = np.stack([1.7 * np.cos(az), 1.7 * np.sin(az), np.full(n, 1.3)], axis=1)
+    return look_at(c, np.tile([0.0, 0.0, 0.9], (n, 1)))
+
+
+def assignment(stamp: int, drones: list, cams: np.ndarray) -> FleetAssignment:
+    msg = FleetAssignment(num_poses=len(cams), assignment="min_total", orientation="body")
+    msg.header.frame_id = "map"
+    msg.plan_stamp.sec = stamp
+    msg.entries = [DroneAssignment(drone=d, pose_index=i, goal=pose_msg(cameras_to_poses(c)))
+                   for i, (d, c) in enumerate(zip(drones, cams))]
+    return msg
+
+
+def test_fleet_images_reconstruct_as_the_render_source_and_a_silent_drone_is_named(ros_env, start_node,
+                                                                                    ros_node, tmp_path) -> None:
+    """Four drones photograph the plan (ideal capture, 640 x 480): per realization one capture
+    set, reconstructed to the render source's Chamfer (the same images and poses: to 1e-6);
+    the score says source fleet; a plan whose drone d9 does not exist gives CAPTURE_MISSING
+    naming d9, an image of d0 stamped before the trigger is dropped with a log line, and the
+    node keeps running."""
+    cams = ring()
+    drones = ["d0", "d1", "d2", "d3"]
+    start_node("vp_scene", "scene", SCENE, ros_env)
+    recon = start_node("vp_recon", "recon", {**SIZE, "capture": "ideal", "source": "fleet", "num_threads": 1,
+                                             "capture_timeout": 20.0, "output_folder": str(tmp_path / "out")},
+                       ros_env)
+    for d, c in zip(drones, cams):
+        start_node("vp_planner", "sim_drone", {"drone": d, "x": float(c[0]), "y": float(c[1]), "z": float(c[2]),
+                                               "camera": True, "capture": "ideal", **SIZE}, ros_env,
+                   args=("--ros-args", "-r", f"__node:=sim_{d}"))
+    client = ros_node(ros_env)
+    scores = client.subscribe(Score, "/reconstruction/score", 20)
+    descriptions = client.subscribe(SceneDescription, "/scene/description", LATCHED)
+    fleet_pub = client.node.create_publisher(FleetAssignment, "/fleet/assignment", LATCHED)
+    plan_pub = client.node.create_publisher(type(cameras_to_pose_array(cams, "map", None)), "/camera_plan", LATCHED)
+    goal_pubs = {d: client.node.create_publisher(PoseStamped, f"/{d}/goal_pose", LATCHED) for d in drones}
+    assert client.spin_until(lambda: descriptions, 60)
+    for d, c in zip(drones, cams):
+        g = PoseStamped(pose=pose_msg(cameras_to_poses(c)))
+        g.header.frame_id = "map"
+        goal_pubs[d].publish(g)
+    fleet_pub.publish(assignment(7, drones, cams))
+    plan = cameras_to_pose_array(cams, "map", None)
+    plan.header.stamp.sec = 7
+    plan_pub.publish(plan)
+
+    def aggregates():
+        return [s for s in scores if s.realization == Score.AGGREGATE]
+    assert client.spin_until(lambda: aggregates(), TIMEOUT), recon.output()[-4000:]
+    agg = aggregates()[0]
+    assert agg.error_code == Score.NONE, agg.error_msg
+    assert agg.source == "fleet" and agg.realizations == 2 and agg.num_images == 4
+    per = sorted((s for s in scores if s.realization != Score.AGGREGATE), key=lambda s: s.realization)
+    scene = scene_of_description(descriptions[-1])
+    for s in per:  # the render source under the same capture model: the same flight, the same numbers
+        ref = reconstruct_realization(scene, s.realization, cams, ReconConfig(**SIZE, capture=IDEAL, num_threads=1))
+        assert s.chamfer == pytest.approx(100 * ref.chamfer, rel=1e-6) and s.num_points == len(ref.points)
+
+    scores.clear()
+    stale = Image(height=1, width=1, encoding="rgb8", step=3, data=b"abc")  # a capture of long ago
+    stale.header.stamp.sec = 1
+    stale_pub = client.node.create_publisher(Image, "/d0/camera/image_raw", LATCHED)
+    stale_pub.publish(stale)
+    fleet_pub.publish(assignment(8, ["d0", "d1", "d2", "d9"], cams))
+    plan.header.stamp.sec = 8
+    plan_pub.publish(plan)
+    assert client.spin_until(lambda: aggregates(), TIMEOUT), recon.output()[-4000:]
+    agg = aggregates()[0]
+    assert agg.error_code == Score.CAPTURE_MISSING and "d9" in agg.error_msg and "d0" not in agg.error_msg
+    assert "capture of d0 stamped 1000000000 ns is older than capture 0 of this plan: ignored" in recon.output()
+    assert recon.poll() is None
