@@ -52,7 +52,8 @@ def test_fleet_images_reconstruct_as_the_render_source_and_a_silent_drone_is_nam
     drones = ["d0", "d1", "d2", "d3"]
     start_node("vp_scene", "scene", SCENE, ros_env)
     recon = start_node("vp_recon", "recon", {**SIZE, "capture": "ideal", "source": "fleet", "num_threads": 1,
-                                             "capture_timeout": 20.0, "output_folder": str(tmp_path / "out")},
+                                             "capture_timeout": 45.0, "output_folder": str(tmp_path / "out")},  # 20 s: missed once
+                       # on a loaded 2-core machine (four drones' first renders beside a benchmark)
                        ros_env)
     for d, c in zip(drones, cams):
         start_node("vp_planner", "sim_drone", {"drone": d, "x": float(c[0]), "y": float(c[1]), "z": float(c[2]),
