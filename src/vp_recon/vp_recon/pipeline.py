@@ -656,8 +656,11 @@ def reconstruct_captured(noisy_scene: object, views: object, config: Optional[Re
         try:
             score = chamfer(vr.points, truth_all[k], cfg.fscore_threshold)
             shape = chamfer_after_icp(vr.points, truth_all[k], cfg.fscore_threshold)
-        except EmptyCloudError as exc:
-            raise ReconError(RECONSTRUCTION_FAILED, f"the reconstruction is empty: {exc}") from exc
+        except EmptyCloudError as exc:  # registered, but nothing in the prior's box on plant pixels
+            raise ReconError(RECONSTRUCTION_FAILED, f"the reconstruction is empty: {vr.sparse.registered} of "
+                             f"{len(views.images)} images registered, {len(vr.sparse.points)} sparse points, none "
+                             "of them inside the planning cloud's box on plant pixels (a registration to map "
+                             f"that is off?): {exc}") from exc
         seconds["score"] = time.perf_counter() - t0
         _tick(progress, "score", k)
     finally:
