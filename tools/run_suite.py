@@ -417,6 +417,9 @@ def run(args: argparse.Namespace) -> int:
         raise KeyboardInterrupt
 
     signal.signal(signal.SIGTERM, on_signal)
+    # SIGINT stops the mission also when a non-interactive shell started the script with `&`
+    # (which starts it with SIGINT ignored: `kill -INT` then did nothing, and the test failed)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         # the planner and the recon share the cores: 1 thread for the planner, the rest for the recon
         recon_threads = max(1, (os.cpu_count() or 2) - 1)
