@@ -441,16 +441,6 @@ def plot(path: Path, per_plan: dict, variant: str, specs: dict) -> None:
     fig.savefig(path, dpi=110)
 
 
-def per_plan_chamfer(record: dict, key: str = 'chamfer') -> float:
-    """Mean Chamfer x 100 of a per-plan record of plan_quality.json (inf: a realization failed)."""
-    vals = []
-    for r in record['realizations'].values():
-        if r.get('error') or r.get(key) is None:
-            return math.inf
-        vals.append(r[key])
-    return float(np.mean(vals)) if vals else math.nan
-
-
 def check_from_records(args) -> dict:
     """The split and the check half's Spearman from the per-plan records of an existing
     ``plan_quality.json`` (its main variant): for a study whose reconstruction cache is gone."""
@@ -465,10 +455,12 @@ def check_from_records(args) -> dict:
         every = plans_of(s, args.models)
         by_id = {r['id']: r for r in records.get(s, [])}
         half = split_halves(every, args.split_seed)
-        recorded = [by_id[p['id']] for p in every if p['id'] in by_id]
-        ch_all = np.array([per_plan_chamfer(by_id[p['id']]) if p['id'] in by_id else math.nan for p in every])
-        result['counts'][s] = study_counts([{**p, 'recon': p['id'] in by_id} for p in every], ch_all)
-        ch = np.array([per_plan_chamfer(r) for r in recorded])
+        # a per-plan record's realizations, as plan_chamfer reads a plan's cached records (x 100 here)
+        every = [{**p, 'recon': by_id[p['id']]['realizations'] if p['id'] in by_id else {}} for p in every]
+        ch_all = np.array([plan_chamfer(p) for p in every])
+        result['counts'][s] = study_counts(every, ch_all)
+        has = np.array([bool(p['recon']) for p in every], dtype=bool)
+        recorded, ch = [by_id[p['id']] for p in every if p['recon']], ch_all[has]
         rewards = {m: [r['reward'][m] for r in recorded] for m in recorded[0]['reward']} if recorded else {}
         halves = spearman_halves([r['id'] for r in recorded], rewards, ch, half)
         result['spearman_design'][s], result['spearman_check'][s] = halves['design'], halves['check']
