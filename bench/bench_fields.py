@@ -43,7 +43,7 @@ from stats import describe, describe_difference, paired_difference, rank, summar
 
 #: (field, N) cells: the issue's targets, and N = 16 on the row (planned and reconstructed).
 FIELDS = (("grid_3x3", 8), ("row_12", 12), ("row_12", 16))
-#: Method label -> plan_views keyword arguments (``evaluations`` filled in per field).
+#: Method label -> PlanRequest fields (``evaluations`` filled in per field).
 #: The baselines of the paired differences (every METHODS row that is not egp).
 BASELINES = ("circle", "arc", "sa", "lawnmower", "lawnmower-oblique")
 METHODS = {
@@ -99,19 +99,18 @@ def plan_path(cache: Path, field: str, n: int, label: str, args) -> tuple[Path, 
 
 def plan_cell(cache: Path, field: str, n: int, label: str, args) -> dict:
     """One planning run (cached), timed alone with one torch thread."""
-    from vp_planner.optimizers import plan_views
+    from vp_planner.optimizers import PlanRequest, plan_views
 
-    kwargs = dict(METHODS[label])
-    method = kwargs.pop("method")
     path, evals = plan_path(cache, field, n, label, args)
+    request = PlanRequest(**METHODS[label], num_cameras=n, evaluations=evals, initial_evaluations=min(50, evals),
+                          seed=args.seed)
 
     def compute() -> dict:
         import torch
 
         torch.set_num_threads(1)
         noisy, _ = scene(field, args.models)
-        res = plan_views(method, noisy.points, n, evaluations=evals, initial_evaluations=min(50, evals),
-                         seed=args.seed, **kwargs)
+        res = plan_views(request, noisy.points)
         return {"cameras": np.asarray(res.cameras).tolist(), "reward": float(res.reward),
                 "reward_model": res.reward_model, "evaluations": int(res.evaluations),
                 "seconds": float(res.seconds), "parts": res.parts, "initial_best": res.initial_best}

@@ -34,7 +34,7 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 from vp_scene.build import build_noisy_scene  # noqa: E402
 from vp_scene.capture import IDEAL, REALISTIC  # noqa: E402
 
-from vp_planner.optimizers import plan_views  # noqa: E402
+from vp_planner.optimizers import PlanRequest, plan_views  # noqa: E402
 from vp_recon.meshing import scene_meshes  # noqa: E402
 from vp_recon.pipeline import ReconConfig, ReconError, reconstruct_plan  # noqa: E402
 from vp_recon.render import Renderer  # noqa: E402
@@ -113,7 +113,8 @@ def main() -> int:
     for name, n in SCENARIO_CAMERAS.items():
         sc, _ = build_noisy_scene(name, models=a.models, seed=0, points_per_plant=ppp,
                                   realizations=max(1, len(ks)))
-        cams = plan_views("circle", sc.points, n, evaluations=100, seed=0).cameras  # the tuned circle baseline
+        # the tuned circle baseline
+        cams = plan_views(PlanRequest("circle", n, evaluations=100, seed=0), sc.points).cameras
         try:
             res = reconstruct_plan(sc, cams, cfg, realizations=ks)
             r0 = res.realizations

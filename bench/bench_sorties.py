@@ -64,7 +64,7 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 def sortie2_cell(cache: Path, scenario: str, first: dict, m: int, args, reconstruction=None) -> dict:
     """An egp plan of M cameras given sortie 1's cameras (d), and its reconstruction (e); cached."""
-    from vp_planner.optimizers import plan_views
+    from vp_planner.optimizers import PlanRequest, plan_views
 
     case = 'e' if reconstruction is not None else 'd'
     tag = (f'{models_tag(args.models)}-{scenario}-sortie2-{case}-m{m}-seed{args.seed}-e{args.evals}-i{args.init}'
@@ -76,9 +76,9 @@ def sortie2_cell(cache: Path, scenario: str, first: dict, m: int, args, reconstr
 
         torch.set_num_threads(1)  # as the planner node and CLI
         noisy, _ = scene(scenario, args.models)
-        res = plan_views('egp', noisy.points, m, evaluations=args.evals, initial_evaluations=args.init,
-                         seed=args.seed, fixed_cameras=first['cameras'], reconstruction=reconstruction,
-                         tau=args.tau, reconstructed_weight=args.reconstructed_weight)
+        res = plan_views(PlanRequest('egp', m, evaluations=args.evals, initial_evaluations=args.init, seed=args.seed,
+                                     fixed_cameras=first['cameras'], reconstruction=reconstruction, tau=args.tau,
+                                     reconstructed_weight=args.reconstructed_weight), noisy.points)
         return {'cameras': np.asarray(res.cameras).tolist(), 'reward': float(res.reward), 'seconds': float(res.seconds),
                 'reconstructed_fraction': res.reconstructed_fraction}
     return cached(cache / 'plans' / f'{tag}.json', compute)

@@ -63,7 +63,7 @@ def models_tag(models: str) -> str:
     return Path(models).name if models else 'procedural'
 
 
-#: Planner variants of the benchmarks: name -> plan_views keyword arguments.
+#: Planner variants of the benchmarks: name -> PlanRequest fields (:mod:`vp_planner.request`).
 VARIANTS = {
     'egp': {'method': 'egp'},                                           # the default planner
     'egp-random-init': {'method': 'egp', 'structured_init': 0},          # the paper's random design
@@ -91,13 +91,13 @@ def plan_cell(cache: Path, scenario: str, variant: str, seed: int, evals: int = 
     """One planning run (cached): cameras, reward, best-so-far trace, seconds, the initial
     design's best and the BO steps (egp/gp). ``variant`` is a key of :data:`VARIANTS`;
     ``reward`` a reward model (None: the planner's default)."""
-    from vp_planner.optimizers import plan_views
+    from vp_planner.optimizers import PlanRequest, plan_views
     from vp_planner.reward_models import DEFAULT_REWARD_MODEL
 
     n = num_cameras or SCENARIOS[scenario]
     reward = reward or DEFAULT_REWARD_MODEL
-    kwargs = dict(VARIANTS[variant])
-    method = kwargs.pop('method')
+    request = PlanRequest(**VARIANTS[variant], num_cameras=n, evaluations=evals, initial_evaluations=init, seed=seed,
+                          reward=reward)
     path = plan_path(cache, scenario, variant, seed, evals, init, models, num_cameras, reward)
 
     def compute() -> dict:
@@ -105,8 +105,7 @@ def plan_cell(cache: Path, scenario: str, variant: str, seed: int, evals: int = 
 
         torch.set_num_threads(1)  # as the planner node and CLI
         noisy, _ = scene(scenario, models)
-        res = plan_views(method, noisy.points, n, evaluations=evals, initial_evaluations=init, seed=seed,
-                         reward=reward, **kwargs)
+        res = plan_views(request, noisy.points)
         return {'cameras': np.asarray(res.cameras).tolist(), 'reward': float(res.reward), 'reward_model': reward,
                 'trace': [float(x) for x in res.trace], 'seconds': float(res.seconds),
                 'ensemble_weights': res.ensemble_weights, 'initial_best': res.initial_best, 'steps': res.steps}

@@ -81,7 +81,7 @@ def _space(scenario: str, models: str):
 
 def plan_families(scenario: str, models: str) -> list[dict]:
     """The study's plans: [{id, family, params, cameras}], feasible only, deterministic."""
-    from vp_planner.optimizers import plan_views
+    from vp_planner.optimizers import PlanRequest, plan_views
     from vp_planner.patterns import arc, cap, ring
 
     noisy, space = _space(scenario, models)
@@ -136,7 +136,8 @@ def plan_families(scenario: str, models: str) -> list[dict]:
     for method, seeds, reward in (('circle', (0,), 'paper'), ('sa', (0, 1, 2, 3), 'paper'), ('egp', (0, 1, 2), 'paper'),
                                   ('gp', (0,), 'paper'), ('egp', (0, 1, 2), 'coverage'), ('arc', (0,), 'coverage')):
         for seed in seeds:
-            res = plan_views(method, R, N, evaluations=100, initial_evaluations=50, seed=seed, reward=reward)
+            res = plan_views(PlanRequest(method, N, evaluations=100, initial_evaluations=50, seed=seed, reward=reward),
+                             R)
             add(method if reward == 'paper' else f'{method}-{reward}', {'seed': seed, 'reward_model': reward},
                 res.cameras)
     return plans

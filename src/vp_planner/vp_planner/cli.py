@@ -33,12 +33,16 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+from dataclasses import replace
 from pathlib import Path
-from typing import Any, Optional, Sequence
+from typing import TYPE_CHECKING, Any, Optional, Sequence
 
 import numpy as np
 
 from vp_scene.layout import BUILTIN_LAYOUTS, LayoutError, read_scenario, resolve_layout
+
+if TYPE_CHECKING:
+    from .request import PlanRequest
 
 SCENARIO_NAMES = tuple(BUILTIN_LAYOUTS)
 
@@ -221,26 +225,35 @@ def reconstruction_of(path: Optional[str]) -> Optional[np.ndarray]:
         raise CliError(f"--reconstructed: {exc}") from None
 
 
+def request_of(args: argparse.Namespace) -> "PlanRequest":
+    """The :class:`~vp_planner.request.PlanRequest` of the plan flags (validated there; the cameras
+    already flown and the reconstruction are read from their files later)."""
+    from .request import PlanRequest
+
+    return PlanRequest(args.method, args.cameras, args.evals, args.init, seed=args.seed,
+                       min_standoff=args.min_standoff, min_altitude=args.min_altitude,
+                       min_separation=args.min_separation, fov=args.fov, theta_match=args.theta_match,
+                       structured_init=args.structured_init, reward=args.reward, image_size=_image_size(args),
+                       bo_mode=args.bo_mode, arc_spacing=args.arc_spacing, parts=args.parts,
+                       lawnmower_overlap=args.lawnmower_overlap, lawnmower_tilt=args.lawnmower_tilt,
+                       tau=args.tau, reconstructed_weight=args.reconstructed_weight)
+
+
 def plan(args: argparse.Namespace) -> dict:
     """Plan views; write OUT/plan.json and OUT/noisy_points.npy; return the plan dict."""
     from vp_scene.camera import cameras_to_poses
     from vp_scene.planfile import write_plan
 
-    from .optimizers import check_lawnmower, plan_views, validate_request
+    from .optimizers import plan_views
 
-    validate_request(args.method, args.cameras, args.evals, args.init)  # fail before building the scene
+    request = request_of(args)  # fail before reading files or building the scene
     if args.threads < 1:
         raise CliError(f"--threads must be >= 1, got {args.threads}")
-    if not 0.0 < args.arc_spacing < 2 * math.pi:
-        raise CliError(f"--arc-spacing must be in (0, 2 pi) rad, got {args.arc_spacing}")
-    if args.parts < 0:
-        raise CliError(f"--parts must be >= 0 (0: automatic), got {args.parts}")
-    check_lawnmower(args.lawnmower_overlap, args.lawnmower_tilt)
-    fixed = fixed_cameras_of(args.fixed)
-    reconstruction = reconstruction_of(args.reconstructed)
+    request = replace(request, fixed_cameras=fixed_cameras_of(args.fixed),
+                      reconstruction=reconstruction_of(args.reconstructed))
     set_threads(args.threads)
     out = Path(args.out)
-    image_size = _image_size(args)
+    image_size = request.image_size
     scene = scene_of(args)
     realizations = build_scene(scene)
 
@@ -258,15 +271,7 @@ def plan(args: argparse.Namespace) -> dict:
         return True
 
     try:
-        res = plan_views(args.method, realizations, args.cameras, evaluations=args.evals,
-                         initial_evaluations=args.init, seed=args.seed, min_standoff=args.min_standoff,
-                         min_altitude=args.min_altitude, min_separation=args.min_separation, fov=args.fov,
-                         theta_match=args.theta_match, callback=progress, structured_init=args.structured_init,
-                         reward=args.reward, image_size=image_size, bo_mode=args.bo_mode,
-                         arc_spacing=args.arc_spacing, parts=args.parts,
-                         lawnmower_overlap=args.lawnmower_overlap, lawnmower_tilt=args.lawnmower_tilt,
-                         fixed_cameras=fixed, reconstruction=reconstruction, tau=args.tau,
-                         reconstructed_weight=args.reconstructed_weight)
+        res = plan_views(request, realizations, callback=progress)
     finally:
         if bar is not None:
             bar.close()
@@ -299,10 +304,11 @@ def plan(args: argparse.Namespace) -> dict:
                         "min_separation": args.min_separation},
         "ensemble_weights": res.ensemble_weights,
         "model_names": res.model_names,
-        "fixed_cameras": [[float(x) for x in row] for row in fixed],
+        "fixed_cameras": [[float(x) for x in row] for row in request.fixed_cameras],
         "fixed_from": [str(Path(f).resolve()) for f in args.fixed],
-        "reconstructed": None if reconstruction is None else {
-            "path": str(Path(args.reconstructed).resolve()), "points": int(len(reconstruction)), "tau": args.tau,
+        "reconstructed": None if request.reconstruction is None else {
+            "path": str(Path(args.reconstructed).resolve()), "points": int(len(request.reconstruction)),
+            "tau": args.tau,
             "reconstructed_weight": args.reconstructed_weight, "fraction": res.reconstructed_fraction},
         "scene": scene,
     }

@@ -67,9 +67,11 @@ import torch
 from numpy.typing import NDArray
 
 from .methods import BAYESIAN, MAX_EVALUATIONS, METHODS
-from .reward import DEFAULT_FOV, DEFAULT_THETA_MATCH
-from .reward_models import (DEFAULT_RECONSTRUCTED_WEIGHT, DEFAULT_REWARD_MODEL, DEFAULT_TAU, check_fixed_cameras,
-                            check_reward_model)
+from .request import (MAX_CAMERAS, BudgetTooLargeError, InvalidBudgetError, InvalidFixedCamerasError,
+                      InvalidNumCamerasError, InvalidReconstructionError, InvalidRequestError, PlanRequest,
+                      UnknownMethodError, UnknownRewardModelError, check_lawnmower, check_reconstruction,
+                      check_sortie_weighting)
+from .reward_models import DEFAULT_REWARD_MODEL
 from .space import (
     NoFeasiblePlanError,
     Objective,
@@ -81,9 +83,10 @@ from .space import (
 __all__ = [
     "METHODS",
     "MAX_CAMERAS",
+    "PlanRequest",
     "PlanResult",
     "plan_views",
-    "validate_request",
+    "check_lawnmower",
     "estimate_memory",
     "check_memory",
     "InvalidNumCamerasError",
@@ -95,13 +98,11 @@ __all__ = [
     "InvalidSceneError",
     "InvalidFixedCamerasError",
     "InvalidReconstructionError",
+    "InvalidRequestError",
+    "UnknownRewardModelError",
     "sortie_weights",
     "NoFeasiblePlanError",
 ]
-
-
-#: The largest number of cameras N of a plan (see the module docstring).
-MAX_CAMERAS: int = 100
 
 
 Callback = Callable[[int, int, float, Optional[list]], bool]
@@ -120,34 +121,8 @@ def _batch(space: ViewSpace) -> int:
     return int(max(1, min(_BATCH, _BATCH_TERMS // max(pair_points, 1.0))))
 
 
-class InvalidNumCamerasError(ValueError):
-    """num_cameras not an integer in [2, MAX_CAMERAS], or more cameras than the memory holds."""
-
-
-class UnknownMethodError(ValueError):
-    """method is not one of METHODS."""
-
-
-class InvalidBudgetError(ValueError):
-    """evaluations < 1, or smaller than initial_evaluations for egp/gp."""
-
-
-class BudgetTooLargeError(InvalidBudgetError):
-    """evaluations above :data:`MAX_EVALUATIONS`, or a run the memory cannot hold."""
-
-
 class InvalidSceneError(ValueError):
     """Empty or non-finite point cloud, or a wrong shape."""
-
-
-class InvalidFixedCamerasError(ValueError):
-    """Cameras already flown that are not finite (M, 6) cameras with a viewing direction, or
-    more than the memory holds together with the plan (:func:`check_memory` of N + M)."""
-
-
-class InvalidReconstructionError(ValueError):
-    """A reconstruction (of an earlier sortie) with non-finite points, more points than the
-    memory holds, or a tau / reconstructed_weight out of range."""
 
 
 #: Bytes a reconstruction point costs the hole weighting (the points and their KD-tree).
@@ -161,16 +136,13 @@ def sortie_weights(realizations: NDArray[np.float64], reconstruction: Any, tau: 
     tau or weight, or a reconstruction the memory cannot hold."""
     from .reward_models import reconstructed_mask
 
-    Q = np.asarray(reconstruction, dtype=np.float64)
-    if Q.size % 3 or (Q.ndim == 2 and Q.shape[1] != 3) or Q.ndim > 2:
-        raise InvalidReconstructionError(f"the reconstruction must be (Q, 3) points, got shape {Q.shape}")
-    need = Q.size // 3 * RECONSTRUCTION_POINT_BYTES
+    Q = check_reconstruction(reconstruction)
+    need = len(Q) * RECONSTRUCTION_POINT_BYTES
     have = available_memory() if available is None else int(available)
     if have is not None and need > 0.8 * have:
-        raise InvalidReconstructionError(f"the reconstruction's {Q.size // 3} points need about "
+        raise InvalidReconstructionError(f"the reconstruction's {len(Q)} points need about "
                                          f"{need / 2**30:.1f} GiB; {have / 2**30:.1f} GiB are available")
-    if not (math.isfinite(reconstructed_weight) and 0.0 <= reconstructed_weight <= 1.0):
-        raise InvalidReconstructionError(f"reconstructed_weight must be in [0, 1], got {reconstructed_weight}")
+    check_sortie_weighting(tau, reconstructed_weight)
     try:
         mask = reconstructed_mask(realizations, Q, tau)
     except ValueError as exc:
@@ -229,25 +201,6 @@ class PlanResult:
 
 
 # ---------------------------------------------------------------------- validation
-def validate_request(method: str, num_cameras: Any, evaluations: Any, initial_evaluations: Any) -> None:
-    """Raise the ValueError subclass for a bad method, camera count or budget (cheap; no scene)."""
-    if not isinstance(method, str) or method not in METHODS:
-        raise UnknownMethodError(f"unknown method {method!r}; one of {', '.join(METHODS)}")
-    if isinstance(num_cameras, bool) or int(num_cameras) != num_cameras or not 2 <= num_cameras <= MAX_CAMERAS:
-        raise InvalidNumCamerasError(f"num_cameras must be an integer from 2 to {MAX_CAMERAS}, got {num_cameras}")
-    if isinstance(evaluations, bool) or int(evaluations) != evaluations or evaluations < 1:
-        raise InvalidBudgetError(f"evaluations must be an integer >= 1, got {evaluations}")
-    if evaluations > MAX_EVALUATIONS[method]:
-        raise BudgetTooLargeError(f"evaluations = {evaluations} is above the bound of {MAX_EVALUATIONS[method]} "
-                                  f"for method {method} (README, 'Planner node')")
-    if method in BAYESIAN:
-        if int(initial_evaluations) != initial_evaluations or initial_evaluations < 1:
-            raise InvalidBudgetError(f"initial_evaluations must be an integer >= 1, got {initial_evaluations}")
-        if evaluations < initial_evaluations:
-            raise InvalidBudgetError(
-                f"evaluation budget {evaluations} is smaller than the initial design ({initial_evaluations})")
-
-
 def estimate_memory(num_cameras: int, num_realizations: int, num_points: int, reward: str) -> int:
     """Bytes one reward evaluation of an N-camera plan needs at most (an upper estimate).
 
@@ -319,12 +272,10 @@ def check_memory(num_cameras: int, realizations_shape: tuple, reward: str,
             f"{reward} reward; {have / 2**30:.1f} GiB are available: use fewer cameras or points")
 
 
-def _check_parts(parts: Any, method: str, realizations: NDArray[np.float64], num_cameras: int) -> int:
-    """The number of parts a run plans by (1 for methods other than egp/gp): ``parts``, or
-    :func:`vp_planner.parts.auto_parts` for 0. ValueError for a negative or non-integer value,
+def _check_parts(parts: int, method: str, realizations: NDArray[np.float64], num_cameras: int) -> int:
+    """The number of parts a run plans by (1 for methods other than egp/gp): ``parts`` (an integer
+    >= 0, :class:`PlanRequest`), or :func:`vp_planner.parts.auto_parts` for 0.
     InvalidNumCamerasError for more parts than pairs of cameras."""
-    if isinstance(parts, bool) or int(parts) != parts or parts < 0:
-        raise ValueError(f"parts must be an integer >= 0 (0: automatic), got {parts!r}")
     if method not in BAYESIAN:
         return 1
     if parts == 0:
@@ -345,14 +296,6 @@ def total_evaluations(method: str, evaluations: int, parts: int) -> int:
     if method in BAYESIAN and parts > 1:
         return parts * int(evaluations) + max(1, int(evaluations) // 2)
     return int(evaluations)
-
-
-def check_lawnmower(overlap: float, tilt: float) -> None:
-    """ValueError unless 0 <= overlap <= 0.95 and 0 <= tilt <= 60 degrees (finite)."""
-    if not (math.isfinite(overlap) and 0.0 <= overlap <= 0.95):
-        raise ValueError(f"lawnmower overlap must be in [0, 0.95], got {overlap}")
-    if not (math.isfinite(tilt) and 0.0 <= tilt <= math.radians(60.0) + 1e-12):
-        raise ValueError(f"lawnmower tilt must be in [0, 60 degrees] (rad), got {tilt}")
 
 
 # ---------------------------------------------------------------------- baselines
@@ -703,107 +646,67 @@ def _forward(obj: Objective) -> Callback:
 
 
 # ---------------------------------------------------------------------- entry point
-def plan_views(
-    method: str,
-    realizations: Any,
-    num_cameras: int,
-    evaluations: int = 100,
-    initial_evaluations: int = 50,
-    seed: int = 0,
-    min_standoff: float = 0.5,
-    min_altitude: float = 0.3,
-    min_separation: float = 0.5,
-    fov: float = DEFAULT_FOV,
-    theta_match: float = DEFAULT_THETA_MATCH,
-    callback: Optional[Callback] = None,
-    *,
-    should_stop: Optional[StopCheck] = None,
-    shell_depth: Optional[float] = None,
-    structured_init: int = 20,
-    dtype: torch.dtype = torch.float64,
-    reward: str = DEFAULT_REWARD_MODEL,
-    image_size: tuple[int, int] = (2000, 1500),
-    bo_mode: str = "trust_region",
-    arc_spacing: float = math.radians(30.0),
-    parts: int = 0,
-    lawnmower_overlap: float = 0.7,
-    lawnmower_tilt: float = 0.0,
-    fixed_cameras: Any = None,
-    reconstruction: Any = None,
-    tau: float = DEFAULT_TAU,
-    reconstructed_weight: float = DEFAULT_RECONSTRUCTED_WEIGHT,
-) -> PlanResult:
-    """Plan ``num_cameras`` views of the noisy scene with ``method`` (one of :data:`METHODS`).
+def plan_views(request: PlanRequest, realizations: Any, callback: Optional[Callback] = None,
+               should_stop: Optional[StopCheck] = None) -> PlanResult:
+    """Plan ``request.num_cameras`` views of the noisy scene with ``request.method`` (one of
+    :data:`METHODS`); every setting is a field of the :class:`~vp_planner.request.PlanRequest`
+    (validated there, its docstring gives the units and rules).
 
     Args:
-        method: egp | gp | circle | sa | random.
+        request: what to plan: method, N, budget, seed, feasibility rules, reward, the method's
+            settings, a second sortie's cameras already flown and reconstruction.
         realizations: (K, P, 3) noisy scene realizations (the reward is their mean, eq. 7).
-        num_cameras: N >= 2.
-        evaluations: total reward evaluations E (initial design included), >= 1.
-        initial_evaluations: initial design size of egp/gp (<= evaluations).
-        seed: random seed (numpy and torch).
-        min_standoff, min_altitude, min_separation: feasibility rules (see ViewSpace).
-        fov, theta_match: reward parameters (eq. 6).
         callback: ``callback(done, total, best, weights) -> bool`` after every evaluation
             (``weights``: latest ensemble weights for egp, else None); returning False stops
             the run within one evaluation and returns the best plan so far (``stopped=True``).
         should_stop: ``should_stop() -> bool``, asked between evaluations and inside the
             feasible-plan searches (rejection sampling, BO candidate batches, SA's start); True
             stops the run as a callback returning False does (a cancel, a node shutting down).
-        shell_depth: outer bound of camera distances (see ViewSpace).
-        structured_init: number of structured plans in the egp/gp initial design.
-        dtype: reward precision (torch.float64 or torch.float32).
-        reward: the reward model to maximize (:data:`vp_planner.reward_models.REWARD_MODELS`).
-        image_size: (width, height) of the cameras' images (the ``coverage`` model's resolution).
-        bo_mode: egp/gp: ``'trust_region'`` (EI in a trust region about the incumbent) or
-            ``'global'`` (the paper's: EI over the whole space).
-        arc_spacing: arc: azimuth between neighbouring cameras, rad.
-        parts: egp/gp: plan the field by this many parts (:mod:`vp_planner.parts`; each part
-            gets ``evaluations``, the joint refinement ``evaluations // 2``, all counted in the
-            result); 0: :func:`vp_planner.parts.auto_parts` (1 for N <= 7); 1: one space.
-        lawnmower_overlap, lawnmower_tilt: lawnmower: image overlap in [0, 0.95] and camera
-            tilt from nadir in [0, 60 degrees] (rad).
-        fixed_cameras: (M, 6) cameras already flown (an earlier sortie): every method's reward
-            counts them with the plan (pairs with them like pairs within it); the plan need not
-            keep min_separation from them (README "A second sortie").
-        reconstruction: (Q, 3) points an earlier sortie reconstructed: the realizations' points
-            within ``tau`` (m) of them weigh ``reconstructed_weight`` in [0, 1] in the reward,
-            the others 1 (:func:`vp_planner.reward_models.reconstructed_weights`).
+
+    Planning by parts (egp/gp, ``request.parts``): each part gets ``evaluations``, the joint
+    refinement ``evaluations // 2``, all counted in the result; 0: :func:`vp_planner.parts.auto_parts`
+    (1 for N <= 7); 1: one space. Cameras already flown (``request.fixed_cameras``) count in every
+    method's reward with the plan (pairs with them like pairs within it); the plan need not keep
+    min_separation from them (README "A second sortie"). The realizations' points within ``tau``
+    of ``request.reconstruction`` weigh ``reconstructed_weight`` in the reward, the others 1
+    (:func:`vp_planner.reward_models.reconstructed_weights`).
 
     Raises:
-        UnknownMethodError, InvalidNumCamerasError, InvalidBudgetError, InvalidSceneError (all
-        ValueError) for bad arguments (InvalidNumCamerasError also for a plan the memory cannot
-        hold, :func:`check_memory`; BudgetTooLargeError, an InvalidBudgetError, for a budget above
-        :data:`MAX_EVALUATIONS` or one the memory cannot hold, :func:`check_budget_memory`);
-        InvalidFixedCamerasError, InvalidReconstructionError (ValueError) for bad cameras already
-        flown or a bad reconstruction (nothing planned); NoFeasiblePlanError (ValueError) when no
-        feasible plan was found.
+        TypeError when ``request`` is not a PlanRequest; InvalidSceneError (a ValueError) for bad
+        realizations; InvalidNumCamerasError for a plan the memory cannot hold
+        (:func:`check_memory`) or more parts than pairs of cameras; BudgetTooLargeError for a run
+        the memory cannot hold (:func:`check_budget_memory`); InvalidFixedCamerasError,
+        InvalidReconstructionError when the cameras already flown or the reconstruction do not fit
+        in memory (nothing planned); NoFeasiblePlanError (ValueError) when no feasible plan was
+        found.
     """
-    validate_request(method, num_cameras, evaluations, initial_evaluations)
-    check_reward_model(reward)
-    evaluations = int(evaluations)
-    num_cameras = int(num_cameras)
+    if not isinstance(request, PlanRequest):
+        raise TypeError(f"plan_views takes a vp_planner.request.PlanRequest, got {type(request).__name__}")
+    q = request
+    method, num_cameras, evaluations = q.method, q.num_cameras, q.evaluations
     try:
         R = check_realizations(realizations)
     except ValueError as exc:
         raise InvalidSceneError(str(exc)) from None
-    check_memory(num_cameras, R.shape, reward)
-    try:
-        F = check_fixed_cameras(fixed_cameras)
-        if len(F):
-            check_memory(num_cameras + len(F), R.shape, reward)
-    except ValueError as exc:
-        raise InvalidFixedCamerasError(f"fixed cameras: {exc}") from None
-    W, done = (None, None) if reconstruction is None else sortie_weights(R, reconstruction, tau, reconstructed_weight)
-    n_parts = _check_parts(parts, method, R, num_cameras)
-    check_lawnmower(lawnmower_overlap, lawnmower_tilt)
+    check_memory(num_cameras, R.shape, q.reward)
+    F = q.fixed_cameras
+    if len(F):
+        try:
+            check_memory(num_cameras + len(F), R.shape, q.reward)
+        except ValueError as exc:
+            raise InvalidFixedCamerasError(f"fixed cameras: {exc}") from None
+    W, done = (None, None) if q.reconstruction is None else sortie_weights(R, q.reconstruction, q.tau,
+                                                                            q.reconstructed_weight)
+    n_parts = _check_parts(q.parts, method, R, num_cameras)
     budget = total_evaluations(method, evaluations, n_parts)
     check_budget_memory(method, num_cameras, budget)
     start = time.perf_counter()
-    space = ViewSpace(R, num_cameras, min_standoff=min_standoff, min_altitude=min_altitude,
-                      min_separation=min_separation, fov=fov, theta_match=theta_match, shell_depth=shell_depth,
-                      reward_model=reward, image_size=image_size, fixed_cameras=F, point_weights=W)
-    obj = Objective(space, budget, callback=callback, dtype=dtype, should_stop=should_stop)
+    space = ViewSpace(R, num_cameras, min_standoff=q.min_standoff, min_altitude=q.min_altitude,
+                      min_separation=q.min_separation, fov=q.fov, theta_match=q.theta_match,
+                      shell_depth=q.shell_depth, reward_model=q.reward, image_size=q.image_size, fixed_cameras=F,
+                      point_weights=W)
+    obj = Objective(space, budget, callback=callback, dtype=getattr(torch, q.dtype), should_stop=should_stop)
+    seed = q.seed
     rng = np.random.default_rng(seed)
     torch.manual_seed(seed)
     info: dict = {}
@@ -811,19 +714,19 @@ def plan_views(
         if method == "circle":
             _circle(space, obj, evaluations, rng)
         elif method == "arc":
-            _arc(space, obj, evaluations, rng, arc_spacing)
+            _arc(space, obj, evaluations, rng, q.arc_spacing)
         elif method == "sa":
             _sa(space, obj, evaluations, rng)
         elif method == "random":
             _random(space, obj, evaluations, rng)
         elif method == "lawnmower":
-            _lawnmower(space, obj, lawnmower_overlap, lawnmower_tilt)
+            _lawnmower(space, obj, q.lawnmower_overlap, q.lawnmower_tilt)
         elif n_parts > 1:
-            info = _bo_by_parts(space, obj, evaluations, int(initial_evaluations), seed, method == "egp",
-                                int(structured_init), bo_mode, n_parts)
+            info = _bo_by_parts(space, obj, evaluations, q.initial_evaluations, seed, method == "egp",
+                                q.structured_init, q.bo_mode, n_parts)
         else:
-            info = _bo(space, obj, evaluations, int(initial_evaluations), seed, rng, method == "egp",
-                       int(structured_init), bo_mode)
+            info = _bo(space, obj, evaluations, q.initial_evaluations, seed, rng, method == "egp",
+                       q.structured_init, q.bo_mode)
     except PlanningCancelled:
         pass
     stopped = obj.cancelled or obj.count < budget
@@ -849,7 +752,7 @@ def plan_views(
         model_names=names,
         stopped=bool(stopped),
         rewards=np.asarray(obj.values, dtype=np.float64),
-        reward_model=reward,
+        reward_model=q.reward,
         steps=info.get("steps"),
         initial_best=info.get("initial_best"),
         parts=info.get("parts"),

@@ -26,6 +26,7 @@ from __future__ import annotations
 import math
 import threading
 import time
+from dataclasses import replace
 from typing import Optional
 
 import numpy as np
@@ -41,12 +42,12 @@ from visualization_msgs.msg import MarkerArray
 from vp_interfaces.action import PlanViews
 from vp_interfaces.msg import CameraPlan
 from vp_planner.gp import MODEL_NAMES
-from vp_planner.optimizers import (MAX_CAMERAS, MAX_EVALUATIONS, METHODS, BudgetTooLargeError, InvalidBudgetError,
-                                   InvalidFixedCamerasError, InvalidNumCamerasError, InvalidReconstructionError,
-                                   InvalidSceneError, NoFeasiblePlanError, PlanResult, UnknownMethodError,
-                                   check_lawnmower, plan_views, validate_request)
-from vp_planner.reward_models import (DEFAULT_RECONSTRUCTED_WEIGHT, DEFAULT_REWARD_MODEL, DEFAULT_TAU, REWARD_MODELS,
-                                      check_reward_model)
+from vp_planner.optimizers import InvalidSceneError, NoFeasiblePlanError, PlanResult, plan_views
+from vp_planner.methods import MAX_EVALUATIONS, METHODS
+from vp_planner.request import (MAX_CAMERAS, BudgetTooLargeError, InvalidBudgetError, InvalidFixedCamerasError,
+                                InvalidNumCamerasError, InvalidReconstructionError, PlanRequest, UnknownMethodError,
+                                UnknownRewardModelError, check_lawnmower)
+from vp_planner.reward_models import DEFAULT_RECONSTRUCTED_WEIGHT, DEFAULT_REWARD_MODEL, DEFAULT_TAU, REWARD_MODELS
 from vp_scene.messages import (cameras_to_pose_array, camera_plan_msg, frustum_markers, pose_array_to_cameras,
                                pointcloud2_to_numpy, realizations_from_cloud)
 from vp_scene.node_runtime import (INT_MAX, Param, declare_typed, parameter_value, refuse_bad_changes, run_node,
@@ -54,6 +55,23 @@ from vp_scene.node_runtime import (INT_MAX, Param, declare_typed, parameter_valu
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+#: The library's refusals and the action's error codes (the first class a refusal is an instance of).
+ERROR_CODES = (
+    (InvalidNumCamerasError, PlanViews.Result.INVALID_NUM_CAMERAS),  # also more than the memory holds
+    (UnknownMethodError, PlanViews.Result.UNKNOWN_METHOD),
+    (BudgetTooLargeError, PlanViews.Result.BUDGET_TOO_LARGE),  # also a run the memory cannot hold
+    (InvalidBudgetError, PlanViews.Result.INVALID_BUDGET),
+    (UnknownRewardModelError, PlanViews.Result.UNKNOWN_REWARD_MODEL),
+    (InvalidFixedCamerasError, PlanViews.Result.INVALID_FIXED_CAMERAS),  # NaN, or beyond the memory with the plan
+    (InvalidReconstructionError, PlanViews.Result.INVALID_RECONSTRUCTION),
+    (NoFeasiblePlanError, PlanViews.Result.NO_FEASIBLE_PLAN),
+)
+
+
+def error_code(exc: Exception) -> int:
+    """The PlanViews error code of a refusal of the library (PLANNER_FAILED for anything else)."""
+    return next((code for cls, code in ERROR_CODES if isinstance(exc, cls)), PlanViews.Result.PLANNER_FAILED)
 
 
 #: The node's parameters (:class:`vp_scene.node_runtime.Param`): default (its type is enforced),
@@ -224,10 +242,9 @@ class PlannerNode(Node):
             return
         self._enter()
         try:
-            result = self._plan(self._param('method'), self._param('num_cameras'),
-                                self._param('evaluations'), self._param('initial_evaluations'),
-                                self._param('seed'), self._param('reward'), progress=self._log_progress,
-                                should_stop=self._stopping)
+            request = self._request(self._param('method'), self._param('num_cameras'), self._param('evaluations'),
+                                    self._param('initial_evaluations'), self._param('seed'), self._param('reward'))
+            result = self._plan(request, progress=self._log_progress, should_stop=self._stopping)
             if result.stopped:
                 self.get_logger().info(f'autostart planning stopped after {result.evaluations} evaluations')
             else:
@@ -245,25 +262,26 @@ class PlannerNode(Node):
         return not self._stopping()
 
     # ---------------------------------------------------------------- planning
-    def _plan(self, method: str, num_cameras: int, evaluations: int, initial: int, seed: int, reward: str,
-              progress, should_stop, fixed_cameras: Optional[np.ndarray] = None,
-              reconstruction: Optional[np.ndarray] = None) -> PlanResult:
+    def _request(self, method: str, num_cameras: int, evaluations: int, initial: int, seed: int,
+                 reward: str) -> PlanRequest:
+        """The PlanRequest of a goal's fields (or the parameters they default to) and the node's
+        parameters; the request's ValueError (:mod:`vp_planner.request`) for a bad one."""
+        return PlanRequest(
+            method, num_cameras, evaluations, initial, seed=seed, min_standoff=self._param('min_standoff'),
+            min_altitude=self._param('min_altitude'), min_separation=self._param('min_separation'),
+            fov=self._param('fov'), theta_match=self._param('theta_match'), reward=reward,
+            image_size=(self._param('image_width'), self._param('image_height')), bo_mode=self._param('bo_mode'),
+            structured_init=self._param('structured_init'), arc_spacing=self._param('arc_spacing'),
+            parts=self._param('parts'), lawnmower_overlap=self._param('lawnmower_overlap'),
+            lawnmower_tilt=self._param('lawnmower_tilt'), tau=self._param('tau'),
+            reconstructed_weight=self._param('reconstructed_weight'))
+
+    def _plan(self, request: PlanRequest, progress, should_stop) -> PlanResult:
         realizations = self._realizations
         assert realizations is not None
-        self.get_logger().info(f'planning {num_cameras} cameras with {method} ({reward} reward): '
-                               f'{evaluations} evaluations, seed {seed}')
-        return plan_views(
-            method, realizations, num_cameras, evaluations=evaluations,
-            initial_evaluations=initial, seed=seed, callback=progress, should_stop=should_stop,
-            min_standoff=self._param('min_standoff'), min_altitude=self._param('min_altitude'),
-            min_separation=self._param('min_separation'), fov=self._param('fov'),
-            theta_match=self._param('theta_match'), reward=reward,
-            image_size=(self._param('image_width'), self._param('image_height')),
-            bo_mode=self._param('bo_mode'), structured_init=self._param('structured_init'),
-            arc_spacing=self._param('arc_spacing'), parts=self._param('parts'),
-            lawnmower_overlap=self._param('lawnmower_overlap'), lawnmower_tilt=self._param('lawnmower_tilt'),
-            fixed_cameras=fixed_cameras, reconstruction=reconstruction, tau=self._param('tau'),
-            reconstructed_weight=self._param('reconstructed_weight'))
+        self.get_logger().info(f'planning {request.num_cameras} cameras with {request.method} ({request.reward} '
+                               f'reward): {request.evaluations} evaluations, seed {request.seed}')
+        return plan_views(request, realizations, callback=progress, should_stop=should_stop)
 
     def _publish_plan(self, result: PlanResult, fixed: Optional[np.ndarray] = None) -> PoseArray:
         """/camera_plan/info first (so that a recon has the reward, and the cameras already flown
@@ -359,20 +377,10 @@ class PlannerNode(Node):
             self.get_logger().error(f'goal aborted: {text}')
             return finish(code, text)
 
-        try:  # the library's own checks, mapped to the action's error codes
-            validate_request(method, num_cameras, int(evaluations), int(initial))
-        except InvalidNumCamerasError as exc:
-            return abort(PlanViews.Result.INVALID_NUM_CAMERAS, str(exc))
-        except UnknownMethodError as exc:
-            return abort(PlanViews.Result.UNKNOWN_METHOD, str(exc))
-        except BudgetTooLargeError as exc:
-            return abort(PlanViews.Result.BUDGET_TOO_LARGE, str(exc))
-        except InvalidBudgetError as exc:
-            return abort(PlanViews.Result.INVALID_BUDGET, str(exc))
-        try:
-            check_reward_model(reward)
+        try:  # the request's own checks (vp_planner.request), mapped to the action's error codes
+            request = self._request(method, num_cameras, evaluations, initial, seed, reward)
         except ValueError as exc:
-            return abort(PlanViews.Result.UNKNOWN_REWARD_MODEL, str(exc))
+            return abort(error_code(exc), str(exc))
         try:
             fixed = self._goal_fixed_cameras(goal.fixed_cameras)
         except ValueError as exc:
@@ -381,6 +389,10 @@ class PlannerNode(Node):
             reconstruction = self._goal_reconstruction(goal.reconstruction)
         except ValueError as exc:
             return abort(PlanViews.Result.INVALID_RECONSTRUCTION, str(exc))
+        try:  # NaN poses, a non-finite reconstruction
+            request = replace(request, fixed_cameras=fixed, reconstruction=reconstruction)
+        except ValueError as exc:
+            return abort(error_code(exc), str(exc))
         if not self._wait_for_scene():
             if self._stopping():
                 return abort(PlanViews.Result.CANCELED, 'the planner is shutting down')
@@ -405,8 +417,7 @@ class PlannerNode(Node):
 
         try:
             start = time.monotonic()
-            plan = self._plan(method, num_cameras, evaluations, initial, seed, reward, progress, should_stop,
-                              fixed, reconstruction)
+            plan = self._plan(request, progress, should_stop)
             if plan.stopped:
                 why = 'cancelled' if goal_handle.is_cancel_requested else 'the planner is shutting down'
                 text = f'{why} after {plan.evaluations} evaluations'
@@ -422,18 +433,11 @@ class PlannerNode(Node):
             result.planning_time = time.monotonic() - start
             result.evaluations = int(plan.evaluations)
             return finish(PlanViews.Result.NONE, '', succeed=True)
-        except InvalidNumCamerasError as exc:  # more cameras than the memory holds
-            return abort(PlanViews.Result.INVALID_NUM_CAMERAS, str(exc))
-        except BudgetTooLargeError as exc:  # a run the memory cannot hold
-            return abort(PlanViews.Result.BUDGET_TOO_LARGE, str(exc))
-        except NoFeasiblePlanError as exc:
-            return abort(PlanViews.Result.NO_FEASIBLE_PLAN, str(exc))
         except InvalidSceneError as exc:
             return abort(PlanViews.Result.NO_SCENE, f'unusable scene: {exc}')
-        except InvalidFixedCamerasError as exc:  # NaN, or more than the memory holds with the plan
-            return abort(PlanViews.Result.INVALID_FIXED_CAMERAS, str(exc))
-        except InvalidReconstructionError as exc:
-            return abort(PlanViews.Result.INVALID_RECONSTRUCTION, str(exc))
+        except ValueError as exc:  # the library's refusals that need the scene or the memory
+            code = error_code(exc)
+            return abort(code, str(exc) if code != PlanViews.Result.PLANNER_FAILED else f'{type(exc).__name__}: {exc}')
         except Exception as exc:  # keep serving whatever happened inside the optimizer
             return abort(PlanViews.Result.PLANNER_FAILED, f'{type(exc).__name__}: {exc}')
         finally:

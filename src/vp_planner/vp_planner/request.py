@@ -1,0 +1,284 @@
+"""One planning request: :class:`PlanRequest`, everything :func:`vp_planner.optimizers.plan_views`
+needs besides the scene realizations and the callbacks, typed and validated in one place.
+
+The planner node builds it from a goal and its parameters, the CLI from its flags, the benchmarks
+from their cell arguments; ``plan_views(request, realizations, callback, should_stop)`` plans it.
+A request is frozen and validated on construction (``dataclasses.replace`` validates again), so a
+request that exists is one ``plan_views`` accepts up to the checks that need the scene (its memory,
+the parts' camera count) or the machine (:func:`vp_planner.optimizers.check_memory`).
+
+Fields (units; validation; the error raised, every one a ValueError):
+
+==========================  ===========================================================================
+``method``                  one of :data:`vp_planner.methods.METHODS` (UnknownMethodError)
+``num_cameras``             N, an integer in [2, :data:`MAX_CAMERAS`] (InvalidNumCamerasError)
+``evaluations``             the budget E of reward evaluations (eq. 7), an integer >= 1 (InvalidBudgetError)
+                            and <= :data:`vp_planner.methods.MAX_EVALUATIONS` [method] (BudgetTooLargeError)
+``initial_evaluations``     egp/gp: initial design size, an integer in [1, E] (InvalidBudgetError);
+                            ignored by the other methods
+``seed``                    random seed of numpy and torch, an integer >= 0
+``min_standoff``            m from every scene point, finite >= 0 (feasibility, :mod:`vp_planner.feasibility`)
+``min_altitude``            m above the ground, finite >= 0
+``min_separation``          m between cameras, finite >= 0
+``fov``                     horizontal field of view, rad, in (0, pi) (eq. 6)
+``theta_match``             matching angle of the reward, rad, in (0, pi) (eq. 6)
+``shell_depth``             m, outer bound of camera distances (:class:`vp_planner.space.ViewSpace`);
+                            None (automatic) or finite > 0
+``structured_init``         egp/gp: structured plans in the initial design, an integer >= 0 (0: random)
+``reward``                  one of :data:`vp_planner.reward_models.REWARD_MODELS` (UnknownRewardModelError)
+``image_size``              (width, height) of the cameras' images, pixels, integers >= 16
+``bo_mode``                 egp/gp: ``'trust_region'`` or ``'global'`` (the paper's)
+``arc_spacing``             arc: rad between neighbouring cameras, in (0, 2 pi)
+``parts``                   egp/gp: parts a field is planned by, an integer >= 0 (0: automatic)
+``lawnmower_overlap``       lawnmower: image overlap, in [0, 0.95]
+``lawnmower_tilt``          lawnmower: camera tilt from nadir, rad, in [0, 60 degrees]
+``fixed_cameras``           (M, 6) cameras already flown [cx cy cz vx vy vz] (m; viewing vector),
+                            finite, non-zero viewing vectors (InvalidFixedCamerasError); stored
+                            read-only, (0, 6) for none
+``reconstruction``          (Q, 3) points (m) an earlier sortie reconstructed, finite, or None
+                            (InvalidReconstructionError); stored read-only
+``tau``                     m: a scene point this close to the reconstruction counts as
+                            reconstructed, finite >= 0 (InvalidReconstructionError)
+``reconstructed_weight``    reward weight of a reconstructed point, in [0, 1] (InvalidReconstructionError)
+``dtype``                   reward precision, ``'float64'`` or ``'float32'``
+==========================  ===========================================================================
+
+Other bad fields raise :class:`InvalidRequestError`. :meth:`PlanRequest.as_dict` and
+:meth:`PlanRequest.from_dict` convert to and from plain (JSON) data; ``from_dict`` refuses keys
+that are not fields.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from typing import Any, Mapping, Optional
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .methods import BAYESIAN, MAX_EVALUATIONS, METHODS
+from .reward import DEFAULT_FOV, DEFAULT_THETA_MATCH
+from .reward_models import (DEFAULT_RECONSTRUCTED_WEIGHT, DEFAULT_REWARD_MODEL, DEFAULT_TAU, check_fixed_cameras,
+                            check_reward_model)
+
+__all__ = [
+    "MAX_CAMERAS",
+    "PlanRequest",
+    "InvalidRequestError",
+    "InvalidNumCamerasError",
+    "UnknownMethodError",
+    "UnknownRewardModelError",
+    "InvalidBudgetError",
+    "BudgetTooLargeError",
+    "InvalidFixedCamerasError",
+    "InvalidReconstructionError",
+    "check_lawnmower",
+    "check_reconstruction",
+    "check_sortie_weighting",
+    "DTYPES",
+    "BO_MODES",
+]
+
+#: The largest number of cameras N of a plan (:mod:`vp_planner.optimizers` says why).
+MAX_CAMERAS: int = 100
+#: Reward precisions a request may ask for.
+DTYPES: tuple[str, ...] = ("float64", "float32")
+#: egp/gp searches of the acquisition.
+BO_MODES: tuple[str, ...] = ("trust_region", "global")
+
+
+class InvalidRequestError(ValueError):
+    """A request field out of its range (the fields without an error of their own)."""
+
+
+class InvalidNumCamerasError(ValueError):
+    """num_cameras not an integer in [2, MAX_CAMERAS], or more cameras than the memory holds."""
+
+
+class UnknownMethodError(ValueError):
+    """method is not one of METHODS."""
+
+
+class UnknownRewardModelError(ValueError):
+    """reward is not one of REWARD_MODELS."""
+
+
+class InvalidBudgetError(ValueError):
+    """evaluations < 1, or smaller than initial_evaluations for egp/gp."""
+
+
+class BudgetTooLargeError(InvalidBudgetError):
+    """evaluations above :data:`MAX_EVALUATIONS`, or a run the memory cannot hold."""
+
+
+class InvalidFixedCamerasError(ValueError):
+    """Cameras already flown that are not finite (M, 6) cameras with a viewing direction, or
+    more than the memory holds together with the plan (:func:`check_memory` of N + M)."""
+
+
+class InvalidReconstructionError(ValueError):
+    """A reconstruction (of an earlier sortie) with non-finite points, more points than the
+    memory holds, or a tau / reconstructed_weight out of range."""
+
+
+def _integer(name: str, value: Any, lo: int, hi: Optional[int] = None, error: type = InvalidRequestError) -> int:
+    """``value`` as an int in [lo, hi] (bools and fractions refused), else ``error`` naming it."""
+    try:
+        ok = not isinstance(value, (bool, np.bool_)) and int(value) == value
+    except (TypeError, ValueError, OverflowError):
+        ok = False
+    if not ok or value < lo or (hi is not None and value > hi):
+        bound = f"from {lo} to {hi}" if hi is not None else f">= {lo}"
+        raise error(f"{name} must be an integer {bound}, got {value!r}")
+    return int(value)
+
+
+def _real(name: str, value: Any, lo: float, hi: float = math.inf, open_ends: bool = False) -> float:
+    """``value`` as a finite float in [lo, hi] ((lo, hi) with ``open_ends``), else InvalidRequestError."""
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise InvalidRequestError(f"{name} must be a number, got {value!r}") from None
+    inside = lo < x < hi if open_ends else lo <= x <= hi
+    if not (math.isfinite(x) and inside):
+        ends = f"({lo:g}, {hi:g})" if open_ends else f"[{lo:g}, {hi:g}]"
+        raise InvalidRequestError(f"{name} must be finite and in {ends}, got {value!r}")
+    return x
+
+
+def check_lawnmower(overlap: float, tilt: float) -> None:
+    """ValueError unless 0 <= overlap <= 0.95 and 0 <= tilt <= 60 degrees (finite)."""
+    if not (math.isfinite(overlap) and 0.0 <= overlap <= 0.95):
+        raise InvalidRequestError(f"lawnmower overlap must be in [0, 0.95], got {overlap}")
+    if not (math.isfinite(tilt) and 0.0 <= tilt <= math.radians(60.0) + 1e-12):
+        raise InvalidRequestError(f"lawnmower tilt must be in [0, 60 degrees] (rad), got {tilt}")
+
+
+def check_reconstruction(reconstruction: Any) -> NDArray[np.float64]:
+    """A reconstruction as finite (Q, 3) points (a flat array of 3 Q values is read as Q points);
+    InvalidReconstructionError otherwise."""
+    Q = np.asarray(reconstruction, dtype=np.float64)
+    if Q.size % 3 or (Q.ndim == 2 and Q.shape[1] != 3) or Q.ndim > 2:
+        raise InvalidReconstructionError(f"the reconstruction must be (Q, 3) points, got shape {Q.shape}")
+    Q = Q.reshape(-1, 3)
+    if not np.all(np.isfinite(Q)):
+        raise InvalidReconstructionError("the reconstruction contains non-finite coordinates")
+    return Q
+
+
+def check_sortie_weighting(tau: float, reconstructed_weight: float) -> None:
+    """InvalidReconstructionError unless tau is finite >= 0 and reconstructed_weight in [0, 1]."""
+    if not (math.isfinite(reconstructed_weight) and 0.0 <= reconstructed_weight <= 1.0):
+        raise InvalidReconstructionError(f"reconstructed_weight must be in [0, 1], got {reconstructed_weight}")
+    if not (math.isfinite(tau) and tau >= 0):
+        raise InvalidReconstructionError(f"tau must be finite and >= 0, got {tau}")
+
+
+def _read_only(a: NDArray[np.float64]) -> NDArray[np.float64]:
+    a = np.array(a, dtype=np.float64)
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class PlanRequest:
+    """What to plan (see the module docstring for every field's unit and rule)."""
+
+    method: str
+    num_cameras: int
+    evaluations: int = 100
+    initial_evaluations: int = 50
+    seed: int = 0
+    min_standoff: float = 0.5
+    min_altitude: float = 0.3
+    min_separation: float = 0.5
+    fov: float = DEFAULT_FOV
+    theta_match: float = DEFAULT_THETA_MATCH
+    shell_depth: Optional[float] = None
+    structured_init: int = 20
+    reward: str = DEFAULT_REWARD_MODEL
+    image_size: tuple[int, int] = (2000, 1500)
+    bo_mode: str = "trust_region"
+    arc_spacing: float = math.radians(30.0)
+    parts: int = 0
+    lawnmower_overlap: float = 0.7
+    lawnmower_tilt: float = 0.0
+    fixed_cameras: Any = None
+    reconstruction: Any = None
+    tau: float = DEFAULT_TAU
+    reconstructed_weight: float = DEFAULT_RECONSTRUCTED_WEIGHT
+    dtype: str = "float64"
+
+    def __post_init__(self) -> None:
+        def put(name: str, value: Any) -> None:
+            object.__setattr__(self, name, value)
+
+        # the goal's own fields first, in the order the planner's error codes were always checked
+        if not isinstance(self.method, str) or self.method not in METHODS:
+            raise UnknownMethodError(f"unknown method {self.method!r}; one of {', '.join(METHODS)}")
+        put("num_cameras", _integer("num_cameras", self.num_cameras, 2, MAX_CAMERAS, InvalidNumCamerasError))
+        put("evaluations", _integer("evaluations", self.evaluations, 1, None, InvalidBudgetError))
+        if self.evaluations > MAX_EVALUATIONS[self.method]:
+            raise BudgetTooLargeError(f"evaluations = {self.evaluations} is above the bound of "
+                                      f"{MAX_EVALUATIONS[self.method]} for method {self.method} "
+                                      f"(README, 'Planner node')")
+        if self.method in BAYESIAN:
+            put("initial_evaluations", _integer("initial_evaluations", self.initial_evaluations, 1, None,
+                                                InvalidBudgetError))
+            if self.evaluations < self.initial_evaluations:
+                raise InvalidBudgetError(f"evaluation budget {self.evaluations} is smaller than the initial "
+                                         f"design ({self.initial_evaluations})")
+        try:
+            check_reward_model(self.reward)
+        except ValueError as exc:
+            raise UnknownRewardModelError(str(exc)) from None
+        put("seed", _integer("seed", self.seed, 0))
+        for name in ("min_standoff", "min_altitude", "min_separation"):
+            put(name, _real(name, getattr(self, name), 0.0))
+        for name in ("fov", "theta_match"):
+            put(name, _real(name, getattr(self, name), 0.0, math.pi, open_ends=True))
+        if self.shell_depth is not None:
+            put("shell_depth", _real("shell_depth", self.shell_depth, 0.0, open_ends=True))
+        put("structured_init", _integer("structured_init", self.structured_init, 0))
+        try:
+            width, height = self.image_size
+        except (TypeError, ValueError):
+            raise InvalidRequestError(f"image_size must be (width, height), got {self.image_size!r}") from None
+        put("image_size", (_integer("image width", width, 16), _integer("image height", height, 16)))
+        if self.bo_mode not in BO_MODES:
+            raise InvalidRequestError(f"bo_mode must be one of {', '.join(BO_MODES)}, got {self.bo_mode!r}")
+        put("arc_spacing", _real("arc_spacing", self.arc_spacing, 0.0, 2 * math.pi, open_ends=True))
+        put("parts", _integer("parts", self.parts, 0))  # 0: automatic
+        check_lawnmower(self.lawnmower_overlap, self.lawnmower_tilt)
+        try:
+            put("fixed_cameras", _read_only(check_fixed_cameras(self.fixed_cameras)))
+        except ValueError as exc:
+            raise InvalidFixedCamerasError(f"fixed cameras: {exc}") from None
+        if self.reconstruction is not None:
+            put("reconstruction", _read_only(check_reconstruction(self.reconstruction)))
+        check_sortie_weighting(self.tau, self.reconstructed_weight)
+        if self.dtype not in DTYPES:
+            raise InvalidRequestError(f"dtype must be one of {', '.join(DTYPES)}, got {self.dtype!r}")
+
+    def as_dict(self) -> dict:
+        """The request as plain data (lists for the arrays), :meth:`from_dict`'s input."""
+        out = {f.name: getattr(self, f.name) for f in fields(self)}
+        out["image_size"] = list(self.image_size)
+        out["fixed_cameras"] = self.fixed_cameras.tolist()
+        out["reconstruction"] = None if self.reconstruction is None else self.reconstruction.tolist()
+        return out
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "PlanRequest":
+        """A request of plain data (:meth:`as_dict`, a JSON record); InvalidRequestError naming
+        keys that are not fields (and the field's own error for a bad value)."""
+        names = {f.name for f in fields(cls)}
+        unknown = sorted(set(data) - names)
+        if unknown:
+            raise InvalidRequestError(f"not fields of a plan request: {', '.join(unknown)}")
+        return cls(**dict(data))
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, PlanRequest):
+            return NotImplemented
+        return self.as_dict() == other.as_dict()
