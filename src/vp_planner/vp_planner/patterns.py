@@ -87,12 +87,12 @@ def footprint(distance: float, image: CameraModel, tilt: float = 0.0) -> tuple[f
 
     (``across`` at the footprint's centre line; a tilted footprint is a trapezoid). Requires
     tilt + b_v < pi / 2 (the upper image edge must meet the plane)."""
-    b_h, b_v = 0.5 * image.fov, image.half_fov_vertical
+    b_v = image.half_fov_vertical
     if not (0.0 <= tilt and tilt + b_v < 0.5 * math.pi):
         raise ValueError(f"tilt {tilt:.3f} rad: the image's upper edge does not meet the ground (max "
                          f"{0.5 * math.pi - b_v:.3f} rad)")
     along = distance * (math.tan(tilt + b_v) - math.tan(tilt - b_v))
-    return along, 2.0 * distance * math.tan(b_h) / math.cos(tilt)
+    return along, 2.0 * distance * image.tan_half_fov / math.cos(tilt)
 
 
 def lawnmower(lo_xy: ArrayLike, hi_xy: ArrayLike, plane_z: float, distance: float, n: int, image: CameraModel,

@@ -57,7 +57,7 @@ from typing import Any, Callable, Optional, Union
 import numpy as np
 import torch
 
-from vp_scene.camera import CameraModel
+from vp_scene.camera import CameraModel, optical_axes
 
 from .feasibility import check_realizations
 from .reward import DEFAULT_FOV, DEFAULT_THETA_MATCH, noisy_reward, prepare_points
@@ -130,23 +130,6 @@ def ablations() -> dict[str, tuple[str, CoverageParams]]:
         "coverage-cone": ("coverage", replace(base, frustum=False)),
     }
     return out
-
-
-def _unit_rows(cams: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Camera centres (B, N, 3) and optical-frame axes x_o, y_o, z_o (B, N, 3) (vp_scene.camera)."""
-    c = cams[..., :3]
-    v = cams[..., 3:]
-    n = torch.linalg.vector_norm(v, dim=-1, keepdim=True)
-    ok = (n > 0) & torch.isfinite(n)
-    z_o = torch.where(ok, v / torch.where(ok, n, torch.ones_like(n)), torch.zeros_like(v))
-    ez = torch.tensor([0.0, 0.0, 1.0], dtype=cams.dtype)
-    y_b = torch.linalg.cross(ez.expand_as(z_o), z_o)
-    yn = torch.linalg.vector_norm(y_b, dim=-1, keepdim=True)
-    vertical = yn < 1e-9
-    y_b = torch.where(vertical, torch.tensor([0.0, 1.0, 0.0], dtype=cams.dtype).expand_as(y_b),
-                      y_b / torch.where(vertical, torch.ones_like(yn), yn))
-    z_b = torch.linalg.cross(z_o, y_b)
-    return c, -y_b, -z_b, z_o
 
 
 def _window(theta_deg: torch.Tensor, p: CoverageParams) -> torch.Tensor:
@@ -272,7 +255,7 @@ def _point_coverage(cams: torch.Tensor, pts: torch.Tensor, p: CoverageParams, im
     B, N, _ = cams.shape
     K, P, _ = pts.shape
     dt = cams.dtype
-    c, x_o, y_o, z_o = _unit_rows(cams)
+    c, x_o, y_o, z_o = optical_axes(cams)
     valid_cam = torch.isfinite(cams).all(-1) & (torch.linalg.vector_norm(cams[..., 3:], dim=-1) > 0)
     flat = pts.reshape(1, 1, K * P, 3)
     d = flat - c[:, :, None, :]                                     # (B, N, KP, 3): p - c_i
@@ -282,8 +265,7 @@ def _point_coverage(cams: torch.Tensor, pts: torch.Tensor, p: CoverageParams, im
     ys = (d * y_o[:, :, None, :]).sum(-1)
     front = (depth > 1e-6) & valid_cam[:, :, None] & (r > 1e-9)
     safe = torch.where(front, depth, torch.ones_like(depth))
-    tx = math.tan(0.5 * image.fov)
-    ty = tx * image.height / image.width
+    tx, ty = image.tan_half_fov, image.tan_half_fov_vertical
     if p.frustum:
         u, v = xs / safe, ys / safe
         inside = front & (u.abs() <= tx) & (v.abs() <= ty)

@@ -36,7 +36,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from vp_scene.camera import check_cameras, world_to_camera
+from vp_scene.camera import check_cameras, project_with, world_to_camera
 
 __all__ = ["DenseResult", "neighbour_pairs", "overlap_pairs", "dense_reconstruct", "voxel_downsample", "silhouette_filter",
            "crop_to_box"]
@@ -102,21 +102,14 @@ def silhouette_filter(points: NDArray[np.float64], cameras: NDArray[np.float64],
                       masks: Sequence[NDArray[np.bool_]], dilate: int = 3) -> NDArray[np.bool_]:
     """Keep points that project onto (dilated) foreground in every view that sees them in-frame."""
     keep = np.ones(len(points), dtype=bool)
-    R, t = world_to_camera(cameras)
     kernel = np.ones((2 * dilate + 1, 2 * dilate + 1), np.uint8)
-    for i, m in enumerate(masks):
+    for camera, m in zip(np.asarray(cameras, dtype=np.float64), masks):
         fg = cv2.dilate(np.asarray(m, np.uint8), kernel) > 0
         h, w = fg.shape
-        Xc = points @ R[i].T + t[i]
-        z = Xc[:, 2]
-        front = z > 1e-6
-        u = np.full(len(points), -1, np.int64)
-        v = np.full(len(points), -1, np.int64)
-        u[front] = np.rint(K[0, 0] * Xc[front, 0] / z[front] + K[0, 2]).astype(np.int64)
-        v[front] = np.rint(K[1, 1] * Xc[front, 1] / z[front] + K[1, 2]).astype(np.int64)
-        inside = front & (u >= 0) & (u < w) & (v >= 0) & (v < h)
+        uv, inside = project_with(points, camera, K, w, h, min_depth=1e-6)
+        u, v = np.rint(uv[inside]).astype(np.int64).T
         bad = np.zeros(len(points), dtype=bool)
-        bad[inside] = ~fg[v[inside], u[inside]]
+        bad[inside] = ~fg[v, u]
         keep &= ~bad
     return keep
 

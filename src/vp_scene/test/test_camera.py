@@ -11,10 +11,13 @@ from vp_scene.camera import (
     cameras_to_poses,
     intrinsics,
     look_at,
+    optical_axes,
     optical_orientation,
     poses_to_cameras,
     project,
+    project_with,
     rotation_matrix,
+    tan_half_fov,
     world_to_camera,
 )
 
@@ -124,3 +127,39 @@ def test_roll_and_the_optical_frame_back_to_the_body() -> None:
     for deg in (10.0, -35.0):
         turned = (Rotation.from_quat(poses[:, 3:]) * Rotation.from_euler("x", deg, degrees=True)).as_quat()
         np.testing.assert_allclose(np.degrees(roll_of(np.hstack([poses[:, :3], turned]))), deg, atol=1e-9)
+
+
+def test_the_torch_axes_and_the_half_fov_are_the_conventions() -> None:
+    """Issue 19 (the camera's single home): the planner's torch rewards take the optical axes from
+    here (they re-derived them), and tan(fov / 2) has one definition."""
+    import torch
+
+    v = directions()
+    c = np.random.default_rng(1).normal(size=v.shape)
+    cams = np.concatenate([c, v], axis=1)
+    R_cw, _ = world_to_camera(cams)
+    centre, x_o, y_o, z_o = optical_axes(torch.as_tensor(cams))
+    np.testing.assert_array_equal(centre.numpy(), c)
+    for row, axis in enumerate((x_o, y_o, z_o)):
+        np.testing.assert_allclose(axis.numpy(), R_cw[:, row], atol=1e-12)
+    bad = torch.tensor([[0.0, 0.0, 1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, math.nan, 0.0, 1.0]])
+    assert torch.all(optical_axes(bad)[3] == 0)  # no viewing direction: no axes (a reward of 0)
+    cam = CameraModel(640, 480, 1.2)
+    assert tan_half_fov(1.2) == math.tan(0.6) == cam.tan_half_fov
+    assert cam.focal_px == 320 / tan_half_fov(1.2) == intrinsics(640, 480, 1.2)[0, 0]
+    assert cam.tan_half_fov_vertical == pytest.approx(math.tan(cam.half_fov_vertical), rel=1e-12)
+
+
+def test_projection_with_a_given_calibration() -> None:
+    """project_with: project's pixels for any K (the reconstruction's silhouette filter)."""
+    rng = np.random.default_rng(2)
+    pts = rng.uniform(-1, 1, (400, 3)) + [0.0, 0.0, 1.0]
+    cam = np.array([3.0, 0.0, 1.0, -1.0, 0.0, 0.0])
+    uv, inside = project(pts, cam, 320, 240, 1.3)
+    uv2, inside2 = project_with(pts, cam, intrinsics(320, 240, 1.3), 320, 240)
+    np.testing.assert_array_equal(inside, inside2)
+    np.testing.assert_array_equal(uv[inside], uv2[inside])
+    ij = np.rint(uv2[inside2]).astype(int)
+    assert inside.any() and ij.min() >= 0 and (ij < [320, 240]).all()
+    _, far = project_with(pts, cam, intrinsics(320, 240, 1.3), 320, 240, min_depth=10.0)
+    assert not far.any()

@@ -33,16 +33,21 @@ with OpenCV pixel centres at integer coordinates (u right, v down). OpenGL and C
 centres at +0.5, so their principal point is (W/2, H/2) (:func:`principal_point_gl`).
 
 Quaternions go through :class:`scipy.spatial.transform.Rotation`. Everything is vectorized
-over leading dimensions and works on numpy arrays. ROS-free.
+over leading dimensions and works on numpy arrays, except :func:`optical_axes`, the same axes
+for torch tensors (the planner's batched rewards; torch is imported only there). ROS-free.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
+
+if TYPE_CHECKING:
+    import torch
 
 __all__ = [
     "OPTICAL_IN_BODY",
@@ -59,6 +64,9 @@ __all__ = [
     "world_to_camera",
     "camera_to_world_gl",
     "project",
+    "project_with",
+    "tan_half_fov",
+    "optical_axes",
     "check_cameras",
 ]
 
@@ -199,7 +207,17 @@ class CameraModel:
     @property
     def focal_px(self) -> float:
         """f = (W / 2) / tan(fov / 2), pixels."""
-        return 0.5 * self.width / math.tan(0.5 * self.fov)
+        return 0.5 * self.width / tan_half_fov(self.fov)
+
+    @property
+    def tan_half_fov(self) -> float:
+        """tan(fov / 2): the image's half-width at unit depth."""
+        return tan_half_fov(self.fov)
+
+    @property
+    def tan_half_fov_vertical(self) -> float:
+        """tan(fov / 2) H / W: the image's half-height at unit depth (square pixels)."""
+        return self.tan_half_fov * self.height / self.width
 
     @property
     def K(self) -> NDArray[np.float64]:
@@ -220,10 +238,16 @@ def _check_size(width: int, height: int, fov: float) -> None:
         raise ValueError(f"fov must be in (0, pi) rad, got {fov}")
 
 
+def tan_half_fov(fov: float) -> float:
+    """tan(fov / 2) of a field of view ``fov`` (rad): the half-extent of the image at unit depth,
+    f = (W / 2) / tan(fov / 2) (the module docstring)."""
+    return math.tan(0.5 * fov)
+
+
 def intrinsics(width: int, height: int, fov: float = math.pi / 2) -> NDArray[np.float64]:
     """3x3 calibration K (OpenCV pixel centres) from the horizontal field of view, square pixels."""
     _check_size(width, height, fov)
-    f = 0.5 * width / math.tan(0.5 * fov)
+    f = 0.5 * width / tan_half_fov(fov)
     return np.array([[f, 0.0, 0.5 * (width - 1)], [0.0, f, 0.5 * (height - 1)], [0.0, 0.0, 1.0]])
 
 
@@ -265,13 +289,45 @@ def project(points: ArrayLike, camera6: ArrayLike, width: int, height: int,
     (u, v, 1)^T ~ K (R_cw X + t); a point is in the image when its depth is > 0 and
     -0.5 <= u < W - 0.5, -0.5 <= v < H - 0.5 (no occlusion test). Points behind get NaN.
     """
+    return project_with(points, camera6, intrinsics(width, height, fov), width, height)
+
+
+def project_with(points: ArrayLike, camera6: ArrayLike, K: ArrayLike, width: int, height: int,
+                 min_depth: float = 1e-9) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """:func:`project` with a given calibration ``K`` (3, 3) (a reconstruction's, say): pixels
+    (M, 2) and in-image flags of world points (M, 3); a point is in front when its depth is above
+    ``min_depth`` (m). Rounding the pixels of the points in the image (``np.rint``) gives pixel
+    indices in [0, W) x [0, H)."""
     P = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    K = intrinsics(width, height, fov)
+    K = np.asarray(K, dtype=np.float64)
     R, t = world_to_camera(camera6)
     Xc = P @ R.T + t
     z = Xc[:, 2]
-    front = z > 1e-9
+    front = z > min_depth
     with np.errstate(divide="ignore", invalid="ignore"):
         uv = (Xc[:, :2] / np.where(front, z, np.nan)[:, None]) * K[[0, 1], [0, 1]] + K[:2, 2]
     inside = front & (uv[:, 0] >= -0.5) & (uv[:, 0] < width - 0.5) & (uv[:, 1] >= -0.5) & (uv[:, 1] < height - 0.5)
     return uv, inside
+
+
+def optical_axes(cameras: "torch.Tensor") -> tuple["torch.Tensor", "torch.Tensor", "torch.Tensor", "torch.Tensor"]:
+    """Camera centres c and optical-frame axes x_o, y_o, z_o (each (..., 3)) of cameras (..., 6)
+    given as a torch tensor: the rows of :func:`world_to_camera`'s R_cw (x_o = -y_b, y_o = -z_b,
+    z_o = x_b of :func:`rotation_matrix`), computed in torch for batched (and differentiable)
+    rewards. A camera with a zero or non-finite viewing direction gets z_o = 0 instead of an
+    error (the rewards score it 0)."""
+    import torch  # only here: the rest of the module is numpy
+
+    c = cameras[..., :3]
+    v = cameras[..., 3:]
+    n = torch.linalg.vector_norm(v, dim=-1, keepdim=True)
+    ok = (n > 0) & torch.isfinite(n)
+    z_o = torch.where(ok, v / torch.where(ok, n, torch.ones_like(n)), torch.zeros_like(v))
+    ez = torch.tensor([0.0, 0.0, 1.0], dtype=cameras.dtype)
+    y_b = torch.linalg.cross(ez.expand_as(z_o), z_o)
+    yn = torch.linalg.vector_norm(y_b, dim=-1, keepdim=True)
+    vertical = yn < _VERTICAL_TOL
+    y_b = torch.where(vertical, torch.tensor([0.0, 1.0, 0.0], dtype=cameras.dtype).expand_as(y_b),
+                      y_b / torch.where(vertical, torch.ones_like(yn), yn))
+    z_b = torch.linalg.cross(z_o, y_b)
+    return c, -y_b, -z_b, z_o

@@ -37,7 +37,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from vp_interfaces.msg import CameraPlan, PlantPlacement, ReconstructionScore, SceneDescription
 
-from .camera import cameras_to_poses, poses_to_cameras, rotation_matrix
+from .camera import cameras_to_poses, poses_to_cameras, rotation_matrix, tan_half_fov
 from .cloud import numpy_to_pointcloud2, pack_rgb, pointcloud2_to_numpy, realizations_from_cloud, unpack_rgb
 
 __all__ = [
@@ -160,7 +160,7 @@ def frustum_markers(cameras: ArrayLike, frame_id: str, stamp: Any, fov: float,
     clear = Marker()
     clear.action = Marker.DELETEALL
     out.markers.append(clear)
-    half_w = depth * math.tan(fov / 2.0)
+    half_w = depth * tan_half_fov(fov)
     half_h = half_w / aspect
     for i, cam in enumerate(np.asarray(cameras, dtype=float)):
         c = cam[:3]
