@@ -39,7 +39,7 @@ from typing import TYPE_CHECKING, Any, Optional, Sequence
 
 import numpy as np
 
-from vp_scene.layout import BUILTIN_LAYOUTS, LayoutError, read_scenario, resolve_layout
+from vp_scene.layout import BUILTIN_LAYOUTS, LayoutError, read_scenario
 
 if TYPE_CHECKING:
     from .request import PlanRequest
@@ -181,12 +181,13 @@ def scene_of(args: argparse.Namespace) -> dict:
             "wind_variance": args.wind_variance, "wind_direction": args.wind_direction}
 
 
-def build_scene(scene: dict) -> np.ndarray:
-    """The noisy realizations (K, P, 3) of a scene dict."""
+def build_scene(scene: dict) -> tuple[np.ndarray, str]:
+    """The noisy realizations (K, P, 3) of a scene dict and its layout's name (the layout
+    resolved once, by the scene's build)."""
     from vp_scene.build import build_noisy_scene
 
     noisy, _ = build_noisy_scene(**scene)
-    return np.asarray(noisy.points, dtype=np.float64)
+    return np.asarray(noisy.points, dtype=np.float64), noisy.scene.scenario
 
 
 def _image_size(args: argparse.Namespace, default: tuple[int, int] = (2000, 1500)) -> tuple[int, int]:
@@ -255,7 +256,7 @@ def plan(args: argparse.Namespace) -> dict:
     out = Path(args.out)
     image_size = request.image_size
     scene = scene_of(args)
-    realizations = build_scene(scene)
+    realizations, layout_name = build_scene(scene)
 
     bar: Any = None
     if not args.no_progress:
@@ -277,7 +278,7 @@ def plan(args: argparse.Namespace) -> dict:
             bar.close()
     poses = cameras_to_poses(res.cameras)
     data = {
-        "scenario": resolve_layout(scene["scenario"]).name,
+        "scenario": layout_name,
         "method": args.method,
         "reward_model": res.reward_model,
         "num_cameras": int(args.cameras),
@@ -353,12 +354,12 @@ def score(args: argparse.Namespace) -> float:
     fov = args.fov if args.fov is not None else pf.fov
     theta = args.theta_match if args.theta_match is not None else pf.theta_match
     image = CameraModel(*_image_size(args, pf.image_size or (2000, 1500)), fov)
-    realizations = build_scene(scene)
+    realizations, layout_name = build_scene(scene)
     fixed, weights = _sortie_of(pf.data, realizations)
     value = float(np.asarray(make_reward(model, realizations, fov, theta, image, fixed_cameras=fixed,
                                          point_weights=weights)(pf.cameras[None]))[0])
     print(f"plan score: {model} reward of {args.plan} ({len(pf.cameras)} cameras, "
-          f"{resolve_layout(scene['scenario']).name}):",
+          f"{layout_name}):",
           file=sys.stderr)
     print(f"{value:.6f}")
     return value

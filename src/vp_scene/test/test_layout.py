@@ -354,6 +354,36 @@ def test_bad_layout_fails_before_the_models_are_read(tmp_path: Path) -> None:
         build_noisy_scene(str(bad), models=tmp_path / "no_such_models_folder")
 
 
+def count_layout_resolutions(monkeypatch) -> list:
+    """Every module's ``resolve_layout`` counted in the returned list (one entry a call)."""
+    import sys
+
+    from vp_scene import layout as layout_module
+
+    calls: list = []
+    real = layout_module.resolve_layout
+
+    def counted(*args, **kwargs):
+        calls.append(args[0])
+        return real(*args, **kwargs)
+
+    for name in ("vp_scene.layout", "vp_scene.scenario", "vp_scene.build", "vp_planner.cli"):
+        if name in sys.modules:
+            monkeypatch.setattr(sys.modules[name], "resolve_layout", counted, raising=False)
+    return calls
+
+
+def test_a_scene_build_resolves_its_layout_once(tmp_path: Path, monkeypatch) -> None:
+    """Issue 19 (the house): build.py and scenario.py each resolved the layout; make_scene is the
+    one place now, and a models folder is read after the layout is checked."""
+    path = _write(tmp_path, "two.yaml", "plants:\n- {x: 0, y: 0}\n- {x: 1, y: 0}\n")
+    calls = count_layout_resolutions(monkeypatch)
+    noisy, models = build_noisy_scene(str(path), models="", points_per_plant=20, realizations=2)
+    assert calls == [str(path)] and noisy.scene.scenario == "two" and len(models) == 2
+    with pytest.raises(ValueError, match="no_such_models_folder"):
+        make_scene("one_plant", models=str(tmp_path / "no_such_models_folder"), points_per_plant=10)
+
+
 def test_from_placements_checks_values() -> None:
     with pytest.raises(LayoutError, match=r"^/scene/description: plants\[1\]\.scale must be a number in \(0, 3\]"):
         Layout.from_placements("s", [("a", 0.0, 1.0, 0.0, 0.0), ("b", 0.0, -1.0, 1.0, 0.0)], "/scene/description")

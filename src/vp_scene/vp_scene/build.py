@@ -2,11 +2,10 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional, Sequence, Union
+from typing import Sequence, Union
 
-from .layout import Layout, resolve_layout
+from .layout import Layout
 from .plants import PlantModel
-from .ply import load_models
 from .scenario import make_scene
 from .wind import NoisyScene, WindConfig, make_noisy_scene
 
@@ -32,18 +31,11 @@ def build_noisy_scene(scenario: Union[str, dict, Layout] = "one_plant",
 
     Raises:
         ValueError (PlantModelError for model files, LayoutError for the layout) naming the
-        problem. Cheap checks (the layout, read and checked once here; wind parameters) come
-        before loading any model file.
+        problem. Cheap checks (the wind parameters, then the layout, resolved once, in
+        :func:`vp_scene.scenario.make_scene`) come before loading any model file.
     """
-    layout = resolve_layout(scenario, plant_spacing, row_spacing)
     config = WindConfig(levels=levels, realizations=realizations, variance=wind_variance,
                         direction=wind_direction)
-    loaded: Optional[list] = None
-    if isinstance(models, (str, Path)):
-        if str(models):
-            loaded = load_models(models)
-    elif models is not None:
-        loaded = list(models)
-    scene = make_scene(layout, models=loaded, seed=seed, points_per_plant=points_per_plant,
+    scene = make_scene(scenario, models=models, seed=seed, points_per_plant=points_per_plant,
                        plant_spacing=plant_spacing, row_spacing=row_spacing)
     return make_noisy_scene(scene, config, seed), scene.models

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Optional, Sequence, Union
 
 import numpy as np
@@ -19,6 +20,7 @@ import trimesh
 
 from .layout import BUILTIN_LAYOUTS, Layout, LayoutError, PlantSpec, resolve_layout
 from .plants import PlantModel
+from .ply import load_models
 from .procedural import procedural_corn, procedural_name_seed, procedural_seed
 
 __all__ = ["SCENARIOS", "PlacedPlant", "Scene", "layout", "make_scene", "place_points", "place_mesh"]
@@ -147,10 +149,14 @@ def _wrap(yaw: float) -> float:
     return 0.0 if w >= 2.0 * math.pi else w
 
 
-def make_scene(scenario: Union[str, dict, Layout], models: Optional[Sequence[PlantModel]] = None, seed: int = 0,
-               points_per_plant: int = 4000, plant_spacing: float = 0.6, row_spacing: float = 0.76) -> Scene:
+def make_scene(scenario: Union[str, dict, Layout], models: Union[None, str, Path, Sequence[PlantModel]] = None,
+               seed: int = 0, points_per_plant: int = 4000, plant_spacing: float = 0.6,
+               row_spacing: float = 0.76) -> Scene:
     """Build a scene (paper Sec. V-A) after a layout (:func:`vp_scene.layout.resolve_layout`:
-    a built-in name with these spacings, a layout file path, a layout dict or a Layout).
+    a built-in name with these spacings, a layout file path, a layout dict or a Layout). The one
+    place a scene's layout is resolved (:func:`vp_scene.build.build_noisy_scene` forwards it);
+    ``models`` may be a folder of PLY plants ('' or None: procedural corn), loaded after the
+    layout and the counts are checked (a bad layout is reported before any model file is read).
 
     Each plant gets yaw ~ U[0, 2 pi) and scale ~ U[0.9, 1.1]; its model is drawn among
     ``models`` (seeded choice) or, when ``models`` is None, is a distinct procedural corn plant
@@ -179,6 +185,8 @@ def make_scene(scenario: Union[str, dict, Layout], models: Optional[Sequence[Pla
     lay = resolve_layout(scenario, plant_spacing, row_spacing)
     n_pts = _check_int("points_per_plant", points_per_plant, 1)
     seed = _check_int("seed", seed, 0)
+    if isinstance(models, (str, Path)):
+        models = load_models(models) if str(models) else None
     if models is not None:
         models = list(models)
         if not models:
