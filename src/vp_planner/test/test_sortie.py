@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from vp_planner import optimizers
+from vp_planner import optimizers, request
 from vp_planner.cli import main
 from vp_planner.optimizers import InvalidFixedCamerasError, InvalidReconstructionError, PlanRequest, plan_views
 from vp_planner.reward_models import (CoverageParams, make_reward, point_coverage, reconstructed_mask,
@@ -125,7 +125,7 @@ def test_bad_fixed_cameras_are_refused(realizations, fixed, text) -> None:
 def test_fixed_cameras_beyond_the_memory_are_refused(realizations, monkeypatch) -> None:
     plan_views(PlanRequest("random", 2, evaluations=2, fixed_cameras=[ring_camera(0)]), realizations)
     need = optimizers.estimate_memory(2 + 50, realizations.shape[0], realizations.shape[1], "coverage")
-    monkeypatch.setattr(optimizers, "available_memory", lambda: int(need))  # the plan alone fits
+    monkeypatch.setattr(request, "available_memory", lambda: int(need))  # the plan alone fits
     optimizers.check_memory(2, realizations.shape, "coverage")
     with pytest.raises(InvalidFixedCamerasError, match="memory|GiB"):
         plan_views(PlanRequest("random", 2, evaluations=2, fixed_cameras=np.tile(ring_camera(0), (50, 1))),
@@ -140,7 +140,7 @@ def test_bad_reconstructions_are_refused(realizations, monkeypatch) -> None:
     with pytest.raises(InvalidReconstructionError, match="reconstructed_weight"):
         plan_views(PlanRequest("random", 2, evaluations=2, reconstruction=[[0.0, 0.0, 0.0]], reconstructed_weight=1.5),
                    realizations)
-    monkeypatch.setattr(optimizers, "available_memory", lambda: 1000)
+    monkeypatch.setattr(request, "available_memory", lambda: 1000)
     with pytest.raises(InvalidReconstructionError, match="GiB"):
         optimizers.sortie_weights(realizations, np.zeros((100, 3)), 0.03, 0.1)
 

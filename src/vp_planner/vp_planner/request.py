@@ -46,6 +46,11 @@ Fields (units; validation; the error raised, every one a ValueError):
 Other bad fields raise :class:`InvalidRequestError`. :meth:`PlanRequest.as_dict` and
 :meth:`PlanRequest.from_dict` convert to and from plain (JSON) data; ``from_dict`` refuses keys
 that are not fields.
+
+The checks of a request against the scene and the machine live here too, run by ``plan_views``
+before anything is allocated: :func:`check_memory` (one evaluation of N cameras),
+:func:`check_budget_memory` (the run's records and GPs), :func:`check_reconstruction_memory`,
+:func:`check_parts` (the parts a field is planned by) and :func:`total_evaluations`.
 """
 from __future__ import annotations
 
@@ -77,6 +82,14 @@ __all__ = [
     "check_sortie_weighting",
     "DTYPES",
     "BO_MODES",
+    "estimate_memory",
+    "estimate_run_memory",
+    "check_memory",
+    "check_budget_memory",
+    "check_reconstruction_memory",
+    "available_memory",
+    "check_parts",
+    "total_evaluations",
 ]
 
 #: The largest number of cameras N of a plan (:mod:`vp_planner.optimizers` says why).
@@ -282,3 +295,115 @@ class PlanRequest:
         if not isinstance(other, PlanRequest):
             return NotImplemented
         return self.as_dict() == other.as_dict()
+
+
+# ---------------------------------------------------------------------- against the scene and the machine
+#: Bytes a reconstruction point costs the hole weighting (the points and their KD-tree).
+RECONSTRUCTION_POINT_BYTES = 64
+
+
+def check_reconstruction_memory(num_points: int, available: Optional[int] = None) -> None:
+    """InvalidReconstructionError when a reconstruction of ``num_points`` points needs more than
+    80 % of the available memory (``available`` bytes; default: :func:`available_memory`)."""
+    need = int(num_points) * RECONSTRUCTION_POINT_BYTES
+    have = available_memory() if available is None else int(available)
+    if have is not None and need > 0.8 * have:
+        raise InvalidReconstructionError(f"the reconstruction's {num_points} points need about "
+                                         f"{need / 2**30:.1f} GiB; {have / 2**30:.1f} GiB are available")
+
+
+def estimate_memory(num_cameras: int, num_realizations: int, num_points: int, reward: str) -> int:
+    """Bytes one reward evaluation of an N-camera plan needs at most (an upper estimate).
+
+    paper: its chunks (``reward.DEFAULT_MAX_ELEMENTS`` elements, about 10 float64 arrays of that
+    size alive at once) plus per pair S = N (N - 1) / 2 an accumulator, two indices and the pair's
+    coefficients (about 80 bytes). coverage: the per-camera terms, N x K x min(P, 3000) elements
+    (each realization subsampled to 3000 points) of about 200 bytes in all (measured: 150), and
+    its pair blocks (``max_elements`` = 2^22 float32 elements, about 6 arrays).
+    """
+    from .reward import DEFAULT_MAX_ELEMENTS
+    from .reward_models import CoverageParams
+
+    N, K, P = int(num_cameras), int(num_realizations), int(num_points)
+    S = N * (N - 1) // 2
+    if reward == "paper":
+        return 10 * 8 * DEFAULT_MAX_ELEMENTS + 80 * S
+    kp = K * min(P, CoverageParams().max_points or P)
+    return 200 * N * kp + 6 * 4 * (1 << 22) + 80 * S
+
+
+def estimate_run_memory(method: str, num_cameras: int, evaluations: int) -> int:
+    """Bytes a run of ``evaluations`` reward evaluations (all of them, parts included) keeps
+    beyond one evaluation's own (an upper estimate): every evaluation is recorded (its U row and
+    its cameras, 6N float64 each with their array headers, the value and flags: about
+    300 + 96 N bytes), the grid methods hold their candidate plans at once (48 N bytes each)
+    and egp/gp's GPs hold n x n kernel matrices and their factors and gradients while fitting
+    (four models of about six float64 matrices: 192 n^2 bytes)."""
+    N, E = int(num_cameras), int(evaluations)
+    need = E * (300 + 96 * N) + E * 48 * N
+    if method in BAYESIAN:
+        need += 192 * E * E
+    return need
+
+
+def check_budget_memory(method: str, num_cameras: int, evaluations: int,
+                        available: Optional[int] = None) -> None:
+    """BudgetTooLargeError when :func:`estimate_run_memory` exceeds 80 % of the available memory
+    (``available`` bytes; default: :func:`available_memory`), before anything is allocated."""
+    need = estimate_run_memory(method, num_cameras, evaluations)
+    have = available_memory() if available is None else int(available)
+    if have is not None and need > 0.8 * have:
+        raise BudgetTooLargeError(
+            f"{evaluations} evaluations of {num_cameras} cameras with {method} need about {need / 2**30:.1f} GiB; "
+            f"{have / 2**30:.1f} GiB are available: use a smaller budget")
+
+
+def available_memory() -> Optional[int]:
+    """MemAvailable of /proc/meminfo in bytes (None where unknown)."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def check_memory(num_cameras: int, realizations_shape: tuple, reward: str,
+                 available: Optional[int] = None) -> None:
+    """InvalidNumCamerasError when :func:`estimate_memory` exceeds 80 % of the available memory
+    (``available`` bytes; default: :func:`available_memory`), before anything is allocated."""
+    K, P = int(realizations_shape[0]), int(realizations_shape[1])
+    need = estimate_memory(num_cameras, K, P, reward)
+    have = available_memory() if available is None else int(available)
+    if have is not None and need > 0.8 * have:
+        raise InvalidNumCamerasError(
+            f"num_cameras = {num_cameras} on {K} x {P} points needs about {need / 2**30:.1f} GiB for the "
+            f"{reward} reward; {have / 2**30:.1f} GiB are available: use fewer cameras or points")
+
+
+def check_parts(parts: int, method: str, realizations: NDArray[np.float64], num_cameras: int) -> int:
+    """The number of parts a run plans by (1 for methods other than egp/gp): ``parts`` (an integer
+    >= 0, :class:`PlanRequest`), or :func:`vp_planner.parts.auto_parts` for 0.
+    InvalidNumCamerasError for more parts than pairs of cameras."""
+    if method not in BAYESIAN:
+        return 1
+    if parts == 0:
+        from .parts import auto_parts
+
+        return auto_parts(realizations, num_cameras)
+    if 2 * int(parts) > num_cameras:
+        raise InvalidNumCamerasError(f"parts = {parts} needs at least {2 * int(parts)} cameras (2 a part), got {num_cameras}")
+    return int(parts)
+
+
+def total_evaluations(method: str, evaluations: int, parts: int) -> int:
+    """Reward evaluations a run makes: ``evaluations``; for egp/gp by G > 1 parts, G times that
+    (one plan's budget a part) plus ``evaluations // 2`` for the joint refinement; for
+    ``lawnmower`` 1 (a survey is flown as planned, not tuned)."""
+    if method == "lawnmower":
+        return 1
+    if method in BAYESIAN and parts > 1:
+        return parts * int(evaluations) + max(1, int(evaluations) // 2)
+    return int(evaluations)

@@ -65,7 +65,10 @@ __all__ = [
     "check_realizations",
 ]
 
+#: ``callback(done, total, best, weights) -> bool`` after every evaluation (False: stop).
 Callback = Callable[[int, int, float, Optional[list]], bool]
+#: ``should_stop() -> bool``, asked between evaluations (True: stop).
+StopCheck = Callable[[], bool]
 
 
 class NoFeasiblePlanError(ValueError):

@@ -1,0 +1,131 @@
+"""The BO driver of :func:`vp_planner.optimizers.plan_views`: ``egp`` and ``gp`` (Sec. IV) in a
+:class:`~vp_planner.space.ViewSpace`, their initial design, and planning a field by parts
+(:mod:`vp_planner.parts`). :func:`vp_planner.bo.optimize` runs the BO loop itself; this module
+binds it to a space and its :class:`~vp_planner.space.Objective` (feasibility, cancel, records).
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Optional
+
+import numpy as np
+import torch
+from numpy.typing import NDArray
+
+from .space import Callback, NoFeasiblePlanError, Objective, StopCheck, ViewSpace
+
+__all__ = ["initial_design", "plan_bo", "plan_bo_by_parts", "optimize_in"]
+
+
+def initial_design(space: ViewSpace, n: int, rng: np.random.Generator, structured: int = 20,
+                   should_stop: Optional[StopCheck] = None) -> NDArray[np.float64]:
+    """n initial plans U (n, 6N): up to ``structured`` structured plans, then random feasible ones
+    (PlanningCancelled as soon as ``should_stop()`` is True)."""
+    S = space.structured(max_plans=max(0, min(structured, n))) if structured > 0 else np.zeros((0, space.dim))
+    S = S[:n]
+    try:
+        rest = space.sample(n - len(S), rng, should_stop=should_stop) if n > len(S) else np.zeros((0, space.dim))
+    except NoFeasiblePlanError as exc:
+        # The range egp/gp serve (issue 19, item 4; README "Planner node"): their space is a
+        # shell about the scene, and random plans in it keep min_separation only up to a few
+        # dozen cameras (one plant, 0.5 m: 40 cameras found 10 feasible plans, 44 none, in 16000
+        # draws). The ring methods widen their circle instead and serve every N up to 100.
+        raise NoFeasiblePlanError(f"{exc}; egp/gp plan up to about 40 cameras a plant (more: circle, arc, sa "
+                                  f"or lawnmower, or a field planned by parts)") from None
+    return np.concatenate([S, rest], axis=0)
+
+
+def plan_bo(space: ViewSpace, obj: Objective, evaluations: int, initial_evaluations: int, seed: int,
+        rng: np.random.Generator, ensemble: bool, structured_init: int, bo_mode: str) -> dict:
+    X0 = initial_design(space, initial_evaluations, rng, structured_init, obj.should_stop)
+    return optimize_in(space, obj, X0, evaluations, initial_evaluations, seed, ensemble, bo_mode)
+
+
+def optimize_in(space: Any, obj: Objective, X0: NDArray[np.float64], evaluations: int, initial_evaluations: int,
+              seed: int, ensemble: bool, bo_mode: str) -> dict:
+    """:func:`vp_planner.bo.optimize` on ``obj`` in ``space`` (a ViewSpace, or the JointSpace of
+    planning by parts) from the initial design X0; the run's weights, models, steps and the
+    initial design's best."""
+    from . import bo  # imported lazily: botorch is heavy
+
+    info: dict = {"weights": None, "model_names": None}
+
+    def objective(U: torch.Tensor) -> torch.Tensor:
+        return obj(U).to(U.dtype) if isinstance(U, torch.Tensor) else torch.as_tensor(obj(U))
+
+    def feasible(U: torch.Tensor) -> torch.Tensor:
+        # BO's rejection sampling and acquisition ask this for every candidate batch: the place to
+        # see a cancel between evaluations (PlanningCancelled leaves bo.optimize)
+        obj.check_stop()
+        return space.feasible(U)
+
+    def bo_callback(done: int, total: int, best: float, weights: Optional[list]) -> bool:
+        if weights is not None:
+            obj.weights = info["weights"] = [float(x) for x in weights]
+        return not obj.cancelled
+
+    res = bo.optimize(objective, space.dim, evaluations, initial_evaluations, seed, ensemble=ensemble,
+                      feasible=feasible, initial_design=torch.as_tensor(X0, dtype=torch.float64),
+                      callback=bo_callback, settings=bo.BOSettings(mode=bo_mode),
+                      periodic=torch.as_tensor(space.periodic),
+                      groups=torch.arange(space.dim) % 6)  # the 6 parameters of a camera
+    if ensemble and res.steps:
+        info["weights"] = [float(x) for x in res.steps[-1].weights]
+    info["model_names"] = list(res.model_names)
+    info["steps"] = [st.as_dict(res.model_names) for st in res.steps]
+    info["initial_best"] = float(res.best_initial) if math.isfinite(res.best_initial) else None
+    return info
+
+
+def plan_bo_by_parts(space: ViewSpace, obj: Objective, evaluations: int, initial_evaluations: int, seed: int,
+                 ensemble: bool, structured_init: int, bo_mode: str, parts: int) -> dict:
+    """EGP-EI (GP-EI) by parts (:mod:`vp_planner.parts`): each of the ``parts`` parts gets the budget
+    of a plan (``evaluations``, ``initial_evaluations``) on its own points, then the union of the
+    part plans is refined on the whole field's reward with ``evaluations // 2`` evaluations.
+
+    ``obj`` is the whole run's objective (the joint space's): it counts the part evaluations too
+    (recorded with reward 0 and ``candidate=False``: a part's reward is not a plan's) so that the
+    budget, the progress callback and cancelling work as for any method."""
+    from .parts import JointSpace, allocate_cameras, partition
+
+    R = space.realizations
+    labels = partition(R, parts, seed)
+    counts = allocate_cameras(np.bincount(labels, minlength=parts), space.num_cameras)
+    fixed = np.zeros((0, 3))
+    part_spaces, part_U, records = [], [], []
+    for g in range(parts):
+        sub = ViewSpace(R[:, labels == g], int(counts[g]), min_standoff=space.min_standoff,
+                        min_altitude=space.min_altitude, min_separation=space.min_separation, fov=space.fov,
+                        theta_match=space.theta_match, reward_model=space.reward_model,
+                        image_size=(space.image.width, space.image.height), obstacles=R, fixed_positions=fixed,
+                        fixed_cameras=space.fixed_cameras,
+                        point_weights=None if space.point_weights is None else space.point_weights[:, labels == g])
+        part_obj = Objective(sub, evaluations, dtype=obj.dtype, should_stop=obj.should_stop,
+                             callback=_forward(obj))
+        info = plan_bo(sub, part_obj, evaluations, initial_evaluations, seed + g, np.random.default_rng([seed, g]),
+                   ensemble, structured_init, bo_mode)
+        best = part_obj.best_cameras()
+        if best is None:
+            raise NoFeasiblePlanError(f"no feasible plan for part {g + 1} of {parts} ({counts[g]} cameras)")
+        fixed = np.concatenate([fixed, best[:, :3]])
+        part_spaces.append(sub)
+        part_U.append(part_obj.U[part_obj.best_index])
+        records.append({"part": g, "cameras": int(counts[g]), "points": int(sub.realizations.shape[1]),
+                        "evaluations": part_obj.count, "reward": float(part_obj.best_value),
+                        "initial_best": info.get("initial_best")})
+    joint = JointSpace(space, part_spaces)
+    obj.space = joint
+    info = optimize_in(joint, obj, np.concatenate(part_U)[None], max(1, evaluations // 2), 1, seed, ensemble,
+                     "trust_region")
+    info["parts"] = records
+    return info
+
+
+def _forward(obj: Objective) -> Callback:
+    """A part objective's callback: count the evaluation in the whole run's objective
+    (:meth:`Objective.record_part_evaluation`), whose callback and cancel then see it."""
+    def callback(done: int, total: int, best: float, weights: Optional[list]) -> bool:
+        if weights is not None:
+            obj.weights = weights
+        return obj.record_part_evaluation()
+    return callback
