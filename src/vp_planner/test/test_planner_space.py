@@ -9,7 +9,8 @@ import torch
 
 from vp_planner.reward import noisy_reward
 from vp_planner.reward_models import make_reward
-from vp_planner.space import NoFeasiblePlanError, Objective, PlanningCancelled, ViewSpace
+from vp_planner.objective import Objective
+from vp_planner.space import NoFeasiblePlanError, PlanningCancelled, ViewSpace
 
 
 @pytest.fixture(scope="module")

@@ -1,7 +1,7 @@
 """The baselines of :func:`vp_planner.optimizers.plan_views`: ``circle``, ``arc``, ``sa``, ``random``
 and ``lawnmower`` (the methods' descriptions: :mod:`vp_planner.optimizers`).
 
-Each ``plan_<method>(space, obj, ...)`` spends its budget on the :class:`~vp_planner.space.Objective`
+Each ``plan_<method>(space, obj, ...)`` spends its budget on the :class:`~vp_planner.objective.Objective`
 ``obj`` of the :class:`~vp_planner.space.ViewSpace` ``space`` (which records every evaluation and
 the best feasible plan, reports progress and sees a cancel); none returns a plan of its own.
 """
@@ -12,7 +12,8 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from .space import NoFeasiblePlanError, Objective, ViewSpace
+from .objective import Objective
+from .space import NoFeasiblePlanError, ViewSpace
 
 __all__ = ["CircleFamily", "ARC_PHASES", "batch_size", "evaluate_plans", "plan_circle", "plan_arc", "plan_sa",
            "plan_random", "plan_lawnmower", "sa_candidates"]

@@ -1,7 +1,7 @@
 """The BO driver of :func:`vp_planner.optimizers.plan_views`: ``egp`` and ``gp`` (Sec. IV) in a
 :class:`~vp_planner.space.ViewSpace`, their initial design, and planning a field by parts
 (:mod:`vp_planner.parts`). :func:`vp_planner.bo.optimize` runs the BO loop itself; this module
-binds it to a space and its :class:`~vp_planner.space.Objective` (feasibility, cancel, records).
+binds it to a space and its :class:`~vp_planner.objective.Objective` (feasibility, cancel, records).
 """
 from __future__ import annotations
 
@@ -12,7 +12,8 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 
-from .space import Callback, NoFeasiblePlanError, Objective, StopCheck, ViewSpace
+from .objective import Objective
+from .space import Callback, NoFeasiblePlanError, StopCheck, ViewSpace
 
 __all__ = ["initial_design", "plan_bo", "plan_bo_by_parts", "optimize_in"]
 

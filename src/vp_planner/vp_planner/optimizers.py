@@ -80,10 +80,10 @@ from .request import (MAX_CAMERAS, BudgetTooLargeError, InvalidBudgetError, Inva
                       check_lawnmower, check_memory, check_parts, check_reconstruction, check_reconstruction_memory,
                       check_sortie_weighting, estimate_memory, estimate_run_memory, total_evaluations)
 from .reward_models import DEFAULT_REWARD_MODEL
+from .objective import Objective
 from .space import (
     Callback,
     NoFeasiblePlanError,
-    Objective,
     PlanningCancelled,
     StopCheck,
     ViewSpace,

@@ -1,4 +1,7 @@
-"""The continuous search space of camera plans, its feasibility rules, and the objective wrapper.
+"""The continuous search space of camera plans: its encoding, feasibility and reward binding.
+
+Random and structured plans of the space: :mod:`vp_planner.designs`; the objective the
+optimizers maximize on it: :mod:`vp_planner.objective`.
 
 Why a shell-and-target parameterization
 ---------------------------------------
@@ -35,14 +38,14 @@ Only the minimum separation between cameras is not guaranteed by the decode.
 Handling infeasible candidates: :meth:`ViewSpace.feasible` checks all rules (altitude,
 stand-off against every point of every realization with a KD-tree, separation, finiteness; the
 rules live in the torch-free :mod:`vp_planner.feasibility`).
-:class:`Objective` returns 0 for an infeasible plan (still counted as an evaluation), BO
+:class:`vp_planner.objective.Objective` returns 0 for an infeasible plan (still counted as an evaluation), BO
 restricts its acquisition to feasible candidates through ``feasible``, and the plan a method
 returns is always the best *feasible* plan evaluated (an error if none was).
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Callable, Optional
 
 import numpy as np
@@ -59,7 +62,6 @@ from .reward_models import DEFAULT_REWARD_MODEL, RewardFunction, check_fixed_cam
 __all__ = [
     "SceneExtent",
     "ViewSpace",
-    "Objective",
     "PlanningCancelled",
     "NoFeasiblePlanError",
     "check_realizations",
@@ -105,7 +107,7 @@ class SceneExtent:
         return cls(flat.min(axis=0), flat.max(axis=0))
 
 
-def _to_numpy(x: Any) -> tuple[NDArray[np.float64], bool]:
+def to_numpy(x: Any) -> tuple[NDArray[np.float64], bool]:
     if isinstance(x, torch.Tensor):
         return x.detach().cpu().to(torch.float64).numpy(), True
     return np.asarray(x, dtype=np.float64), False
@@ -238,7 +240,7 @@ class ViewSpace:
 
         Returns the same kind (numpy or torch, float64) as the input; a (6N,) vector gives (N, 6).
         """
-        X, is_torch = _to_numpy(U)
+        X, is_torch = to_numpy(U)
         single = X.ndim == 1
         X = np.atleast_2d(X)
         if X.shape[-1] != self.dim:
@@ -314,7 +316,7 @@ class ViewSpace:
         realization, and pairwise at least ``min_separation`` apart. Returns a bool array (B,)
         (a torch BoolTensor for torch input; a Python bool for a single plan).
         """
-        X, is_torch = _to_numpy(x)
+        X, is_torch = to_numpy(x)
         if X.ndim in (1, 2) and X.shape[-1] == self.dim and not (X.ndim == 2 and X.shape == (self.num_cameras, 6)):
             single = X.ndim == 1
             cams = self.decode(np.atleast_2d(X))
@@ -331,207 +333,16 @@ class ViewSpace:
     def _feasible_cameras(self, cams: NDArray[np.float64]) -> NDArray[np.bool_]:
         return self.rules(cams)
 
-    # ------------------------------------------------------------------ sampling
+    # ------------------------------------------------------------------ designs (vp_planner.designs)
     def sample(self, n: int, rng: Any = None, max_tries: int = 1000,
-               should_stop: Optional[Callable[[], bool]] = None) -> NDArray[np.float64]:
-        """n feasible plans U (n, 6N) drawn uniformly from the cube, by rejection.
+               should_stop: Optional[StopCheck] = None) -> NDArray[np.float64]:
+        """n feasible plans U (n, 6N) drawn uniformly from the cube (:func:`vp_planner.designs.random_plans`)."""
+        from .designs import random_plans
 
-        Raises NoFeasiblePlanError when fewer than n were found in ``max_tries`` rounds, and
-        PlanningCancelled as soon as ``should_stop()`` is True (asked every round: for large N
-        the search can take minutes).
-        """
-        rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
-        out: list[NDArray[np.float64]] = []
-        have = 0
-        batch = max(16, 2 * n)
-        for _ in range(max_tries):
-            if have >= n:
-                break
-            if should_stop is not None and should_stop():
-                raise PlanningCancelled()
-            U = rng.random((batch, self.dim))
-            U = U[self.feasible(U)]
-            out.append(U)
-            have += len(U)
-        if have < n:
-            raise NoFeasiblePlanError(
-                f"no feasible plan: found {have} of {n} feasible plans in {max_tries * batch} random draws "
-                f"(min_separation {self.min_separation}, min_standoff {self.min_standoff}, "
-                f"min_altitude {self.min_altitude})")
-        return np.concatenate(out)[:n] if n > 0 else np.zeros((0, self.dim))
+        return random_plans(self, n, rng, max_tries, should_stop)
 
     def structured(self, max_plans: int = 20) -> NDArray[np.float64]:
-        """Up to ``max_plans`` structured plans U (M, 6N), the patterns a good plan is made of.
+        """Up to ``max_plans`` structured plans U (M, 6N) (:func:`vp_planner.designs.structured_plans`)."""
+        from .designs import structured_plans
 
-        In this order (infeasible ones are dropped):
-
-        * 4 caps: the N cameras on a small circle (a spherical cap) of angular radius
-          rho = theta_match / 2 about a central direction (plus one camera on the axis for
-          N >= 5), so that the widest pair is about theta_match as seen from the scene's centre,
-          at elevations 35, 50, 20, 65 degrees and several distances;
-        * 2 rings: N cameras evenly spread in azimuth at the elevation 90 - theta_match/2 + 2
-          degrees, where opposite cameras meet at just under theta_match (the paper reward's
-          best circle), at the shell's outer edge and a little inside it;
-        * 12 arcs: N cameras 30 degrees apart in azimuth (the pattern that reconstructs best),
-          at elevations 20, 40 and 60 degrees, close to the stand-off distance and farther out,
-          facing the long side of the scene and the opposite side;
-        * 4 more caps.
-
-        Every camera looks at the scene's centre; positions are on the shell of the space.
-        """
-        N = self.num_cameras
-        tm = self.theta_match
-        span = self.elevation_hi - self.elevation_lo
-
-        def u_el(deg: float) -> float:
-            return float(np.clip((math.radians(deg) - self.elevation_lo) / span, 0.0, 1.0))
-
-        def caps(variants) -> list:
-            out = []
-            for el_deg, az_deg, u_dist, spread in variants:
-                centre_dir = np.array(self._dir_from_angles(math.radians(az_deg), math.radians(el_deg)))
-                ring = N if N <= 4 else N - 1
-                rho = spread * tm / 2.0
-                dirs = [centre_dir] if N > 4 else []
-                e1 = np.cross([0.0, 0.0, 1.0], centre_dir)
-                e1 /= np.linalg.norm(e1)
-                e2 = np.cross(centre_dir, e1)
-                for k in range(ring):
-                    a = 2 * math.pi * k / ring
-                    d = math.cos(rho) * centre_dir + math.sin(rho) * (math.cos(a) * e1 + math.sin(a) * e2)
-                    dirs.append(d / np.linalg.norm(d))
-                out.append(np.array([self._u_from_dir(d) + (u_dist,) for d in dirs]))
-            return out
-
-        def along(az0_deg: float, step_deg: float, el_deg: float, u_dist: float) -> NDArray[np.float64]:
-            az = (az0_deg + step_deg * (np.arange(N) - 0.5 * (N - 1))) / 360.0
-            return np.stack([np.mod(az, 1.0), np.full(N, u_el(el_deg)), np.full(N, u_dist)], axis=1)
-
-        ring_el = min(85.0, 90.0 - math.degrees(tm) / 2.0 + 2.0)
-        u_pos = caps([(35, 0, 1.0, 1.0), (50, 90, 0.75, 1.0), (20, 180, 1.0, 0.9), (65, 270, 0.5, 1.0)])
-        u_pos += [along(0.0, 360.0 / N, ring_el, 1.0), along(0.0, 360.0 / N, ring_el, 0.6)]
-        long_side = 90.0 if self.extent.half[0] >= self.extent.half[1] else 0.0
-        u_pos += [along(long_side + side, 30.0, el, u_dist) for el in (60.0, 40.0, 20.0)
-                  for u_dist in (0.05, 0.4) for side in (0.0, 180.0)]
-        u_pos += caps([(35, 45, 0.5, 0.8), (80, 135, 1.0, 1.0), (50, 225, 0.25, 1.1), (20, 315, 0.75, 1.0)])
-        u_pos = u_pos[: max(0, max_plans)]
-        if not u_pos:
-            return np.zeros((0, self.dim))
-        U = self.encode(np.array(u_pos), np.full((len(u_pos), N, 3), 0.5))
-        return U[self.feasible(U)]
-
-    @staticmethod
-    def _dir_from_angles(phi: float, eps: float) -> tuple[float, float, float]:
-        return (math.cos(eps) * math.cos(phi), math.cos(eps) * math.sin(phi), math.sin(eps))
-
-    def _u_from_dir(self, d: NDArray[np.float64]) -> tuple[float, float]:
-        phi = math.atan2(d[1], d[0]) % (2 * math.pi)
-        eps = math.asin(max(-1.0, min(1.0, d[2] / np.linalg.norm(d))))
-        u_el = (eps - self.elevation_lo) / (self.elevation_hi - self.elevation_lo)
-        return (phi / (2 * math.pi), float(min(1.0, max(0.0, u_el))))
-
-
-@dataclass
-class Objective:
-    """The reward (eq. 7 averaging) on U for optimizers: 0 for infeasible plans; counts and records.
-
-    Calling it on U (B, 6N) (numpy or torch) decodes, checks feasibility, evaluates
-    the space's reward model for the feasible rows and returns rewards (B,) of the input's kind.
-    Every row counts as one evaluation; after each one ``callback(done, total, best, weights)``
-    is called (``weights`` = :attr:`weights`, the latest ensemble weights an optimizer stored);
-    when it returns False the objective records that row and raises :class:`PlanningCancelled`.
-    ``should_stop()`` is asked before every batch and by :meth:`check_stop` (which optimizers
-    call in their feasible-plan searches); True raises :class:`PlanningCancelled` too.
-    Evaluations beyond ``total`` raise RuntimeError.
-    """
-
-    space: ViewSpace
-    total: int
-    callback: Optional[Callback] = None
-    dtype: torch.dtype = torch.float64
-    weights: Optional[list] = None
-    U: list = field(default_factory=list)
-    cameras: list = field(default_factory=list)
-    values: list = field(default_factory=list)
-    feasible_flags: list = field(default_factory=list)
-    candidate_flags: list = field(default_factory=list)
-    best_value: float = 0.0
-    best_index: int = -1
-    cancelled: bool = False
-    should_stop: Optional[Callable[[], bool]] = None
-
-    @property
-    def count(self) -> int:
-        return len(self.values)
-
-    def check_stop(self) -> None:
-        """Raise :class:`PlanningCancelled` (and mark the run cancelled) when ``should_stop()``."""
-        if self.cancelled or (self.should_stop is not None and self.should_stop()):
-            self.cancelled = True
-            raise PlanningCancelled()
-
-    def trace(self) -> NDArray[np.float64]:
-        """Best-so-far reward of a feasible candidate plan after each evaluation (0 before the first)."""
-        ok = np.asarray(self.feasible_flags, bool) & np.asarray(self.candidate_flags, bool)
-        v = np.where(ok, np.asarray(self.values, float), 0.0)
-        return np.maximum.accumulate(np.maximum(v, 0.0)) if len(v) else np.zeros(0)
-
-    def evaluate_cameras(self, cams: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Reward of camera plans (B, N, 6) without bookkeeping (no feasibility check)."""
-        if len(cams) == 0:
-            return np.zeros(0)
-        r = self.space.reward(np.asarray(cams, dtype=np.float64), self.dtype)
-        return np.asarray(r, dtype=np.float64).reshape(-1)
-
-    def __call__(self, U: Any) -> Any:
-        X, is_torch = _to_numpy(U)
-        X = np.atleast_2d(X)
-        cams = self.space.decode(X)
-        return self.record(X, cams, is_torch)
-
-    def record(self, X: NDArray[np.float64], cams: NDArray[np.float64], as_torch: bool = False,
-               feasible: Optional[NDArray[np.bool_]] = None, candidate: bool = True) -> Any:
-        """Evaluate plans given by both U rows X (B, dim) (may be NaN when not applicable) and
-        cameras (B, N, 6); record them one at a time; return rewards (0 where infeasible).
-
-        ``candidate=False`` marks evaluations a method spends on something it will not return
-        (the ``arc`` baseline tuning its circle): they count against the budget but never
-        become the best plan."""
-        self.check_stop()
-        ok = self.space._feasible_cameras(cams) if feasible is None else np.asarray(feasible, bool)
-        vals = np.zeros(len(cams))
-        if ok.any():
-            vals[ok] = self.evaluate_cameras(cams[ok])
-        for k in range(len(cams)):
-            if self.count >= self.total:
-                raise RuntimeError(f"evaluation budget of {self.total} exceeded")
-            self.U.append(X[k].copy())
-            self.cameras.append(cams[k].copy())
-            self.values.append(float(vals[k]))
-            self.feasible_flags.append(bool(ok[k]))
-            self.candidate_flags.append(bool(candidate))
-            if candidate and ok[k] and (self.best_index < 0 or vals[k] > self.best_value):
-                self.best_value, self.best_index = float(vals[k]), self.count - 1
-            if self.callback is not None and self.callback(self.count, self.total, self.best_value, self.weights) is False:
-                self.cancelled = True
-                raise PlanningCancelled()
-        return torch.from_numpy(vals) if as_torch else vals
-
-    def record_part_evaluation(self) -> bool:
-        """Count one evaluation spent on a part of the field (:mod:`vp_planner.parts`), not on a
-        plan of this space: it uses the budget and reaches the callback like any evaluation but is
-        never a candidate (its trace entry is the best complete plan so far, 0 before the first).
-        Returns False when the callback asked to stop (the run is then cancelled)."""
-        if self.count >= self.total:
-            raise RuntimeError(f"evaluation budget of {self.total} exceeded")
-        self.U.append(np.full(self.space.dim, np.nan))
-        self.cameras.append(np.full((self.space.num_cameras, 6), np.nan))
-        self.values.append(0.0)
-        self.feasible_flags.append(False)
-        self.candidate_flags.append(False)
-        if self.callback is not None and self.callback(self.count, self.total, self.best_value, self.weights) is False:
-            self.cancelled = True
-        return not self.cancelled
-
-    def best_cameras(self) -> Optional[NDArray[np.float64]]:
-        return None if self.best_index < 0 else self.cameras[self.best_index]
+        return structured_plans(self, max_plans)
