@@ -38,7 +38,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from cluster import Task, add_cluster_args, open_client, run_tasks  # noqa: E402
 from common import (ROOT, add_capture, cached, capture_of, capture_tag, chamfer_text, default_models,  # noqa: E402
-                    machine, models_tag, reconstruct_record, scene)
+                    known_realizations, machine, models_tag, reconstruct_record, reconstructed,
+                    scene)
 from stats import describe, describe_difference, paired_difference, rank, summary  # noqa: E402
 
 #: (field, N) cells: the issue's targets, and N = 16 on the row (planned and reconstructed).
@@ -133,7 +134,8 @@ def recon_cell(cache: Path, out: Path, field: str, n: int, label: str, plan: dic
         cfg = ReconConfig(width=args.width, height=args.height, num_threads=args.threads,
                           capture=capture_of(args))
         ks = range(min(args.realizations, len(noisy.points)))
-        return reconstruct_record(noisy, plan["cameras"], cfg, out / "recon" / "fields" / tag, ks)
+        return reconstruct_record(noisy, plan["cameras"], cfg, out / "recon" / "fields" / tag, ks,
+                                  known_realizations(cache / "recon" / f"{tag}.json", out / "recon" / "fields" / tag))
     return cached(cache / "recon" / f"{tag}.json", compute)
 
 
@@ -210,10 +212,10 @@ def main(argv=None) -> int:
 
 
 def realization_chamfers(r: dict, args) -> dict:
-    """realization -> Chamfer x100 of a reconstruction record, None where it failed (a failed
-    plan reconstruction fails in every realization asked)."""
-    per = [] if r.get("error") else r["per_realization"]
-    return {k: (per[k]["chamfer"] if k < len(per) else None) for k in range(args.realizations)}
+    """realization -> Chamfer x100 of a reconstruction record, None where it failed (each
+    realization on its own: ``common.reconstruct_record``; a failed plan fails in every one)."""
+    per = {p.get("realization", i): p.get("chamfer") for i, p in enumerate(r.get("per_realization", []))}
+    return {k: per.get(k) for k in range(args.realizations)}
 
 
 def paired_lines(field: str, n: int, args, recons: dict, result: dict) -> list[str]:
@@ -259,7 +261,7 @@ def write_results(args, out: Path, cells, plans, recons, subsampling) -> None:
             elif r.get("error"):
                 rec = [f"{describe(summary(realization_chamfers(r, args)))} ({r['error']})", "-", "-", "-", "-"]
             else:
-                per = r["per_realization"]
+                per = reconstructed(r["per_realization"])
                 rec = [describe(summary(realization_chamfers(r, args))),
                        f"{np.mean([x['accuracy'] for x in per]):.3f}",
                        f"{np.mean([x['completeness'] for x in per]):.3f}",

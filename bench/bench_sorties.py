@@ -17,9 +17,11 @@ says where it does not. Writes ``results/bench_sorties.{md,json}``; every plan a
 reconstruction is cached as JSON under ``<out>/cache`` (a re-run resumes). Plants: Corn50 from
 ``../shared/data/corn50`` when present (``--models``), else procedural.
 
-This runs for hours on 2 cores at the defaults (13 plans and 7 reconstructions a scenario); a
-smoke slice: ``--scenarios one_plant --evals 8 --init 6 --realizations 1 --width 800 --height 600
---capture ideal --out /tmp/sorties``.
+Plans and reconstructions are tasks on Dask (``--scheduler``, ``--workers``: README "Running the
+benchmarks on a cluster"; ``--threads 1`` beside more than one local worker). This runs for hours
+on 2 cores at the defaults (8 plans and 7 reconstructions a scenario); a smoke slice:
+``--scenarios one_plant --evals 8 --init 6 --realizations 1 --width 800 --height 600 --capture ideal
+--out /tmp/sorties``.
 """
 from __future__ import annotations
 
@@ -32,8 +34,9 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from cluster import Task, add_cluster_args, open_client, run_tasks  # noqa: E402
 from common import (ROOT, add_capture, cached, capture_of, capture_tag, chamfer_text, default_models,  # noqa: E402
-                    machine, models_tag, plan_cell, reconstruct_record, scene, write_json)
+                    machine, models_tag, plan_cell, plan_path, reconstruct_record, scene, write_json)
 
 #: scenario -> (N cameras of sortie 1, M cameras of sortie 2).
 SORTIES = {'one_plant': (4, 2), 'three_row': (6, 3), 'six_rect': (6, 3), 'grid_3x3': (8, 4)}
@@ -59,17 +62,13 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument('--reconstructed-weight', type=float, default=0.1)
     ap.add_argument('--out', default=str(ROOT / 'results'))
     add_capture(ap)
+    add_cluster_args(ap)
     return ap.parse_args(argv)
 
 
 def sortie2_cell(cache: Path, scenario: str, first: dict, m: int, args, reconstruction=None) -> dict:
     """An egp plan of M cameras given sortie 1's cameras (d), and its reconstruction (e); cached."""
     from vp_planner.optimizers import PlanRequest, plan_views
-
-    case = 'e' if reconstruction is not None else 'd'
-    tag = (f'{models_tag(args.models)}-{scenario}-sortie2-{case}-m{m}-seed{args.seed}-e{args.evals}-i{args.init}'
-           + (f'-tau{args.tau:g}-w{args.reconstructed_weight:g}-{args.width}x{args.height}'
-              f'{capture_tag(capture_of(args))}-k{args.realizations}' if reconstruction is not None else ''))
 
     def compute() -> dict:
         import torch
@@ -81,15 +80,23 @@ def sortie2_cell(cache: Path, scenario: str, first: dict, m: int, args, reconstr
                                      reconstructed_weight=args.reconstructed_weight), noisy.points)
         return {'cameras': np.asarray(res.cameras).tolist(), 'reward': float(res.reward), 'seconds': float(res.seconds),
                 'reconstructed_fraction': res.reconstructed_fraction}
-    return cached(cache / 'plans' / f'{tag}.json', compute)
+    return cached(sortie2_path(cache, scenario, m, args, reconstruction is not None), compute)
+
+
+def sortie2_path(cache: Path, scenario: str, m: int, args, with_reconstruction: bool) -> Path:
+    """The cache file of :func:`sortie2_cell` (case e: ``with_reconstruction``)."""
+    case = 'e' if with_reconstruction else 'd'
+    tag = (f'{models_tag(args.models)}-{scenario}-sortie2-{case}-m{m}-seed{args.seed}-e{args.evals}-i{args.init}'
+           + (f'-tau{args.tau:g}-w{args.reconstructed_weight:g}-{args.width}x{args.height}'
+              f'{capture_tag(capture_of(args))}-k{args.realizations}' if with_reconstruction else ''))
+    return cache / 'plans' / f'{tag}.json'
 
 
 def recon_cell(cache: Path, out: Path, scenario: str, name: str, cameras, args) -> dict:
     """Reconstruct cameras (all of both sorties) in the first ``--realizations`` realizations; cached."""
     from vp_recon.pipeline import ReconConfig
 
-    tag = (f'{models_tag(args.models)}-{scenario}-{name}-seed{args.seed}-e{args.evals}-{args.width}x{args.height}'
-           f'{capture_tag(capture_of(args))}-k{args.realizations}')
+    tag = recon_tag(scenario, name, args)
 
     def compute() -> dict:
         noisy, _ = scene(scenario, args.models)
@@ -101,6 +108,12 @@ def recon_cell(cache: Path, out: Path, scenario: str, name: str, cameras, args) 
     return cached(cache / 'recon' / f'{tag}.json', compute)
 
 
+def recon_tag(scenario: str, name: str, args) -> str:
+    """The cache name of :func:`recon_cell`."""
+    return (f'{models_tag(args.models)}-{scenario}-{name}-seed{args.seed}-e{args.evals}-{args.width}x{args.height}'
+            f'{capture_tag(capture_of(args))}-k{args.realizations}')
+
+
 def reconstruction_points(record: dict) -> np.ndarray:
     """The points of every realization a reconstruction record wrote (its recon_<k>.ply)."""
     from vp_scene.ply import load_points
@@ -109,30 +122,68 @@ def reconstruction_points(record: dict) -> np.ndarray:
     return np.concatenate(clouds) if clouds else np.zeros((0, 3))
 
 
-def run_scenario(cache: Path, out: Path, scenario: str, args) -> dict:
-    """Sortie 1 and every case of sortie 2 of one scenario: plans, rewards, Chamfer x100."""
-    n, m = SORTIES[scenario]
+def run(client, cache: Path, out: Path, args) -> dict:
+    """Every scenario's sortie 1 and cases of sortie 2 (plans, rewards, Chamfer x100) as tasks on
+    the Dask ``client``, in four waves (each needs the one before): (1) sortie 1 and the plans of
+    a, b, c; (2) sortie 1's reconstruction, the plans of d, the reconstructions of a, b, c;
+    (3) the plans of e (from sortie 1's reconstruction); (4) the reconstructions of d and e.
+    A task that fails is a record with its error (counted, never dropped)."""
     kw = dict(evals=args.evals, init=args.init, models=args.models)
-    first = plan_cell(cache, scenario, 'egp', args.seed, num_cameras=n, **kw)
-    first_rec = recon_cell(cache, out, scenario, f'sortie1-egp-n{n}', first['cameras'], args)
-    row = {'n': n, 'm': m, 'sortie1': {'reward': first['reward'], 'chamfer': first_rec}, 'cases': {}}
-    plans = {
-        'a': plan_cell(cache, scenario, 'egp', args.seed, num_cameras=n + m, **kw),
-        'b': plan_cell(cache, scenario, 'egp', args.seed, num_cameras=m, **kw),
-        'c-circle': plan_cell(cache, scenario, 'circle', args.seed, num_cameras=m, **kw),
-        'c-arc': plan_cell(cache, scenario, 'arc', args.seed, num_cameras=m, **kw),
-        'd': sortie2_cell(cache, scenario, first, m, args),
-    }
-    if first_rec.get('chamfer_mean') is not None:
-        plans['e'] = sortie2_cell(cache, scenario, first, m, args, reconstruction_points(first_rec))
-    for case in CASES:
-        if case not in plans:
-            row['cases'][case] = {'error': 'sortie 1 did not reconstruct', 'chamfer_mean': None}
-            continue
-        cams = plans[case]['cameras'] if case == 'a' else np.concatenate([first['cameras'], plans[case]['cameras']])
-        rec = recon_cell(cache, out, scenario, f'{case}-n{n}-m{m}', np.asarray(cams).tolist(), args)
-        row['cases'][case] = {'reward': plans[case]['reward'], 'plan_seconds': plans[case].get('seconds'), **rec}
-    return row
+    plan_of = {'a': ('egp', 1), 'b': ('egp', 0), 'c-circle': ('circle', 0), 'c-arc': ('arc', 0)}
+
+    def plan_task(scenario: str, key: str, variant: str, cameras: int) -> Task:
+        a = (cache, scenario, variant, args.seed, args.evals, args.init, args.models, cameras)
+        return Task((scenario, key), plan_cell, a, plan_path(*a), f'{scenario} plan {key}')
+
+    def recon_task(scenario: str, key: str, name: str, cameras) -> Task:
+        return Task((scenario, key), recon_cell, (cache, out, scenario, name, np.asarray(cameras).tolist(), args),
+                    cache / 'recon' / f'{recon_tag(scenario, name, args)}.json', f'{scenario} recon {key}')
+
+    def sortie2_task(scenario: str, key: str, first: dict, reconstruction=None) -> Task:
+        m = SORTIES[scenario][1]
+        return Task((scenario, key), sortie2_cell, (cache, scenario, first, m, args, reconstruction),
+                    sortie2_path(cache, scenario, m, args, reconstruction is not None), f'{scenario} plan {key}')
+
+    sizes = {s: SORTIES[s] for s in args.scenarios}
+    plans = run_tasks(client, [plan_task(s, 'sortie1', 'egp', n) for s, (n, m) in sizes.items()]
+                      + [plan_task(s, c, v, m + n * extra) for s, (n, m) in sizes.items()
+                         for c, (v, extra) in plan_of.items()], 'planning')
+
+    def both(s: str, case: str):
+        """The cameras reconstructed after sortie 2 of ``case``: a alone, else sortie 1 + case."""
+        first, p = plans[(s, 'sortie1')], plans[(s, case)]
+        return p['cameras'] if case == 'a' else np.concatenate([first['cameras'], p['cameras']])
+
+    ok = [s for s in sizes if 'error' not in plans[(s, 'sortie1')]]
+    recons = run_tasks(client, [recon_task(s, 'sortie1', f'sortie1-egp-n{sizes[s][0]}', plans[(s, 'sortie1')]['cameras'])
+                                for s in ok]
+                       + [sortie2_task(s, 'd', plans[(s, 'sortie1')]) for s in ok]
+                       + [recon_task(s, c, f'{c}-n{sizes[s][0]}-m{sizes[s][1]}', both(s, c)) for s in ok
+                          for c in plan_of if 'error' not in plans[(s, c)]], 'sortie 1, a-c')
+    plans.update({k: v for k, v in recons.items() if k[1] == 'd'})
+    flown = [s for s in ok if recons[(s, 'sortie1')].get('chamfer_mean') is not None]
+    plans.update(run_tasks(client, [sortie2_task(s, 'e', plans[(s, 'sortie1')],
+                                                 reconstruction_points(recons[(s, 'sortie1')])) for s in flown],
+                           'planning e'))
+    recons.update(run_tasks(client, [recon_task(s, c, f'{c}-n{sizes[s][0]}-m{sizes[s][1]}', both(s, c))
+                                     for s in ok for c in ('d', 'e') if 'error' not in plans.get((s, c), {'error': 1})],
+                            'd, e'))
+    rows = {}
+    for s, (n, m) in sizes.items():
+        first = plans[(s, 'sortie1')]
+        row = {'n': n, 'm': m, 'sortie1': {'reward': first.get('reward'), 'chamfer': recons.get((s, 'sortie1'), first)},
+               'cases': {}}
+        for case in CASES:
+            p = plans.get((s, case))
+            if p is None:
+                why = 'sortie 1 did not plan' if 'error' in first else 'sortie 1 did not reconstruct'
+                row['cases'][case] = {'error': why, 'chamfer_mean': None}
+            elif 'error' in p:
+                row['cases'][case] = {**p, 'chamfer_mean': None}
+            else:
+                row['cases'][case] = {'reward': p['reward'], 'plan_seconds': p.get('seconds'), **recons[(s, case)]}
+        rows[s] = row
+    return rows
 
 
 def verdict(row: dict) -> str:
@@ -169,11 +220,11 @@ def main(argv=None) -> int:
     args = parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    rows = {}
-    for scenario in args.scenarios:
-        rows[scenario] = run_scenario(out / 'cache', out, scenario, args)
-        print(f'{scenario}: {verdict(rows[scenario])}', flush=True)
-        write_results(args, out, rows)  # after every scenario: a long run leaves what it has
+    with open_client(args.scheduler, args.workers) as client:
+        rows = run(client, out / 'cache', out, args)
+    for scenario, row in rows.items():
+        print(f'{scenario}: {verdict(row)}', flush=True)
+    write_results(args, out, rows)
     print(json.dumps({s: {c: r['cases'][c].get('chamfer_mean') for c in CASES} for s, r in rows.items()}), flush=True)
     return 0
 

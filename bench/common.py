@@ -146,32 +146,105 @@ def chamfer_text(record: dict) -> str:
     """'mean +- std' of a reconstruction record, or 'failed (ERROR)': a failure is a result."""
     if record.get('error') or record.get('chamfer_mean') is None:
         return f"failed ({record.get('error', 'no result')})"
-    return f"{record['chamfer_mean']:.3f} +- {record['chamfer_std']:.3f}"
+    failed = record.get('failed', 0)
+    return (f"{record['chamfer_mean']:.3f} +- {record['chamfer_std']:.3f}"
+            + (f" ({failed} of {len(record['per_realization'])} realizations failed)" if failed else ''))
 
 
-def reconstruct_record(noisy, cameras, config, folder: Path, realizations=None) -> dict:
-    """Reconstruct a plan (``vp_recon.pipeline.reconstruct_plan``), write its clouds and contact
-    sheet into ``folder``, and return the benchmarks' JSON record (Chamfer etc. x100 as Table I;
-    a plan that does not reconstruct is a result too: its error)."""
-    from vp_recon.outputs import TABLE_SCALE, contact_sheet, write_image, write_ply
+def realization_entry(r) -> dict:
+    """The ``per_realization`` entry of one reconstructed realization (x100 as Table I)."""
+    from vp_recon.outputs import TABLE_SCALE
+
+    return {'realization': int(r.realization), 'chamfer': TABLE_SCALE * r.chamfer,
+            'chamfer_shape': TABLE_SCALE * r.chamfer_shape, 'accuracy': TABLE_SCALE * r.accuracy,
+            'completeness': TABLE_SCALE * r.completeness, 'fscore': r.fscore, 'points': int(len(r.points)),
+            'images': r.images, 'source': r.source, 'matching': r.matching, 'matched_pairs': r.matched_pairs,
+            'seconds': r.seconds}
+
+
+def reconstructed(per: list) -> list:
+    """The entries of ``per_realization`` that reconstructed (a failed one has ``chamfer`` None)."""
+    return [p for p in per if p.get('chamfer') is not None]
+
+
+def reconstruct_record(noisy, cameras, config, folder: Path, realizations=None, known=None) -> dict:
+    """Reconstruct a plan (``vp_recon.pipeline.reconstruct_plan``), one wind realization at a time,
+    write its clouds and contact sheet into ``folder``, and return the benchmarks' JSON record
+    (Chamfer etc. x100 as Table I).
+
+    A realization that does not reconstruct is a result too: its ``per_realization`` entry holds
+    its error and ``chamfer: null`` (counted, ranked last) and the other realizations keep theirs;
+    ``chamfer_mean`` / ``chamfer_std`` (population) are over the reconstructed ones, ``failed``
+    counts the rest, and the record carries ``error`` only when no realization reconstructed.
+    ``known``: realization -> entry already computed (a cached record of the same plan with fewer
+    realizations, :func:`known_realizations`): reused, not recomputed (a realization's capture and
+    reconstruction are seeded by its index alone, so the entry is the same).
+    """
+    from vp_recon.outputs import contact_sheet, write_image, write_ply
     from vp_recon.pipeline import ReconError, reconstruct_plan
 
     capture = {'capture': config.capture.kind, 'capture_params': config.capture.to_dict(),
                'sparse_mode': config.sparse_mode_used}
-    try:
-        res = reconstruct_plan(noisy, np.asarray(cameras), config, folder, realizations=realizations)
-    except ReconError as exc:  # a failure: chamfer null, counted and ranked last by every benchmark
-        return {'error': exc.name, 'error_msg': str(exc), 'chamfer_mean': None,
-                'chamfer_std': None, 'per_realization': [], **capture}
-    for r in res.realizations:
-        write_ply(folder / f'recon_{r.realization}.ply', r.points, r.colors)
-    if res.realizations and res.realizations[0].rendered:
-        write_image(folder / 'views.png', contact_sheet(res.realizations[0].rendered))
-    return {'chamfer_mean': TABLE_SCALE * res.chamfer_mean, 'chamfer_std': TABLE_SCALE * res.chamfer_std,
-            'chamfer_shape_mean': TABLE_SCALE * res.chamfer_shape_mean, 'seconds': res.seconds, **capture,
-            'per_realization': [{'chamfer': TABLE_SCALE * r.chamfer, 'chamfer_shape': TABLE_SCALE * r.chamfer_shape,
-                                 'accuracy': TABLE_SCALE * r.accuracy,
-                                 'completeness': TABLE_SCALE * r.completeness, 'fscore': r.fscore,
-                                 'points': int(len(r.points)), 'images': r.images, 'source': r.source,
-                                 'matching': r.matching, 'matched_pairs': r.matched_pairs,
-                                 'seconds': r.seconds} for r in res.realizations]}
+    ks = list(range(len(noisy.points))) if realizations is None else [int(k) for k in realizations]
+    known = known or {}
+    per = []
+    for k in ks:
+        if k in known:
+            per.append({**known[k], 'realization': k})
+            continue
+        try:
+            (r,) = reconstruct_plan(noisy, np.asarray(cameras), config, folder, realizations=[k]).realizations
+        except ReconError as exc:  # this realization failed: recorded, the others go on
+            per.append({'realization': k, 'error': exc.name, 'error_msg': str(exc), 'chamfer': None,
+                        'chamfer_shape': None, 'images': None})
+            continue
+        folder.mkdir(parents=True, exist_ok=True)
+        write_ply(folder / f'recon_{k}.ply', r.points, r.colors)
+        if r.rendered and not (folder / 'views.png').exists():
+            write_image(folder / 'views.png', contact_sheet(r.rendered))
+        per.append(realization_entry(r))
+    ok = reconstructed(per)
+    seconds = {}
+    for p in ok:
+        for stage, s in p['seconds'].items():
+            seconds[stage] = seconds.get(stage, 0.0) + s
+    record = {'failed': len(per) - len(ok), 'seconds': seconds, **capture, 'per_realization': per}
+    if not ok:
+        first = per[0] if per else {'error': 'NO_SCENE', 'error_msg': 'no realization selected'}
+        return {'error': first['error'], 'error_msg': first['error_msg'], 'chamfer_mean': None,
+                'chamfer_std': None, **record}
+    ch = np.array([p['chamfer'] for p in ok])
+    return {'chamfer_mean': float(ch.mean()), 'chamfer_std': float(ch.std()),
+            'chamfer_shape_mean': float(np.mean([p['chamfer_shape'] for p in ok])), **record}
+
+
+def known_realizations(cache_file: Path, folder: Path) -> dict:
+    """realization -> ``per_realization`` entry of the cached records of the same cell with fewer
+    realizations (``<tag>-k<j><rest>.json`` beside ``cache_file`` = ``<tag>-k<n><rest>.json``, j < n), their
+    clouds copied into ``folder``: what a rerun with more realizations need not recompute."""
+    import re
+    import shutil
+
+    m = re.fullmatch(r'(.*)-k(\d+)((?:-\D.*)?)\.json', cache_file.name)
+    if not m:
+        return {}
+    base, n, rest = m.group(1), int(m.group(2)), m.group(3)
+    known = {}
+    for j in range(n - 1, 0, -1):
+        old = cache_file.with_name(f'{base}-k{j}{rest}.json')
+        if not old.exists():
+            continue
+        for i, p in enumerate(json.loads(old.read_text()).get('per_realization', [])):
+            k = int(p.get('realization', i))  # records before per-realization failures: in order 0..j-1
+            if k in known:
+                continue
+            cloud = folder.parent / f'{base}-k{j}{rest}' / f'recon_{k}.ply'
+            if p.get('chamfer') is not None and not cloud.exists():
+                continue  # its cloud is gone: recompute rather than leave a hole in the folder
+            if cloud.exists():
+                folder.mkdir(parents=True, exist_ok=True)
+                for f in (cloud, cloud.with_name('views.png')):
+                    if f.exists() and not (folder / f.name).exists():
+                        shutil.copyfile(f, folder / f.name)
+            known[k] = p
+    return known

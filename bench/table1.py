@@ -27,7 +27,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from cluster import Task, add_cluster_args, open_client, run_tasks  # noqa: E402
 from common import (ROOT, SCENARIOS, cached, default_models, machine, models_tag, plan_cell,  # noqa: E402
-                    add_capture, capture_of, capture_tag, plan_path, reconstruct_record,
+                    add_capture, capture_of, capture_tag, known_realizations, plan_path, reconstruct_record,
                     scene)
 from stats import describe, describe_difference, paired_difference, rank, summary  # noqa: E402
 
@@ -90,7 +90,8 @@ def recon_cell(cache: Path, out: Path, scenario: str, row: str, plan: dict, args
         cfg = ReconConfig(width=args.width, height=args.height, num_threads=args.threads,
                           capture=capture_of(args))
         ks = range(min(args.realizations, len(noisy.points))) if args.realizations else None
-        return reconstruct_record(noisy, plan['cameras'], cfg, out / 'recon' / tag, ks)
+        return reconstruct_record(noisy, plan['cameras'], cfg, out / 'recon' / tag, ks,
+                                  known_realizations(cache / 'recon' / f'{tag}.json', out / 'recon' / tag))
     return cached(cache / 'recon' / f'{tag}.json', compute)
 
 
@@ -146,17 +147,16 @@ def main(argv=None) -> int:
 
 
 def chamfer_units(recons: dict, scenario: str, row: str, args) -> dict:
-    """(seed, realization) -> Chamfer x100 of a row, None where the reconstruction failed (a plan
-    whose reconstruction fails fails in every realization asked: ``reconstruct_plan`` stops at the
-    first failing one)."""
+    """(seed, realization) -> Chamfer x100 of a row, None where the reconstruction failed (each
+    realization reconstructs on its own: ``common.reconstruct_record``; a failed plan fails in all)."""
     K = len(scene(scenario, args.models)[0].points)
     ks = min(args.realizations, K) if args.realizations else K
     units = {}
     for seed in recon_seeds(args):
         r = recons[(scenario, row, seed)]
-        per = [] if r.get('error') else r['per_realization']
+        per = {p.get('realization', i): p.get('chamfer') for i, p in enumerate(r.get('per_realization', []))}
         for k in range(ks):
-            units[(seed, k)] = per[k]['chamfer'] if k < len(per) else None
+            units[(seed, k)] = per.get(k)
     return units
 
 
@@ -216,7 +216,7 @@ def shape_lines(args, recons: dict, table: dict) -> list[str]:
             per = [p for seed in seeds for p in recons[(scenario, row, seed)].get('per_realization', [])]
             stat = summary({i: p.get('chamfer_shape') for i, p in enumerate(per)})
             failed = sum(1 for seed in seeds if recons[(scenario, row, seed)].get('error'))
-            imgs = [p['images'] for p in per]
+            imgs = [p['images'] for p in per if p.get('images') is not None]
             table['shape'][f'{scenario}/{row}'] = {**stat, 'images': imgs, 'failed_plans': failed}
             cells.append((describe(stat) if per else 'failed') + (f', images {min(imgs)}-{max(imgs)}' if imgs else '')
                          + (f', {failed} plan(s) failed' if failed else ''))

@@ -32,3 +32,26 @@ def test_results_files(tmp_path: Path) -> None:
     assert "| one_plant | 4 + 2 | 2.000 +- 0.000 | 1.000 +- 0.000 |" in md and "within 5 %" in md
     data = json.loads((tmp_path / "bench_sorties.json").read_text())
     assert data["rows"]["one_plant"]["cases"]["e"]["chamfer_mean"] == 1.04
+
+
+def test_a_slice_runs_on_a_local_cluster_and_a_rerun_reads_the_cache(tmp_path: Path) -> None:
+    """The smoke slice (procedural plants, 640x480, ideal capture) through a 1-worker LocalCluster:
+    every case of the table has a result or a named error, sortie 2's plan e is made from sortie 1's
+    reconstruction, and a rerun runs no task (every plan and reconstruction cached)."""
+    argv = ["--models", "", "--scenarios", "one_plant", "--evals", "4", "--init", "3", "--realizations", "1",
+            "--width", "640", "--height", "480", "--capture", "ideal", "--out", str(tmp_path), "--workers", "1",
+            "--threads", "1"]
+    assert bench_sorties.main(argv) == 0
+    rows = json.loads((tmp_path / "bench_sorties.json").read_text())["rows"]
+    cases = rows["one_plant"]["cases"]
+    assert set(cases) == set(bench_sorties.CASES)
+    assert all(c.get("chamfer_mean") is not None or c.get("error") for c in cases.values())
+    assert rows["one_plant"]["sortie1"]["chamfer"]["chamfer_mean"] is not None
+    assert cases["e"]["chamfer_mean"] is not None  # planned given sortie 1's reconstruction
+    plans = sorted(p.name for p in (tmp_path / "cache" / "plans").glob("*.json"))
+    assert len(plans) == 7 and sum("sortie2-e" in p and "-k1" in p for p in plans) == 1
+    assert len(list((tmp_path / "cache" / "recon").glob("*.json"))) == 7
+    stamps = {p: p.stat().st_mtime_ns for p in (tmp_path / "cache").rglob("*.json")}
+    assert bench_sorties.main(argv) == 0
+    assert {p: p.stat().st_mtime_ns for p in (tmp_path / "cache").rglob("*.json")} == stamps
+    assert json.loads((tmp_path / "bench_sorties.json").read_text())["rows"] == rows

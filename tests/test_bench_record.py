@@ -1,0 +1,101 @@
+"""bench/common.py's reconstruction record: each wind realization reconstructs on its own (a
+failure is recorded beside the others, never hides them, never is dropped), and a rerun asking
+for more realizations reuses the cached ones instead of recomputing them."""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+import common  # noqa: E402  (bench/common.py)
+
+
+def _result(k: int) -> SimpleNamespace:
+    r = SimpleNamespace(realization=k, chamfer=0.01 * (k + 1), chamfer_shape=0.005 * (k + 1), accuracy=0.004,
+                        completeness=0.006, fscore=0.7, points=np.full((5, 3), float(k)),
+                        colors=np.zeros((5, 3), np.uint8), images=4, source="dense", matching="exhaustive",
+                        matched_pairs=6, seconds={"render": 1.0, "sparse": 2.0}, rendered=[])
+    return SimpleNamespace(realizations=[r])
+
+
+@pytest.fixture
+def fake_pipeline(monkeypatch):
+    """vp_recon.pipeline.reconstruct_plan replaced by one that fails realizations in ``failing``
+    and records which realizations it was asked for."""
+    from vp_recon import pipeline
+
+    calls, failing = [], set()
+
+    def reconstruct_plan(noisy, cameras, config, folder, realizations):
+        (k,) = realizations
+        calls.append(k)
+        if k in failing:
+            raise pipeline.ReconError(pipeline.RECONSTRUCTION_FAILED, f"realization {k}: registered 1 of 4 images")
+        return _result(k)
+
+    monkeypatch.setattr(pipeline, "reconstruct_plan", reconstruct_plan)
+    return calls, failing
+
+
+def _record(folder: Path, ks, known=None) -> dict:
+    from vp_recon.pipeline import ReconConfig
+
+    noisy = SimpleNamespace(points=np.zeros((5, 10, 3)))
+    return common.reconstruct_record(noisy, np.zeros((4, 6)), ReconConfig(), folder, ks, known)
+
+
+def test_a_failed_realization_is_recorded_beside_the_others(tmp_path, fake_pipeline) -> None:
+    calls, failing = fake_pipeline
+    failing.add(1)
+    rec = _record(tmp_path / "cell", range(3))
+    assert calls == [0, 1, 2]  # the failure did not stop realization 2
+    assert "error" not in rec and rec["failed"] == 1
+    assert [p["realization"] for p in rec["per_realization"]] == [0, 1, 2]
+    bad = rec["per_realization"][1]
+    assert bad["chamfer"] is None and bad["error"] == "RECONSTRUCTION_FAILED" and "1 of 4" in bad["error_msg"]
+    assert rec["chamfer_mean"] == pytest.approx((1.0 + 3.0) / 2)  # x100, over the reconstructed ones
+    assert common.chamfer_text(rec) == "2.000 +- 1.000 (1 of 3 realizations failed)"
+    assert sorted(p.name for p in (tmp_path / "cell").glob("recon_*.ply")) == ["recon_0.ply", "recon_2.ply"]
+
+
+def test_a_record_fails_only_when_no_realization_reconstructs(tmp_path, fake_pipeline) -> None:
+    _, failing = fake_pipeline
+    failing.update({0, 1})
+    rec = _record(tmp_path / "cell", [0, 1])
+    assert rec["error"] == "RECONSTRUCTION_FAILED" and rec["chamfer_mean"] is None and rec["failed"] == 2
+    assert common.chamfer_text(rec) == "failed (RECONSTRUCTION_FAILED)"
+
+
+def test_more_realizations_reuse_the_cached_ones(tmp_path, fake_pipeline) -> None:
+    calls, failing = fake_pipeline
+    failing.add(1)
+    cache, recon = tmp_path / "cache", tmp_path / "recon"
+    cache.mkdir()
+    old = _record(recon / "cell-x-k2-soil", range(2))  # realization 1 failed there
+    (cache / "cell-x-k2-soil.json").write_text(json.dumps(old))
+    calls.clear()
+    known = common.known_realizations(cache / "cell-x-k4-soil.json", recon / "cell-x-k4-soil")
+    assert sorted(known) == [0, 1]
+    rec = _record(recon / "cell-x-k4-soil", range(4), known)
+    assert calls == [2, 3]  # 0 and 1 come from the k2 record, its failure included
+    assert rec["per_realization"][:2] == old["per_realization"]
+    assert rec["failed"] == 1 and rec["chamfer_mean"] == pytest.approx((1.0 + 3.0 + 4.0) / 3)
+    assert (recon / "cell-x-k4-soil" / "recon_0.ply").exists()  # the reused cloud travels along
+
+
+def test_records_before_per_realization_failures_are_reused_by_position(tmp_path) -> None:
+    """A cached record written before each entry named its realization: entries in order 0..j-1;
+    an entry whose cloud is gone is recomputed, not reused."""
+    cache, recon = tmp_path / "cache", tmp_path / "recon"
+    cache.mkdir()
+    (recon / "c-k2").mkdir(parents=True)
+    (recon / "c-k2" / "recon_0.ply").write_text("ply")
+    (cache / "c-k2.json").write_text(json.dumps({"per_realization": [{"chamfer": 1.5}, {"chamfer": 2.5}]}))
+    known = common.known_realizations(cache / "c-k3.json", recon / "c-k3")
+    assert known == {0: {"chamfer": 1.5}}
+    assert common.known_realizations(cache / "c.json", recon / "c") == {}  # no realization count: nothing to reuse
