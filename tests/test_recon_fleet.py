@@ -12,13 +12,13 @@ import pytest
 from geometry_msgs.msg import PoseStamped
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Image
-from vp_interfaces.msg import DroneAssignment, FleetAssignment, SceneDescription
+from vp_interfaces.msg import FleetAssignment, SceneDescription
 from vp_interfaces.msg import ReconstructionScore as Score
 
 from vp_recon.pipeline import ReconConfig, reconstruct_realization
 from vp_scene.camera import cameras_to_poses, look_at
 from vp_scene.capture import IDEAL
-from vp_scene.messages import cameras_to_pose_array, pose_msg, scene_of_description
+from vp_scene.messages import cameras_to_pose_array, fleet_assignment_msg, pose_msg, scene_of_description
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 SCENE = dict(scenario="one_plant", points_per_plant=2000, realizations=2, levels=5, seed=3)
@@ -30,15 +30,6 @@ def ring(n: int = 4) -> np.ndarray:
     az = np.linspace(0.0, math.radians(150), n)
     c = np.stack([1.7 * np.cos(az), 1.7 * np.sin(az), np.full(n, 1.3)], axis=1)
     return look_at(c, np.tile([0.0, 0.0, 0.9], (n, 1)))
-
-
-def assignment(stamp: int, drones: list, cams: np.ndarray) -> FleetAssignment:
-    msg = FleetAssignment(num_poses=len(cams), assignment="min_total", orientation="body")
-    msg.header.frame_id = "map"
-    msg.plan_stamp.sec = stamp
-    msg.entries = [DroneAssignment(drone=d, pose_index=i, goal=pose_msg(cameras_to_poses(c)))
-                   for i, (d, c) in enumerate(zip(drones, cams))]
-    return msg
 
 
 def test_fleet_images_reconstruct_as_the_render_source_and_a_silent_drone_is_named(ros_env, start_node,
@@ -70,7 +61,7 @@ def test_fleet_images_reconstruct_as_the_render_source_and_a_silent_drone_is_nam
         g = PoseStamped(pose=pose_msg(cameras_to_poses(c)))
         g.header.frame_id = "map"
         goal_pubs[d].publish(g)
-    fleet_pub.publish(assignment(7, drones, cams))
+    fleet_pub.publish(fleet_assignment_msg(7, drones, cams))
     plan = cameras_to_pose_array(cams, "map", None)
     plan.header.stamp.sec = 7
     plan_pub.publish(plan)
@@ -92,7 +83,7 @@ def test_fleet_images_reconstruct_as_the_render_source_and_a_silent_drone_is_nam
     stale.header.stamp.sec = 1
     stale_pub = client.node.create_publisher(Image, "/d0/camera/image_raw", LATCHED)
     stale_pub.publish(stale)
-    fleet_pub.publish(assignment(8, ["d0", "d1", "d2", "d9"], cams))
+    fleet_pub.publish(fleet_assignment_msg(8, ["d0", "d1", "d2", "d9"], cams))
     plan.header.stamp.sec = 8
     plan_pub.publish(plan)
     assert client.spin_until(lambda: aggregates(), TIMEOUT), recon.output()[-4000:]
@@ -100,3 +91,33 @@ def test_fleet_images_reconstruct_as_the_render_source_and_a_silent_drone_is_nam
     assert agg.error_code == Score.CAPTURE_MISSING and "d9" in agg.error_msg and "d0" not in agg.error_msg
     assert "capture of d0 stamped 1000000000 ns is older than capture 0 of this plan: ignored" in recon.output()
     assert recon.poll() is None
+
+
+def test_the_fleet_captures_keep_arrays_and_a_bounded_number_per_drone(ros_env, ros_node, capfd) -> None:
+    """Memory (issue 20, part 5): an image is kept as its array, a view of the message's buffer
+    (no copy), an image that does not convert is kept as its error (reported by the capture set
+    that takes it), and a drone's captures beyond CAPTURES_KEPT drop the oldest with a log line."""
+    import threading
+
+    from vp_recon.recon_node import CAPTURES_KEPT, FleetCaptures
+
+    client = ros_node(ros_env)
+    fleet = FleetCaptures(client.node, threading.Condition())
+    rgb = np.arange(4 * 5 * 3, dtype=np.uint8).reshape(4, 5, 3)
+    msgs = []
+    for sec in range(1, CAPTURES_KEPT + 2):
+        msg = Image(height=4, width=5, encoding="rgb8", step=15, data=rgb.tobytes())
+        msg.header.stamp.sec = sec
+        msgs.append(msg)
+        fleet._on("d0", "image", msg)
+    bad = Image(height=1, width=1, encoding="16UC1", step=2, data=b"ab")
+    bad.header.stamp.sec = CAPTURES_KEPT + 2
+    fleet._on("d0", "image", bad)
+    kept = fleet._got["d0"]
+    assert sorted(kept) == [s * 1_000_000_000 for s in range(3, CAPTURES_KEPT + 3)]
+    newest_good = kept[(CAPTURES_KEPT + 1) * 1_000_000_000]["image"]
+    np.testing.assert_array_equal(newest_good, rgb)
+    assert np.shares_memory(newest_good, np.frombuffer(msgs[-1].data, np.uint8))
+    assert isinstance(kept[(CAPTURES_KEPT + 2) * 1_000_000_000]["image"], ValueError)
+    err = capfd.readouterr().err
+    assert "capture of d0 stamped 1000000000 ns dropped" in err and "stamped 2000000000 ns dropped" in err, err

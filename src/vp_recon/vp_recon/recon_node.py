@@ -121,6 +121,9 @@ PARAMS = {
 
 #: /camera_plan/info messages remembered to find the one of a plan.
 _INFO_MEMORY = 16
+#: captures (stamps) kept per drone until a capture set takes them; beyond, the oldest is dropped
+#: with a log line (memory: a 2000 x 1500 image is 9 MB; a drone that sends unasked would grow it).
+CAPTURES_KEPT = 2
 #: s a plan waits for its /camera_plan/info (its reward, a second sortie's cameras already flown);
 #: a plan without one (another planner) is reconstructed as it is after that.
 INFO_WAIT_S = 2.0
@@ -435,11 +438,15 @@ class ReconNode(Node):
                                             self._param('camera_topic'), lambda: self._plans.stopped)
                 if views is None:
                     raise ReconCancelled('stopped while waiting for the fleet')
+                self.get_logger().info(f'capture {k}: {len(views.images)} images from the fleet '
+                                       f'({sum(im.nbytes for im in views.images) / 1e6:.0f} MB) collected')
                 res = reconstruct_captured(scene, views, config, progress=progress)
             except ReconError as exc:
                 exc.realization = k
                 raise
             on_realization(res)
+            if k > 0:  # as reconstruct_plan: only the first realization keeps its images (memory)
+                res.rendered = []
             results.append(res)
         return plan_result(results, {'total': time.perf_counter() - t0})
 
@@ -464,7 +471,13 @@ class FleetCaptures:
     ``pose`` (the reported PoseStamped). Every message received is kept by its stamp until a
     capture set takes it (nothing received is lost, also what arrives while a set is being
     reconstructed); a capture older than the trigger asking for it belongs to an older plan or
-    realization and is ignored with a log line."""
+    realization and is ignored with a log line.
+
+    Memory (issue 20, part 5): an image is converted to its array as it arrives (a view of the
+    message's buffer, which is then the only copy), and at most :data:`CAPTURES_KEPT` captures
+    are kept per drone (the oldest beyond is dropped with a log line): a capture set of N images
+    costs the node about N images' bytes, not three times that (measured in
+    results/bench_fleet_transport.json, ``recon_node_memory``)."""
 
     def __init__(self, node: Node, lock: threading.Condition) -> None:
         from vp_interfaces.msg import CaptureTrigger, FleetAssignment
@@ -502,9 +515,22 @@ class FleetCaptures:
             self._node.create_subscription(t, f'{base}/{name}', lambda m, d=drone, k=kind: self._on(d, k, m), LATCHED)
 
     def _on(self, drone: str, kind: str, msg) -> None:
+        stamp = self._ns(msg.header.stamp)
+        if kind == 'image':  # kept as the array (a view of msg.data): the message itself is let go
+            try:
+                msg = image_array(msg)
+            except ValueError as exc:
+                msg = exc  # reported when a capture set takes it
         with self._lock:
-            self._got.setdefault(drone, {}).setdefault(self._ns(msg.header.stamp), {})[kind] = msg
+            got = self._got.setdefault(drone, {})
+            got.setdefault(stamp, {})[kind] = msg
+            dropped = sorted(got)[:-CAPTURES_KEPT]
+            for t in dropped:
+                del got[t]
             self._lock.notify_all()
+        for t in dropped:
+            self._node.get_logger().warning(f'capture of {drone} stamped {t} ns dropped: {CAPTURES_KEPT} newer '
+                                            'ones are waiting for a capture set (memory)')
 
     def capture(self, plan_stamp, num_poses: int, k: int, timeout: float, topic: str, stopped) -> object:
         """The capture set of realization ``k`` of the plan: trigger, then one image, camera_info
@@ -561,9 +587,12 @@ class FleetCaptures:
             intr = [camera_info_intrinsics(sets[d]['info']) for d in drones]
             if any(not np.allclose(a[0], intr[0][0]) or a[1:] != intr[0][1:] for a in intr):
                 raise ValueError('the drones\' cameras differ (one camera model per flight)')
+            bad = [(d, sets[d]['image']) for d in drones if isinstance(sets[d]['image'], Exception)]
+            if bad:
+                raise ValueError(f'the image of {bad[0][0]}: {bad[0][1]}')
             return CapturedViews(
                 names=[f'view_{e.pose_index:03d}.png' for e in entries],
-                images=[image_array(sets[d]['image']) for d in drones],
+                images=[sets[d]['image'] for d in drones],
                 reported=poses_to_cameras(np.array([pose_array(sets[d]['pose'].pose) for d in drones])),
                 K=intr[0][0], realization=int(k)).validate()
         except (ValueError, FlightError) as exc:
