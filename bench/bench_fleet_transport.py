@@ -21,7 +21,8 @@ reconstruction, not a whole one). Key ``recon_node_memory``.
 real scene node; this process triggers ``--repeats`` captures (/fleet/capture) and receives
 every drone's image_raw: per set the time from the trigger to the last image (the drones'
 render of W x H included), and the failures counted: drones whose image did not come within
-``--set-timeout`` (named) and "capture failed" lines in the drones' logs. Key ``drone_processes``.
+``--set-timeout`` (named) and "capture failed" lines in the drones' logs. Key ``drone_processes``,
+one record per image size (``"640x480"``...).
 
     python bench/bench_fleet_transport.py [--mode transport|recon|drones] [--drones 16 --width 2000
         --height 1500 --repeats 3]
@@ -285,7 +286,7 @@ def drone_processes(args, env: dict) -> dict:
     """--mode drones (module docstring)."""
     from geometry_msgs.msg import PoseStamped
     from sensor_msgs.msg import Image
-    from vp_interfaces.msg import CaptureTrigger, FleetAssignment
+    from vp_interfaces.msg import CaptureTrigger, FleetAssignment, SceneDescription
 
     from vp_scene.camera import cameras_to_poses
     from vp_scene.messages import fleet_assignment_msg, pose_msg
@@ -311,6 +312,8 @@ def drone_processes(args, env: dict) -> dict:
 
         for d in drones:
             node.create_subscription(Image, f'/{d}/camera/image_raw', lambda m, d=d: on(d, m), _qos())
+        descriptions: list = []
+        node.create_subscription(SceneDescription, '/scene/description', descriptions.append, _qos())
         fleet_pub = node.create_publisher(FleetAssignment, '/fleet/assignment', _qos())
         trig_pub = node.create_publisher(CaptureTrigger, '/fleet/capture', _qos())
         goal_pubs = {d: node.create_publisher(PoseStamped, f'/{d}/goal_pose', _qos()) for d in drones}
@@ -323,6 +326,11 @@ def drone_processes(args, env: dict) -> dict:
             goal_pubs[d].publish(g)
         h.wait(lambda: all('goal (' in s.output() for s in sims), 120, 'the goals', *sims)
         h.wait(lambda: trig_pub.get_subscription_count() >= args.drones, 60, 'the drones\' trigger subscriptions')
+        # a trigger before the drones have the scene fails their capture ("no /scene/description yet",
+        # counted below): wait for the description here, then as long again for the drones to have it
+        t0 = time.monotonic()
+        h.wait(lambda: descriptions, 300, 'the scene description', scene)
+        time.sleep(min(30.0, time.monotonic() - t0) + 2.0)
         sets = []
         for r in range(args.repeats):
             with lock:
@@ -396,6 +404,9 @@ def main() -> int:
         new = {key: {**fn(args, env), 'machine_load': MACHINE_LOAD,
                      'date': time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}}
     out = json.loads(RESULTS.read_text()) if RESULTS.is_file() else {}
+    if args.mode == 'drones':  # one record per image size
+        new = {'drone_processes': {**out.get('drone_processes', {}),
+                                   f'{args.width}x{args.height}': new['drone_processes']}}
     out.update(new)
     RESULTS.write_text(json.dumps(out, indent=1) + '\n')
     print(json.dumps(new, indent=1))
