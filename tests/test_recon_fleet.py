@@ -32,20 +32,15 @@ def ring(n: int = 4) -> np.ndarray:
     return look_at(c, np.tile([0.0, 0.0, 0.9], (n, 1)))
 
 
-def test_fleet_images_reconstruct_as_the_render_source_and_a_silent_drone_is_named(ros_env, start_node,
-                                                                                    ros_node, tmp_path) -> None:
-    """Four drones photograph the plan (ideal capture, 640 x 480): per realization one capture
-    set, reconstructed to the render source's Chamfer (the same images and poses: to 1e-6);
-    the score says source fleet; a plan whose drone d9 does not exist gives CAPTURE_MISSING
-    naming d9, an image of d0 stamped before the trigger is dropped with a log line, and the
-    node keeps running."""
-    cams = ring()
-    drones = ["d0", "d1", "d2", "d3"]
+def fly(cams: np.ndarray, drones: list, recon_params: dict, ros_env, start_node, ros_node, tmp_path) -> tuple:
+    """The real scene node, recon node (source fleet, ideal capture, ``recon_params``) and one
+    sim_drone with a camera per pose; the test plays the planner and the dispatcher: goals,
+    /fleet/assignment and /camera_plan of plan stamp 7. Returns (recon, client, scores,
+    descriptions, the assignment and plan publishers, the plan)."""
     start_node("vp_scene", "scene", SCENE, ros_env)
+    # capture_timeout 20 s missed once on a loaded 2-core machine (four drones' first renders beside a benchmark)
     recon = start_node("vp_recon", "recon", {**SIZE, "capture": "ideal", "source": "fleet", "num_threads": 1,
-                                             "capture_timeout": 45.0, "output_folder": str(tmp_path / "out")},  # 20 s: missed once
-                       # on a loaded 2-core machine (four drones' first renders beside a benchmark)
-                       ros_env)
+                                             "output_folder": str(tmp_path / "out"), **recon_params}, ros_env)
     for d, c in zip(drones, cams):
         start_node("vp_planner", "sim_drone", {"drone": d, "x": float(c[0]), "y": float(c[1]), "z": float(c[2]),
                                                "camera": True, "capture": "ideal", **SIZE}, ros_env,
@@ -65,11 +60,25 @@ def test_fleet_images_reconstruct_as_the_render_source_and_a_silent_drone_is_nam
     plan = cameras_to_pose_array(cams, "map", None)
     plan.header.stamp.sec = 7
     plan_pub.publish(plan)
+    return recon, client, scores, descriptions, fleet_pub, plan_pub, plan
 
-    def aggregates():
-        return [s for s in scores if s.realization == Score.AGGREGATE]
-    assert client.spin_until(lambda: aggregates(), TIMEOUT), recon.output()[-4000:]
-    agg = aggregates()[0]
+
+def aggregates(scores: list) -> list:
+    return [s for s in scores if s.realization == Score.AGGREGATE]
+
+
+def test_fleet_images_reconstruct_as_the_render_source_and_a_silent_drone_is_named(ros_env, start_node,
+                                                                                    ros_node, tmp_path) -> None:
+    """Four drones photograph the plan (ideal capture, 640 x 480): per realization one capture
+    set, reconstructed to the render source's Chamfer (the same images and poses: to 1e-6);
+    the score says source fleet; a plan whose drone d9 does not exist gives CAPTURE_MISSING
+    naming d9, an image of d0 stamped before the trigger is dropped with a log line, and the
+    node keeps running."""
+    cams, drones = ring(), ["d0", "d1", "d2", "d3"]
+    recon, client, scores, descriptions, fleet_pub, plan_pub, plan = fly(
+        cams, drones, {"capture_timeout": 45.0}, ros_env, start_node, ros_node, tmp_path)
+    assert client.spin_until(lambda: aggregates(scores), TIMEOUT), recon.output()[-4000:]
+    agg = aggregates(scores)[0]
     assert agg.error_code == Score.NONE, agg.error_msg
     assert agg.source == "fleet" and agg.realizations == 2 and agg.num_images == 4
     per = sorted((s for s in scores if s.realization != Score.AGGREGATE), key=lambda s: s.realization)
@@ -86,8 +95,8 @@ def test_fleet_images_reconstruct_as_the_render_source_and_a_silent_drone_is_nam
     fleet_pub.publish(fleet_assignment_msg(8, ["d0", "d1", "d2", "d9"], cams))
     plan.header.stamp.sec = 8
     plan_pub.publish(plan)
-    assert client.spin_until(lambda: aggregates(), TIMEOUT), recon.output()[-4000:]
-    agg = aggregates()[0]
+    assert client.spin_until(lambda: aggregates(scores), TIMEOUT), recon.output()[-4000:]
+    agg = aggregates(scores)[0]
     assert agg.error_code == Score.CAPTURE_MISSING and "d9" in agg.error_msg and "d0" not in agg.error_msg
     assert "capture of d0 stamped 1000000000 ns is older than capture 0 of this plan: ignored" in recon.output()
     assert recon.poll() is None
@@ -121,3 +130,28 @@ def test_the_fleet_captures_keep_arrays_and_a_bounded_number_per_drone(ros_env, 
     assert isinstance(kept[(CAPTURES_KEPT + 2) * 1_000_000_000]["image"], ValueError)
     err = capfd.readouterr().err
     assert "capture of d0 stamped 1000000000 ns dropped" in err and "stamped 2000000000 ns dropped" in err, err
+
+
+def test_compressed_images_give_the_raw_reconstruction(ros_env, start_node, ros_node, tmp_path) -> None:
+    """``image_transport: compressed``: the recon node takes the drones' image_raw/compressed
+    (PNG, lossless) and not image_raw, and reconstructs what the raw images give (the render
+    source's reconstruction, which the raw transport matches in the test above: to 1e-6, same
+    point count). (A transport it does not know: tests/test_node_parameters.py.)"""
+    cams, drones = ring(), ["d0", "d1", "d2", "d3"]
+    recon, client, scores, descriptions, *_ = fly(
+        cams, drones, {"capture_timeout": 45.0, "image_transport": "compressed", "max_realizations": 1}, ros_env,
+        start_node, ros_node, tmp_path)
+    assert client.spin_until(lambda: aggregates(scores), TIMEOUT), recon.output()[-4000:]
+    agg = aggregates(scores)[0]
+    assert agg.error_code == Score.NONE, agg.error_msg
+    assert agg.realizations == 1 and agg.num_images == 4
+    for d in drones:
+        assert f"subscribed /{d}/camera/image_raw/compressed" in recon.output()
+        assert "recon" in [e.node_name for e in client.node.get_subscriptions_info_by_topic(
+            f"/{d}/camera/image_raw/compressed")]
+        assert "recon" not in [e.node_name for e in client.node.get_subscriptions_info_by_topic(
+            f"/{d}/camera/image_raw")]
+    (s,) = [s for s in scores if s.realization != Score.AGGREGATE]
+    ref = reconstruct_realization(scene_of_description(descriptions[-1]), s.realization, cams,
+                                  ReconConfig(**SIZE, capture=IDEAL, num_threads=1))
+    assert s.chamfer == pytest.approx(100 * ref.chamfer, rel=1e-6) and s.num_points == len(ref.points)

@@ -67,7 +67,8 @@ from vp_recon.pipeline import (CAPTURE_MISSING, ReconCancelled, ReconConfig, Rec
                                ensure_writable_dir, plan_result, reconstruct_captured, reconstruct_plan)
 from vp_scene.capture import IDEAL, REALISTIC, CaptureModel
 from vp_scene.camera import poses_to_cameras
-from vp_scene.messages import (aggregate_score, camera_info_intrinsics, drone_topic, error_score, image_array,
+from vp_scene.messages import (aggregate_score, camera_info_intrinsics, compressed_image_array, drone_topic,
+                               error_score, image_array,
                                numpy_to_pointcloud2, plan_key, pose_array, pose_array_to_cameras, realization_score,
                                realizations_from_cloud, scene_of_description, score_msg)
 from vp_scene.node_runtime import (INT_MAX, NewestWins, Param, declare_typed, parameter_value, refuse_bad_changes,
@@ -106,6 +107,8 @@ PARAMS = {
     'capture_timeout': Param(60.0, 's source fleet: how long a capture set may take to arrive', _M),
     'camera_topic': Param('/{drone}/camera', 'source fleet: the drones\' camera topics (image_raw, camera_info, '
                                              'pose)'),
+    'image_transport': Param('raw', 'source fleet: the images from image_raw (sensor_msgs/Image) | compressed: '
+                                    'from image_raw/compressed (CompressedImage, PNG or JPEG; PNG is lossless)'),
     'record_captures': Param(True, 'write each realization\'s capture set (images, poses.csv, COLMAP text model) '
                                    'to <plan folder>/captures/realization_<k>: `make recon IMAGES=...` re-runs it'),
     'max_realizations': Param(0, 'reconstruct only the first n realizations (0: all)', (0, INT_MAX)),
@@ -119,6 +122,8 @@ PARAMS = {
                      (1, INT_MAX)),
 }
 
+#: image_transport -> the image topic under camera_topic (the image_transport convention).
+IMAGE_TRANSPORTS = {'raw': 'image_raw', 'compressed': 'image_raw/compressed'}
 #: /camera_plan/info messages remembered to find the one of a plan.
 _INFO_MEMORY = 16
 #: captures (stamps) kept per drone until a capture set takes them; beyond, the oldest is dropped
@@ -156,6 +161,8 @@ def check_parameters(values: dict) -> dict:
                          f'{v.get("workers", 1)}')
     if v.get('source', 'render') not in ('render', 'fleet'):
         raise ValueError(f"source must be render or fleet, got {v['source']!r}")
+    if v.get('image_transport', 'raw') not in IMAGE_TRANSPORTS:
+        raise ValueError(f"image_transport must be raw or compressed, got {v['image_transport']!r}")
     if v.get('capture_timeout', 1.0) <= 0.0:
         raise ValueError(f'capture_timeout must be > 0 s, got {v["capture_timeout"]}')
     if v.get('output_folder', 'x') == '' or v.get('frame_id', 'x') == '':
@@ -435,7 +442,8 @@ class ReconNode(Node):
         for k in range(K):
             try:
                 views = self._fleet.capture(plan.header.stamp, len(plan.poses), k, self._param('capture_timeout'),
-                                            self._param('camera_topic'), lambda: self._plans.stopped)
+                                            self._param('camera_topic'), lambda: self._plans.stopped,
+                                            transport=self._param('image_transport'))
                 if views is None:
                     raise ReconCancelled('stopped while waiting for the fleet')
                 self.get_logger().info(f'capture {k}: {len(views.images)} images from the fleet '
@@ -467,7 +475,8 @@ class FleetCaptures:
     """The drones' capture sets (source fleet; README "From a real flight").
 
     ``/fleet/assignment`` says which drone holds which pose of a plan; for each drone named there
-    the node subscribes ``{camera_topic}/image_raw`` (sensor_msgs/Image), ``camera_info`` and
+    the node subscribes ``{camera_topic}/image_raw`` (sensor_msgs/Image; with ``image_transport``
+    compressed ``image_raw/compressed``, sensor_msgs/CompressedImage), ``camera_info`` and
     ``pose`` (the reported PoseStamped). Every message received is kept by its stamp until a
     capture set takes it (nothing received is lost, also what arrives while a set is being
     reconstructed); a capture older than the trigger asking for it belongs to an older plan or
@@ -502,25 +511,30 @@ class FleetCaptures:
                 self._assignments.popitem(last=False)
             self._lock.notify_all()
 
-    def _subscribe(self, drone: str, topic: str) -> None:
+    def _subscribe(self, drone: str, topic: str, transport: str = 'raw') -> None:
+        """Subscribe the drone's image (``image_raw`` or ``image_raw/compressed``, by
+        ``transport``), ``camera_info`` and ``pose`` under ``topic``, once per topic name."""
         from geometry_msgs.msg import PoseStamped
-        from sensor_msgs.msg import CameraInfo, Image
+        from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 
-        if drone in self._subscribed:
-            return
-        self._subscribed.add(drone)
         base = drone_topic(topic, drone)
-        for kind, t, name in (('image', Image, 'image_raw'), ('info', CameraInfo, 'camera_info'),
+        image = ('compressed', CompressedImage) if transport == 'compressed' else ('image', Image)
+        for kind, t, name in ((*image, IMAGE_TRANSPORTS[transport]), ('info', CameraInfo, 'camera_info'),
                               ('pose', PoseStamped, 'pose')):
+            if f'{base}/{name}' in self._subscribed:
+                continue
+            self._subscribed.add(f'{base}/{name}')
             self._node.create_subscription(t, f'{base}/{name}', lambda m, d=drone, k=kind: self._on(d, k, m), LATCHED)
+            self._node.get_logger().info(f'subscribed {base}/{name}')
 
     def _on(self, drone: str, kind: str, msg) -> None:
         stamp = self._ns(msg.header.stamp)
-        if kind == 'image':  # kept as the array (a view of msg.data): the message itself is let go
-            try:
-                msg = image_array(msg)
+        if kind in ('image', 'compressed'):  # kept as the array: the message itself is let go
+            try:  # raw: a view of msg.data; compressed: decoded, one image at a time as they come
+                msg = image_array(msg) if kind == 'image' else compressed_image_array(msg)
             except ValueError as exc:
                 msg = exc  # reported when a capture set takes it
+            kind = 'image'
         with self._lock:
             got = self._got.setdefault(drone, {})
             got.setdefault(stamp, {})[kind] = msg
@@ -532,7 +546,8 @@ class FleetCaptures:
             self._node.get_logger().warning(f'capture of {drone} stamped {t} ns dropped: {CAPTURES_KEPT} newer '
                                             'ones are waiting for a capture set (memory)')
 
-    def capture(self, plan_stamp, num_poses: int, k: int, timeout: float, topic: str, stopped) -> object:
+    def capture(self, plan_stamp, num_poses: int, k: int, timeout: float, topic: str, stopped,
+                transport: str = 'raw') -> object:
         """The capture set of realization ``k`` of the plan: trigger, then one image, camera_info
         and pose with one stamp (not older than the trigger) from every drone of the plan's
         assignment, as :class:`vp_recon.flight.CapturedViews` in pose order; None when
@@ -554,7 +569,7 @@ class FleetCaptures:
         entries = sorted(fleet.entries, key=lambda e: e.pose_index)
         drones = [e.drone for e in entries]
         for d in drones:
-            self._subscribe(d, topic)
+            self._subscribe(d, topic, transport)
         asked = self.now_ns()
         trigger = self._trigger_type(realization=int(k), plan_stamp=plan_stamp)
         trigger.header.frame_id = fleet.header.frame_id
