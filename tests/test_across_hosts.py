@@ -16,6 +16,9 @@ Fast DDS that took them for one host would pass data through shared memory, past
 test takes down. (With Fast DDS 2.14 the data stopped during the link-down with the default
 transports as well; the test asserts that it stops.)
 
+A capture set crosses too (issue 20, part 5): drones with cameras (2000 x 1500) on the scene host,
+the recon node (``source: fleet``) on the recon host; one set, so the traffic stays bounded.
+
 Needs root and ``ip netns`` (iproute2); elsewhere the tests skip and say why. The numbers
 (discovery time, latency of 100k-point clouds, recovery after the link flap) are printed and
 written to ``<tmp>/across_hosts.json`` (and to ``$VP_ACROSS_HOSTS_JSON`` when set).
@@ -376,3 +379,62 @@ def test_localhost_stays_local_and_static_peers_cross(lab, ros_env, tmp_path, ca
     with capsys.disabled():
         print(f"\nstatic peers: {json.dumps(numbers)}")
     (tmp_path / "static_peers.json").write_text(json.dumps(numbers, indent=2))
+
+
+_LOG_TIME = re.compile(r"^\[\w+\] \[(\d+\.\d+)\] \[[^\]]+\]: (.*)$")
+
+
+def log_times(proc: NodeProcess, text: str) -> list:
+    """The ROS log stamps (s, the one kernel's clock of all hosts) of the lines holding ``text``."""
+    return [float(m.group(1)) for m in map(_LOG_TIME.match, proc.output().splitlines()) if m and text in m.group(2)]
+
+
+def test_a_capture_set_crosses_hosts(lab, ros_env, tmp_path, capsys) -> None:
+    """Issue 20, part 5: the drones (sim_drone, camera:=true, 2000 x 1500) and the scene on one
+    host, the planner on a second, dispatcher and recon (source fleet) on a third: the plan is
+    dispatched, the drones fly to their goals, the recon's trigger crosses to them, and their
+    capture set (image_raw, camera_info, pose of every drone) crosses back and is collected;
+    the recon ends the plan (score or plan error) and every node keeps running."""
+    lab.check_isolated()
+    env = lab.env(ros_env, "subnet")
+    drones = ["d0", "d1", "d2"]
+    size = dict(width=2000, height=1500)
+    scene = lab.node("scene", "vp_scene", "scene", SCENE, env)
+    sims = [lab.node("scene", "vp_planner", "sim_drone", {"drone": d, "x": float(k), "y": -3.0, "speed": 5.0,
+                                                          "camera": True, "capture": "ideal", **size}, env,
+                     name=f"sim_{d}") for k, d in enumerate(drones)]
+    recon = lab.node("recon", "vp_recon", "recon", {"source": "fleet", **size, "capture": "ideal",
+                                                    "max_realizations": 1, "dense": False, "num_threads": 1,
+                                                    "capture_timeout": 240.0, "scene_timeout": 120.0,
+                                                    "record_captures": False,
+                                                    "output_folder": str(tmp_path / "recon")}, env)
+    dispatcher = lab.node("recon", "vp_planner", "dispatcher", {"drones": drones, "scene_timeout": 120.0}, env)
+    planner = lab.node("planner", "vp_planner", "planner", {"autostart": True, "method": "circle", "num_cameras": 3,
+                                                            "evaluations": 6, "num_threads": 1}, env)
+    everyone = (scene, planner, dispatcher, recon, *sims)
+    asked = wait(lambda: log_times(recon, "capture 0 of the plan asked of"), 240, "the recon's capture trigger",
+                 *everyone)
+    collected = wait(lambda: log_times(recon, "capture 0: 3 images from the fleet"), 240,
+                     "the capture set on the recon host", *everyone)
+    captured = [wait(lambda s=s: log_times(s, "captured pose"), 10, "the drone's capture log", s) for s in sims]
+    assert all(len(c) == 1 for c in captured), "one trigger, one capture per drone"
+    wait(lambda: "aggregate: Chamfer" in recon.output() or "]: plan: " in recon.output(), 300,
+         "the recon's result for the plan", recon)
+    numbers = {
+        "hosts": "scene + 3 sim_drone (camera 2000x1500) | planner | dispatcher + recon (source fleet)",
+        "discovery": "ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET, FASTDDS_BUILTIN_TRANSPORTS=UDPv4",
+        "megabytes_per_set": round(len(drones) * size["width"] * size["height"] * 3 / 1e6, 1),
+        "trigger_to_collected_s": round(collected[0] - asked[0], 3),
+        "last_capture_to_collected_s": round(collected[0] - max(c[0] for c in captured), 3),
+        "bridge_tx_bytes": lab.bridge_bytes(),
+        "recon_result": next(ln.split("]: ", 1)[1] for ln in recon.output().splitlines()
+                             if "aggregate: Chamfer" in ln or "]: plan: " in ln)[:200],
+    }
+    text = json.dumps(numbers, indent=2)
+    (tmp_path / "across_hosts_capture.json").write_text(text)
+    with capsys.disabled():
+        print(f"\ncapture set across hosts: {text}")
+    assert numbers["bridge_tx_bytes"] > len(drones) * size["width"] * size["height"] * 3  # the set crossed
+    for proc in everyone:
+        assert proc.alive(), proc.output()[-2000:]
+        assert "Traceback" not in proc.output(), proc.output()[-3000:]

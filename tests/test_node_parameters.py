@@ -25,6 +25,7 @@ PKG = {"planner": "vp_planner", "recon": "vp_recon", "dispatcher": "vp_planner"}
     ("recon", {"max_realizations": -1}, "max_realizations must be >= 0"),
     ("recon", {"fov": 4}, "fov must be in (0, pi)"),
     ("recon", {"matching": "magic"}, "matching must be one of auto, exhaustive, poses"),
+    ("recon", {"image_transport": "theora"}, "image_transport must be raw or compressed, got 'theora'"),
     ("dispatcher", {}, 'drones must name at least one drone, e.g. -p "drones:=[d0, d1, d2, d3]"'),
     ("dispatcher", {"drones": "d0"}, "'drones' must be a list of strings"),
     ("dispatcher", {"drones": ["d0", "d1", "d0"]}, "drones names a drone twice: ['d0']"),

@@ -12,13 +12,13 @@ import pytest
 from geometry_msgs.msg import PoseStamped
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Image
-from vp_interfaces.msg import DroneAssignment, FleetAssignment, SceneDescription
+from vp_interfaces.msg import FleetAssignment, SceneDescription
 from vp_interfaces.msg import ReconstructionScore as Score
 
 from vp_recon.pipeline import ReconConfig, reconstruct_realization
 from vp_scene.camera import cameras_to_poses, look_at
 from vp_scene.capture import IDEAL
-from vp_scene.messages import cameras_to_pose_array, pose_msg, scene_of_description
+from vp_scene.messages import cameras_to_pose_array, fleet_assignment_msg, pose_msg, scene_of_description
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 SCENE = dict(scenario="one_plant", points_per_plant=2000, realizations=2, levels=5, seed=3)
@@ -32,29 +32,15 @@ def ring(n: int = 4) -> np.ndarray:
     return look_at(c, np.tile([0.0, 0.0, 0.9], (n, 1)))
 
 
-def assignment(stamp: int, drones: list, cams: np.ndarray) -> FleetAssignment:
-    msg = FleetAssignment(num_poses=len(cams), assignment="min_total", orientation="body")
-    msg.header.frame_id = "map"
-    msg.plan_stamp.sec = stamp
-    msg.entries = [DroneAssignment(drone=d, pose_index=i, goal=pose_msg(cameras_to_poses(c)))
-                   for i, (d, c) in enumerate(zip(drones, cams))]
-    return msg
-
-
-def test_fleet_images_reconstruct_as_the_render_source_and_a_silent_drone_is_named(ros_env, start_node,
-                                                                                    ros_node, tmp_path) -> None:
-    """Four drones photograph the plan (ideal capture, 640 x 480): per realization one capture
-    set, reconstructed to the render source's Chamfer (the same images and poses: to 1e-6);
-    the score says source fleet; a plan whose drone d9 does not exist gives CAPTURE_MISSING
-    naming d9, an image of d0 stamped before the trigger is dropped with a log line, and the
-    node keeps running."""
-    cams = ring()
-    drones = ["d0", "d1", "d2", "d3"]
+def fly(cams: np.ndarray, drones: list, recon_params: dict, ros_env, start_node, ros_node, tmp_path) -> tuple:
+    """The real scene node, recon node (source fleet, ideal capture, ``recon_params``) and one
+    sim_drone with a camera per pose; the test plays the planner and the dispatcher: goals,
+    /fleet/assignment and /camera_plan of plan stamp 7. Returns (recon, client, scores,
+    descriptions, the assignment and plan publishers, the plan)."""
     start_node("vp_scene", "scene", SCENE, ros_env)
+    # capture_timeout 20 s missed once on a loaded 2-core machine (four drones' first renders beside a benchmark)
     recon = start_node("vp_recon", "recon", {**SIZE, "capture": "ideal", "source": "fleet", "num_threads": 1,
-                                             "capture_timeout": 45.0, "output_folder": str(tmp_path / "out")},  # 20 s: missed once
-                       # on a loaded 2-core machine (four drones' first renders beside a benchmark)
-                       ros_env)
+                                             "output_folder": str(tmp_path / "out"), **recon_params}, ros_env)
     for d, c in zip(drones, cams):
         start_node("vp_planner", "sim_drone", {"drone": d, "x": float(c[0]), "y": float(c[1]), "z": float(c[2]),
                                                "camera": True, "capture": "ideal", **SIZE}, ros_env,
@@ -70,15 +56,29 @@ def test_fleet_images_reconstruct_as_the_render_source_and_a_silent_drone_is_nam
         g = PoseStamped(pose=pose_msg(cameras_to_poses(c)))
         g.header.frame_id = "map"
         goal_pubs[d].publish(g)
-    fleet_pub.publish(assignment(7, drones, cams))
+    fleet_pub.publish(fleet_assignment_msg(7, drones, cams))
     plan = cameras_to_pose_array(cams, "map", None)
     plan.header.stamp.sec = 7
     plan_pub.publish(plan)
+    return recon, client, scores, descriptions, fleet_pub, plan_pub, plan
 
-    def aggregates():
-        return [s for s in scores if s.realization == Score.AGGREGATE]
-    assert client.spin_until(lambda: aggregates(), TIMEOUT), recon.output()[-4000:]
-    agg = aggregates()[0]
+
+def aggregates(scores: list) -> list:
+    return [s for s in scores if s.realization == Score.AGGREGATE]
+
+
+def test_fleet_images_reconstruct_as_the_render_source_and_a_silent_drone_is_named(ros_env, start_node,
+                                                                                    ros_node, tmp_path) -> None:
+    """Four drones photograph the plan (ideal capture, 640 x 480): per realization one capture
+    set, reconstructed to the render source's Chamfer (the same images and poses: to 1e-6);
+    the score says source fleet; a plan whose drone d9 does not exist gives CAPTURE_MISSING
+    naming d9, an image of d0 stamped before the trigger is dropped with a log line, and the
+    node keeps running."""
+    cams, drones = ring(), ["d0", "d1", "d2", "d3"]
+    recon, client, scores, descriptions, fleet_pub, plan_pub, plan = fly(
+        cams, drones, {"capture_timeout": 45.0}, ros_env, start_node, ros_node, tmp_path)
+    assert client.spin_until(lambda: aggregates(scores), TIMEOUT), recon.output()[-4000:]
+    agg = aggregates(scores)[0]
     assert agg.error_code == Score.NONE, agg.error_msg
     assert agg.source == "fleet" and agg.realizations == 2 and agg.num_images == 4
     per = sorted((s for s in scores if s.realization != Score.AGGREGATE), key=lambda s: s.realization)
@@ -92,11 +92,66 @@ def test_fleet_images_reconstruct_as_the_render_source_and_a_silent_drone_is_nam
     stale.header.stamp.sec = 1
     stale_pub = client.node.create_publisher(Image, "/d0/camera/image_raw", LATCHED)
     stale_pub.publish(stale)
-    fleet_pub.publish(assignment(8, ["d0", "d1", "d2", "d9"], cams))
+    fleet_pub.publish(fleet_assignment_msg(8, ["d0", "d1", "d2", "d9"], cams))
     plan.header.stamp.sec = 8
     plan_pub.publish(plan)
-    assert client.spin_until(lambda: aggregates(), TIMEOUT), recon.output()[-4000:]
-    agg = aggregates()[0]
+    assert client.spin_until(lambda: aggregates(scores), TIMEOUT), recon.output()[-4000:]
+    agg = aggregates(scores)[0]
     assert agg.error_code == Score.CAPTURE_MISSING and "d9" in agg.error_msg and "d0" not in agg.error_msg
     assert "capture of d0 stamped 1000000000 ns is older than capture 0 of this plan: ignored" in recon.output()
     assert recon.poll() is None
+
+
+def test_the_fleet_captures_keep_arrays_and_a_bounded_number_per_drone(ros_env, ros_node, capfd) -> None:
+    """Memory (issue 20, part 5): an image is kept as its array, a view of the message's buffer
+    (no copy), an image that does not convert is kept as its error (reported by the capture set
+    that takes it), and a drone's captures beyond CAPTURES_KEPT drop the oldest with a log line."""
+    import threading
+
+    from vp_recon.recon_node import CAPTURES_KEPT, FleetCaptures
+
+    client = ros_node(ros_env)
+    fleet = FleetCaptures(client.node, threading.Condition())
+    rgb = np.arange(4 * 5 * 3, dtype=np.uint8).reshape(4, 5, 3)
+    msgs = []
+    for sec in range(1, CAPTURES_KEPT + 2):
+        msg = Image(height=4, width=5, encoding="rgb8", step=15, data=rgb.tobytes())
+        msg.header.stamp.sec = sec
+        msgs.append(msg)
+        fleet._on("d0", "image", msg)
+    bad = Image(height=1, width=1, encoding="16UC1", step=2, data=b"ab")
+    bad.header.stamp.sec = CAPTURES_KEPT + 2
+    fleet._on("d0", "image", bad)
+    kept = fleet._got["d0"]
+    assert sorted(kept) == [s * 1_000_000_000 for s in range(3, CAPTURES_KEPT + 3)]
+    newest_good = kept[(CAPTURES_KEPT + 1) * 1_000_000_000]["image"]
+    np.testing.assert_array_equal(newest_good, rgb)
+    assert np.shares_memory(newest_good, np.frombuffer(msgs[-1].data, np.uint8))
+    assert isinstance(kept[(CAPTURES_KEPT + 2) * 1_000_000_000]["image"], ValueError)
+    err = capfd.readouterr().err
+    assert "capture of d0 stamped 1000000000 ns dropped" in err and "stamped 2000000000 ns dropped" in err, err
+
+
+def test_compressed_images_give_the_raw_reconstruction(ros_env, start_node, ros_node, tmp_path) -> None:
+    """``image_transport: compressed``: the recon node takes the drones' image_raw/compressed
+    (PNG, lossless) and not image_raw, and reconstructs what the raw images give (the render
+    source's reconstruction, which the raw transport matches in the test above: to 1e-6, same
+    point count). (A transport it does not know: tests/test_node_parameters.py.)"""
+    cams, drones = ring(), ["d0", "d1", "d2", "d3"]
+    recon, client, scores, descriptions, *_ = fly(
+        cams, drones, {"capture_timeout": 45.0, "image_transport": "compressed", "max_realizations": 1}, ros_env,
+        start_node, ros_node, tmp_path)
+    assert client.spin_until(lambda: aggregates(scores), TIMEOUT), recon.output()[-4000:]
+    agg = aggregates(scores)[0]
+    assert agg.error_code == Score.NONE, agg.error_msg
+    assert agg.realizations == 1 and agg.num_images == 4
+    for d in drones:
+        assert f"subscribed /{d}/camera/image_raw/compressed" in recon.output()
+        assert "recon" in [e.node_name for e in client.node.get_subscriptions_info_by_topic(
+            f"/{d}/camera/image_raw/compressed")]
+        assert "recon" not in [e.node_name for e in client.node.get_subscriptions_info_by_topic(
+            f"/{d}/camera/image_raw")]
+    (s,) = [s for s in scores if s.realization != Score.AGGREGATE]
+    ref = reconstruct_realization(scene_of_description(descriptions[-1]), s.realization, cams,
+                                  ReconConfig(**SIZE, capture=IDEAL, num_threads=1))
+    assert s.chamfer == pytest.approx(100 * ref.chamfer, rel=1e-6) and s.num_points == len(ref.points)

@@ -67,7 +67,8 @@ from vp_recon.pipeline import (CAPTURE_MISSING, ReconCancelled, ReconConfig, Rec
                                ensure_writable_dir, plan_result, reconstruct_captured, reconstruct_plan)
 from vp_scene.capture import IDEAL, REALISTIC, CaptureModel
 from vp_scene.camera import poses_to_cameras
-from vp_scene.messages import (aggregate_score, camera_info_intrinsics, drone_topic, error_score, image_array,
+from vp_scene.messages import (aggregate_score, camera_info_intrinsics, compressed_image_array, drone_topic,
+                               error_score, image_array,
                                numpy_to_pointcloud2, plan_key, pose_array, pose_array_to_cameras, realization_score,
                                realizations_from_cloud, scene_of_description, score_msg)
 from vp_scene.node_runtime import (INT_MAX, NewestWins, Param, declare_typed, parameter_value, refuse_bad_changes,
@@ -106,6 +107,8 @@ PARAMS = {
     'capture_timeout': Param(60.0, 's source fleet: how long a capture set may take to arrive', _M),
     'camera_topic': Param('/{drone}/camera', 'source fleet: the drones\' camera topics (image_raw, camera_info, '
                                              'pose)'),
+    'image_transport': Param('raw', 'source fleet: the images from image_raw (sensor_msgs/Image) | compressed: '
+                                    'from image_raw/compressed (CompressedImage, PNG or JPEG; PNG is lossless)'),
     'record_captures': Param(True, 'write each realization\'s capture set (images, poses.csv, COLMAP text model) '
                                    'to <plan folder>/captures/realization_<k>: `make recon IMAGES=...` re-runs it'),
     'max_realizations': Param(0, 'reconstruct only the first n realizations (0: all)', (0, INT_MAX)),
@@ -119,8 +122,13 @@ PARAMS = {
                      (1, INT_MAX)),
 }
 
+#: image_transport -> the image topic under camera_topic (the image_transport convention).
+IMAGE_TRANSPORTS = {'raw': 'image_raw', 'compressed': 'image_raw/compressed'}
 #: /camera_plan/info messages remembered to find the one of a plan.
 _INFO_MEMORY = 16
+#: captures (stamps) kept per drone until a capture set takes them; beyond, the oldest is dropped
+#: with a log line (memory: a 2000 x 1500 image is 9 MB; a drone that sends unasked would grow it).
+CAPTURES_KEPT = 2
 #: s a plan waits for its /camera_plan/info (its reward, a second sortie's cameras already flown);
 #: a plan without one (another planner) is reconstructed as it is after that.
 INFO_WAIT_S = 2.0
@@ -153,6 +161,8 @@ def check_parameters(values: dict) -> dict:
                          f'{v.get("workers", 1)}')
     if v.get('source', 'render') not in ('render', 'fleet'):
         raise ValueError(f"source must be render or fleet, got {v['source']!r}")
+    if v.get('image_transport', 'raw') not in IMAGE_TRANSPORTS:
+        raise ValueError(f"image_transport must be raw or compressed, got {v['image_transport']!r}")
     if v.get('capture_timeout', 1.0) <= 0.0:
         raise ValueError(f'capture_timeout must be > 0 s, got {v["capture_timeout"]}')
     if v.get('output_folder', 'x') == '' or v.get('frame_id', 'x') == '':
@@ -432,14 +442,19 @@ class ReconNode(Node):
         for k in range(K):
             try:
                 views = self._fleet.capture(plan.header.stamp, len(plan.poses), k, self._param('capture_timeout'),
-                                            self._param('camera_topic'), lambda: self._plans.stopped)
+                                            self._param('camera_topic'), lambda: self._plans.stopped,
+                                            transport=self._param('image_transport'))
                 if views is None:
                     raise ReconCancelled('stopped while waiting for the fleet')
+                self.get_logger().info(f'capture {k}: {len(views.images)} images from the fleet '
+                                       f'({sum(im.nbytes for im in views.images) / 1e6:.0f} MB) collected')
                 res = reconstruct_captured(scene, views, config, progress=progress)
             except ReconError as exc:
                 exc.realization = k
                 raise
             on_realization(res)
+            if k > 0:  # as reconstruct_plan: only the first realization keeps its images (memory)
+                res.rendered = []
             results.append(res)
         return plan_result(results, {'total': time.perf_counter() - t0})
 
@@ -460,11 +475,18 @@ class FleetCaptures:
     """The drones' capture sets (source fleet; README "From a real flight").
 
     ``/fleet/assignment`` says which drone holds which pose of a plan; for each drone named there
-    the node subscribes ``{camera_topic}/image_raw`` (sensor_msgs/Image), ``camera_info`` and
+    the node subscribes ``{camera_topic}/image_raw`` (sensor_msgs/Image; with ``image_transport``
+    compressed ``image_raw/compressed``, sensor_msgs/CompressedImage), ``camera_info`` and
     ``pose`` (the reported PoseStamped). Every message received is kept by its stamp until a
     capture set takes it (nothing received is lost, also what arrives while a set is being
     reconstructed); a capture older than the trigger asking for it belongs to an older plan or
-    realization and is ignored with a log line."""
+    realization and is ignored with a log line.
+
+    Memory (issue 20, part 5): an image is converted to its array as it arrives (a view of the
+    message's buffer, which is then the only copy), and at most :data:`CAPTURES_KEPT` captures
+    are kept per drone (the oldest beyond is dropped with a log line): a capture set of N images
+    costs the node about N images' bytes, not three times that (measured in
+    results/bench_fleet_transport.json, ``recon_node_memory``)."""
 
     def __init__(self, node: Node, lock: threading.Condition) -> None:
         from vp_interfaces.msg import CaptureTrigger, FleetAssignment
@@ -489,24 +511,43 @@ class FleetCaptures:
                 self._assignments.popitem(last=False)
             self._lock.notify_all()
 
-    def _subscribe(self, drone: str, topic: str) -> None:
+    def _subscribe(self, drone: str, topic: str, transport: str = 'raw') -> None:
+        """Subscribe the drone's image (``image_raw`` or ``image_raw/compressed``, by
+        ``transport``), ``camera_info`` and ``pose`` under ``topic``, once per topic name."""
         from geometry_msgs.msg import PoseStamped
-        from sensor_msgs.msg import CameraInfo, Image
+        from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 
-        if drone in self._subscribed:
-            return
-        self._subscribed.add(drone)
         base = drone_topic(topic, drone)
-        for kind, t, name in (('image', Image, 'image_raw'), ('info', CameraInfo, 'camera_info'),
+        image = ('compressed', CompressedImage) if transport == 'compressed' else ('image', Image)
+        for kind, t, name in ((*image, IMAGE_TRANSPORTS[transport]), ('info', CameraInfo, 'camera_info'),
                               ('pose', PoseStamped, 'pose')):
+            if f'{base}/{name}' in self._subscribed:
+                continue
+            self._subscribed.add(f'{base}/{name}')
             self._node.create_subscription(t, f'{base}/{name}', lambda m, d=drone, k=kind: self._on(d, k, m), LATCHED)
+            self._node.get_logger().info(f'subscribed {base}/{name}')
 
     def _on(self, drone: str, kind: str, msg) -> None:
+        stamp = self._ns(msg.header.stamp)
+        if kind in ('image', 'compressed'):  # kept as the array: the message itself is let go
+            try:  # raw: a view of msg.data; compressed: decoded, one image at a time as they come
+                msg = image_array(msg) if kind == 'image' else compressed_image_array(msg)
+            except ValueError as exc:
+                msg = exc  # reported when a capture set takes it
+            kind = 'image'
         with self._lock:
-            self._got.setdefault(drone, {}).setdefault(self._ns(msg.header.stamp), {})[kind] = msg
+            got = self._got.setdefault(drone, {})
+            got.setdefault(stamp, {})[kind] = msg
+            dropped = sorted(got)[:-CAPTURES_KEPT]
+            for t in dropped:
+                del got[t]
             self._lock.notify_all()
+        for t in dropped:
+            self._node.get_logger().warning(f'capture of {drone} stamped {t} ns dropped: {CAPTURES_KEPT} newer '
+                                            'ones are waiting for a capture set (memory)')
 
-    def capture(self, plan_stamp, num_poses: int, k: int, timeout: float, topic: str, stopped) -> object:
+    def capture(self, plan_stamp, num_poses: int, k: int, timeout: float, topic: str, stopped,
+                transport: str = 'raw') -> object:
         """The capture set of realization ``k`` of the plan: trigger, then one image, camera_info
         and pose with one stamp (not older than the trigger) from every drone of the plan's
         assignment, as :class:`vp_recon.flight.CapturedViews` in pose order; None when
@@ -528,7 +569,7 @@ class FleetCaptures:
         entries = sorted(fleet.entries, key=lambda e: e.pose_index)
         drones = [e.drone for e in entries]
         for d in drones:
-            self._subscribe(d, topic)
+            self._subscribe(d, topic, transport)
         asked = self.now_ns()
         trigger = self._trigger_type(realization=int(k), plan_stamp=plan_stamp)
         trigger.header.frame_id = fleet.header.frame_id
@@ -561,9 +602,12 @@ class FleetCaptures:
             intr = [camera_info_intrinsics(sets[d]['info']) for d in drones]
             if any(not np.allclose(a[0], intr[0][0]) or a[1:] != intr[0][1:] for a in intr):
                 raise ValueError('the drones\' cameras differ (one camera model per flight)')
+            bad = [(d, sets[d]['image']) for d in drones if isinstance(sets[d]['image'], Exception)]
+            if bad:
+                raise ValueError(f'the image of {bad[0][0]}: {bad[0][1]}')
             return CapturedViews(
                 names=[f'view_{e.pose_index:03d}.png' for e in entries],
-                images=[image_array(sets[d]['image']) for d in drones],
+                images=[sets[d]['image'] for d in drones],
                 reported=poses_to_cameras(np.array([pose_array(sets[d]['pose'].pose) for d in drones])),
                 K=intr[0][0], realization=int(k)).validate()
         except (ValueError, FlightError) as exc:

@@ -127,6 +127,21 @@ def cameras_to_pose_array(cameras: ArrayLike, frame_id: str, stamp: Any = None) 
     return msg
 
 
+def fleet_assignment_msg(plan_stamp_sec: int, drones: Sequence[str], cameras: ArrayLike,
+                         frame_id: str = 'map') -> Any:
+    """``vp_interfaces/FleetAssignment`` giving drone i pose i of a plan of cameras (N, 6) stamped
+    ``plan_stamp_sec`` (as the dispatcher answers it; for tests and benchmarks that play it)."""
+    from vp_interfaces.msg import DroneAssignment, FleetAssignment
+
+    cams = np.asarray(cameras, dtype=np.float64).reshape(-1, 6)
+    msg = FleetAssignment(num_poses=len(cams), assignment='min_total', orientation='body')
+    msg.header.frame_id = frame_id
+    msg.plan_stamp.sec = int(plan_stamp_sec)
+    msg.entries = [DroneAssignment(drone=d, pose_index=i, goal=pose_msg(cameras_to_poses(c)))
+                   for i, (d, c) in enumerate(zip(drones, cams))]
+    return msg
+
+
 def pose_array_to_cameras(poses: Sequence[Pose]) -> NDArray[np.float64]:
     """Cameras (N, 6) = [c, v] of a PoseArray's poses (ValueError for unusable quaternions)."""
     return poses_to_cameras(msgs_to_poses(poses))
@@ -337,12 +352,16 @@ def image_msg(image: ArrayLike, frame_id: str, stamp: Any) -> Image:
 
 def image_array(msg: Image) -> NDArray[np.uint8]:
     """RGB (H, W, 3) uint8 of a ``sensor_msgs/Image`` in ``rgb8``, ``bgr8`` or ``mono8`` (rows
-    may be padded: ``step``); ValueError naming the problem for another encoding or a short buffer."""
+    may be padded: ``step``); ValueError naming the problem for another encoding or a short buffer.
+    An ``rgb8`` image without padding is a view of ``msg.data`` (no copy; it keeps the buffer alive)."""
     channels = {'rgb8': 3, 'bgr8': 3, 'mono8': 1}
     if msg.encoding not in channels:
         raise ValueError(f"image encoding {msg.encoding!r} is not read (rgb8, bgr8, mono8)")
     c, h, w, step = channels[msg.encoding], int(msg.height), int(msg.width), int(msg.step)
-    data = np.frombuffer(bytes(msg.data), dtype=np.uint8)
+    try:  # a view of the message's buffer (rclpy: array.array), not a copy: a set of 16 images is 144 MB
+        data = np.frombuffer(msg.data, dtype=np.uint8)
+    except (TypeError, ValueError):
+        data = np.frombuffer(bytes(msg.data), dtype=np.uint8)
     if step < c * w or len(data) < step * h or h < 1 or w < 1:
         raise ValueError(f"image of {w}x{h} {msg.encoding} with step {step} has {len(data)} bytes")
     a = data[:step * h].reshape(h, step)[:, :c * w].reshape(h, w, c)
