@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import math
 import re
-import threading
 import time
 from functools import partial
 from typing import Optional
@@ -151,7 +150,11 @@ class DispatcherNode(Node):
         refuse_bad_changes(self, PARAMS, check_parameters)
 
         self._drones: list[str] = list(v['drones'])
-        self._plans = NewestWins()  # of the plans that arrive while one is dispatched, the newest waits
+        # of the plans that arrive while one is dispatched, the newest waits
+        self._plans = NewestWins('dispatcher-worker', self._dispatch_newest,
+                                 lambda plan, exc: self._fail(plan, Msg.UNKNOWN, f'{type(exc).__name__}: {exc}',
+                                                              self._values()),
+                                 self.get_logger(), 'a newer plan arrived: it replaces the one waiting to be dispatched')
         self._lock = self._plans.lock
         self._scene: Optional[np.ndarray] = None
         self._scene_problem = ''
@@ -167,8 +170,7 @@ class DispatcherNode(Node):
         self.assignment_pub = self.create_publisher(FleetAssignment, '/fleet/assignment', LATCHED)
         self.create_subscription(PointCloud2, '/scene/noisy_points', self._on_scene, LATCHED)
         self.create_subscription(PoseArray, '/camera_plan', self._on_plan, LATCHED)
-        self._worker = threading.Thread(target=self._work, name='dispatcher-worker', daemon=True)
-        self._worker.start()
+        self._plans.start()
         self.get_logger().info(
             f'dispatcher ready: {len(self._drones)} drones ({", ".join(self._drones)}), {v["assignment"]}, '
             f'goals on {drone_topic(v["goal_topic"], "<drone>")} in {v["fleet_frame"]!r}; waiting for /camera_plan')
@@ -222,25 +224,20 @@ class DispatcherNode(Node):
                                f'{realizations.shape[1]} points (for the stand-off check)')
 
     def _on_plan(self, msg: PoseArray) -> None:
-        if self._plans.offer(msg):
-            self.get_logger().warn('a newer plan arrived: it replaces the one waiting to be dispatched')
+        self._plans.offer(msg)
         self.get_logger().info(f'plan received: {len(msg.poses)} poses (frame {msg.header.frame_id!r}, '
                                f'stamp {_stamp(msg.header.stamp)})')
 
     # ---------------------------------------------------------------- work
-    def _work(self) -> None:
-        while (plan := self._plans.take()) is not None:
-            try:
-                self._dispatch(plan)
-            except _Superseded:
-                if self._plans.stopped:
-                    return
+    def _dispatch_newest(self, plan: PoseArray) -> None:
+        """The worker's work (:class:`NewestWins`): dispatch the plan unless a newer one arrives
+        while it waits for the scene or the drones."""
+        try:
+            self._dispatch(plan)
+        except _Superseded:
+            if not self._plans.stopped:
                 self.get_logger().info(f'plan {_stamp(plan.header.stamp)} superseded by a newer one before it '
                                        'was dispatched')
-            except Exception as exc:  # never let one plan kill the worker
-                if self._plans.stopped:
-                    return
-                self._fail(plan, Msg.UNKNOWN, f'{type(exc).__name__}: {exc}', self._values())
 
     def _wait(self, ready, timeout: float) -> None:
         """Wait (lock held) until ``ready()``, ``timeout`` s, a newer plan (_Superseded) or shutdown."""

@@ -189,7 +189,9 @@ class ReconNode(Node):
         # signal); imported here, in the constructor, node_runtime puts its own handler back.
         import pycolmap  # noqa: F401
 
-        self._plans = NewestWins()  # of the plans that arrive during a reconstruction, the newest waits
+        # of the plans that arrive during a reconstruction, the newest waits
+        self._plans = NewestWins('recon-worker', self._reconstruct_newest, self._crashed, self.get_logger(),
+                                 'a newer plan arrived: it replaces the queued one')
         self._lock = self._plans.lock
         self._infos: OrderedDict = OrderedDict()  # plan key -> CameraPlan
         self._description: Optional[SceneDescription] = None
@@ -203,8 +205,7 @@ class ReconNode(Node):
         self.create_subscription(CameraPlan, '/camera_plan/info', self._on_info, LATCHED)
         self.create_subscription(PoseArray, '/camera_plan', self._on_plan, LATCHED)
         self._fleet = FleetCaptures(self, self._lock)
-        self._worker = threading.Thread(target=self._work, name='recon-worker', daemon=True)
-        self._worker.start()
+        self._plans.start()
         self.get_logger().info(
             f'recon ready ({self._param("width")}x{self._param("height")}, output {self._param("output_folder")}): '
             'waiting for /scene/description, /scene/noisy_points and /camera_plan')
@@ -266,23 +267,21 @@ class ReconNode(Node):
             return self._infos.get(key)
 
     def _on_plan(self, msg: PoseArray) -> None:
-        if self._plans.offer(msg):
-            self.get_logger().warn('a newer plan arrived: it replaces the queued one')
+        self._plans.offer(msg)
         self.get_logger().info(f'plan received: {len(msg.poses)} cameras (frame {msg.header.frame_id!r})')
 
     # ---------------------------------------------------------------- work
-    def _work(self) -> None:
-        while (plan := self._plans.take()) is not None:
-            try:
-                self._reconstruct(plan)
-            except ReconCancelled:
-                self.get_logger().info('shutting down: reconstruction abandoned')
-                return
-            except Exception as exc:  # never let one plan kill the worker
-                if self._plans.stopped:  # the node is being torn down under the worker: nothing to report
-                    return
-                self.get_logger().error(f'reconstruction crashed: {type(exc).__name__}: {exc}')
-                self._publish_error(Score.UNKNOWN, f'{type(exc).__name__}: {exc}', Score.AGGREGATE, 0, plan)
+    def _reconstruct_newest(self, plan: PoseArray) -> None:
+        """The worker's work (:class:`NewestWins`): reconstruct the plan to its end, or until
+        SIGINT/SIGTERM abandons it."""
+        try:
+            self._reconstruct(plan)
+        except ReconCancelled:
+            self.get_logger().info('shutting down: reconstruction abandoned')
+
+    def _crashed(self, plan: PoseArray, exc: Exception) -> None:
+        self.get_logger().error(f'reconstruction crashed: {type(exc).__name__}: {exc}')
+        self._publish_error(Score.UNKNOWN, f'{type(exc).__name__}: {exc}', Score.AGGREGATE, 0, plan)
 
     def _scene_now(self):
         """The rebuilt NoisyScene (cached), checked against the received ground truth.

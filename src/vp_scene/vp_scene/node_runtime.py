@@ -188,26 +188,42 @@ def refuse_bad_changes(node: Any, specs: dict, check: Callable[[dict], dict]) ->
 
 
 class NewestWins:
-    """A node's work queue where the newest item wins: one slot, a worker thread takes from it.
+    """A node's "newest plan wins" worker: one thread runs the item in progress to its end; of the
+    items that arrive meanwhile only the newest is kept (it replaces an older waiting one, logged
+    as ``replaced``), because a newer plan supersedes older ones.
 
-    :meth:`offer` puts an item in the slot (replacing one that still waits: True), :meth:`take`
-    blocks until there is one or the queue is stopped (then None), :meth:`stop` wakes every
-    waiter. ``lock`` is a Condition the node may share for its other state (``pending`` and
-    ``stopped`` are read under it)."""
+    ``handle(item)`` does the work; an exception out of it does not end the worker: it goes to
+    ``on_error(item, exc)`` (unless the worker is stopped: then nothing is reported).
+    :meth:`start` starts the thread, :meth:`offer` puts an item in the slot (True: it replaced
+    one still waiting), :meth:`stop` ends the worker after its item and wakes every waiter.
+    ``lock`` is a Condition the node may share for its other state (``pending`` and ``stopped``
+    are read under it)."""
 
-    def __init__(self) -> None:
+    def __init__(self, name: str = "worker", handle: Optional[Callable[[Any], None]] = None,
+                 on_error: Optional[Callable[[Any, Exception], None]] = None, logger: Any = None,
+                 replaced: str = "a newer item arrived: it replaces the one waiting") -> None:
         self.lock = threading.Condition()
         self.pending: Any = None
         self.stopped = False
+        self._handle, self._on_error = handle, on_error
+        self._logger, self._replaced = logger, replaced
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+
+    def start(self) -> "NewestWins":
+        self._thread.start()
+        return self
 
     def offer(self, item: Any) -> bool:
         with self.lock:
             replaced = self.pending is not None
             self.pending = item
             self.lock.notify_all()
+        if replaced and self._logger is not None:
+            self._logger.warn(self._replaced)
         return replaced
 
     def take(self) -> Any:
+        """The next item, waiting for one; None once stopped."""
         with self.lock:
             while self.pending is None and not self.stopped:
                 self.lock.wait(0.5)
@@ -220,6 +236,16 @@ class NewestWins:
         with self.lock:
             self.stopped = True
             self.lock.notify_all()
+
+    def _run(self) -> None:
+        while (item := self.take()) is not None:
+            try:
+                self._handle(item)
+            except Exception as exc:  # noqa: BLE001 - never let one item kill the worker
+                if self.stopped:  # the node is being torn down under the worker: nothing to report
+                    return
+                if self._on_error is not None:
+                    self._on_error(item, exc)
 
 
 def _exit(code: int) -> None:
