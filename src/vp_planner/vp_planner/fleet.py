@@ -55,7 +55,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import maximum_bipartite_matching
 from scipy.spatial.transform import Rotation
 
-from vp_scene.camera import check_cameras, optical_orientation
+from vp_scene.camera import check_cameras, express_poses, optical_orientation
 
 from .feasibility import FeasibilityRules
 
@@ -224,11 +224,9 @@ class FleetTransform:
         return p @ self._rotation().as_matrix().T + np.array([self.x, self.y, self.z])
 
     def poses_to_fleet(self, poses_map: ArrayLike) -> NDArray[np.float64]:
-        """Poses (N, 7) = (x, y, z, qx, qy, qz, qw) in ``map`` -> the fleet frame (qw >= 0)."""
-        p = np.asarray(poses_map, dtype=np.float64).reshape(-1, 7)
-        q = (self._rotation().inv() * Rotation.from_quat(p[:, 3:])).as_quat() if len(p) else np.zeros((0, 4))
-        q = np.where(q[:, 3:4] < 0, -q, q)
-        return np.concatenate([self.points_to_fleet(p[:, :3]), q], axis=1)
+        """Poses (N, 7) = (x, y, z, qx, qy, qz, qw) in ``map`` -> the fleet frame (qw >= 0)
+        (:func:`vp_scene.camera.express_poses`)."""
+        return express_poses(poses_map, self._rotation(), [self.x, self.y, self.z])
 
 
 def goal_orientations(quaternions: ArrayLike, orientation: str = "body") -> NDArray[np.float64]:

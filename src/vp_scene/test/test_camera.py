@@ -163,3 +163,19 @@ def test_projection_with_a_given_calibration() -> None:
     assert inside.any() and ij.min() >= 0 and (ij < [320, 240]).all()
     _, far = project_with(pts, cam, intrinsics(320, 240, 1.3), 320, 240, min_depth=10.0)
     assert not far.any()
+
+
+def test_poses_expressed_in_a_turned_and_shifted_frame() -> None:
+    """express_poses: a camera at the other frame's origin looking along map +y is, in a frame
+    turned by +90 deg about z, at its origin looking along its +x (the fleet frame's pose math)."""
+    from scipy.spatial.transform import Rotation
+
+    from vp_scene.camera import express_poses
+
+    origin, turn = np.array([2.0, -1.0, 0.5]), Rotation.from_euler("z", math.pi / 2)
+    pose = cameras_to_poses(np.array([[2.0, -1.0, 0.5, 0.0, 1.0, 0.0]]))
+    out = express_poses(pose, turn, origin)
+    np.testing.assert_allclose(out[0, :3], 0.0, atol=1e-12)
+    np.testing.assert_allclose(poses_to_cameras(out)[0, 3:], [1.0, 0.0, 0.0], atol=1e-12)
+    assert out[0, 6] >= 0
+    assert express_poses(np.zeros((0, 7)), turn, origin).shape == (0, 7)

@@ -58,6 +58,7 @@ __all__ = [
     "roll_of",
     "body_from_optical",
     "optical_orientation",
+    "express_poses",
     "look_at",
     "intrinsics",
     "principal_point_gl",
@@ -178,6 +179,16 @@ def optical_orientation(quaternions: ArrayLike) -> NDArray[np.float64]:
     body = Rotation.from_quat(q.reshape(-1, 4))
     out = (body * Rotation.from_quat(OPTICAL_IN_BODY)).as_quat().reshape(q.shape)
     return _canonical(out)
+
+
+def express_poses(poses: ArrayLike, rotation: Rotation, origin: ArrayLike) -> NDArray[np.float64]:
+    """Poses (N, 7) = (x, y, z, qx, qy, qz, qw) expressed in another frame, whose origin o (3,)
+    and axes R (a scipy Rotation) are given in the poses' frame (tf's parent -> child transform):
+    positions R^T (p - o), orientations R^-1 q (qw >= 0)."""
+    p = np.asarray(poses, dtype=np.float64).reshape(-1, 7)
+    q = (rotation.inv() * Rotation.from_quat(p[:, 3:])).as_quat() if len(p) else np.zeros((0, 4))
+    positions = (p[:, :3] - np.asarray(origin, dtype=np.float64)) @ rotation.as_matrix()
+    return np.concatenate([positions, _canonical(q)], axis=1)
 
 
 def look_at(positions: ArrayLike, targets: ArrayLike) -> NDArray[np.float64]:
