@@ -326,28 +326,22 @@ def reward(
     return _finish(out, batch_shape, cameras)
 
 
-def noisy_reward(
-    cameras: Any,
-    realizations: Any,
-    fov: float = DEFAULT_FOV,
-    theta_match: float = DEFAULT_THETA_MATCH,
-    *,
-    dtype: Any = torch.float64,
-    max_elements: int = DEFAULT_MAX_ELEMENTS,
-) -> Any:
+def noisy_reward(cameras: Any, realizations: Any, fov: float = DEFAULT_FOV,
+                 theta_match: float = DEFAULT_THETA_MATCH, **options: Any) -> Any:
     """Paper eq. 7: r~(z) = (1/K) sum_k r(z; p~^(k)_1..p~^(k)_P), the mean over K realizations.
 
     Args:
         cameras: (..., N, 6) plans as in :func:`reward`.
         realizations: (K, P, 3) noisy point clouds (a (P, 3) array counts as K = 1), or
             ``prepare_points(realizations)``.
+        fov, theta_match, options: as :func:`reward` (its keywords ``dtype`` and ``max_elements``).
 
     Because each realization has the same P points, the mean of the K rewards equals the
     reward of the K*P points taken together, which is what is computed (one pass).
     """
     R = realizations
     if isinstance(R, PreparedPoints):
-        return reward(cameras, R, fov, theta_match, dtype=dtype, max_elements=max_elements)
+        return reward(cameras, R, fov, theta_match, **options)
     if isinstance(R, torch.Tensor):
         flat = R.reshape(-1, R.shape[-1]) if R.ndim == 3 else R
     else:
@@ -355,4 +349,4 @@ def noisy_reward(
         flat = R.reshape(-1, R.shape[-1]) if R.ndim == 3 else R
     if R.ndim not in (2, 3) or R.shape[-1] != 3:
         raise ValueError(f"realizations must have shape (K, P, 3), got {tuple(R.shape)}")
-    return reward(cameras, flat, fov, theta_match, dtype=dtype, max_elements=max_elements)
+    return reward(cameras, flat, fov, theta_match, **options)
