@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["DEFAULT_FSCORE_THRESHOLD", "ICP_MAX_DISTANCE", "COVERAGE_TAU", "EmptyCloudError", "CloudScore",
+__all__ = ["DEFAULT_FSCORE_THRESHOLD", "ICP_MAX_DISTANCE", "COVERAGE_TAU", "EmptyCloudError", "Scores", "CloudScore",
            "Coverage", "nn_distances", "chamfer", "chamfer_after_icp", "coverage_of_prior"]
 
 #: m: correspondences of the rigid refinement of :func:`chamfer_after_icp` (several times the
@@ -44,9 +44,11 @@ class EmptyCloudError(ValueError):
     """The reconstruction (or the truth) has no points: no distance is defined."""
 
 
-@dataclass(frozen=True)
-class CloudScore:
-    """Scores of a reconstruction, metres (fscore and its parts unitless in [0, 1])."""
+@dataclass
+class Scores:
+    """The scores of a reconstruction against its truth (:func:`chamfer`): Chamfer = accuracy +
+    completeness, metres; fscore, precision and recall unitless in [0, 1]. The fields every
+    score record shares (:class:`CloudScore`, :class:`vp_recon.pipeline.RealizationResult`)."""
 
     chamfer: float
     accuracy: float
@@ -54,6 +56,12 @@ class CloudScore:
     fscore: float
     precision: float
     recall: float
+
+
+@dataclass
+class CloudScore(Scores):
+    """:class:`Scores` at ``threshold`` metres, of a reconstruction of ``num_points`` points."""
+
     threshold: float
     num_points: int
 

@@ -57,7 +57,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from vp_scene.capture import CaptureModel, REALISTIC
 
-from .metrics import DEFAULT_FSCORE_THRESHOLD, CloudScore, EmptyCloudError, chamfer, chamfer_after_icp
+from .metrics import DEFAULT_FSCORE_THRESHOLD, CloudScore, EmptyCloudError, Scores, chamfer, chamfer_after_icp
 
 __all__ = [
     "NONE", "UNKNOWN", "EMPTY_PLAN", "NO_SCENE", "NOTHING_VISIBLE", "RECONSTRUCTION_FAILED",
@@ -222,8 +222,9 @@ class ReconConfig:
 
 
 @dataclass
-class RealizationResult:
-    """One realization's reconstruction and scores (distances in metres).
+class RealizationResult(Scores):
+    """One realization's reconstruction and scores (distances in metres; the :class:`Scores`
+    fields first).
 
     Attributes:
         realization: k.
@@ -256,12 +257,6 @@ class RealizationResult:
     """
 
     realization: int
-    chamfer: float
-    accuracy: float
-    completeness: float
-    fscore: float
-    precision: float
-    recall: float
     fscore_threshold: float
     points: NDArray[np.float64]
     colors: NDArray[np.uint8]
