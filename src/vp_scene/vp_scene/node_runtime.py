@@ -199,7 +199,7 @@ class NewestWins:
     ``lock`` is a Condition the node may share for its other state (``pending`` and ``stopped``
     are read under it)."""
 
-    def __init__(self, name: str = "worker", handle: Optional[Callable[[Any], None]] = None,
+    def __init__(self, name: str, handle: Callable[[Any], None],
                  on_error: Optional[Callable[[Any, Exception], None]] = None, logger: Any = None,
                  replaced: str = "a newer item arrived: it replaces the one waiting") -> None:
         self.lock = threading.Condition()
