@@ -5,7 +5,8 @@ subscribes, once, to each one that matches a pattern of ``topics`` and has a pub
 serialized subscription (``raw=True``: the CDR bytes are written as they arrive, never decoded),
 with QoS adapted to the publishers as rosbag2 does (reliable when all of them are, transient local
 when all of them are, so latched messages published before the recorder started are recorded
-too). On SIGINT/SIGTERM the file is closed (summary and footer written) and the counts logged;
+too). On SIGINT/SIGTERM the messages still arriving are written (until none came for 0.5 s, at
+most the shutdown grace), then the file is closed (summary and footer written) and the counts logged;
 signals, exit codes and parameter types follow :mod:`vp_scene.node_runtime` (a bad parameter or
 an unwritable file: one line, exit 2).
 
@@ -31,6 +32,10 @@ PARAMS = {
     'topics': Param(list(RUN_TOPICS), 'topic patterns to record (fnmatch: * also matches /)', None, True),
     'discovery_period': Param(0.5, 's between two looks at the graph for new topics', (0.0, math.inf), True, '> 0'),
 }
+
+
+#: s without a new message after which a stopping recorder closes its file (:meth:`RecorderNode.on_shutdown`).
+DRAIN_QUIET_S = 0.5
 
 
 def check_parameters(values: dict) -> dict:
@@ -97,6 +102,14 @@ class RecorderNode(Node):
         self.get_logger().error(f'not recording {topic}: {why}')
 
     def on_shutdown(self, timeout: float) -> bool:
+        """Close the file once what was sent has been written: the executor still spins here, so
+        messages already on their way (``make run`` stops every node within a second of the last
+        score) are written until none came for :data:`DRAIN_QUIET_S`, within ``timeout``."""
+        deadline = time.monotonic() + timeout
+        written = -1
+        while written != self.recording.total() and time.monotonic() < deadline:
+            written = self.recording.total()
+            time.sleep(DRAIN_QUIET_S)
         self.recording.close()
         counts = ', '.join(f'{t} {n}' for t, n in sorted(self.recording.counts.items()))
         self.get_logger().info(f'closed {self.recording.path}: {counts or "no messages"}')

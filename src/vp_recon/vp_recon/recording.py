@@ -183,6 +183,11 @@ class RunRecording:
             self._sequence[topic] += 1
             self.counts[topic] += 1
 
+    def total(self) -> int:
+        """Messages written so far, all topics."""
+        with self._lock:
+            return sum(self.counts.values())
+
     def close(self) -> None:
         with self._lock:
             if self._closed:
