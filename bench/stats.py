@@ -58,11 +58,15 @@ def paired_difference(a: Mapping[Hashable, Optional[float]], b: Mapping[Hashable
 def describe(s: dict) -> str:
     """'mean +- std (n=.., k failed)' of a :func:`summary`."""
     failed = f', {s["failed"]} failed' if s['failed'] else ''
+    if not s['n']:
+        return f'failed (n=0{failed})'
     return f'{s["mean"]:.3f} +- {s["std"]:.3f} (n={s["n"]}{failed})'
 
 
 def describe_difference(d: dict) -> str:
     """'mean [low, high] (n=..)' of a :func:`paired_difference`, with its failures."""
     fails = [f'{d[k]} {k.replace("_", " ")}' for k in ('only_a_failed', 'only_b_failed', 'both_failed', 'missing') if d[k]]
+    if not d['n']:
+        return 'no pair (n=0' + (', ' + ', '.join(fails) if fails else '') + ')'
     return (f'{d["mean"]:+.3f} [{d["low"]:+.3f}, {d["high"]:+.3f}] (n={d["n"]}'
             + (', ' + ', '.join(fails) if fails else '') + ')')

@@ -58,3 +58,10 @@ def test_table1_shape_table_counts_a_failed_plan() -> None:
     assert "| circle | 1.100 +- 0.141 (n=2), images 3-4 |" in lines
     assert "| egp | failed, 1 plan(s) failed |" in lines
     assert table["shape"]["one_plant/egp"]["failed_plans"] == 1
+
+
+def test_a_row_with_no_success_reads_failed_not_nan():
+    from stats import describe, describe_difference
+
+    assert describe(summary({0: None, 1: None})) == "failed (n=0, 2 failed)"
+    assert describe_difference(paired_difference({0: None}, {0: 1.0})) == "no pair (n=0, 1 only a failed)"
