@@ -149,25 +149,26 @@ def run(client, cache: Path, out: Path, args) -> dict:
                       + [plan_task(s, c, v, m + n * extra) for s, (n, m) in sizes.items()
                          for c, (v, extra) in plan_of.items()], 'planning')
 
-    def both(s: str, case: str):
-        """The cameras reconstructed after sortie 2 of ``case``: a alone, else sortie 1 + case."""
-        first, p = plans[(s, 'sortie1')], plans[(s, case)]
-        return p['cameras'] if case == 'a' else np.concatenate([first['cameras'], p['cameras']])
+    def case_task(s: str, case: str) -> Task:
+        """The reconstruction after sortie 2 of ``case``: a's cameras alone, else sortie 1's and the case's."""
+        (n, m), first, p = sizes[s], plans[(s, 'sortie1')], plans[(s, case)]
+        cams = p['cameras'] if case == 'a' else np.concatenate([first['cameras'], p['cameras']])
+        return recon_task(s, case, f'{case}-n{n}-m{m}', cams)
 
-    ok = [s for s in sizes if 'error' not in plans[(s, 'sortie1')]]
+    def planned(s: str, case: str) -> bool:
+        return (s, case) in plans and 'error' not in plans[(s, case)]
+
+    ok = [s for s in sizes if planned(s, 'sortie1')]
     recons = run_tasks(client, [recon_task(s, 'sortie1', f'sortie1-egp-n{sizes[s][0]}', plans[(s, 'sortie1')]['cameras'])
                                 for s in ok]
                        + [sortie2_task(s, 'd', plans[(s, 'sortie1')]) for s in ok]
-                       + [recon_task(s, c, f'{c}-n{sizes[s][0]}-m{sizes[s][1]}', both(s, c)) for s in ok
-                          for c in plan_of if 'error' not in plans[(s, c)]], 'sortie 1, a-c')
-    plans.update({k: v for k, v in recons.items() if k[1] == 'd'})
+                       + [case_task(s, c) for s in ok for c in plan_of if planned(s, c)], 'sortie 1, a-c')
+    plans.update({k: recons.pop(k) for k in [k for k in recons if k[1] == 'd']})  # plan d rode along in that wave
     flown = [s for s in ok if recons[(s, 'sortie1')].get('chamfer_mean') is not None]
     plans.update(run_tasks(client, [sortie2_task(s, 'e', plans[(s, 'sortie1')],
                                                  reconstruction_points(recons[(s, 'sortie1')])) for s in flown],
                            'planning e'))
-    recons.update(run_tasks(client, [recon_task(s, c, f'{c}-n{sizes[s][0]}-m{sizes[s][1]}', both(s, c))
-                                     for s in ok for c in ('d', 'e') if 'error' not in plans.get((s, c), {'error': 1})],
-                            'd, e'))
+    recons.update(run_tasks(client, [case_task(s, c) for s in ok for c in ('d', 'e') if planned(s, c)], 'd, e'))
     rows = {}
     for s, (n, m) in sizes.items():
         first = plans[(s, 'sortie1')]

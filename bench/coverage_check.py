@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 import sys
 from datetime import datetime, timezone
 from pathlib import Path
@@ -26,7 +25,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import ROOT, SCENARIOS, default_models, machine, models_tag, scene, write_json  # noqa: E402
+from common import (ROOT, SCENARIOS, default_models, machine, models_tag, scene,  # noqa: E402
+                    split_realizations, write_json)
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -47,8 +47,8 @@ def records(results: Path, models: str, capture: str) -> dict:
         rec = json.loads(path.read_text())
         if rec.get('capture', 'ideal') != capture or not (results / 'recon' / path.stem).is_dir():
             continue
-        m = re.fullmatch(r'(.*)-k(\d+)((?:-\D.*)?)', path.stem)
-        cell, k = (m.group(1) + m.group(3), int(m.group(2))) if m else (path.stem, 0)
+        split = split_realizations(path.stem)
+        cell, k = (split[0] + split[2], split[1]) if split else (path.stem, 0)
         if cell not in cells or cells[cell][0] < k:
             cells[cell] = (k, path.stem, rec)
     return {cell: (stem, rec) for cell, (_, stem, rec) in cells.items()}
