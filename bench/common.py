@@ -158,8 +158,8 @@ def realization_entry(r) -> dict:
     return {'realization': int(r.realization), 'chamfer': TABLE_SCALE * r.chamfer,
             'chamfer_shape': TABLE_SCALE * r.chamfer_shape, 'accuracy': TABLE_SCALE * r.accuracy,
             'completeness': TABLE_SCALE * r.completeness, 'fscore': r.fscore, 'points': int(len(r.points)),
-            'images': r.images, 'source': r.source, 'matching': r.matching, 'matched_pairs': r.matched_pairs,
-            'seconds': r.seconds}
+            'images': r.images, 'sparse_models': r.sparse_models, 'source': r.source, 'matching': r.matching,
+            'matched_pairs': r.matched_pairs, 'seconds': r.seconds}
 
 
 def reconstructed(per: list) -> list:

@@ -162,7 +162,7 @@ def summary(result: Any, extra: Optional[dict] = None) -> dict:
             "completeness": r.completeness * s, "fscore": r.fscore, "precision": r.precision, "recall": r.recall,
             "points": int(len(r.points)), "images": int(r.images), "num_images": int(r.num_images),
             "visible_images": int(r.visible_images), "source": r.source, "sparse_points": int(r.sparse_points),
-            "matching": r.matching, "matched_pairs": int(r.matched_pairs),
+            "matching": r.matching, "matched_pairs": int(r.matched_pairs), "sparse_models": int(r.sparse_models),
             "seconds": {k: float(v) for k, v in r.seconds.items()},
             **no_truth_metrics(r.images, r.mean_reprojection_error, r.mean_track_length, len(r.points), r.coverage),
         })

@@ -252,6 +252,8 @@ class RealizationResult(Scores):
         mean_track_length, mean_reprojection_error: of the sparse model (images a point is seen
             in; pixels): metrics without a ground truth (issue 20, part 4).
         coverage: :class:`vp_recon.metrics.Coverage` of the planning cloud (no truth read).
+        sparse_models: the structure-from-motion models merged, each registered to map on its own
+            reported poses (parts of a plan that share no matches; :func:`vp_recon.sparse._merge_models`).
         reported, K: the poses the drones reported (N, 6) and the intrinsics: with ``rendered``,
             the capture set (:meth:`captured_views`).
     """
@@ -280,6 +282,7 @@ class RealizationResult(Scores):
     mean_track_length: float = math.nan
     mean_reprojection_error: float = math.nan
     coverage: object = None
+    sparse_models: int = 1
     reported: Optional[NDArray[np.float64]] = field(default=None, repr=False)
     K: Optional[NDArray[np.float64]] = field(default=None, repr=False)
 
@@ -674,7 +677,7 @@ def reconstruct_captured(noisy_scene: object, views: object, config: Optional[Re
         dense_pairs=list(dn.pairs) if dn is not None else [], dense_pair_points=list(dn.pair_points) if dn is not None else [],
         rendered=views.images if cfg.keep_images else [], seconds=seconds, chamfer_shape=shape.chamfer,
         capture=cfg.capture.to_dict(), sparse_mode=vr.mode, mean_track_length=sp.mean_track_length,
-        mean_reprojection_error=sp.mean_reprojection_error, coverage=vr.coverage,
+        mean_reprojection_error=sp.mean_reprojection_error, coverage=vr.coverage, sparse_models=sp.models,
         reported=np.asarray(views.reported, dtype=np.float64), K=np.asarray(views.K, dtype=np.float64))
 
 

@@ -12,10 +12,12 @@ Pipeline (Schönberger & Frahm, "Structure-from-Motion Revisited", CVPR 2016):
    (R_cw, t) of :func:`vp_scene.camera.world_to_camera`), then ``triangulate_points``;
    ``mode='incremental'``: ``incremental_mapping`` (unknown poses; with ``prior_centres`` the
    reported camera centres are pose priors of the bundle adjustment, COLMAP's
-   ``use_prior_position``), the largest model registered to the world on the given poses (the
-   reported ones of a flight; never the true ones there) by :func:`similarity_from_poses`: the
-   rotation from the images' attitudes, scale and translation from their centres (needs 3
-   registered images). The centres alone (Umeyama 1991) left a 4-camera Corn50 arc 27 cm x100
+   ``use_prior_position``), every model of 3 or more images registered to the world on the given
+   poses (the reported ones of a flight; never the true ones there) by
+   :func:`similarity_from_poses`: the rotation from the images' attitudes, scale and translation
+   from their centres. Parts of a plan that share no matches become separate models, each placed
+   on its own poses (:func:`_merge_models`); before, only the largest was kept, and a field
+   planned by parts lost every part but one. The centres alone (Umeyama 1991) left a 4-camera Corn50 arc 27 cm x100
    Chamfer off in map (shape 9.1); with the attitudes 3.9 (shape 1.3).
 
 The 3D points come back in the world frame.
@@ -65,6 +67,8 @@ class SparseResult:
         cameras: (N, 6) the cameras of the model in the world frame ([c, v], roll dropped): the
             given ones in ``known_poses`` mode; in ``incremental`` mode the registered images'
             estimated poses after the alignment, NaN rows for images not registered.
+        models: the models merged (``incremental``: every model of >= 3 registered images, each
+            aligned to the world on its own, :func:`_merge_models`; 1 otherwise).
     """
 
     points: NDArray[np.float64]
@@ -78,6 +82,7 @@ class SparseResult:
     seconds: dict = field(default_factory=dict)
     cameras: Optional[NDArray[np.float64]] = None
     mean_reprojection_error: float = float("nan")
+    models: int = 1
 
 
 def _write_pairs(pairs: Sequence[tuple[int, int]], names: Sequence[str], path: Path) -> None:
@@ -273,23 +278,58 @@ def _sparse(pycolmap: object, images: Sequence[NDArray[np.uint8]], cameras: NDAr
         if not models:
             raise SparseError(f"incremental mapping registered no image pair: 0 of {len(names)} images "
                               f"registered ({verified} verified pairs)")
-        rec = max(models.values(), key=lambda r: r.num_reg_images())
-        seen = int(rec.num_reg_images())
-        xyz, rgb, track = _read_points(rec)
-        if seen < 3:
-            raise SparseError(f"incremental mapping registered {seen} of {len(names)} images; aligning to the "
-                              f"world needs 3")
         anchor = cams[:, :3] if prior_centres is None else np.asarray(prior_centres, dtype=np.float64).reshape(-1, 3)
-        # registered on the poses given (a flight: the reported ones), attitudes included
-        xyz, est = _align(pycolmap, rec, names, anchor, xyz, lambda im: im.has_pose, world_to_camera(cams)[0])
+        # every model registered on the poses given (a flight: the reported ones), attitudes included
+        xyz, rgb, track, est, seen, reprojection, n_models = _merge_models(
+            pycolmap, list(models.values()), names, anchor, world_to_camera(cams)[0])
     if len(xyz) == 0:
         raise SparseError(f"no 3D point triangulated ({verified} verified image pairs, keypoints {keypoints})")
     seconds["triangulate"] = time.perf_counter() - t0
-    reprojection = float(rec.compute_mean_reprojection_error())
+    if mode != "incremental":
+        reprojection, n_models = float(rec.compute_mean_reprojection_error()), 1
     return SparseResult(points=xyz, colors=rgb, registered=int(seen), keypoints=[int(k) for k in keypoints],
                         verified_pairs=verified, mean_track_length=track, pair_inliers=pair_inliers,
                         matched_pairs=matched, seconds=seconds, cameras=cams.copy() if mode == "known_poses" else est,
-                        mean_reprojection_error=reprojection)
+                        mean_reprojection_error=reprojection, models=n_models)
+
+
+def _merge_models(pycolmap: object, models: list, names: Sequence[str], anchor: NDArray[np.float64],
+                  attitudes: NDArray[np.float64]) -> tuple:
+    """Every model COLMAP's incremental mapper made, each registered to the world on its own
+    images' given poses (:func:`_align`), as one cloud.
+
+    The mapper starts a new model when the images left share no verified matches with the current
+    one: a plan whose parts see different plants (a field planned by parts) gives one model per
+    part. Each model has its own gauge (frame and scale), but a flight knows every image's pose to a
+    few cm, so each is placed in the world on its own, as COLMAP's model_aligner would. Largest
+    first; an image in two models counts in the larger. Models of fewer than 3 registered images
+    are left out (the scale of 2 centres 2 cm apart each is too loose); none of 3: SparseError.
+
+    Returns: points, colours, mean track length and mean reprojection error (point-weighted over
+    the models), the (N, 6) camera estimates (NaN rows: not registered), registered images and the
+    number of models merged.
+    """
+    models = sorted(models, key=lambda r: -r.num_reg_images())
+    usable = [r for r in models if r.num_reg_images() >= 3]
+    if not usable:
+        raise SparseError(f"incremental mapping registered {models[0].num_reg_images()} of {len(names)} images "
+                          f"in its largest model; aligning to the world needs 3")
+    est = np.full((len(names), 6), np.nan)
+    xyz, rgb, tracks, errors = [], [], [], []
+    for rec in usable:
+        p, c, track = _read_points(rec)
+        p, e = _align(pycolmap, rec, names, anchor, p, lambda im: im.has_pose, attitudes)
+        new = np.isnan(est[:, 0]) & np.isfinite(e[:, 0])
+        est[new] = e[new]
+        xyz.append(p)
+        rgb.append(c)
+        tracks.append((track, len(p)))
+        errors.append((float(rec.compute_mean_reprojection_error()), len(p)))
+    n = sum(k for _, k in tracks)
+    mean = (lambda pairs: float(sum(v * k for v, k in pairs) / n) if n else 0.0)
+    seen = int(np.isfinite(est[:, 0]).sum())
+    return (np.concatenate(xyz), np.concatenate(rgb), mean(tracks), est, seen,
+            mean(errors) if n else float("nan"), len(usable))
 
 
 def _known_pose_model(pycolmap: object, db_cameras: list, db_images: dict, names: Sequence[str],
