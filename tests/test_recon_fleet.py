@@ -133,26 +133,32 @@ def test_the_fleet_captures_keep_arrays_and_a_bounded_number_per_drone(ros_env, 
     assert "capture of d0 stamped 1000000000 ns dropped" in err and "stamped 2000000000 ns dropped" in err, err
 
 
-def test_compressed_images_give_the_raw_reconstruction(ros_env, start_node, ros_node, tmp_path) -> None:
+def test_compressed_images_on_a_dask_cluster_give_the_raw_in_process_reconstruction(
+        ros_env, start_node, ros_node, tmp_path) -> None:
     """``image_transport: compressed``: the recon node takes the drones' image_raw/compressed
-    (PNG, lossless) and not image_raw, and reconstructs what the raw images give (the render
-    source's reconstruction, which the raw transport matches in the test above: to 1e-6, same
-    point count). (A transport it does not know: tests/test_node_parameters.py.)"""
+    (PNG, lossless) and not image_raw; with ``scheduler: local`` (issue 22) each capture set is
+    reconstructed on a local Dask cluster while the drones take the next. Both together give what
+    the raw images give in-process (the render source's reconstruction, which the raw transport
+    matches in the test above: to 1e-6, same point count), for every realization, in order. (A
+    transport it does not know: tests/test_node_parameters.py.)"""
     cams, drones = ring(), ["d0", "d1", "d2", "d3"]
     recon, client, scores, descriptions, *_ = fly(
-        cams, drones, {"capture_timeout": 90.0, "image_transport": "compressed", "max_realizations": 1}, ros_env,
-        start_node, ros_node, tmp_path)
+        cams, drones, {"capture_timeout": 90.0, "image_transport": "compressed", "scheduler": "local",
+                       "workers": 2}, ros_env, start_node, ros_node, tmp_path)
     assert client.spin_until(lambda: aggregates(scores), TIMEOUT), recon.output()[-4000:]
     agg = aggregates(scores)[0]
     assert agg.error_code == Score.NONE, agg.error_msg
-    assert agg.realizations == 1 and agg.num_images == 4
+    assert agg.realizations == 2 and agg.num_images == 4
+    assert "realizations in parallel on Dask (local" in recon.output()
     for d in drones:
         assert f"subscribed /{d}/camera/image_raw/compressed" in recon.output()
         assert "recon" in [e.node_name for e in client.node.get_subscriptions_info_by_topic(
             f"/{d}/camera/image_raw/compressed")]
         assert "recon" not in [e.node_name for e in client.node.get_subscriptions_info_by_topic(
             f"/{d}/camera/image_raw")]
-    (s,) = [s for s in scores if s.realization != Score.AGGREGATE]
-    ref = reconstruct_realization(scene_of_description(descriptions[-1]), s.realization, cams,
-                                  ReconConfig(**SIZE, capture=IDEAL, num_threads=1))
-    assert s.chamfer == pytest.approx(100 * ref.chamfer, rel=1e-6) and s.num_points == len(ref.points)
+    per = [s for s in scores if s.realization != Score.AGGREGATE]
+    assert [s.realization for s in per] == [0, 1]  # published in order k
+    scene = scene_of_description(descriptions[-1])
+    for s in per:
+        ref = reconstruct_realization(scene, s.realization, cams, ReconConfig(**SIZE, capture=IDEAL, num_threads=1))
+        assert s.chamfer == pytest.approx(100 * ref.chamfer, rel=1e-6) and s.num_points == len(ref.points)

@@ -99,12 +99,18 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
                     help="sorties: 2 plans a second one given the first one's cameras and reconstruction")
     ap.add_argument('--cameras2', type=int, default=0,
                     help='cameras M of the second sortie (0: half of --cameras, at least 2)')
+    ap.add_argument('--recon-workers', type=int, default=os.cpu_count() or 1,
+                    help='the recon node reconstructs the wind realizations on a local Dask cluster of this many '
+                         'one-thread workers (the planner is idle by then; 1: in the node, on the cores the '
+                         'planner leaves)')
     ap.add_argument('--timeout', type=float, default=3600.0, help='seconds for the whole mission')
     ap.add_argument('--domain-id', type=int, default=None,
                     help='ROS_DOMAIN_ID of this run (default: $ROS_DOMAIN_ID, else derived from the process id)')
     args = ap.parse_args(argv)
     if args.cameras < 2:
         ap.error('--cameras must be >= 2')
+    if args.recon_workers < 1:
+        ap.error('--recon-workers must be >= 1')
     if args.evals < 1:
         ap.error('--evals must be >= 1')
     if args.cameras2 < 0 or args.cameras2 == 1:
@@ -432,10 +438,14 @@ def run(args: argparse.Namespace) -> int:
             'num_cameras': args.cameras, 'method': args.method, 'evaluations': args.evals,
             'initial_evaluations': min(args.init, args.evals), 'seed': args.seed, 'num_threads': 1},
             {**env, 'OMP_NUM_THREADS': '1'}, out))
+        # the realizations reconstruct after the plan is made (the planner idle): on a local Dask
+        # cluster of one-thread workers, all cores (issue 18, part 4: make run's time)
+        on_cluster = {'scheduler': 'local', 'workers': args.recon_workers, 'num_threads': 1} \
+            if args.recon_workers > 1 else {}
         nodes.append(start_node('recon', 'vp_recon', 'recon', {
             'output_folder': str(out), 'width': args.width, 'height': args.height,
-            'method': args.method, 'num_threads': recon_threads, 'capture': args.capture, 'source': args.source},
-            {**env, 'OMP_NUM_THREADS': str(recon_threads)}, out))
+            'method': args.method, 'num_threads': recon_threads, 'capture': args.capture, 'source': args.source,
+            **on_cluster}, {**env, 'OMP_NUM_THREADS': str(recon_threads)}, out))
         if args.drones:
             drones = [f'd{k}' for k in range(args.drones)]
             nodes.append(start_node('dispatcher', 'vp_planner', 'dispatcher', {

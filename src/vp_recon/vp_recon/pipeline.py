@@ -701,6 +701,15 @@ def _realization_task(noisy_scene: object, k: int, cams: NDArray[np.float64], cf
         return ("error", exc.code, str(exc))
 
 
+def captured_task(noisy_scene: object, views: object, cfg: ReconConfig) -> tuple:
+    """:func:`reconstruct_captured` on a Dask worker (a fleet's capture set): ('ok', result) or
+    ('error', code, message), as :func:`_realization_task`."""
+    try:
+        return ("ok", reconstruct_captured(noisy_scene, views, cfg))
+    except ReconError as exc:
+        return ("error", exc.code, str(exc))
+
+
 def _on_cluster(client: object, noisy_scene: object, cams: NDArray[np.float64], cfg: ReconConfig,
                 ks: list, work_root: Optional[Path], progress: Optional[ProgressFn],
                 on_realization: Optional[RealizationFn]) -> list:

@@ -63,8 +63,9 @@ from vp_interfaces.msg import CameraPlan, ReconstructionScore, SceneDescription
 from vp_recon.flight import write_flight
 from vp_recon.metrics import DEFAULT_FSCORE_THRESHOLD
 from vp_recon.outputs import contact_sheet, new_run_folder, remove_if_empty, write_image, write_ply
-from vp_recon.pipeline import (CAPTURE_MISSING, ReconCancelled, ReconConfig, ReconError, RealizationResult,
-                               ensure_writable_dir, plan_result, reconstruct_captured, reconstruct_plan)
+from vp_recon.pipeline import (CAPTURE_MISSING, STAGES, ReconCancelled, ReconConfig, ReconError, RealizationResult,
+                               captured_task, ensure_writable_dir, plan_result, reconstruct_captured,
+                               reconstruct_plan)
 from vp_scene.capture import IDEAL, REALISTIC, CaptureModel
 from vp_scene.camera import poses_to_cameras
 from vp_scene.messages import (aggregate_score, camera_info_intrinsics, compressed_image_array, drone_topic,
@@ -395,7 +396,7 @@ class ReconNode(Node):
                         self.get_logger().warning(
                             f'source fleet: the {len(info.fixed_poses)} cameras already flown are not in this '
                             'capture set (their images are not kept yet); reconstructing the new sortie alone')
-                    result = self._from_fleet(plan, scene, config, K, run_dir, progress, on_realization)
+                    result = self._from_fleet(plan, scene, config, K, run_dir, progress, on_realization, client)
                 else:
                     result = reconstruct_plan(scene, cameras, config, out_dir=run_dir, realizations=range(K),
                                               progress=progress, on_realization=on_realization, client=client)
@@ -432,29 +433,72 @@ class ReconNode(Node):
                          self._info_of(plan) if plan is not None else None, source=self._param('source'))
 
     def _from_fleet(self, plan: PoseArray, scene: object, config: ReconConfig, K: int, run_dir: Path,
-                    progress, on_realization) -> object:
+                    progress, on_realization, client: object = None) -> object:
         """Source fleet: for each realization k, one capture set of the plan from the drones
         (:class:`FleetCaptures`), reconstructed on the library path of every capture set
-        (:func:`vp_recon.pipeline.reconstruct_captured`); the first that fails stops the plan."""
+        (:func:`vp_recon.pipeline.reconstruct_captured`); the first that fails stops the plan.
+        With a Dask ``client`` each capture set is reconstructed on the cluster as soon as it is
+        collected (one thread a task), while the drones take the next: the results are the
+        in-process ones, reported in the order k."""
         t0 = time.perf_counter()
         results = []
-        for k in range(K):
-            try:
-                views = self._fleet.capture(plan.header.stamp, len(plan.poses), k, self._param('capture_timeout'),
-                                            self._param('camera_topic'), lambda: self._plans.stopped,
-                                            transport=self._param('image_transport'))
-                if views is None:
-                    raise ReconCancelled('stopped while waiting for the fleet')
-                self.get_logger().info(f'capture {k}: {len(views.images)} images from the fleet '
-                                       f'({sum(im.nbytes for im in views.images) / 1e6:.0f} MB) collected')
-                res = reconstruct_captured(scene, views, config, progress=progress)
-            except ReconError as exc:
-                exc.realization = k
-                raise
+        pending: list = []  # (k, future) on the cluster, in order k
+        shared = client.scatter(scene, broadcast=True) if client is not None else None
+        cluster_cfg = ReconConfig(**{**config.__dict__, 'num_threads': 1}) if client is not None else None
+
+        def finish(res: RealizationResult) -> None:
             on_realization(res)
-            if k > 0:  # as reconstruct_plan: only the first realization keeps its images (memory)
+            if res.realization > 0:  # as reconstruct_plan: only the first realization keeps its images (memory)
                 res.rendered = []
             results.append(res)
+
+        def collect(block: bool) -> None:
+            """Report the cluster's finished reconstructions in order k (all of them: ``block``)."""
+            from distributed import wait
+
+            while pending and (block or pending[0][1].done()):
+                k, fut = pending[0]
+                while not fut.done():
+                    if self._plans.stopped:
+                        raise ReconCancelled('stopped while reconstructing on the cluster')
+                    try:
+                        wait(fut, timeout=0.5)
+                    except TimeoutError:  # distributed.wait's way of saying 'not yet'
+                        pass
+                pending.pop(0)
+                out = fut.result()
+                if out[0] == 'error':
+                    exc = ReconError(out[1], out[2])
+                    exc.realization = k
+                    raise exc
+                for stage in STAGES:
+                    progress(stage, k)
+                finish(out[1])
+
+        try:
+            for k in range(K):
+                try:
+                    views = self._fleet.capture(plan.header.stamp, len(plan.poses), k,
+                                                self._param('capture_timeout'), self._param('camera_topic'),
+                                                lambda: self._plans.stopped, transport=self._param('image_transport'))
+                    if views is None:
+                        raise ReconCancelled('stopped while waiting for the fleet')
+                    self.get_logger().info(f'capture {k}: {len(views.images)} images from the fleet '
+                                           f'({sum(im.nbytes for im in views.images) / 1e6:.0f} MB) collected')
+                    if client is None:
+                        res = reconstruct_captured(scene, views, config, progress=progress)
+                except ReconError as exc:
+                    exc.realization = k
+                    raise
+                if client is None:
+                    finish(res)
+                    continue
+                pending.append((k, client.submit(captured_task, shared, views, cluster_cfg, pure=False)))
+                collect(block=False)
+            collect(block=True)
+        finally:
+            if pending:
+                client.cancel([f for _, f in pending])
         return plan_result(results, {'total': time.perf_counter() - t0})
 
     def _publish_error(self, code: int, text: str, realization: int, images: int, plan: Optional[PoseArray],
