@@ -55,12 +55,15 @@ def paired_difference(a: Mapping[Hashable, Optional[float]], b: Mapping[Hashable
     return out
 
 
-def describe(s: dict) -> str:
-    """'mean +- std (n=.., k failed)' of a :func:`summary`."""
+def describe(s: dict, digits: int = 3, note: str = '') -> str:
+    """'mean +- std (n=.., k failed; note)' of a :func:`summary`; one value has no sample std:
+    'mean (n=1; ...)'."""
     failed = f', {s["failed"]} failed' if s['failed'] else ''
+    tail = f'{failed}; {note}' if note else failed
     if not s['n']:
-        return f'failed (n=0{failed})'
-    return f'{s["mean"]:.3f} +- {s["std"]:.3f} (n={s["n"]}{failed})'
+        return f'failed (n=0{tail})'
+    spread = f' +- {s["std"]:.{digits}f}' if s['n'] > 1 else ''
+    return f'{s["mean"]:.{digits}f}{spread} (n={s["n"]}{tail})'
 
 
 def describe_difference(d: dict) -> str:

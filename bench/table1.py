@@ -282,8 +282,7 @@ def write_results(args, out: Path, plans, recons) -> None:
             ok = [p for p in runs if 'error' not in p]
             traces = np.array([p['trace'] for p in ok]).reshape(len(ok), -1)
             stat = summary({s: (p['trace'][-1] if 'error' not in p else None) for s, p in enumerate(runs)})
-            cells.append(f'{stat["mean"]:.4f} +- {stat["std"]:.4f} (n={stat["n"]}'
-                         + (f', {stat["failed"]} failed' if stat['failed'] else '') + f'; {ROWS[row][1]})')
+            cells.append(describe(stat, digits=4, note=ROWS[row][1]))
             regret[(scenario, row)] = 1.0 - traces  # paper eq. SR with optimum 1
             table['cells'][f'{scenario}/{row}']['final_reward'] = {
                 **stat, 'model': ROWS[row][1],
