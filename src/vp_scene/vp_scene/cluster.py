@@ -12,6 +12,7 @@ N cores. A worker of a remote cluster must import the suite (``install/setup.bas
 """
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import logging
 import os
@@ -40,6 +41,22 @@ class OneThread(WorkerPlugin):
             pass
 
 
+#: s a local cluster gets to stop its workers when the work is done
+CLOSE_TIMEOUT_S = 60.0
+
+
+def close_cluster(cluster: object, timeout: float = CLOSE_TIMEOUT_S) -> None:
+    """Close a local cluster; a worker slow to stop (a loaded machine: a benchmark ended with a
+    nanny's TimeoutError after all its results were cached, and wrote none of them) is a warning,
+    not a failure of the work already done: the workers are daemon processes of this one and end
+    with it."""
+    try:
+        cluster.close(timeout=timeout)
+    except (TimeoutError, asyncio.TimeoutError) as exc:
+        print(f'dask: the local cluster did not stop within {timeout:.0f} s ({type(exc).__name__}); its workers '
+              'end with this process', file=sys.stderr)
+
+
 @contextlib.contextmanager
 def open_client(scheduler: Optional[str] = None, workers: int = 1, quiet: bool = False,
                 pythonpath: Sequence[str] = ()) -> Iterator:
@@ -58,9 +75,9 @@ def open_client(scheduler: Optional[str] = None, workers: int = 1, quiet: bool =
     with contextlib.ExitStack() as stack:
         if scheduler == 'local':
             with dask.config.set({'distributed.nanny.pre-spawn-environ': env}):
-                cluster = stack.enter_context(LocalCluster(
-                    n_workers=workers, threads_per_worker=1, processes=True, env=env,
-                    dashboard_address=':0', silence_logs=logging.ERROR))
+                cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, env=env,
+                                       dashboard_address=':0', silence_logs=logging.ERROR)
+            stack.callback(close_cluster, cluster)
             client = stack.enter_context(Client(cluster))
         else:
             client = stack.enter_context(Client(scheduler, timeout='30s'))
