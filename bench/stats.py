@@ -71,5 +71,6 @@ def describe_difference(d: dict) -> str:
     fails = [f'{d[k]} {k.replace("_", " ")}' for k in ('only_a_failed', 'only_b_failed', 'both_failed', 'missing') if d[k]]
     if not d['n']:
         return 'no pair (n=0' + (', ' + ', '.join(fails) if fails else '') + ')'
-    return (f'{d["mean"]:+.3f} [{d["low"]:+.3f}, {d["high"]:+.3f}] (n={d["n"]}'
+    interval = f' [{d["low"]:+.3f}, {d["high"]:+.3f}]' if d['n'] > 1 else ''  # one pair: no interval
+    return (f'{d["mean"]:+.3f}{interval} (n={d["n"]}'
             + (', ' + ', '.join(fails) if fails else '') + ')')

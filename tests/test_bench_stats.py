@@ -68,3 +68,4 @@ def test_a_row_with_no_success_reads_failed_not_nan():
     assert describe(summary({0: 0.5, 1: None}), digits=4, note="paper") == "0.5000 (n=1, 1 failed; paper)"
     assert describe(summary({0: 1.0, 1: 2.0})) == "1.500 +- 0.707 (n=2)"
     assert describe_difference(paired_difference({0: None}, {0: 1.0})) == "no pair (n=0, 1 only a failed)"
+    assert describe_difference(paired_difference({0: 1.0, 1: 2.0}, {0: 3.0, 1: None})) == "-2.000 (n=1, 1 only b failed)"
