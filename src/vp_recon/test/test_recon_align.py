@@ -63,3 +63,68 @@ def test_one_centre_has_no_scale() -> None:
     mc, mR = model_of(cams, 1.0, np.eye(3), np.zeros(3))
     with pytest.raises(SparseError, match="one centre"):
         similarity_from_poses(mc, mR, cams[:, :3], world_to_camera(cams)[0])
+
+
+class _Image:
+    """The parts of a pycolmap.Image that the registration reads."""
+
+    def __init__(self, name: str, centre, R_cw) -> None:
+        self.name, self._c, self._R, self.has_pose = name, np.asarray(centre, float), np.asarray(R_cw, float), True
+
+    def projection_center(self):
+        return self._c
+
+    def cam_from_world(self):
+        R = self._R
+        return type("Pose", (), {"rotation": type("Rot", (), {"matrix": staticmethod(lambda: R)})()})()
+
+
+class _Model:
+    """The parts of a pycolmap.Reconstruction that the merge reads: images and points."""
+
+    def __init__(self, images, points) -> None:
+        track = type("Track", (), {"length": staticmethod(lambda: 2)})()
+        self.images = dict(enumerate(images))
+        self.points3D = {i: type("P", (), {"xyz": p, "color": np.zeros(3, np.uint8), "track": track})()
+                         for i, p in enumerate(np.asarray(points, float))}
+
+    def num_reg_images(self) -> int:
+        return len(self.images)
+
+    def compute_mean_reprojection_error(self) -> float:
+        return 0.5
+
+
+def test_every_model_is_placed_on_its_own_poses_and_one_that_cannot_be_is_left_out() -> None:
+    """Two SfM models of one flight, each in its own frame and scale: both placed in the world on
+    their images' poses (their points join); a smaller model whose centres are a point reflection
+    of the reported ones (no similarity with a positive scale) is left out and its images count
+    as not registered; the largest one must be placed."""
+    import pycolmap
+
+    from vp_recon.sparse import _merge_models
+
+    cams = flight(7, 150.0)
+    names = [f"view_{i:03d}.png" for i in range(7)]
+    R_cw = world_to_camera(cams)[0]
+    plant = np.array([[0.0, 0.0, 0.8], [0.1, 0.1, 1.2]])
+
+    def model(idx, s, R, t, mirror=False):
+        centres, mR = model_of(cams[idx], s, R, t)
+        if mirror:
+            centres = 2 * centres.mean(axis=0) - centres
+        return _Model([_Image(names[i], c, r) for i, c, r in zip(idx, centres, mR)], (plant - t) @ R / s)
+
+    a = model([0, 1, 2, 3], 0.4, Rotation.from_euler("z", 40, degrees=True).as_matrix(), np.array([1.0, 0, 0]))
+    b = model([4, 5, 6], 2.0, Rotation.from_euler("x", -70, degrees=True).as_matrix(), np.array([0, 3.0, 0]))
+    xyz, _rgb, _track, est, seen, _err, n = _merge_models(pycolmap, [b, a], names, cams[:, :3], R_cw)
+    assert n == 2 and seen == 7
+    np.testing.assert_allclose(xyz, np.vstack([plant, plant]), atol=1e-9)
+    np.testing.assert_allclose(est[:, :3], cams[:, :3], atol=1e-9)
+
+    bad = model([4, 5, 6], 2.0, np.eye(3), np.zeros(3), mirror=True)
+    xyz, _rgb, _track, est, seen, _err, n = _merge_models(pycolmap, [a, bad], names, cams[:, :3], R_cw)
+    assert n == 1 and seen == 4 and np.isnan(est[4:]).all() and len(xyz) == 2
+    with pytest.raises(SparseError, match="negative scale"):
+        _merge_models(pycolmap, [model([0, 1, 2, 3], 1.0, np.eye(3), np.zeros(3), mirror=True), b], names,
+                      cams[:, :3], R_cw)

@@ -304,6 +304,9 @@ def _merge_models(pycolmap: object, models: list, names: Sequence[str], anchor: 
     few cm, so each is placed in the world on its own, as COLMAP's model_aligner would. Largest
     first; an image in two models counts in the larger. Models of fewer than 3 registered images
     are left out (the scale of 2 centres 2 cm apart each is too loose); none of 3: SparseError.
+    A smaller model that cannot be placed (its centres' spread in the model disagrees with the
+    reported one: a negative scale, say) is left out too; the largest one must be placed
+    (SparseError), as when it was the only one kept.
 
     Returns: points, colours, mean track length and mean reprojection error (point-weighted over
     the models), the (N, 6) camera estimates (NaN rows: not registered), registered images and the
@@ -316,9 +319,14 @@ def _merge_models(pycolmap: object, models: list, names: Sequence[str], anchor: 
                           f"in its largest model; aligning to the world needs 3")
     est = np.full((len(names), 6), np.nan)
     xyz, rgb, tracks, errors = [], [], [], []
-    for rec in usable:
+    for rank, rec in enumerate(usable):
         p, c, track = _read_points(rec)
-        p, e = _align(pycolmap, rec, names, anchor, p, lambda im: im.has_pose, attitudes)
+        try:
+            p, e = _align(pycolmap, rec, names, anchor, p, lambda im: im.has_pose, attitudes)
+        except SparseError:
+            if rank == 0:
+                raise
+            continue
         new = np.isnan(est[:, 0]) & np.isfinite(e[:, 0])
         est[new] = e[new]
         xyz.append(p)
@@ -329,7 +337,7 @@ def _merge_models(pycolmap: object, models: list, names: Sequence[str], anchor: 
     mean = (lambda pairs: float(sum(v * k for v, k in pairs) / n) if n else 0.0)
     seen = int(np.isfinite(est[:, 0]).sum())
     return (np.concatenate(xyz), np.concatenate(rgb), mean(tracks), est, seen,
-            mean(errors) if n else float("nan"), len(usable))
+            mean(errors) if n else float("nan"), len(xyz))
 
 
 def _known_pose_model(pycolmap: object, db_cameras: list, db_images: dict, names: Sequence[str],
