@@ -691,23 +691,24 @@ def plan_result(results: Sequence[RealizationResult], seconds: Optional[dict] = 
                            seconds=secs, chamfer_shape_mean=float(np.mean([r.chamfer_shape for r in results])))
 
 
-def _realization_task(noisy_scene: object, k: int, cams: NDArray[np.float64], cfg: ReconConfig,
-                      workdir: Optional[Path]) -> tuple:
-    """One realization on a Dask worker: ('ok', result) or ('error', code, message) (a ReconError
-    travels as its fields: the exception's own pickling is not part of its contract)."""
+def worker_call(reconstruct: Callable, *args, **kwargs) -> tuple:
+    """``reconstruct(*args, **kwargs)`` on a Dask worker (:func:`reconstruct_realization`, or
+    :func:`reconstruct_captured` for a fleet's capture set): ('ok', result) or ('error', code,
+    message) (a ReconError travels as its fields: the exception's own pickling is not part of its
+    contract)."""
     try:
-        return ("ok", reconstruct_realization(noisy_scene, k, cams, cfg, workdir=workdir))
+        return ("ok", reconstruct(*args, **kwargs))
     except ReconError as exc:
         return ("error", exc.code, str(exc))
 
 
-def captured_task(noisy_scene: object, views: object, cfg: ReconConfig) -> tuple:
-    """:func:`reconstruct_captured` on a Dask worker (a fleet's capture set): ('ok', result) or
-    ('error', code, message), as :func:`_realization_task`."""
-    try:
-        return ("ok", reconstruct_captured(noisy_scene, views, cfg))
-    except ReconError as exc:
-        return ("error", exc.code, str(exc))
+def worker_result(out: tuple, k: int) -> RealizationResult:
+    """The result of a :func:`worker_call`, or its ReconError raised with ``.realization = k``."""
+    if out[0] == "error":
+        exc = ReconError(out[1], out[2])
+        exc.realization = k
+        raise exc
+    return out[1]
 
 
 def _on_cluster(client: object, noisy_scene: object, cams: NDArray[np.float64], cfg: ReconConfig,
@@ -721,18 +722,18 @@ def _on_cluster(client: object, noisy_scene: object, cams: NDArray[np.float64], 
     for n, k in enumerate(ks):
         keep = cfg.keep_images and (n == 0 or on_realization is not None)
         sub = ReconConfig(**{**cfg.__dict__, "keep_images": keep, "num_threads": 1})
-        futures[client.submit(_realization_task, scene, k, cams, sub, work_root, pure=False)] = (n, k)
+        futures[client.submit(worker_call, reconstruct_realization, scene, k, cams, sub, workdir=work_root,
+                              pure=False)] = (n, k)
     done: dict = {}
     failed: dict = {}
     try:
         for fut in as_completed(list(futures)):
             n, k = futures[fut]
-            out = fut.result()
-            if out[0] == "error":
-                failed[n] = ReconError(out[1], out[2])
-                failed[n].realization = k
+            try:
+                res = worker_result(fut.result(), k)
+            except ReconError as exc:
+                failed[n] = exc
                 continue
-            res = out[1]
             for stage in STAGES:
                 _tick(progress, stage, k)
             if on_realization is not None:

@@ -64,8 +64,8 @@ from vp_recon.flight import write_flight
 from vp_recon.metrics import DEFAULT_FSCORE_THRESHOLD
 from vp_recon.outputs import contact_sheet, new_run_folder, remove_if_empty, write_image, write_ply
 from vp_recon.pipeline import (CAPTURE_MISSING, STAGES, ReconCancelled, ReconConfig, ReconError, RealizationResult,
-                               captured_task, ensure_writable_dir, plan_result, reconstruct_captured,
-                               reconstruct_plan)
+                               ensure_writable_dir, plan_result, reconstruct_captured, reconstruct_plan,
+                               worker_call, worker_result)
 from vp_scene.capture import IDEAL, REALISTIC, CaptureModel
 from vp_scene.camera import poses_to_cameras
 from vp_scene.messages import (aggregate_score, camera_info_intrinsics, compressed_image_array, drone_topic,
@@ -466,14 +466,10 @@ class ReconNode(Node):
                     except TimeoutError:  # distributed.wait's way of saying 'not yet'
                         pass
                 pending.pop(0)
-                out = fut.result()
-                if out[0] == 'error':
-                    exc = ReconError(out[1], out[2])
-                    exc.realization = k
-                    raise exc
+                res = worker_result(fut.result(), k)
                 for stage in STAGES:
                     progress(stage, k)
-                finish(out[1])
+                finish(res)
 
         try:
             for k in range(K):
@@ -493,7 +489,8 @@ class ReconNode(Node):
                 if client is None:
                     finish(res)
                     continue
-                pending.append((k, client.submit(captured_task, shared, views, cluster_cfg, pure=False)))
+                pending.append((k, client.submit(worker_call, reconstruct_captured, shared, views, cluster_cfg,
+                                                 pure=False)))
                 collect(block=False)
             collect(block=True)
         finally:
