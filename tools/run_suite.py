@@ -440,8 +440,9 @@ def run(args: argparse.Namespace) -> int:
             {**env, 'OMP_NUM_THREADS': '1'}, out))
         # the realizations reconstruct after the plan is made (the planner idle): on a local Dask
         # cluster of one-thread workers, all cores (issue 18, part 4: make run's time)
-        on_cluster = {'scheduler': 'local', 'workers': args.recon_workers, 'num_threads': 1} \
-            if args.recon_workers > 1 else {}
+        # (each worker one thread; in the node: every core but the planner's)
+        on_cluster = {'scheduler': 'local', 'workers': args.recon_workers} if args.recon_workers > 1 else {}
+        recon_threads = 1 if on_cluster else recon_threads
         nodes.append(start_node('recon', 'vp_recon', 'recon', {
             'output_folder': str(out), 'width': args.width, 'height': args.height,
             'method': args.method, 'num_threads': recon_threads, 'capture': args.capture, 'source': args.source,

@@ -117,14 +117,14 @@ def test_every_model_is_placed_on_its_own_poses_and_one_that_cannot_be_is_left_o
 
     a = model([0, 1, 2, 3], 0.4, Rotation.from_euler("z", 40, degrees=True).as_matrix(), np.array([1.0, 0, 0]))
     b = model([4, 5, 6], 2.0, Rotation.from_euler("x", -70, degrees=True).as_matrix(), np.array([0, 3.0, 0]))
-    xyz, _rgb, _track, est, seen, _err, n = _merge_models(pycolmap, [b, a], names, cams[:, :3], R_cw)
-    assert n == 2 and seen == 7
-    np.testing.assert_allclose(xyz, np.vstack([plant, plant]), atol=1e-9)
-    np.testing.assert_allclose(est[:, :3], cams[:, :3], atol=1e-9)
+    m = _merge_models(pycolmap, [b, a], names, cams[:, :3], R_cw)
+    assert m.models == 2 and m.registered == 7
+    np.testing.assert_allclose(m.points, np.vstack([plant, plant]), atol=1e-9)
+    np.testing.assert_allclose(m.cameras[:, :3], cams[:, :3], atol=1e-9)
 
     bad = model([4, 5, 6], 2.0, np.eye(3), np.zeros(3), mirror=True)
-    xyz, _rgb, _track, est, seen, _err, n = _merge_models(pycolmap, [a, bad], names, cams[:, :3], R_cw)
-    assert n == 1 and seen == 4 and np.isnan(est[4:]).all() and len(xyz) == 2
+    m = _merge_models(pycolmap, [a, bad], names, cams[:, :3], R_cw)
+    assert m.models == 1 and m.registered == 4 and np.isnan(m.cameras[4:]).all() and len(m.points) == 2
     with pytest.raises(SparseError, match="negative scale"):
         _merge_models(pycolmap, [model([0, 1, 2, 3], 1.0, np.eye(3), np.zeros(3), mirror=True), b], names,
                       cams[:, :3], R_cw)

@@ -28,7 +28,7 @@ import shutil
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Optional, Sequence
+from typing import NamedTuple, Optional, Sequence
 
 import cv2
 import numpy as np
@@ -293,8 +293,23 @@ def _sparse(pycolmap: object, images: Sequence[NDArray[np.uint8]], cameras: NDAr
                         mean_reprojection_error=reprojection, models=n_models)
 
 
+class MergedModels(NamedTuple):
+    """What :func:`_merge_models` makes of the mapper's models: points (P, 3) in the world and
+    their colours, mean track length and mean reprojection error (point-weighted over the
+    models), the (N, 6) camera estimates (NaN rows: not registered), the images registered and
+    the number of models merged."""
+
+    points: NDArray[np.float64]
+    colors: NDArray[np.uint8]
+    mean_track_length: float
+    cameras: NDArray[np.float64]
+    registered: int
+    mean_reprojection_error: float
+    models: int
+
+
 def _merge_models(pycolmap: object, models: list, names: Sequence[str], anchor: NDArray[np.float64],
-                  attitudes: NDArray[np.float64]) -> tuple:
+                  attitudes: NDArray[np.float64]) -> MergedModels:
     """Every model COLMAP's incremental mapper made, each registered to the world on its own
     images' given poses (:func:`_align`), as one cloud.
 
@@ -308,9 +323,6 @@ def _merge_models(pycolmap: object, models: list, names: Sequence[str], anchor: 
     reported one: a negative scale, say) is left out too; the largest one must be placed
     (SparseError), as when it was the only one kept.
 
-    Returns: points, colours, mean track length and mean reprojection error (point-weighted over
-    the models), the (N, 6) camera estimates (NaN rows: not registered), registered images and the
-    number of models merged.
     """
     models = sorted(models, key=lambda r: -r.num_reg_images())
     usable = [r for r in models if r.num_reg_images() >= 3]
@@ -336,8 +348,8 @@ def _merge_models(pycolmap: object, models: list, names: Sequence[str], anchor: 
     n = sum(k for _, k in tracks)
     mean = (lambda pairs: float(sum(v * k for v, k in pairs) / n) if n else 0.0)
     seen = int(np.isfinite(est[:, 0]).sum())
-    return (np.concatenate(xyz), np.concatenate(rgb), mean(tracks), est, seen,
-            mean(errors) if n else float("nan"), len(xyz))
+    return MergedModels(np.concatenate(xyz), np.concatenate(rgb), mean(tracks), est, seen,
+                        mean(errors) if n else float("nan"), len(xyz))
 
 
 def _known_pose_model(pycolmap: object, db_cameras: list, db_images: dict, names: Sequence[str],
