@@ -94,16 +94,20 @@ def test_end_to_end_small_mission(ros_env, tmp_path) -> None:
 def test_two_sorties(ros_env, tmp_path) -> None:
     """Issue 21: --rounds 2 plans a second sortie of M cameras given the N flown and their
     reconstruction (the goal's fixed_cameras and reconstruction), and the recon reconstructs from
-    all N + M images; summary.json has one record per sortie."""
+    all N + M images; summary.json has one record per sortie. As `make run ROUNDS=2`: with
+    drones, whose images the recon takes (source fleet), the first sortie's read back from its
+    capture sets."""
     out = tmp_path / "run"
     proc = subprocess.run([sys.executable, str(SCRIPT), *SMALL, "--realizations", "1", "--method", "circle",
-                           "--evals", "16", "--rounds", "2", "--cameras2", "2", "--out", str(out),
+                           "--evals", "16", "--rounds", "2", "--cameras2", "2", "--drones", "4", "--out", str(out),
                            "--timeout", "500"], env=ros_env, capture_output=True, text=True, timeout=560)
     log = proc.stdout + proc.stderr
     assert proc.returncode == 0, log[-6000:]
     assert "second sortie: 2 cameras given the 4 flown" in log
     assert "with 4 cameras already flown" in log  # the planner counted them
+    assert "with the 4 images of the cameras already flown" in log  # the recon read sortie 1's back
     summary = json.loads((out / "summary.json").read_text())
+    assert summary["source"] == "fleet"
     first, second = summary["rounds"]
     assert (first["num_cameras"], first["fixed_cameras"], first["images"]) == (4, 0, 4)
     assert (second["num_cameras"], second["fixed_cameras"], second["images"]) == (2, 4, 6)

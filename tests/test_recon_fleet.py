@@ -162,3 +162,59 @@ def test_compressed_images_on_a_dask_cluster_give_the_raw_in_process_reconstruct
     for s in per:
         ref = reconstruct_realization(scene, s.realization, cams, ReconConfig(**SIZE, capture=IDEAL, num_threads=1))
         assert s.chamfer == pytest.approx(100 * ref.chamfer, rel=1e-6) and s.num_points == len(ref.points)
+
+
+def test_a_second_fleet_sortie_reconstructs_with_the_first_sorties_images(ros_env, start_node, ros_node,
+                                                                          tmp_path) -> None:
+    """Issue 21 with the fleet: after plan 7 (four drones, capture sets recorded), plan 8 sends two
+    drones to two new poses and its /camera_plan/info names plan 7's four cameras as flown. The
+    recon node reads their images of each realization back from plan 7's capture sets and
+    reconstructs all six: the render source's reconstruction of the six cameras, to 1e-6. Plan 9
+    names a camera no sortie flew: CAPTURE_MISSING saying so, and the node keeps running."""
+    from vp_interfaces.msg import CameraPlan
+
+    cams, drones = ring(), ["d0", "d1", "d2", "d3"]
+    recon, client, scores, descriptions, fleet_pub, plan_pub, plan = fly(
+        cams, drones, {"capture_timeout": 90.0}, ros_env, start_node, ros_node, tmp_path)
+    assert client.spin_until(lambda: aggregates(scores), TIMEOUT), recon.output()[-4000:]
+    assert aggregates(scores)[0].error_code == Score.NONE, aggregates(scores)[0].error_msg
+
+    az = np.radians([165.0, 185.0])
+    new = look_at(np.stack([1.7 * np.cos(az), 1.7 * np.sin(az), np.full(2, 1.3)], axis=1),
+                  np.tile([0.0, 0.0, 0.9], (2, 1)))
+    info_pub = client.node.create_publisher(CameraPlan, "/camera_plan/info", LATCHED)
+    goal_pubs = {d: client.node.create_publisher(PoseStamped, f"/{d}/goal_pose", LATCHED) for d in drones[:2]}
+
+    def second(stamp: int, fixed: np.ndarray) -> None:
+        scores.clear()
+        for d, c in zip(drones[:2], new):
+            g = PoseStamped(pose=pose_msg(cameras_to_poses(c)))
+            g.header.frame_id = "map"
+            goal_pubs[d].publish(g)
+        fleet_pub.publish(fleet_assignment_msg(stamp, drones[:2], new))
+        p = cameras_to_pose_array(new, "map", None)
+        p.header.stamp.sec = stamp
+        info_pub.publish(CameraPlan(header=p.header, poses=p.poses, reward_model="coverage", method="circle",
+                                    fixed_poses=cameras_to_pose_array(fixed, "map", None).poses))
+        plan_pub.publish(p)
+        assert client.spin_until(lambda: aggregates(scores), TIMEOUT), recon.output()[-4000:]
+
+    second(8, cams)
+    agg = aggregates(scores)[0]
+    assert agg.error_code == Score.NONE, agg.error_msg
+    assert agg.realizations == 2 and agg.num_images == 6
+    assert "with the 4 images of the cameras already flown" in recon.output()
+    scene = scene_of_description(descriptions[-1])
+    for s in (s for s in scores if s.realization != Score.AGGREGATE):
+        ref = reconstruct_realization(scene, s.realization, np.vstack([cams, new]),
+                                      ReconConfig(**SIZE, capture=IDEAL, num_threads=1))
+        assert ref.images > 4  # a new image takes part (640 x 480: not every one finds enough matches)
+        assert s.chamfer == pytest.approx(100 * ref.chamfer, rel=1e-6) and s.num_points == len(ref.points)
+
+    never = cams.copy()
+    never[1, :3] += [0.0, 0.0, 0.5]  # half a metre above where a drone was
+    second(9, never)
+    agg = aggregates(scores)[0]
+    assert agg.error_code == Score.CAPTURE_MISSING, agg.error_msg
+    assert "1 of the 4 cameras already flown (indices [1])" in agg.error_msg, agg.error_msg
+    assert recon.poll() is None

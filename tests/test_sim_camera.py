@@ -77,3 +77,23 @@ def test_a_settled_drone_publishes_the_image_its_camera_of_the_plan_gets(ros_env
     np.testing.assert_allclose(pose_array(pose.pose), cameras_to_poses(expected.reported[2]), atol=1e-9)
     # the same flight as the render source, rendered in another process: the same pixels
     np.testing.assert_array_equal(image, expected.images[2])
+
+    # plan 8 gives d0 pose 0, and its trigger comes before the new goal: the drone, still settled at
+    # plan 7's goal, waits; once at the new goal it photographs camera 0 of plan 8
+    for r in received.values():
+        r.clear()
+    fleet.plan_stamp.sec = 8
+    fleet.entries = [DroneAssignment(drone="d0", pose_index=0, goal=pose_msg(cameras_to_poses(cams[0])))]
+    assignment_pub.publish(fleet)
+    trigger.plan_stamp.sec = 8
+    trigger_pub.publish(trigger)
+    assert client.spin_until(lambda: "capture of plan (8, 0), pose 0" in drone.output(), TIMEOUT), drone.output()
+    client.spin_until(lambda: received["image_raw"], 3.0)  # at plan 7's goal: no picture
+    assert not received["image_raw"], "photographed plan 8 from plan 7's pose"
+    g = PoseStamped(pose=pose_msg(cameras_to_poses(cams[0])))
+    g.header.frame_id = "map"
+    goal_pub.publish(g)
+    assert client.spin_until(lambda: received["image_raw"] and received["pose"], TIMEOUT), drone.output()[-3000:]
+    np.testing.assert_allclose(pose_array(received["pose"][0].pose), cameras_to_poses(expected.reported[0]),
+                               atol=1e-9)
+    np.testing.assert_array_equal(image_array(received["image_raw"][0]), expected.images[0])

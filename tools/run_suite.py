@@ -19,7 +19,9 @@ is the last thing printed.
 With ``--rounds 2`` the mission flies a second sortie (README "A second sortie"): after the first
 plan of ``--cameras`` N is reconstructed, the planner gets a goal for ``--cameras2`` M more with
 the N cameras already flown (``fixed_cameras``) and their reconstruction (the last cloud on
-``/reconstruction/points``); the recon then reconstructs from all N + M images. summary.json's
+``/reconstruction/points``); the recon then reconstructs from all N + M images (with the fleet:
+the drones photograph the M new poses, the N flown ones' images are read back from the first
+plan's capture sets). summary.json's
 ``rounds`` holds one record per sortie (its cameras, reward, the Chamfer distance of the
 reconstruction after it, seconds); its top-level plan fields are the last sortie's.
 
@@ -123,14 +125,9 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
     if args.drones < 0:
         ap.error('--drones must be >= 0')
     if args.source is None:
-        # a second sortie reconstructs from both sorties' images: the recon node does not keep the
-        # fleet's first capture sets yet, so two sorties render (README "A second sortie")
-        args.source = 'fleet' if args.drones and args.rounds == 1 else 'render'
+        args.source = 'fleet' if args.drones else 'render'
     if args.source == 'fleet' and not args.drones:
         ap.error('--source fleet needs --drones (the drones take the pictures)')
-    if args.source == 'fleet' and args.rounds == 2:
-        ap.error('--source fleet with --rounds 2: the first sortie\'s fleet images are not kept for the '
-                 'second reconstruction yet; use --source render')
     if args.models:
         if not Path(args.models).is_dir():
             ap.error(f'--models: no such folder: {args.models}')

@@ -11,7 +11,8 @@ is ignored with a log line. Signals, exit codes and parameter types follow
 
 With ``camera:=true`` the drone also takes pictures (issue 20, part 1): on a
 ``vp_interfaces/CaptureTrigger`` on ``/fleet/capture`` for a plan in which ``/fleet/assignment``
-gives it pose i, once it has settled at its goal, it flies camera i of the plan under the
+gives it pose i, once it has settled at that assignment's goal (not at an earlier plan's: a
+trigger can arrive before the new goal), it flies camera i of the plan under the
 capture model (``capture``: realistic | ideal, seeded by ``capture_seed``, realization and i:
 :func:`vp_recon.pipeline.render_flight` with ``indices=[i]``, so its image and reported pose are
 exactly those the recon node's render source gives camera i), renders the scene of
@@ -43,6 +44,10 @@ from vp_scene.node_runtime import Param, declare_typed, run_node, typed_values
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+#: how far (m, per axis) from its assigned goal a drone may hover and still take that plan's picture
+#: (it arrives exactly: :func:`vp_planner.fleet.fly_toward`)
+GOAL_TOLERANCE_M = 1e-6
 
 #: The node's parameters (:class:`vp_scene.node_runtime.Param`): all read once, at start (read_only).
 PARAMS = {
@@ -149,21 +154,27 @@ class _Camera:
         self._description, self._scene = msg, None
 
     def _on_assignment(self, msg) -> None:
-        mine = [e.pose_index for e in msg.entries if e.drone == self._v['drone']]
-        self._assignments[self._key(msg.plan_stamp)] = int(mine[0]) if mine else None
+        mine = [(int(e.pose_index), pose_array(e.goal)[:3]) for e in msg.entries if e.drone == self._v['drone']]
+        self._assignments[self._key(msg.plan_stamp)] = mine[0] if mine else None
 
     def _on_trigger(self, msg) -> None:
         key = self._key(msg.plan_stamp)
         if self._assignments.get(key) is None:
             self._node.get_logger().info(f'capture of plan {key} ignored: no pose of it is mine')
             return
-        self._pending = (msg, self._assignments[key])
+        self._pending = (msg, *self._assignments[key])
+        self._node.get_logger().info(f'capture of plan {key}, pose {self._pending[1]}, realization '
+                                     f'{msg.realization}: taken at its goal')
 
     def settled(self, pose: np.ndarray) -> None:
-        """The drone is at its goal ``pose`` (7,): take the pending picture, if any."""
+        """The drone is at its goal ``pose`` (7,): take the pending picture, if any, once that goal is
+        the one its plan assigned (a trigger may arrive before the new goal: the drone then still
+        hovers at the last plan's pose, and waits)."""
         if self._pending is None:
             return
-        trigger, i = self._pending
+        trigger, i, goal = self._pending
+        if np.max(np.abs(np.asarray(pose[:3], dtype=np.float64) - goal)) > GOAL_TOLERANCE_M:
+            return
         self._pending = None
         try:
             self._capture(trigger, i, pose)

@@ -214,3 +214,50 @@ def test_coverage_of_prior_per_plant_in_the_best_covered_realization() -> None:
         coverage_of_prior(recon, base, plant[:2])
     with pytest.raises(ValueError, match="realizations"):
         coverage_of_prior(recon, base, plant, realizations=3)
+
+
+def test_a_second_sortie_reads_the_flown_cameras_images_back_from_the_first_plans_capture_sets(tmp_path) -> None:
+    """Issue 21 with the fleet: the cameras a second sortie names as flown are found in the
+    capture sets of the earlier plan that flew them (newest first, to 1e-6), read back for
+    realization k in the order named and put before the new images; a camera no sortie flew,
+    a realization not kept and a capture set of another camera are named errors."""
+    from vp_recon.flight import capture_folder, flown_views, join_views, locate_flown
+
+    rng = np.random.default_rng(1)
+    K = np.array([[32.0, 0, 31.5], [0, 32.0, 23.5], [0, 0, 1]])
+
+    def views(cams, k, size=(48, 64)):
+        return CapturedViews(names=[f"view_{i:03d}.png" for i in range(len(cams))],
+                             images=[rng.integers(0, 255, (*size, 3), dtype=np.uint8) for _ in cams],
+                             reported=cams + rng.normal(0.0, 0.01, cams.shape), K=K, realization=k)
+
+    first, other = ring(4), ring(6)[4:]
+    plans = {"plan-a": first, "plan-b": other}
+    kept = {}
+    for name, cams in plans.items():
+        for k in range(2):
+            kept[(name, k)] = views(cams, k)
+            write_flight(kept[(name, k)], capture_folder(tmp_path / name, k))
+    flown = [(cams, tmp_path / name) for name, cams in plans.items()]
+    fixed = np.vstack([first[2], other[1], first[0] + 1e-8])  # as a planner names them: any order, float noise
+    located = locate_flown(flown, fixed)
+    assert located == [(tmp_path / "plan-a", 2), (tmp_path / "plan-b", 1), (tmp_path / "plan-a", 0)]
+    old = flown_views(located, 1)
+    for got, (name, j) in zip(old.images, [("plan-a", 2), ("plan-b", 1), ("plan-a", 0)]):
+        np.testing.assert_array_equal(got, kept[(name, 1)].images[j])  # PNG: lossless
+    v = kept[("plan-a", 1)].reported[2]
+    np.testing.assert_allclose(old.reported[0], np.r_[v[:3], v[3:] / np.linalg.norm(v[3:])], atol=1e-9)
+    new = views(ring(6)[:2], 1)
+    both = join_views([old, new]).validate()
+    assert both.names == [f"view_{i:03d}.png" for i in range(5)] and both.realization == 1
+    np.testing.assert_array_equal(both.images[3], new.images[0])
+    np.testing.assert_array_equal(both.reported[3:], new.reported)
+
+    with pytest.raises(FlightError, match=r"1 of the 2 cameras already flown \(indices \[1\]\)"):
+        locate_flown(flown, np.vstack([first[1], first[1] + [0.01, 0, 0, 0, 0, 0]]))
+    with pytest.raises(FlightError, match="no capture set of realization 2 kept"):
+        flown_views(located, 2)
+    with pytest.raises(FlightError, match="cannot be reconstructed together"):
+        join_views([old, views(ring(6)[:2], 1, size=(60, 80))])
+    with pytest.raises(FlightError, match="realizations 1 and 0"):
+        join_views([old, views(ring(6)[:2], 0)])

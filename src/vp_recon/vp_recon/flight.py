@@ -50,14 +50,14 @@ from typing import Optional, Sequence, Union
 
 import cv2
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
 from vp_scene.camera import (body_from_optical, cameras_to_poses, poses_to_cameras, principal_point_gl, roll_of,
                              world_to_camera)
 
 __all__ = ["POSES_FILE", "POSES_COLUMNS", "IMAGE_SUFFIXES", "FRAME", "MAX_ROLL_DEG", "FlightError", "CapturedViews",
-           "write_flight", "read_flight"]
+           "write_flight", "read_flight", "capture_folder", "locate_flown", "flown_views", "join_views"]
 
 POSES_FILE = "poses.csv"
 POSES_COLUMNS = ("image", "x", "y", "z", "qx", "qy", "qz", "qw", "frame", "fx", "fy", "cx", "cy", "width", "height")
@@ -337,3 +337,88 @@ def read_flight(folder: PathLike) -> CapturedViews:
                          realization=realization).validate()
 
 
+
+
+def capture_folder(plan_folder: PathLike, k: int) -> Path:
+    """Where a plan folder keeps realization ``k``'s capture set (the recon node's ``record_captures``)."""
+    return Path(plan_folder) / "captures" / f"realization_{int(k)}"
+
+
+def locate_flown(flown: Sequence[tuple], cameras: NDArray[np.float64], tol: float = 1e-6) -> list[tuple[Path, int]]:
+    """For each camera already flown (a row [c, v] of ``cameras``), the plan folder of the newest
+    earlier sortie that flew it and the camera's index in that plan.
+
+    Args:
+        flown: earlier sorties, oldest first, as (their planned cameras (N, 6), their plan folder).
+        cameras: (F, 6) the cameras a second sortie's plan names as flown (``fixed_poses``).
+        tol: largest difference of a centre (m) or a unit viewing direction that still matches.
+
+    Raises:
+        FlightError: naming the cameras no earlier sortie flew.
+    """
+    def unit(c: ArrayLike) -> NDArray[np.float64]:  # [c, v / |v|]
+        c = np.asarray(c, dtype=np.float64).reshape(-1, 6)
+        return np.hstack([c[:, :3], c[:, 3:] / np.maximum(np.linalg.norm(c[:, 3:], axis=1, keepdims=True), 1e-12)])
+
+    cams = unit(cameras)
+    earlier = [(unit(planned), Path(folder)) for planned, folder in reversed(list(flown))]  # newest first
+    found: list = []
+    for i, c in enumerate(cams):
+        hit = next(((folder, int(j)) for planned, folder in earlier
+                    for j in np.flatnonzero(np.all(np.abs(planned - c) <= tol, axis=1))[:1]), None)
+        found.append(hit if hit is not None else i)
+    missing = [x for x in found if isinstance(x, int)]
+    if missing:
+        raise FlightError(f"{len(missing)} of the {len(cams)} cameras already flown (indices {missing}) were not "
+                          f"flown by an earlier sortie this node reconstructed from the fleet")
+    return found
+
+
+def flown_views(located: Sequence[tuple[Path, int]], k: int) -> CapturedViews:
+    """Realization ``k``'s images and reported poses of the cameras :func:`locate_flown` found,
+    read back from each plan folder's capture set (:func:`capture_folder`, :func:`read_flight`),
+    in the order given. FlightError naming a folder that is missing or does not hold the camera."""
+    sets: dict = {}
+    names, images, reported, K = [], [], [], None
+    for folder, j in located:
+        if folder not in sets:
+            d = capture_folder(folder, k)
+            if not (d / POSES_FILE).is_file():
+                raise FlightError(f"{d}: no capture set of realization {k} kept (the recon node's "
+                                  "record_captures was off, or the folder was removed)")
+            sets[folder] = read_flight(d)
+        v = sets[folder]
+        if j >= len(v.images):
+            raise FlightError(f"{capture_folder(folder, k)}: {len(v.images)} images, camera {j} is not among them")
+        if K is not None and not np.allclose(v.K, K):
+            raise FlightError(f"{capture_folder(folder, k)}: intrinsics differ from the other sorties' (one camera)")
+        K = v.K
+        names.append(v.names[j])
+        images.append(v.images[j])
+        reported.append(v.reported[j])
+    return CapturedViews(names=names, images=images, reported=np.asarray(reported).reshape(-1, 6), K=K,
+                         realization=int(k))
+
+
+def join_views(parts: Sequence[CapturedViews]) -> CapturedViews:
+    """One capture set of several (the sorties of a flight, in order): images renamed
+    ``view_000.png``... in that order; masks kept only when every part has them.
+
+    Raises:
+        FlightError: the parts differ in image size, intrinsics or realization.
+    """
+    parts = [p for p in parts if len(p.images)]
+    if not parts:
+        raise FlightError("no capture set to join")
+    first = parts[0]
+    for p in parts[1:]:
+        if p.size != first.size or not np.allclose(p.K, first.K):
+            raise FlightError(f"capture sets of different cameras ({first.size[0]}x{first.size[1]} and "
+                              f"{p.size[0]}x{p.size[1]}, or other intrinsics) cannot be reconstructed together")
+        if p.realization != first.realization:
+            raise FlightError(f"capture sets of realizations {first.realization} and {p.realization}")
+    images = [im for p in parts for im in p.images]
+    masks = [m for p in parts for m in p.masks] if all(p.masks is not None for p in parts) else None
+    return CapturedViews(names=[f"view_{i:03d}.png" for i in range(len(images))], images=images,
+                         reported=np.concatenate([np.asarray(p.reported, np.float64).reshape(-1, 6) for p in parts]),
+                         K=first.K, masks=masks, fov=first.fov, realization=first.realization)

@@ -15,7 +15,10 @@ Subscribes (all reliable, TRANSIENT_LOCAL, as the scene and planner nodes publis
   same header and poses): the reward and reward model copied into the scores (NaN and '' for a
   plan that came without it). The node has no reward code of its own. A second sortie's plan
   carries the cameras already flown (``fixed_poses``): the node reconstructs from their images
-  and the new ones together (README "A second sortie"; in simulation both are rendered).
+  and the new ones together (README "A second sortie"). ``source: render`` renders both;
+  ``source: fleet`` reads the flown cameras' images of each realization back from the capture
+  sets of the earlier fleet plan that flew them (``record_captures``; the newest of the last
+  ``_FLOWN_MEMORY`` plans), or fails with ``CAPTURE_MISSING`` naming the cameras it cannot find.
 
 For every plan it renders, reconstructs and scores each wind realization (one loop, one failure
 rule: :func:`vp_recon.pipeline.reconstruct_plan`, the first failing realization stops the plan)
@@ -60,7 +63,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
 
 from vp_interfaces.msg import CameraPlan, ReconstructionScore, SceneDescription
-from vp_recon.flight import write_flight
+from vp_recon.flight import FlightError, flown_views, join_views, locate_flown, write_flight
 from vp_recon.metrics import DEFAULT_FSCORE_THRESHOLD
 from vp_recon.outputs import contact_sheet, new_run_folder, remove_if_empty, write_image, write_ply
 from vp_recon.pipeline import (CAPTURE_MISSING, STAGES, ReconCancelled, ReconConfig, ReconError, RealizationResult,
@@ -111,7 +114,8 @@ PARAMS = {
     'image_transport': Param('raw', 'source fleet: the images from image_raw (sensor_msgs/Image) | compressed: '
                                     'from image_raw/compressed (CompressedImage, PNG or JPEG; PNG is lossless)'),
     'record_captures': Param(True, 'write each realization\'s capture set (images, poses.csv, COLMAP text model) '
-                                   'to <plan folder>/captures/realization_<k>: `make recon IMAGES=...` re-runs it'),
+                                   'to <plan folder>/captures/realization_<k>: `make recon IMAGES=...` re-runs it, '
+                                   'and a second fleet sortie reads the flown cameras\' images from it'),
     'max_realizations': Param(0, 'reconstruct only the first n realizations (0: all)', (0, INT_MAX)),
     'scene_timeout': Param(10.0, 's a plan that arrives before the scene waits for it', _M),
     'frame_id': Param('map', 'frame of the plans and of the published clouds', None, False, 'not empty'),
@@ -127,6 +131,8 @@ PARAMS = {
 IMAGE_TRANSPORTS = {'raw': 'image_raw', 'compressed': 'image_raw/compressed'}
 #: /camera_plan/info messages remembered to find the one of a plan.
 _INFO_MEMORY = 16
+#: earlier fleet plans whose capture sets a second sortie may read back (locate_flown)
+_FLOWN_MEMORY = 16
 #: captures (stamps) kept per drone until a capture set takes them; beyond, the oldest is dropped
 #: with a log line (memory: a 2000 x 1500 image is 9 MB; a drone that sends unasked would grow it).
 CAPTURES_KEPT = 2
@@ -199,6 +205,7 @@ class ReconNode(Node):
         self._truth: Optional[np.ndarray] = None
         self._scene = None  # rebuilt NoisyScene matching _description
         self._run_dir: Optional[Path] = None  # the plan folder being filled (see on_shutdown)
+        self._flown: list = []  # fleet plans reconstructed and recorded: (cameras (N, 6), plan folder)
         self.score_pub = self.create_publisher(Score, '/reconstruction/score', 10)
         self.points_pub = self.create_publisher(PointCloud2, '/reconstruction/points', LATCHED)
         self.create_subscription(SceneDescription, '/scene/description', self._on_description, LATCHED)
@@ -337,6 +344,13 @@ class ReconNode(Node):
                 n_cams = len(cameras)
             if not np.all(np.isfinite(cameras)):
                 raise ReconError(Score.EMPTY_PLAN, 'the plan has non-finite poses')
+            located = None
+            if self._param('source') == 'fleet' and info is not None and info.fixed_poses:
+                try:  # the images of the cameras already flown: an earlier fleet plan's capture sets
+                    located = locate_flown(self._flown, cameras[:len(info.fixed_poses)])
+                except FlightError as exc:
+                    raise ReconError(Score.CAPTURE_MISSING, f'source fleet, a second sortie: {exc}; their images '
+                                     'are read back from that plan\'s captures (record_captures)')
             scene = self._scene_now()
             root = ensure_writable_dir(Path(self._param('output_folder')).expanduser())
             try:
@@ -392,11 +406,10 @@ class ReconNode(Node):
                     self.get_logger().info(f'realizations in parallel on Dask ({self._param("scheduler")}, '
                                            f'dashboard {client.dashboard_link})')
                 if self._param('source') == 'fleet':
-                    if info is not None and info.fixed_poses:
-                        self.get_logger().warning(
-                            f'source fleet: the {len(info.fixed_poses)} cameras already flown are not in this '
-                            'capture set (their images are not kept yet); reconstructing the new sortie alone')
-                    result = self._from_fleet(plan, scene, config, K, run_dir, progress, on_realization, client)
+                    result = self._from_fleet(plan, scene, config, K, run_dir, progress, on_realization, client,
+                                              located)
+                    if record:  # a later sortie may name these cameras as flown (locate_flown)
+                        self._flown = (self._flown + [(cameras, run_dir)])[-_FLOWN_MEMORY:]
                 else:
                     result = reconstruct_plan(scene, cameras, config, out_dir=run_dir, realizations=range(K),
                                               progress=progress, on_realization=on_realization, client=client)
@@ -433,13 +446,15 @@ class ReconNode(Node):
                          self._info_of(plan) if plan is not None else None, source=self._param('source'))
 
     def _from_fleet(self, plan: PoseArray, scene: object, config: ReconConfig, K: int, run_dir: Path,
-                    progress, on_realization, client: object = None) -> object:
+                    progress, on_realization, client: object = None, located: Optional[list] = None) -> object:
         """Source fleet: for each realization k, one capture set of the plan from the drones
         (:class:`FleetCaptures`), reconstructed on the library path of every capture set
         (:func:`vp_recon.pipeline.reconstruct_captured`); the first that fails stops the plan.
         With a Dask ``client`` each capture set is reconstructed on the cluster as soon as it is
         collected (one thread a task), while the drones take the next: the results are the
-        in-process ones, reported in the order k."""
+        in-process ones, reported in the order k. A second sortie (``located``: the cameras
+        already flown, :func:`vp_recon.flight.locate_flown`) puts their images of realization k
+        first (:func:`vp_recon.flight.flown_views`), as the render source orders the cameras."""
         t0 = time.perf_counter()
         results = []
         pending: list = []  # (k, future) on the cluster, in order k
@@ -481,6 +496,13 @@ class ReconNode(Node):
                         raise ReconCancelled('stopped while waiting for the fleet')
                     self.get_logger().info(f'capture {k}: {len(views.images)} images from the fleet '
                                            f'({sum(im.nbytes for im in views.images) / 1e6:.0f} MB) collected')
+                    if located:
+                        try:
+                            views = join_views([flown_views(located, k), views])
+                        except FlightError as exc:
+                            raise ReconError(Score.CAPTURE_MISSING, f'the images of the cameras already flown: {exc}')
+                        self.get_logger().info(f'capture {k}: with the {len(located)} images of the cameras '
+                                               'already flown')
                     if client is None:
                         res = reconstruct_captured(scene, views, config, progress=progress)
                 except ReconError as exc:
