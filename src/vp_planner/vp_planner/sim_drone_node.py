@@ -164,7 +164,7 @@ class _Camera:
             return
         self._pending = (msg, *self._assignments[key])
         self._node.get_logger().info(f'capture of plan {key}, pose {self._pending[1]}, realization '
-                                     f'{msg.realization}: taken at its goal')
+                                     f'{msg.realization}: to be taken at its goal')
 
     def settled(self, pose: np.ndarray) -> None:
         """The drone is at its goal ``pose`` (7,): take the pending picture, if any, once that goal is
