@@ -175,6 +175,8 @@ class _Camera:
         trigger, i, goal = self._pending
         if np.max(np.abs(np.asarray(pose[:3], dtype=np.float64) - goal)) > GOAL_TOLERANCE_M:
             return
+        if self._description is None:  # latched, it may come after the trigger: wait for it
+            return
         self._pending = None
         try:
             self._capture(trigger, i, pose)
