@@ -337,8 +337,6 @@ def read_flight(folder: PathLike) -> CapturedViews:
                          realization=realization).validate()
 
 
-
-
 def capture_folder(plan_folder: PathLike, k: int) -> Path:
     """Where a plan folder keeps realization ``k``'s capture set (the recon node's ``record_captures``)."""
     return Path(plan_folder) / "captures" / f"realization_{int(k)}"
@@ -362,12 +360,11 @@ def locate_flown(flown: Sequence[tuple], cameras: NDArray[np.float64], tol: floa
 
     cams = unit(cameras)
     earlier = [(unit(planned), Path(folder)) for planned, folder in reversed(list(flown))]  # newest first
-    found: list = []
+    found, missing = [], []
     for i, c in enumerate(cams):
         hit = next(((folder, int(j)) for planned, folder in earlier
                     for j in np.flatnonzero(np.all(np.abs(planned - c) <= tol, axis=1))[:1]), None)
-        found.append(hit if hit is not None else i)
-    missing = [x for x in found if isinstance(x, int)]
+        (found if hit is not None else missing).append(hit if hit is not None else i)
     if missing:
         raise FlightError(f"{len(missing)} of the {len(cams)} cameras already flown (indices {missing}) were not "
                           f"flown by an earlier sortie this node reconstructed from the fleet")
@@ -377,9 +374,10 @@ def locate_flown(flown: Sequence[tuple], cameras: NDArray[np.float64], tol: floa
 def flown_views(located: Sequence[tuple[Path, int]], k: int) -> CapturedViews:
     """Realization ``k``'s images and reported poses of the cameras :func:`locate_flown` found,
     read back from each plan folder's capture set (:func:`capture_folder`, :func:`read_flight`),
-    in the order given. FlightError naming a folder that is missing or does not hold the camera."""
-    sets: dict = {}
-    names, images, reported, K = [], [], [], None
+    in the order given (joined by :func:`join_views`, which checks they share one camera).
+    FlightError naming a folder that is missing or does not hold the camera."""
+    sets: dict = {}  # plan folder -> its capture set of realization k, read once
+    single = []
     for folder, j in located:
         if folder not in sets:
             d = capture_folder(folder, k)
@@ -390,14 +388,9 @@ def flown_views(located: Sequence[tuple[Path, int]], k: int) -> CapturedViews:
         v = sets[folder]
         if j >= len(v.images):
             raise FlightError(f"{capture_folder(folder, k)}: {len(v.images)} images, camera {j} is not among them")
-        if K is not None and not np.allclose(v.K, K):
-            raise FlightError(f"{capture_folder(folder, k)}: intrinsics differ from the other sorties' (one camera)")
-        K = v.K
-        names.append(v.names[j])
-        images.append(v.images[j])
-        reported.append(v.reported[j])
-    return CapturedViews(names=names, images=images, reported=np.asarray(reported).reshape(-1, 6), K=K,
-                         realization=int(k))
+        single.append(CapturedViews(names=[v.names[j]], images=[v.images[j]], reported=v.reported[j:j + 1], K=v.K,
+                                    realization=int(k)))
+    return join_views(single)
 
 
 def join_views(parts: Sequence[CapturedViews]) -> CapturedViews:

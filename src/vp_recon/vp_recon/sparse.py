@@ -322,7 +322,6 @@ def _merge_models(pycolmap: object, models: list, names: Sequence[str], anchor: 
     A smaller model that cannot be placed (its centres' spread in the model disagrees with the
     reported one: a negative scale, say) is left out too; the largest one must be placed
     (SparseError), as when it was the only one kept.
-
     """
     models = sorted(models, key=lambda r: -r.num_reg_images())
     usable = [r for r in models if r.num_reg_images() >= 3]
