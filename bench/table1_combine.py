@@ -1,0 +1,165 @@
+#!/usr/bin/env python3
+"""Table I from several runs of ``bench/table1.py``: one table over every seed any of them reconstructed.
+
+Table I with 3 planning seeds x 5 realizations for every randomized row is about 13 hours of one
+worker (issue 22); it is run in slices (some rows, some scenarios, some seeds per run, each into its
+own ``--out`` folder, on whatever cluster is at hand), and the cache that would resume a slice is
+not kept with the results. This script joins the slices' ``table1.json`` files: for every
+(scenario, row) the union of the seeds they reconstructed (``recon_by_seed``), each seed's Chamfer
+per wind realization as one unit (seed, realization). Where two files hold the same seed of the
+same cell the later file on the command line wins (the sources are listed per cell). A failed
+reconstruction stays a failed unit: it is counted and ranks its row last (``stats.rank``).
+
+Refuses (one line, exit 1) files that disagree on what was measured: capture model, image size,
+evaluations, plant set, or the plants drawn for a scenario.
+
+Writes ``table1_combined.md`` and ``table1_combined.json`` in ``--out``: per cell mean +- sample std
+(n, failed) of the Chamfer x100 in map and of the shape after ICP (``chamfer_shape``), the seeds
+and their sources, and per scenario egp's paired difference to the best baseline with its 95 %
+t-interval (per (seed, realization) both reconstructed, as ``table1.py``), and over the per-seed
+means (seeds both rows have).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Optional
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from stats import describe, describe_difference, paired_difference, rank, summary  # noqa: E402
+
+#: what every joined file must agree on (a different value: a different experiment)
+SAME = ('capture', 'resolution', 'evaluations', 'models')
+#: rows that are baselines (as table1.BASELINES; not imported: table1 pulls in the planners)
+BASELINES = ('circle', 'arc', 'sa')
+
+
+def load(paths: list[Path]) -> tuple[dict, dict]:
+    """({(scenario, row): {seed: (record, source)}}, the agreed metadata) of the files, in order."""
+    meta: Optional[dict] = None
+    plants: dict = {}
+    cells: dict = {}
+    for path in paths:
+        try:
+            table = json.loads(path.read_text())
+        except (OSError, ValueError) as exc:
+            raise SystemExit(f'table1_combine: cannot read {path}: {exc}') from None
+        if 'cells' not in table:
+            raise SystemExit(f'table1_combine: {path} is not a table1.json (no "cells")')
+        mine = {k: table.get(k) for k in SAME}
+        if meta is None:
+            meta = mine
+        for k in SAME:
+            if mine[k] != meta[k]:
+                raise SystemExit(f'table1_combine: {path} measured another {k} ({mine[k]!r}, not {meta[k]!r})')
+        for scenario, used in table.get('plants', {}).items():
+            if plants.setdefault(scenario, used) != used:
+                raise SystemExit(f'table1_combine: {path} drew other plants for {scenario}')
+        for name, cell in table['cells'].items():
+            scenario, row = name.split('/', 1)
+            by_seed = cell.get('recon_by_seed') or {'0': cell['recon']}
+            for seed, record in by_seed.items():
+                cells.setdefault((scenario, row), {})[int(seed)] = (record, str(path))
+    return cells, {**(meta or {}), 'plants': plants}
+
+
+def units(seeds: dict, realizations: int, key: str = 'chamfer') -> dict:
+    """(seed, realization) -> value of ``key`` (None: failed). A record without per-realization
+    entries (the plan or every realization failed) fails all ``realizations``."""
+    out = {}
+    for seed, (record, _) in sorted(seeds.items()):
+        per = {p.get('realization', i): p.get(key) for i, p in enumerate(record.get('per_realization') or [])}
+        for k in range(max(realizations, max(per, default=-1) + 1)):
+            out[(seed, k)] = per.get(k)
+    return out
+
+
+def seed_means(u: dict) -> dict:
+    """seed -> mean over its realizations (None when any failed: a failed unit is not averaged away)."""
+    by: dict = {}
+    for (seed, _), v in u.items():
+        by.setdefault(seed, []).append(v)
+    return {s: (None if any(v is None for v in vs) else sum(vs) / len(vs)) for s, vs in by.items()}
+
+
+def combine(cells: dict) -> dict:
+    """The combined table (JSON-ready)."""
+    scenarios = sorted({s for s, _ in cells}, key=lambda s: ('one_plant', 'three_row', 'six_rect').index(s)
+                       if s in ('one_plant', 'three_row', 'six_rect') else 9)
+    rows = list(dict.fromkeys(r for _, r in cells))
+    out = {'cells': {}, 'paired': {}}
+    chamfer = {}
+    for (scenario, row), seeds in cells.items():
+        realizations = max((len(rec.get('per_realization') or []) for rec, _ in seeds.values()), default=0)
+        u = units(seeds, realizations)
+        chamfer[(scenario, row)] = u
+        out['cells'][f'{scenario}/{row}'] = {
+            'chamfer': summary({f'{s}/{k}': v for (s, k), v in u.items()}),
+            'chamfer_shape': summary({f'{s}/{k}': v for (s, k), v in units(seeds, realizations, 'chamfer_shape').items()}),
+            'seeds': sorted(seeds), 'sources': {str(s): src for s, (_, src) in sorted(seeds.items())},
+            'per_unit': {f'{s}/{k}': v for (s, k), v in u.items()}}
+    for scenario in scenarios:
+        base = [r for r in rows if r in BASELINES and (scenario, r) in chamfer]
+        if not base:
+            continue
+        best = rank({r: summary(chamfer[(scenario, r)]) for r in base})[0]
+        for row in rows:
+            if row in BASELINES or (scenario, row) not in chamfer:
+                continue
+            a, b = chamfer[(scenario, row)], chamfer[(scenario, best)]
+            sa, sb = seed_means(a), seed_means(b)
+            out['paired'][f'{scenario}/{row}'] = {
+                'baseline': best, **paired_difference(a, b),
+                'over_seed_means': paired_difference(sa, sb)}
+    out['scenarios'], out['rows'] = scenarios, rows
+    return out
+
+
+def markdown(table: dict, meta: dict, paths: list[Path]) -> str:
+    scen, rows = table['scenarios'], table['rows']
+    lines = [f'# Table I, combined {table["date"]}', '',
+             'Joined from ' + ', '.join(f'`{p}`' for p in paths) + ' (a later file wins a seed both hold). '
+             f'Capture {meta["capture"]["kind"]}, {meta["resolution"][0]} x {meta["resolution"][1]}, '
+             f'{meta["evaluations"]} evaluations, plants {meta["models"]}. Chamfer x100 in map, mean +- sample std '
+             'over (seed, realization) units (n: reconstructed; a failed unit is counted and ranks its row last); '
+             'seeds in brackets.', '',
+             '| method | ' + ' | '.join(scen) + ' |', '|---|' + '---|' * len(scen)]
+    for key, title in (('chamfer', None), ('chamfer_shape', 'Shape alone (Chamfer x100 after a rigid ICP)')):
+        if title:
+            lines += ['', f'## {title}', '', '| method | ' + ' | '.join(scen) + ' |', '|---|' + '---|' * len(scen)]
+        for row in rows:
+            cells = []
+            for s in scen:
+                c = table['cells'].get(f'{s}/{row}')
+                cells.append(f'{describe(c[key])} [seeds {",".join(map(str, c["seeds"]))}]' if c else 'not run')
+            lines.append(f'| {row} | ' + ' | '.join(cells) + ' |')
+    lines += ['', '## Paired differences: row - best baseline (Chamfer x100, negative: the row is better)', '',
+              'Per (seed, realization) both reconstructed, mean [95 % t-interval] (n); and over the per-seed '
+              'means of the seeds both rows have (the planning seed as the unit).', '',
+              '| scenario / row | best baseline | per (seed, realization) | over seed means |', '|---|---|---|---|']
+    for name, d in table['paired'].items():
+        lines.append(f'| {name} | {d["baseline"]} | {describe_difference(d)} | '
+                     f'{describe_difference(d["over_seed_means"])} |')
+    return '\n'.join(lines) + '\n'
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    ap.add_argument('tables', nargs='+', type=Path, help="table1.json files of bench/table1.py runs, oldest first")
+    ap.add_argument('--out', type=Path, required=True, help='folder for table1_combined.{md,json}')
+    args = ap.parse_args(argv)
+    cells, meta = load(args.tables)
+    table = {'date': datetime.now(timezone.utc).strftime('%Y-%m-%d'), **meta,
+             'inputs': [str(p) for p in args.tables], **combine(cells)}
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / 'table1_combined.json').write_text(json.dumps(table, indent=2))
+    (args.out / 'table1_combined.md').write_text(markdown(table, meta, args.tables))
+    print(f'wrote {args.out / "table1_combined.md"}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
