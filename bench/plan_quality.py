@@ -16,8 +16,9 @@ ablations of ``study_models``) scores every plan, and Spearman's rho between the
 Phases (``--phase``): ``plans`` (generate, cached), ``recon`` (reconstruct, one cached JSON per
 plan and realization: resumable), ``analyze`` (models, Spearman, ``results/plan_quality.json``
 and ``results/plan_quality.png``), ``all``. Variants: ``--ground`` / ``--no-ground`` choose the
-background (default: by the capture, soil for a flight, as ``vp_recon.cli``); ``--sparse`` analyzes the sparse
-cloud's Chamfer instead of the dense one (same reconstructions).
+background (default: by the capture, soil for a flight, as ``vp_recon.cli``); each variant is analyzed against
+three scores of the same reconstructions (:data:`CLOUDS`): the dense cloud's Chamfer in map (the
+main one), the sparse cloud's, and the dense cloud's shape after ICP (``chamfer_shape``).
 """
 from __future__ import annotations
 
@@ -37,6 +38,10 @@ from common import (ROOT, SCENARIOS, add_capture, cached, capture_of, capture_ta
                     machine, models_tag, scene)
 
 CACHE = ROOT / 'results' / 'cache' / 'plan_quality'
+#: what a variant's Spearman ranks against: the dense cloud's Chamfer in map (the main figure),
+#: COLMAP's sparse cloud alone, and the dense cloud's shape after a rigid ICP onto the truth
+#: (``chamfer_shape``: registration error taken out; kept from 2026-11-26 on)
+CLOUDS = {'dense': 'chamfer', 'sparse': 'sparse_chamfer', 'shape': 'chamfer_shape'}
 #: seed of the design/check split (issue 18: tune on the design half, report the check half)
 SPLIT_SEED = 0
 
@@ -191,7 +196,8 @@ def recon_cell(scenario: str, models: str, plan: dict, k: int, args) -> dict:
             return {'error': exc.name, 'error_msg': str(exc), 'seconds': time.perf_counter() - t0}
         sp = r.sparse_score
         return {
-            'chamfer': r.chamfer, 'accuracy': r.accuracy, 'completeness': r.completeness, 'fscore': r.fscore,
+            'chamfer': r.chamfer, 'chamfer_shape': r.chamfer_shape, 'accuracy': r.accuracy,
+            'completeness': r.completeness, 'fscore': r.fscore,
             'points': int(len(r.points)), 'source': r.source, 'images': r.images, 'visible_images': r.visible_images,
             'sparse_points': r.sparse_points,
             'sparse_chamfer': sp.chamfer if sp else None, 'sparse_accuracy': sp.accuracy if sp else None,
@@ -338,12 +344,16 @@ def analyze(args) -> dict:
                     'spearman_reconstructed': {}, 'variants': {}, 'ms_per_plan': {}, 'failed': {}}
     per_plan: dict = {}
     for variant in variants:
-        for cloud in ('dense', 'sparse'):
-            key = 'chamfer' if cloud == 'dense' else 'sparse_chamfer'
+        for cloud, key in CLOUDS.items():
             vname = f'{variant}/{cloud}'
             vres: dict = {'plans': {}, 'spearman': {}, 'spearman_reconstructed': {}, 'failed': {}}
             for s in args.scenarios:
                 every = load_study(s, args.models, variant)
+                if cloud == 'shape':  # records from before chamfer_shape was kept do not count
+                    every = [{**p, 'recon': {k: r for k, r in p['recon'].items() if key in r or r.get('error')}}
+                             for p in every]
+                    if not any(p['recon'] for p in every):
+                        continue
                 half = split_halves(every, args.split_seed)
                 plans = [p for p in every if p['recon']]  # the skipped ones are counted, below
                 if not plans:
@@ -372,7 +382,7 @@ def analyze(args) -> dict:
                         r.get('seconds', {}).get('total', 0.0) if isinstance(r.get('seconds'), dict) else r.get('seconds', 0.0)
                         for p in plans for r in p['recon'].values()) / 3600.0
             result['variants'][vname] = vres
-    main_v = f'{args.width}x{args.height}/dense'
+    main_v = f'{variant_name(args)}/dense'
     if main_v in result['variants']:
         mv = result['variants'][main_v]
         result['plans'], result['spearman'] = mv['plans'], mv['spearman']
@@ -401,7 +411,8 @@ def plan_record(plan: dict, rewards: dict, scenario: str, models: str) -> dict:
             continue
         rec['realizations'][k] = {
             key: (round(100 * r[key], 4) if r.get(key) is not None else None)
-            for key in ('chamfer', 'accuracy', 'completeness', 'sparse_chamfer', 'sparse_accuracy', 'sparse_completeness')}
+            for key in ('chamfer', 'chamfer_shape', 'accuracy', 'completeness', 'sparse_chamfer', 'sparse_accuracy',
+                        'sparse_completeness')}
         rec['realizations'][k].update({'dense_points': r['points'], 'sparse_points': r['sparse_points'],
                                        'pair_inliers': r['pair_inliers'], 'dense_pairs': r['dense_pairs']})
     return rec
@@ -447,7 +458,7 @@ def check_from_records(args) -> dict:
     ``plan_quality.json`` (its main variant): for a study whose reconstruction cache is gone."""
     path = Path(args.out) / 'plan_quality.json'
     result = json.loads(path.read_text())
-    main_v = f'{args.width}x{args.height}/dense'
+    main_v = f'{variant_name(args)}/dense'
     if main_v not in result.get('variants', {}):
         raise SystemExit(f'{path}: no variant {main_v} to split')
     records = result['variants'][main_v]['per_plan']

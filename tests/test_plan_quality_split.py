@@ -44,3 +44,33 @@ def test_spearman_per_half_ranks_a_failure_last_and_uses_only_its_half():
     rho = spearman_halves(ids, {"m": reward}, chamfer, half)
     assert rho["check"]["m"] == pytest.approx(1.0)
     assert rho["design"]["m"] == pytest.approx(-0.8)   # d = (3, 0, 0, -3): 1 - 6 * 18 / 60
+
+
+def test_check_reads_the_main_variant_of_the_capture(tmp_path):
+    """The check half of a study is read from the variant of the capture asked for: a flight's
+    (realistic, soil) by default, the ideal one with --capture ideal; another is a named error."""
+    import json
+
+    import plan_quality
+
+    args = plan_quality.parse_args(["--scenarios", "one_plant", "--out", str(tmp_path)])
+    if not plan_quality.plans_path("one_plant", args.models).exists():
+        pytest.skip("the committed one_plant plan set is for another plant folder")
+    plans = plan_quality.plans_of("one_plant", args.models)
+    rng = np.random.default_rng(0)
+    records = []
+    for i, p in enumerate(plans):
+        chamfer = float(rng.uniform(1, 5))
+        records.append({"id": p["id"], "reward": {"coverage": -chamfer, "paper": float(rng.uniform())},
+                        "realizations": {"0": {"error": "RECONSTRUCTION_FAILED"} if i == 0 else {"chamfer": chamfer}}})
+    variant = f"{plan_quality.variant_name(args)}/dense"
+    assert variant == "2000x1500-realistic-soil/dense"
+    study = {"variants": {variant: {"per_plan": {"one_plant": records}}}}
+    (tmp_path / "plan_quality.json").write_text(json.dumps(study))
+    result = plan_quality.check_from_records(args)
+    assert result["counts"]["one_plant"] == {"planned": len(plans), "reconstructed": len(plans) - 1,
+                                             "failed": 1, "skipped": 0}
+    assert result["spearman_check"]["one_plant"]["coverage"] > 0.9   # -Chamfer itself, the failed plan last
+    with pytest.raises(SystemExit, match="no variant 2000x1500/dense"):
+        plan_quality.check_from_records(plan_quality.parse_args(["--scenarios", "one_plant", "--out", str(tmp_path),
+                                                                 "--capture", "ideal"]))
