@@ -98,7 +98,8 @@ def combine(cells: dict) -> dict:
         chamfer[(scenario, row)] = u
         out['cells'][f'{scenario}/{row}'] = {
             'chamfer': summary({f'{s}/{k}': v for (s, k), v in u.items()}),
-            'chamfer_shape': summary({f'{s}/{k}': v for (s, k), v in units(seeds, realizations, 'chamfer_shape').items()}),
+            'chamfer_shape': summary({f'{s}/{k}': v
+                                      for (s, k), v in units(seeds, realizations, 'chamfer_shape').items()}),
             'seeds': sorted(seeds), 'sources': {str(s): src for s, (_, src) in sorted(seeds.items())},
             'per_unit': {f'{s}/{k}': v for (s, k), v in u.items()}}
     for scenario in scenarios:
