@@ -65,6 +65,9 @@ def parse_args(argv=None) -> argparse.Namespace:
                     help='reconstruct the first n wind realizations of each plan (0: all K)')
     ap.add_argument('--recon-seeds', type=int, default=1,
                     help='reconstruct the plans of the first n seeds (statistics over seed x realization)')
+    ap.add_argument('--recon-first', type=int, default=0,
+                    help='skip the seeds below this one (a slice of more seeds beside a table that has them; '
+                         'bench/table1_combine.py joins the slices)')
     ap.add_argument('--out', default=str(ROOT / 'results'))
     add_capture(ap)
     add_cluster_args(ap)
@@ -108,7 +111,12 @@ def plan_tasks(cache: Path, args) -> list[Task]:
 
 
 def recon_seeds(args) -> range:
-    return range(min(max(1, args.recon_seeds), args.seeds))
+    """The seeds whose plans are reconstructed: --recon-first up to --recon-seeds (and --seeds)."""
+    seeds = range(max(0, args.recon_first), min(max(1, args.recon_seeds), args.seeds))
+    if not seeds:
+        raise SystemExit(f'table1: no seed to reconstruct (--recon-first {args.recon_first}, --recon-seeds '
+                         f'{args.recon_seeds}, --seeds {args.seeds})')
+    return seeds
 
 
 def recon_tasks(cache: Path, out: Path, plans: dict, args) -> list[Task]:
@@ -140,6 +148,7 @@ def run(args, client) -> tuple[dict, dict]:
 
 def main(argv=None) -> int:
     args = parse_args(argv)
+    recon_seeds(args)  # a slice with no seed fails before any work
     with open_client(args.scheduler, args.workers) as client:
         plans, recons = run(args, client)
     write_results(args, Path(args.out), plans, recons)
@@ -237,7 +246,7 @@ def write_results(args, out: Path, plans, recons) -> None:
     seeds = recon_seeds(args)
     lines = [f'# Table I, measured {stamp} ({host})', '',
              f'Plants: {args.models or "built-in procedural corn"}. Chamfer distance x 100, mean +- sample std '
-             f'(ddof 1) over the plans of seeds 0..{len(seeds) - 1} x {args.realizations or "all"} wind realizations '
+             f'(ddof 1) over the plans of seeds {seeds[0]}..{seeds[-1]} x {args.realizations or "all"} wind realizations '
              'of K = 5 (n: the successful reconstructions; a failed one is counted and ranks its row last), lower is '
              'better; the paper\'s value in brackets. Rewards of the seed-0 plan under both models (coverage / paper).', '',
              f'Capture: {capture_text(args)}', '',
@@ -252,7 +261,7 @@ def write_results(args, out: Path, plans, recons) -> None:
             paper = PAPER[scenario].get(row)
             stat = summary({f'{seed}/{k}': v for (seed, k), v in units[(scenario, row)].items()})
             errors = sorted({r['error'] for r in recs.values() if r.get('error')})
-            cell = {'recon': recs[0], 'recon_by_seed': {str(k): v for k, v in recs.items()}, 'chamfer': stat,
+            cell = {'recon': recs[seeds[0]], 'recon_by_seed': {str(k): v for k, v in recs.items()}, 'chamfer': stat,
                     'paper': paper}
             ref = f' [{paper[0]:.3f} +- {paper[1]:.3f}]' if paper else ''
             text = describe(stat) + (f' ({", ".join(errors)})' if errors else '') + ref

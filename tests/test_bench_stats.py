@@ -60,6 +60,21 @@ def test_table1_shape_table_counts_a_failed_plan() -> None:
     assert table["shape"]["one_plant/egp"]["failed_plans"] == 1
 
 
+def test_table1_reconstructs_a_slice_of_seeds(tmp_path) -> None:
+    """--recon-first skips the seeds a table already has: only seeds 1 and 2 get a reconstruction
+    task; a slice with no seed is refused before any work."""
+    import table1
+
+    base = ["--models", "", "--scenarios", "one_plant", "--rows", "arc", "--seeds", "3", "--recon-seeds", "3"]
+    args = table1.parse_args(base + ["--recon-first", "1"])
+    assert list(table1.recon_seeds(args)) == [1, 2]
+    plans = {("one_plant", "arc", s): {"cameras": []} for s in range(3)}
+    assert [t.key for t in table1.recon_tasks(tmp_path, tmp_path, plans, args)] == [("one_plant", "arc", 1),
+                                                                                ("one_plant", "arc", 2)]
+    with pytest.raises(SystemExit, match="no seed to reconstruct"):
+        table1.main(base + ["--recon-first", "3", "--out", str(tmp_path)])
+
+
 def test_a_row_with_no_success_reads_failed_not_nan():
     from stats import describe, describe_difference
 
