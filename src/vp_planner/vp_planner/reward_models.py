@@ -74,7 +74,8 @@ DEFAULT_RECONSTRUCTED_WEIGHT: float = 0.1
 
 #: Reward models by name (``reward`` parameter, PlanViews goal field, ``--reward``).
 REWARD_MODELS: tuple[str, ...] = ("paper", "coverage")
-#: The model the plan-quality study supports (README, results/plan_quality.json).
+#: The model the plan-quality study supports (README; results/ideal/plan_quality.json, and under the
+#: realistic capture results/plan_quality.json).
 DEFAULT_REWARD_MODEL: str = "coverage"
 
 RewardFunction = Callable[[Any], np.ndarray]
