@@ -350,10 +350,10 @@ def analyze(args) -> dict:
             for s in args.scenarios:
                 every = load_study(s, args.models, variant)
                 if cloud == 'shape':  # records from before chamfer_shape was kept do not count
+                    if not any(key in r for p in every for r in p['recon'].values()):
+                        continue  # no record of this scenario has it: no shape study (not 'all failed')
                     every = [{**p, 'recon': {k: r for k, r in p['recon'].items() if key in r or r.get('error')}}
                              for p in every]
-                    if not any(p['recon'] for p in every):
-                        continue
                 half = split_halves(every, args.split_seed)
                 plans = [p for p in every if p['recon']]  # the skipped ones are counted, below
                 if not plans:
