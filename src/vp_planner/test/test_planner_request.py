@@ -33,7 +33,9 @@ def test_a_plan_through_the_request_is_the_keyword_path_plan(realizations: np.nd
                           reconstruction=realizations[0, :200], tau=0.05, reconstructed_weight=0.2)
     res = plan_views(request, realizations)
     assert res.fixed_cameras == 1 and res.reconstructed_fraction is not None
-    assert res.reward == pytest.approx(SECOND_SORTIE_REWARD, abs=1e-12)
+    # float32 sums: the last bits differ between CPUs (1e-12 held on one machine, 4.5e-8 off on
+    # another with the same wheels); any change of the plan or the reward is far larger than 1e-6
+    assert res.reward == pytest.approx(SECOND_SORTIE_REWARD, rel=1e-6)
 
 
 def test_request_round_trips_and_is_frozen(realizations: np.ndarray) -> None:
