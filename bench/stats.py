@@ -1,5 +1,6 @@
 """Statistics of the benchmark tables: sample spread with its n, paired differences with t-intervals.
 
+- :func:`realization_units`: the (seed, realization) units of reconstruction records.
 - :func:`summary`: mean and sample standard deviation (ddof = 1) of the successful runs, with n and
   the number of failed runs (a failed reconstruction is a result: counted, never skipped).
 - :func:`rank`: rows ordered best first by (failures, mean): a row with a failed reconstruction
@@ -14,6 +15,18 @@ import math
 from typing import Hashable, Mapping, Optional
 
 import numpy as np
+
+
+def realization_units(records: Mapping[int, dict], realizations: int, key: str = 'chamfer') -> dict:
+    """(seed, realization) -> ``key`` of each seed's reconstruction record (``per_realization``
+    entries, as ``common.reconstruct_record`` writes them), None where it failed or is missing: a
+    record without entries (the plan failed) fails all ``realizations``."""
+    units = {}
+    for seed, record in sorted(records.items()):
+        per = {p.get('realization', i): p.get(key) for i, p in enumerate(record.get('per_realization') or [])}
+        for k in range(realizations):
+            units[(seed, k)] = per.get(k)
+    return units
 
 
 def summary(values: Mapping[Hashable, Optional[float]]) -> dict:

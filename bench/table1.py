@@ -29,7 +29,7 @@ from cluster import Task, add_cluster_args, open_client, run_tasks  # noqa: E402
 from common import (ROOT, SCENARIOS, cached, default_models, machine, models_tag, plan_cell,  # noqa: E402
                     add_capture, capture_of, capture_tag, known_realizations, plan_path, reconstruct_record,
                     scene)
-from stats import describe, describe_difference, paired_difference, rank, summary  # noqa: E402
+from stats import describe, describe_difference, paired_difference, rank, realization_units, summary  # noqa: E402
 
 #: Table rows: label -> (planner variant of common.VARIANTS, reward model).
 ROWS = {
@@ -160,13 +160,7 @@ def chamfer_units(recons: dict, scenario: str, row: str, args) -> dict:
     realization reconstructs on its own: ``common.reconstruct_record``; a failed plan fails in all)."""
     K = len(scene(scenario, args.models)[0].points)
     ks = min(args.realizations, K) if args.realizations else K
-    units = {}
-    for seed in recon_seeds(args):
-        r = recons[(scenario, row, seed)]
-        per = {p.get('realization', i): p.get('chamfer') for i, p in enumerate(r.get('per_realization', []))}
-        for k in range(ks):
-            units[(seed, k)] = per.get(k)
-    return units
+    return realization_units({seed: recons[(scenario, row, seed)] for seed in recon_seeds(args)}, ks)
 
 
 def paired_lines(args, units: dict, table: dict) -> list[str]:

@@ -29,12 +29,12 @@ from pathlib import Path
 from typing import Optional
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from stats import describe, describe_difference, paired_difference, rank, summary  # noqa: E402
+from common import SCENARIOS  # noqa: E402
+from stats import describe, describe_difference, paired_difference, rank, realization_units, summary  # noqa: E402
+from table1 import BASELINES  # noqa: E402
 
 #: what every joined file must agree on (a different value: a different experiment)
 SAME = ('capture', 'resolution', 'evaluations', 'models')
-#: rows that are baselines (as table1.BASELINES; not imported: table1 pulls in the planners)
-BASELINES = ('circle', 'arc', 'sa')
 
 
 def load(paths: list[Path]) -> tuple[dict, dict]:
@@ -66,17 +66,6 @@ def load(paths: list[Path]) -> tuple[dict, dict]:
     return cells, {**(meta or {}), 'plants': plants}
 
 
-def units(seeds: dict, realizations: int, key: str = 'chamfer') -> dict:
-    """(seed, realization) -> value of ``key`` (None: failed). A record without per-realization
-    entries (the plan or every realization failed) fails all ``realizations``."""
-    out = {}
-    for seed, (record, _) in sorted(seeds.items()):
-        per = {p.get('realization', i): p.get(key) for i, p in enumerate(record.get('per_realization') or [])}
-        for k in range(max(realizations, max(per, default=-1) + 1)):
-            out[(seed, k)] = per.get(k)
-    return out
-
-
 def seed_means(u: dict) -> dict:
     """seed -> mean over its realizations (None when any failed: a failed unit is not averaged away)."""
     by: dict = {}
@@ -87,19 +76,19 @@ def seed_means(u: dict) -> dict:
 
 def combine(cells: dict) -> dict:
     """The combined table (JSON-ready)."""
-    scenarios = sorted({s for s, _ in cells}, key=lambda s: ('one_plant', 'three_row', 'six_rect').index(s)
-                       if s in ('one_plant', 'three_row', 'six_rect') else 9)
+    scenarios = [s for s in SCENARIOS if any(s == c for c, _ in cells)]
     rows = list(dict.fromkeys(r for _, r in cells))
     out = {'cells': {}, 'paired': {}}
     chamfer = {}
     for (scenario, row), seeds in cells.items():
-        realizations = max((len(rec.get('per_realization') or []) for rec, _ in seeds.values()), default=0)
-        u = units(seeds, realizations)
+        records = {seed: record for seed, (record, _) in seeds.items()}
+        realizations = max((len(r.get('per_realization') or []) for r in records.values()), default=0)
+        u = realization_units(records, realizations)
         chamfer[(scenario, row)] = u
+        shape = realization_units(records, realizations, 'chamfer_shape')
         out['cells'][f'{scenario}/{row}'] = {
             'chamfer': summary({f'{s}/{k}': v for (s, k), v in u.items()}),
-            'chamfer_shape': summary({f'{s}/{k}': v
-                                      for (s, k), v in units(seeds, realizations, 'chamfer_shape').items()}),
+            'chamfer_shape': summary({f'{s}/{k}': v for (s, k), v in shape.items()}),
             'seeds': sorted(seeds), 'sources': {str(s): src for s, (_, src) in sorted(seeds.items())},
             'per_unit': {f'{s}/{k}': v for (s, k), v in u.items()}}
     for scenario in scenarios:
