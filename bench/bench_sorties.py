@@ -35,6 +35,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from cluster import Task, add_cluster_args, open_client, run_tasks  # noqa: E402
+from vp_recon.pipeline import MATCHINGS  # noqa: E402
 from common import (ROOT, add_capture, cached, capture_of, capture_tag, chamfer_text, default_models,  # noqa: E402
                     machine, models_tag, plan_cell, plan_path, reconstruct_record, scene, write_json)
 
@@ -60,6 +61,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument('--threads', type=int, default=0, help='threads of the reconstruction (0: all cores)')
     ap.add_argument('--tau', type=float, default=0.03)
     ap.add_argument('--reconstructed-weight', type=float, default=0.1)
+    ap.add_argument('--matching', default='auto', choices=MATCHINGS,
+                    help="image pairs SIFT compares (vp_recon.pipeline.matching_method; 'auto': the pose-chosen "
+                         "pairs from 8 images up, 'exhaustive': all of them)")
     ap.add_argument('--out', default=str(ROOT / 'results'))
     add_capture(ap)
     add_cluster_args(ap)
@@ -100,7 +104,8 @@ def recon_cell(cache: Path, out: Path, scenario: str, name: str, cameras, args) 
 
     def compute() -> dict:
         noisy, _ = scene(scenario, args.models)
-        cfg = ReconConfig(width=args.width, height=args.height, num_threads=args.threads, capture=capture_of(args))
+        cfg = ReconConfig(width=args.width, height=args.height, num_threads=args.threads, capture=capture_of(args),
+                          matching=args.matching)
         record = reconstruct_record(noisy, np.asarray(cameras), cfg, out / 'recon' / tag,
                                     range(min(args.realizations, len(noisy.points))))
         record['folder'] = str(out / 'recon' / tag)
@@ -111,7 +116,8 @@ def recon_cell(cache: Path, out: Path, scenario: str, name: str, cameras, args) 
 def recon_tag(scenario: str, name: str, args) -> str:
     """The cache name of :func:`recon_cell`."""
     return (f'{models_tag(args.models)}-{scenario}-{name}-seed{args.seed}-e{args.evals}-{args.width}x{args.height}'
-            f'{capture_tag(capture_of(args))}-k{args.realizations}')
+            f'{capture_tag(capture_of(args))}-k{args.realizations}'
+            + ('' if args.matching == 'auto' else f'-{args.matching}'))
 
 
 def reconstruction_points(record: dict) -> np.ndarray:
@@ -172,7 +178,8 @@ def run(client, cache: Path, out: Path, args) -> dict:
     rows = {}
     for s, (n, m) in sizes.items():
         first = plans[(s, 'sortie1')]
-        row = {'n': n, 'm': m, 'sortie1': {'reward': first.get('reward'), 'chamfer': recons.get((s, 'sortie1'), first)},
+        row = {'n': n, 'm': m, 'sortie1': {'reward': first.get('reward'), 'cameras': first.get('cameras'),
+                                            'chamfer': recons.get((s, 'sortie1'), first)},
                'cases': {}}
         for case in CASES:
             p = plans.get((s, case))
@@ -182,7 +189,8 @@ def run(client, cache: Path, out: Path, args) -> dict:
             elif 'error' in p:
                 row['cases'][case] = {**p, 'chamfer_mean': None}
             else:
-                row['cases'][case] = {'reward': p['reward'], 'plan_seconds': p.get('seconds'), **recons[(s, case)]}
+                row['cases'][case] = {'reward': p['reward'], 'plan_seconds': p.get('seconds'),
+                                      'cameras': p['cameras'], **recons[(s, case)]}
         rows[s] = row
     return rows
 
@@ -205,7 +213,7 @@ def write_results(args, out: Path, rows: dict) -> None:
              f'{machine()}; {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC; plants {models_tag(args.models)}; '
              f'egp {args.evals} evaluations ({args.init} initial), seed {args.seed}; {args.realizations} wind '
              f'realizations, {args.width} x {args.height} images, capture {capture_of(args).kind}; tau {args.tau} m, '
-             f'reconstructed weight {args.reconstructed_weight}.', '',
+             f'reconstructed weight {args.reconstructed_weight}; matching {args.matching}.', '',
              'a: one sortie of N + M (egp); b: sortie 2 egp ignoring sortie 1; c: circle / arc of M; '
              'd: egp given the flown cameras; e: egp given the flown cameras and their reconstruction.', '',
              head, '|' + '---|' * (len(CASES) + 4)]

@@ -6,6 +6,8 @@ import json
 import sys
 from pathlib import Path
 
+import pytest
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
 import bench_sorties  # noqa: E402  (bench/bench_sorties.py)
 
@@ -48,6 +50,9 @@ def test_a_slice_runs_on_a_local_cluster_and_a_rerun_reads_the_cache(tmp_path: P
     assert all(c.get("chamfer_mean") is not None or c.get("error") for c in cases.values())
     assert rows["one_plant"]["sortie1"]["chamfer"]["chamfer_mean"] is not None
     assert cases["e"]["chamfer_mean"] is not None  # planned given sortie 1's reconstruction
+    # every plan flown is kept in the results, sortie 2's beside sortie 1's (a: all N + M cameras)
+    assert len(rows["one_plant"]["sortie1"]["cameras"]) == 4 and len(cases["a"]["cameras"]) == 6
+    assert all(len(cases[c]["cameras"]) == 2 for c in ("b", "c-circle", "c-arc", "d", "e"))
     plans = sorted(p.name for p in (tmp_path / "cache" / "plans").glob("*.json"))
     assert len(plans) == 7 and sum("sortie2-e" in p and "-k1" in p for p in plans) == 1
     assert len(list((tmp_path / "cache" / "recon").glob("*.json"))) == 7
@@ -55,3 +60,15 @@ def test_a_slice_runs_on_a_local_cluster_and_a_rerun_reads_the_cache(tmp_path: P
     assert bench_sorties.main(argv) == 0
     assert {p: p.stat().st_mtime_ns for p in (tmp_path / "cache").rglob("*.json")} == stamps
     assert json.loads((tmp_path / "bench_sorties.json").read_text())["rows"] == rows
+
+
+def test_the_matching_is_part_of_a_reconstruction_s_cache_name() -> None:
+    """``--matching exhaustive`` reconstructs again (its own cache files); ``auto`` keeps the names
+    of the reconstructions made before the flag existed."""
+    auto = bench_sorties.parse_args(["--models", ""])
+    exhaustive = bench_sorties.parse_args(["--models", "", "--matching", "exhaustive"])
+    assert bench_sorties.recon_tag("three_row", "d-n6-m3", auto).endswith("-k2")
+    assert bench_sorties.recon_tag("three_row", "d-n6-m3", exhaustive) == (
+        bench_sorties.recon_tag("three_row", "d-n6-m3", auto) + "-exhaustive")
+    with pytest.raises(SystemExit):
+        bench_sorties.parse_args(["--models", "", "--matching", "all"])
