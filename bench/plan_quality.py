@@ -300,6 +300,31 @@ def plan_chamfer(plan: dict, key: str = 'chamfer') -> float:
     return float(np.mean(vals)) if vals else math.inf
 
 
+def realization_agreement(plans: list[dict], key: str = 'chamfer') -> dict | None:
+    """Test-retest reliability of the score itself: Spearman's rho between the plans' Chamfer in
+    two wind realizations (the first two every plan has; a failed one ranks last), over the plans
+    recorded in both. No reward model can rank plans by one realization's Chamfer better than the
+    realizations rank one another, so this is the noise ceiling of the study's rho.
+    ``ceiling_mean``: the Spearman-Brown estimate sqrt(2 r / (1 + r)) of the highest rho a perfect
+    predictor reaches against the mean of the two (a Pearson-model approximation for ranks).
+    None when fewer than 3 plans have two realizations."""
+    common = sorted(set.intersection(*[set(p['recon']) for p in plans]) if plans else set())
+    if len(common) < 2:
+        return None
+    a, b = common[:2]
+
+    def value(r: dict) -> float:
+        v = r.get(key)
+        return math.inf if r.get('error') or v is None else float(v)
+
+    x = np.array([value(p['recon'][a]) for p in plans])
+    y = np.array([value(p['recon'][b]) for p in plans])
+    rho = spearman(-x, -y)
+    ceiling = math.sqrt(2 * rho / (1 + rho)) if rho > 0 else float('nan')
+    return {'realizations': [a, b], 'n': len(plans), 'rho_between': rho, 'ceiling_mean': ceiling,
+            'failed_in_one_only': int((np.isinf(x) != np.isinf(y)).sum())}
+
+
 def spearman(x, y) -> float:
     from scipy.stats import spearmanr
 
@@ -370,6 +395,8 @@ def analyze(args) -> dict:
                 vres.setdefault('spearman_check', {})[s] = halves['check']
                 vres.setdefault('split', {})[s] = half
                 vres['spearman'][s] = {m: spearman(r['reward'], -ch) for m, r in rewards.items()}
+                vres.setdefault('reliability', {})[s] = realization_agreement(plans, key)
+                vres.setdefault('realizations', {})[s] = sorted({k for p in plans for k in p['recon']})
                 vres['spearman_reconstructed'][s] = {m: spearman(np.asarray(r['reward'])[ok], -ch[ok])
                                                      for m, r in rewards.items()}
                 result['ms_per_plan'][s] = {m: r['ms_per_plan'] for m, r in rewards.items()}
@@ -387,7 +414,7 @@ def analyze(args) -> dict:
         mv = result['variants'][main_v]
         result['plans'], result['spearman'] = mv['plans'], mv['spearman']
         result['spearman_reconstructed'], result['failed'] = mv['spearman_reconstructed'], mv['failed']
-        for key in ('counts', 'spearman_design', 'spearman_check', 'split'):
+        for key in ('counts', 'spearman_design', 'spearman_check', 'split', 'reliability', 'realizations'):
             result[key] = mv.get(key, {})
         result['split_seed'] = args.split_seed
     out = Path(args.out)
@@ -488,7 +515,11 @@ def print_table(result: dict) -> None:
     for vname, v in result['variants'].items():
         print(f'\n## {vname}')
         for s, rhos in v['spearman'].items():
-            print(f'{s} ({v["plans"][s]} plans, {v["failed"][s]} failed):')
+            print(f'{s} ({v["plans"][s]} plans, {v["failed"][s]} failed; realizations {v["realizations"][s]}):')
+            rel = v.get('reliability', {}).get(s)
+            if rel:
+                print(f'  realization {rel["realizations"][0]} vs {rel["realizations"][1]}: rho {rel["rho_between"]:+.3f} '
+                      f'(noise ceiling of the mean ~{rel["ceiling_mean"]:.2f}, n {rel["n"]})')
             for m, rho in sorted(rhos.items(), key=lambda kv: -np.nan_to_num(kv[1], nan=-9)):
                 print(f'  {m:40s} rho {rho:+.3f}   reconstructed {v["spearman_reconstructed"][s][m]:+.3f}   '
                       f'{result["ms_per_plan"].get(s, {}).get(m, float("nan")):.1f} ms/plan')

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-from plan_quality import spearman_halves, split_halves, study_counts  # noqa: E402
+from plan_quality import realization_agreement, spearman_halves, split_halves, study_counts  # noqa: E402
 
 
 def _plans() -> list[dict]:
@@ -74,3 +74,28 @@ def test_check_reads_the_main_variant_of_the_capture(tmp_path):
     with pytest.raises(SystemExit, match="no variant 2000x1500/dense"):
         plan_quality.check_from_records(plan_quality.parse_args(["--scenarios", "one_plant", "--out", str(tmp_path),
                                                                  "--capture", "ideal"]))
+
+
+def _two_realizations(first: list, second: list) -> list[dict]:
+    def rec(v):
+        return {"error": "RECONSTRUCTION_FAILED"} if v is None else {"chamfer": v}
+    return [{"id": f"p{i}", "recon": {"0": rec(a), "1": rec(b)}} for i, (a, b) in enumerate(zip(first, second))]
+
+
+def test_realization_agreement_is_the_noise_ceiling_of_the_score():
+    same = _two_realizations([0.01, 0.02, 0.03, None], [0.011, 0.025, 0.031, None])
+    rel = realization_agreement(same)
+    assert rel["realizations"] == ["0", "1"] and rel["n"] == 4
+    assert rel["rho_between"] == pytest.approx(1.0) and rel["ceiling_mean"] == pytest.approx(1.0)
+    assert rel["failed_in_one_only"] == 0
+    # the second realization ranks the plans the other way round, and one fails only there
+    flipped = realization_agreement(_two_realizations([0.01, 0.02, 0.03, 0.04], [None, 0.03, 0.02, 0.01]))
+    assert flipped["rho_between"] == pytest.approx(-1.0) and math.isnan(flipped["ceiling_mean"])
+    assert flipped["failed_in_one_only"] == 1
+    # a middling agreement: Spearman-Brown sqrt(2 r / (1 + r)) lies between r and 1
+    mid = realization_agreement(_two_realizations([0.01, 0.02, 0.03, 0.04, 0.05], [0.02, 0.01, 0.03, 0.05, 0.04]))
+    assert 0 < mid["rho_between"] < mid["ceiling_mean"] < 1
+    # a plan reconstructed in one realization only: no pair of realizations every plan has
+    partial = _two_realizations([0.01, 0.02, 0.03], [0.01, 0.02, 0.03])
+    del partial[1]["recon"]["1"]
+    assert realization_agreement(partial) is None
