@@ -3,7 +3,9 @@
 
 Rows (:data:`ROWS`): the baselines a drone operator flies anyway (circle, arc) and the paper's
 (sa), each tuned with the default reward model; the default planner (egp); and EGP-VP exactly as
-the paper configures it (the paper's reward, EI over the whole space, a random initial design).
+the paper configures it (the paper's reward, EI over the whole space, a random initial design);
+and egp under ``coverage-graph`` (coverage times the view graph's connectivity, the candidate the
+realistic plan-quality study supports: README "Reward models").
 For each scenario (one_plant with 4 cameras, three_row and six_rect with 6) every row plans with
 ``--seeds`` seeds (100 evaluations; egp: 50 initial + 50 BO), keeps the simple regret
 SR(t) = 1 - best-so-far (paper eq. SR, optimum 1) of every run, and reconstructs the seed-0 plan
@@ -38,6 +40,7 @@ ROWS = {
     'sa': ('sa', 'coverage'),
     'egp': ('egp', 'coverage'),
     'egp (paper configuration)': ('egp-paper-config', 'paper'),
+    'egp (coverage-graph)': ('egp', 'coverage-graph'),
 }
 #: The baseline rows (what a drone operator flies anyway, and the paper's SA).
 BASELINES = ('circle', 'arc', 'sa')

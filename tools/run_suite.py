@@ -80,7 +80,7 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
     ap.add_argument('--evals', type=int, default=100, help='reward evaluations')
     ap.add_argument('--init', type=int, default=50, help='initial random design (egp, gp)')
     ap.add_argument('--seed', type=int, default=0)
-    ap.add_argument('--reward', default='', help="reward model: paper | coverage ('': the planner's default)")
+    ap.add_argument('--reward', default='', help="reward model: paper | coverage | coverage-graph ('': the planner's default)")
     ap.add_argument('--models', default='', help='folder of PLY plant models (default: procedural)')
     ap.add_argument('--realizations', type=int, default=5, help='K wind realizations')
     ap.add_argument('--points-per-plant', type=int, default=4000)

@@ -6,10 +6,12 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+import torch
 
 from vp_planner.reward import noisy_reward
 from vp_planner.reward_models import (DEFAULT_REWARD_MODEL, REWARD_MODELS, CoverageParams, check_reward_model,
-                                      coverage_reward, make_reward, point_coverage)
+                                      coverage_reward, make_reward, point_coverage, view_graph,
+                                      view_graph_factor)
 from vp_scene.camera import CameraModel, look_at
 
 IMAGE = CameraModel(2000, 1500, math.pi / 2)
@@ -32,7 +34,7 @@ def grid_patch(x: float, half: float = 0.05, n: int = 11, z: float = 1.0) -> np.
 
 
 def test_model_names() -> None:
-    assert set(REWARD_MODELS) == {"paper", "coverage"} and DEFAULT_REWARD_MODEL in REWARD_MODELS
+    assert set(REWARD_MODELS) == {"paper", "coverage", "coverage-graph"} and DEFAULT_REWARD_MODEL in REWARD_MODELS
     assert check_reward_model("paper") == "paper"
     with pytest.raises(ValueError, match="unknown reward model"):
         check_reward_model("magic")
@@ -124,3 +126,56 @@ def test_degenerate_inputs() -> None:
     assert coverage_reward(cams, pts, ALL_ON, IMAGE) == 0.0
     on_point = look_at(pts[0, :2], [[1.0, 0.0, 1.0], [1.0, 0.1, 1.0]])
     assert np.isfinite(coverage_reward(on_point, pts, ALL_ON, IMAGE))
+
+
+def ring_at(distance: float, azimuths_deg, target=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """Cameras at ``distance`` from ``target`` at the given azimuths (level), looking at it."""
+    t = np.asarray(target, float)
+    a = np.radians(np.asarray(azimuths_deg, float))
+    c = t + distance * np.stack([np.cos(a), np.sin(a), np.zeros(len(a))], axis=1)
+    return look_at(c, np.broadcast_to(t, c.shape))
+
+
+def blob(n: int = 400, seed: int = 0) -> np.ndarray:
+    """A ball of points around (0, 0, 1), one realization (1, n, 3)."""
+    return (np.random.default_rng(seed).normal(size=(n, 3)) * 0.15 + np.array([0.0, 0.0, 1.0]))[None]
+
+
+def test_view_graph_of_two_tight_pairs_falls_apart_and_zeroes_the_reward() -> None:
+    """coverage-graph: two stereo pairs a quarter turn apart share no matchable point (80+ degrees
+    between them, the window ends at 30), so lambda_2 = 0 and the reward is 0, while coverage
+    scores them well; the same four cameras on a 24-degree arc hang together and keep their
+    coverage times min(1, lambda_2 / scale)."""
+    pts = blob()
+    params = replace(ALL_ON, view_graph=True)
+    split = ring_at(2.0, [0, 8, 90, 98])
+    arc = ring_at(2.0, [0, 8, 16, 24])
+    E = view_graph(split, pts, params, IMAGE)
+    assert E.shape == (4, 4) and np.allclose(E, E.T) and np.all(np.diag(E) == 0) and np.all((E >= 0) & (E <= 1))
+    assert E[0, 1] > 0.1 and E[2, 3] > 0.1                        # inside a pair: many shared points
+    assert np.all(E[:2, 2:] == 0)                                 # between the pairs: none
+    assert view_graph_factor(torch.as_tensor(E)[None], 1e-3).item() == 0.0
+    cov_split = coverage_reward(split, pts, ALL_ON, IMAGE)
+    assert cov_split > 0.3 and coverage_reward(split, pts, params, IMAGE) == 0.0
+    E_arc = torch.as_tensor(view_graph(arc, pts, params, IMAGE))[None]
+    lam2 = torch.linalg.eigvalsh(torch.diag_embed(E_arc.sum(-1)) - E_arc)[0, 1].item()
+    assert lam2 > 0
+    for scale in (1e-9, 10 * lam2):                               # saturated; and a tenth of it
+        want = coverage_reward(arc, pts, ALL_ON, IMAGE) * min(1.0, lam2 / scale)
+        got = coverage_reward(arc, pts, replace(params, graph_scale=scale), IMAGE)
+        assert got == pytest.approx(want, rel=1e-5)
+    with pytest.raises(ValueError, match="graph_scale"):
+        coverage_reward(arc, pts, replace(params, graph_scale=0.0), IMAGE)
+
+
+def test_view_graph_links_a_second_sortie_to_the_cameras_flown() -> None:
+    """With fixed cameras the graph spans both sorties: a new pair far from the flown pair scores
+    0 under coverage-graph (it would register on its own), one beside it does not."""
+    pts = blob()
+    flown = ring_at(2.0, [0, 8])
+    far, near = ring_at(2.0, [90, 98]), ring_at(2.0, [16, 24])
+    fn = make_reward("coverage-graph", pts, fov=IMAGE.fov, image=IMAGE, fixed_cameras=flown)
+    plain = make_reward("coverage", pts, fov=IMAGE.fov, image=IMAGE, fixed_cameras=flown)
+    got = fn(np.stack([far, near]))
+    assert got[0] == 0.0 and plain(far[None])[0] > 0.3
+    assert 0.0 < got[1] <= plain(near[None])[0] + 1e-12

@@ -88,7 +88,8 @@ def _reward_args(p: argparse.ArgumentParser, default: Optional[str]) -> None:
     from .reward_models import REWARD_MODELS
 
     p.add_argument("--reward", default=default, choices=REWARD_MODELS,
-                   help="reward model (paper: eqs. 2-7; coverage: expected reconstructed fraction)")
+                   help="reward model (paper: eqs. 2-7; coverage: expected reconstructed fraction; coverage-graph: "
+                        "coverage times the view graph's connectivity)")
     p.add_argument("--image-width", type=int, default=None, help="image width of the cameras, pixels (2000)")
     p.add_argument("--image-height", type=int, default=None, help="image height of the cameras, pixels (1500)")
 

@@ -35,6 +35,24 @@ mean over the K realizations of its reward on each one.
 
 Each ingredient can be switched off (``ablations()``), which is how the study measures it.
 
+``coverage-graph``
+    ``coverage`` times the connectivity of the plan's view graph: under a flight the images must
+    also hang together for SfM, which registers them through matched points. The realistic
+    plan-quality study found plans with the highest coverage that came in tight pairs joined to
+    one another by a few dozen matches, registered wrongly (README "Reward models")::
+
+        m(theta)   = 1 up to match_full, linear to 0 at match_cutoff     SIFT under a change of view
+        e_ij       = 1/(K P) sum_k sum_p q_i(p) q_j(p) m(theta_ij(p))     points pair (i, j) can match
+        lambda_2   = 2nd-smallest eigenvalue of L = diag(E 1) - E          algebraic connectivity
+        R_graph(z) = R(z) min(1, lambda_2 / graph_scale)
+
+    lambda_2 (Fiedler 1973) is 0 exactly when the graph falls apart (some camera or group of
+    cameras shares no matchable point with the rest: SfM cannot register it with them) and grows
+    with the weakest cut between groups; ``graph_scale`` is where it stops mattering. e_ij is
+    averaged over all realizations (one graph of the plan, as a flight has one set of images per
+    wind) and ignores the point weights (registration needs shared points, reconstructed or not).
+    The window and the scale were chosen on the design half of the realistic study alone.
+
 A second sortie (README "A second sortie"): every model takes the cameras already flown,
 ``fixed_cameras`` (M, 6), and scores a plan z together with them, R(z | F) = R(z ∪ F): pairs
 between a new and a fixed camera count like pairs within the plan. It also takes point weights
@@ -63,7 +81,8 @@ from .feasibility import check_realizations
 from .reward import DEFAULT_FOV, DEFAULT_THETA_MATCH, noisy_reward, prepare_points
 
 __all__ = ["REWARD_MODELS", "DEFAULT_REWARD_MODEL", "CoverageParams", "RewardFunction", "make_reward",
-           "coverage_reward", "point_coverage", "ablations", "check_reward_model", "reconstructed_weights", "reconstructed_mask",
+           "coverage_reward", "point_coverage", "view_graph", "view_graph_factor", "ablations", "check_reward_model",
+           "reconstructed_weights", "reconstructed_mask",
            "DEFAULT_TAU", "DEFAULT_RECONSTRUCTED_WEIGHT", "check_fixed_cameras"]
 
 #: A planning-cloud point within this distance (m) of the first sortie's reconstruction counts as
@@ -73,7 +92,7 @@ DEFAULT_TAU: float = 0.03
 DEFAULT_RECONSTRUCTED_WEIGHT: float = 0.1
 
 #: Reward models by name (``reward`` parameter, PlanViews goal field, ``--reward``).
-REWARD_MODELS: tuple[str, ...] = ("paper", "coverage")
+REWARD_MODELS: tuple[str, ...] = ("paper", "coverage", "coverage-graph")
 #: The model the plan-quality study supports (README; results/ideal/plan_quality.json, and under the
 #: realistic capture results/plan_quality.json).
 DEFAULT_REWARD_MODEL: str = "coverage"
@@ -104,6 +123,9 @@ class CoverageParams:
         saturation: per-point 1 - prod(1 - q) (else the mean of q over pairs, as the paper).
         frustum: the rectangular W x H image (else the paper's cone of half-angle FoV/2).
         max_points: subsample each realization to at most this many points (0: all).
+        view_graph: multiply by the view graph's connectivity (``coverage-graph``).
+        match_full, match_cutoff: m(theta) of the view graph, degrees.
+        graph_scale: lambda_2 at and above which the graph counts as fully connected.
     """
 
     occlusion: bool = True
@@ -118,6 +140,12 @@ class CoverageParams:
     saturation: bool = True
     frustum: bool = True
     max_points: int = 3000
+    # chosen on the design half of the realistic plan-quality study (realization 0) from windows
+    # (10, 30), (15, 40), (20, 60) degrees x scales 3e-4 ... 3e-2 (README "Reward models")
+    view_graph: bool = False
+    match_full: float = 10.0
+    match_cutoff: float = 30.0
+    graph_scale: float = 1e-3
 
 
 def ablations() -> dict[str, tuple[str, CoverageParams]]:
@@ -171,9 +199,12 @@ def coverage_reward(cameras: Any, realizations: Any, params: CoverageParams = Co
     per_plan = K * P * max(3 * N, min(S, 64))
     chunk = max(1, max_elements // max(1, per_plan))
     for b0 in range(0, B, chunk):
-        cov = _point_coverage(cams[b0:b0 + chunk], pts, params, image, max_elements)
+        cov, E = _point_coverage(cams[b0:b0 + chunk], pts, params, image, max_elements)
         # 1/(K P) sum_k sum_p (eq. 7), or the w_p-weighted mean
-        out[b0:b0 + chunk] = (cov.mean(-1) if w is None else cov @ w).to(torch.float64)
+        r = cov.mean(-1) if w is None else cov @ w
+        if params.view_graph:
+            r = r * view_graph_factor(E, params.graph_scale)
+        out[b0:b0 + chunk] = r.to(torch.float64)
     res = out.numpy()
     return res.reshape(batch_shape) if batch_shape else float(res.reshape(-1)[0])
 
@@ -250,9 +281,38 @@ def reconstructed_weights(realizations: Any, reconstruction: Any, tau: float = D
     return np.where(reconstructed_mask(realizations, reconstruction, tau), float(reconstructed_weight), 1.0)
 
 
+def _match_window(theta_deg: torch.Tensor, p: CoverageParams) -> torch.Tensor:
+    """m(theta) of the view graph: 1 up to match_full, linear to 0 at match_cutoff."""
+    return ((p.match_cutoff - theta_deg) / max(p.match_cutoff - p.match_full, 1e-9)).clamp(0.0, 1.0)
+
+
+def view_graph_factor(E: torch.Tensor, scale: float) -> torch.Tensor:
+    """min(1, lambda_2 / scale) of view graphs E (B, N, N) (``coverage-graph``): lambda_2 is the
+    algebraic connectivity, the second-smallest eigenvalue of the Laplacian diag(E 1) - E; 0 for
+    a graph that falls apart. ValueError for a scale <= 0."""
+    if not (math.isfinite(scale) and scale > 0):
+        raise ValueError(f"graph_scale must be finite and > 0, got {scale}")
+    L = torch.diag_embed(E.sum(-1)) - E
+    lam2 = torch.linalg.eigvalsh(L.to(torch.float64))[..., 1]
+    return (lam2 / scale).clamp(0.0, 1.0).to(E.dtype)
+
+
+def view_graph(cameras: Any, realizations: Any, params: CoverageParams = CoverageParams(),
+               image: CameraModel = CameraModel()) -> np.ndarray:
+    """The view graph E (N, N) of one plan (``coverage-graph``, module docstring): e_ij, the share
+    of the realizations' points cameras i and j both image usefully within the matching window."""
+    cams = torch.as_tensor(np.asarray(cameras, dtype=np.float64)).reshape(1, -1, 6)
+    if cams.shape[1] < 2:
+        raise ValueError(f"the reward needs at least 2 cameras (pairs), got N = {cams.shape[1]}")
+    _, E = _point_coverage(cams, _points(realizations, params.max_points, 0), replace(params, view_graph=True),
+                           image, 1 << 22)
+    return E[0].numpy()
+
+
 def _point_coverage(cams: torch.Tensor, pts: torch.Tensor, p: CoverageParams, image: CameraModel,
-                    max_elements: int) -> torch.Tensor:
-    """cov(p) (B, K P) of plans (B, N, 6) on realizations (K, P, 3), flattened realization-major."""
+                    max_elements: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """cov(p) (B, K P) of plans (B, N, 6) on realizations (K, P, 3), flattened realization-major,
+    and the view graph E (B, N, N) (zeros unless ``p.view_graph``)."""
     B, N, _ = cams.shape
     K, P, _ = pts.shape
     dt = cams.dtype
@@ -296,17 +356,24 @@ def _point_coverage(cams: torch.Tensor, pts: torch.Tensor, p: CoverageParams, im
     S = ii.numel()
     log_miss = torch.zeros(B, K * P, dtype=dt)
     total = torch.zeros(B, K * P, dtype=dt)
+    E = torch.zeros(B, N, N, dtype=dt)
     block = max(1, max_elements // max(1, 3 * B * K * P))
     for s0 in range(0, S, block):
         a, b = ii[s0:s0 + block], jj[s0:s0 + block]
         cos = (unit[:, a] * unit[:, b]).sum(-1).clamp(-1.0, 1.0)    # (B, s, KP)
         theta = torch.rad2deg(torch.arccos(cos))
-        qij = q[:, a] * q[:, b] * _window(theta, p)
+        qq = q[:, a] * q[:, b]
+        qij = qq * _window(theta, p)
+        if p.view_graph:  # e_ij: the mean over all K P points
+            e = (qq * _match_window(theta, p)).mean(-1)
+            E[:, a, b] = e
+            E[:, b, a] = e
         if p.saturation:
             log_miss += torch.log1p(-qij.clamp(max=1.0 - 1e-7)).sum(1)
         else:
             total += qij.sum(1)
-    return -torch.expm1(log_miss) if p.saturation else total / S     # cov(p), (B, K P)
+    cov = -torch.expm1(log_miss) if p.saturation else total / S      # cov(p), (B, K P)
+    return cov, E
 
 
 def point_coverage(cameras: Any, realizations: Any, params: CoverageParams = CoverageParams(),
@@ -316,7 +383,7 @@ def point_coverage(cameras: Any, realizations: Any, params: CoverageParams = Cov
     if cams.shape[1] < 2:
         raise ValueError(f"the reward needs at least 2 cameras (pairs), got N = {cams.shape[1]}")
     pts = _points(realizations, 0, 0)
-    cov = _point_coverage(cams, pts, params, image, 1 << 22)
+    cov, _ = _point_coverage(cams, pts, params, image, 1 << 22)
     return cov.reshape(pts.shape[0], pts.shape[1]).numpy()
 
 
@@ -326,7 +393,8 @@ def make_reward(spec: Union[str, tuple], realizations: Any, fov: float = DEFAULT
                 point_weights: Any = None) -> RewardFunction:
     """A function cams (..., N, 6) -> rewards of the named model on these realizations.
 
-    ``spec`` is a name of :data:`REWARD_MODELS` or ``("coverage", CoverageParams)``. ``image``
+    ``spec`` is a name of :data:`REWARD_MODELS` or ``("coverage", CoverageParams)`` (``coverage-graph``
+    is ``coverage`` with ``view_graph=True``). ``image``
     gives the image size the resolution term uses (default 2000 x 1500, the paper's) and its
     field of view is ``fov``. ``fixed_cameras`` (M, 6): cameras already flown, scored with every
     plan (R(z ∪ F), module docstring); ``point_weights`` (K, P): w_p of every point (None: 1).
@@ -353,7 +421,7 @@ def make_reward(spec: Union[str, tuple], realizations: Any, fov: float = DEFAULT
     cam_model = image or CameraModel(fov=fov)
     if abs(cam_model.fov - fov) > 1e-12:
         cam_model = CameraModel(cam_model.width, cam_model.height, fov)
-    params = params or CoverageParams()
+    params = params or CoverageParams(view_graph=name == "coverage-graph")
     idx = _subsample(R.shape[1], params.max_points, 0)
     pts = R if idx is None else R[:, idx]
     w = None if W is None else (W if idx is None else W[:, idx])
