@@ -140,8 +140,8 @@ class CoverageParams:
     saturation: bool = True
     frustum: bool = True
     max_points: int = 3000
-    # chosen on the design half of the realistic plan-quality study (realization 0) from windows
-    # (10, 30), (15, 40), (20, 60) degrees x scales 3e-4 ... 3e-2 (README "Reward models")
+    # chosen on the design half of the realistic plan-quality study (realization 0) from matching
+    # windows (10, 30) and (15, 40) degrees x scales 3e-4 ... 3e-2 (README "Reward models")
     view_graph: bool = False
     match_full: float = 10.0
     match_cutoff: float = 30.0
