@@ -302,12 +302,12 @@ def plan_chamfer(plan: dict, key: str = 'chamfer') -> float:
 
 def realization_agreement(plans: list[dict], key: str = 'chamfer') -> dict | None:
     """Test-retest reliability of the score itself: Spearman's rho between the plans' Chamfer in
-    two wind realizations (the first two every plan has; a failed one ranks last), over the plans
-    recorded in both. No reward model can rank plans by one realization's Chamfer better than the
-    realizations rank one another, so this is the noise ceiling of the study's rho.
-    ``ceiling_mean``: the Spearman-Brown estimate sqrt(2 r / (1 + r)) of the highest rho a perfect
-    predictor reaches against the mean of the two (a Pearson-model approximation for ranks).
-    None when fewer than 3 plans have two realizations."""
+    two wind realizations (the first two that every plan has; a failed one ranks last). How well
+    one realization ranks the plans of another bounds how well any reward model can; this is the
+    noise ceiling of the study's rho. ``ceiling_mean``: the Spearman-Brown estimate
+    sqrt(2 r / (1 + r)) of the highest rho a perfect predictor reaches against the mean of the
+    two (a Pearson-model approximation for ranks; NaN for r <= 0). None unless every plan has two
+    realizations (a partial second realization would rank a subset)."""
     common = sorted(set.intersection(*[set(p['recon']) for p in plans]) if plans else set())
     if len(common) < 2:
         return None
