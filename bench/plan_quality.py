@@ -286,18 +286,18 @@ def spearman_halves(ids: list[str], rewards: dict, chamfer: np.ndarray, half: di
     return out
 
 
+def realization_chamfer(record: dict, key: str = 'chamfer') -> float:
+    """``key`` of one realization's record; inf when it failed (an error or no value)."""
+    v = record.get(key)
+    return math.inf if record.get('error') or v is None else float(v)
+
+
 def plan_chamfer(plan: dict, key: str = 'chamfer') -> float:
     """Mean Chamfer (metres) over the reconstructed realizations; inf when any failed; NaN when
     the plan has no record (skipped)."""
     if not plan['recon']:
         return math.nan
-    vals = []
-    for r in plan['recon'].values():
-        v = r.get(key)
-        if r.get('error') or v is None:
-            return math.inf
-        vals.append(v)
-    return float(np.mean(vals)) if vals else math.inf
+    return float(np.mean([realization_chamfer(r, key) for r in plan['recon'].values()]))
 
 
 def realization_agreement(plans: list[dict], key: str = 'chamfer') -> dict | None:
@@ -312,13 +312,8 @@ def realization_agreement(plans: list[dict], key: str = 'chamfer') -> dict | Non
     if len(common) < 2:
         return None
     a, b = common[:2]
-
-    def value(r: dict) -> float:
-        v = r.get(key)
-        return math.inf if r.get('error') or v is None else float(v)
-
-    x = np.array([value(p['recon'][a]) for p in plans])
-    y = np.array([value(p['recon'][b]) for p in plans])
+    x = np.array([realization_chamfer(p['recon'][a], key) for p in plans])
+    y = np.array([realization_chamfer(p['recon'][b], key) for p in plans])
     rho = spearman(-x, -y)
     ceiling = math.sqrt(2 * rho / (1 + rho)) if rho > 0 else float('nan')
     return {'realizations': [a, b], 'n': len(plans), 'rho_between': rho, 'ceiling_mean': ceiling,

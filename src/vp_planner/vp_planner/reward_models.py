@@ -297,13 +297,19 @@ def view_graph_factor(E: torch.Tensor, scale: float) -> torch.Tensor:
     return (lam2 / scale).clamp(0.0, 1.0).to(E.dtype)
 
 
+def _one_plan(cameras: Any) -> torch.Tensor:
+    """One plan (N, 6) as a batch (1, N, 6) in float64; ValueError for N < 2 (no pairs)."""
+    cams = torch.as_tensor(np.asarray(cameras, dtype=np.float64)).reshape(1, -1, 6)
+    if cams.shape[1] < 2:
+        raise ValueError(f"the reward needs at least 2 cameras (pairs), got N = {cams.shape[1]}")
+    return cams
+
+
 def view_graph(cameras: Any, realizations: Any, params: CoverageParams = CoverageParams(),
                image: CameraModel = CameraModel()) -> np.ndarray:
     """The view graph E (N, N) of one plan (``coverage-graph``, module docstring): e_ij, the share
     of the realizations' points cameras i and j both image usefully within the matching window."""
-    cams = torch.as_tensor(np.asarray(cameras, dtype=np.float64)).reshape(1, -1, 6)
-    if cams.shape[1] < 2:
-        raise ValueError(f"the reward needs at least 2 cameras (pairs), got N = {cams.shape[1]}")
+    cams = _one_plan(cameras)
     _, E = _point_coverage(cams, _points(realizations, params.max_points, 0), replace(params, view_graph=True),
                            image, 1 << 22)
     return E[0].numpy()
@@ -379,9 +385,7 @@ def _point_coverage(cams: torch.Tensor, pts: torch.Tensor, p: CoverageParams, im
 def point_coverage(cameras: Any, realizations: Any, params: CoverageParams = CoverageParams(),
                    image: CameraModel = CameraModel()) -> np.ndarray:
     """cov(p) of every point (K, P) of the realizations for one plan (N, 6), all points kept."""
-    cams = torch.as_tensor(np.asarray(cameras, dtype=np.float64)).reshape(1, -1, 6)
-    if cams.shape[1] < 2:
-        raise ValueError(f"the reward needs at least 2 cameras (pairs), got N = {cams.shape[1]}")
+    cams = _one_plan(cameras)
     pts = _points(realizations, 0, 0)
     cov, _ = _point_coverage(cams, pts, params, image, 1 << 22)
     return cov.reshape(pts.shape[0], pts.shape[1]).numpy()
