@@ -178,4 +178,7 @@ def test_view_graph_links_a_second_sortie_to_the_cameras_flown() -> None:
     plain = make_reward("coverage", pts, fov=IMAGE.fov, image=IMAGE, fixed_cameras=flown)
     got = fn(np.stack([far, near]))
     assert got[0] == 0.0 and plain(far[None])[0] > 0.3
+    # the name decides: ("coverage-graph", params) keeps the view graph even if params leave it off
+    named = make_reward(("coverage-graph", CoverageParams()), pts, fov=IMAGE.fov, image=IMAGE, fixed_cameras=flown)
+    assert named(far[None])[0] == 0.0
     assert 0.0 < got[1] <= plain(near[None])[0] + 1e-12

@@ -425,7 +425,9 @@ def make_reward(spec: Union[str, tuple], realizations: Any, fov: float = DEFAULT
     cam_model = image or CameraModel(fov=fov)
     if abs(cam_model.fov - fov) > 1e-12:
         cam_model = CameraModel(cam_model.width, cam_model.height, fov)
-    params = params or CoverageParams(view_graph=name == "coverage-graph")
+    params = params or CoverageParams()
+    if name == "coverage-graph":  # the name is the view graph, whatever params say
+        params = replace(params, view_graph=True)
     idx = _subsample(R.shape[1], params.max_points, 0)
     pts = R if idx is None else R[:, idx]
     w = None if W is None else (W if idx is None else W[:, idx])
