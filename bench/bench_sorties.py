@@ -35,6 +35,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from cluster import Task, add_cluster_args, open_client, run_tasks  # noqa: E402
+from vp_planner.reward_models import DEFAULT_REWARD_MODEL, REWARD_MODELS  # noqa: E402
 from vp_recon.pipeline import MATCHINGS  # noqa: E402
 from common import (ROOT, add_capture, cached, capture_of, capture_tag, chamfer_text, default_models,  # noqa: E402
                     machine, models_tag, plan_cell, plan_path, reconstruct_record, scene, write_json)
@@ -64,6 +65,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument('--matching', default='auto', choices=MATCHINGS,
                     help="image pairs SIFT compares (vp_recon.pipeline.matching_method; 'auto': the pose-chosen "
                          "pairs from 8 images up, 'exhaustive': all of them)")
+    ap.add_argument('--reward', default=None, choices=sorted(REWARD_MODELS),
+                    help='reward model of every plan (default: the planner\'s, vp_planner.reward_models.'
+                         'DEFAULT_REWARD_MODEL); a non-default one is part of every cache name')
     ap.add_argument('--out', default=str(ROOT / 'results'))
     add_capture(ap)
     add_cluster_args(ap)
@@ -81,7 +85,8 @@ def sortie2_cell(cache: Path, scenario: str, first: dict, m: int, args, reconstr
         noisy, _ = scene(scenario, args.models)
         res = plan_views(PlanRequest('egp', m, evaluations=args.evals, initial_evaluations=args.init, seed=args.seed,
                                      fixed_cameras=first['cameras'], reconstruction=reconstruction, tau=args.tau,
-                                     reconstructed_weight=args.reconstructed_weight), noisy.points)
+                                     reconstructed_weight=args.reconstructed_weight,
+                                     **({} if args.reward is None else {'reward': args.reward})), noisy.points)
         return {'cameras': np.asarray(res.cameras).tolist(), 'reward': float(res.reward), 'seconds': float(res.seconds),
                 'reconstructed_fraction': res.reconstructed_fraction}
     return cached(sortie2_path(cache, scenario, m, args, reconstruction is not None), compute)
@@ -91,6 +96,7 @@ def sortie2_path(cache: Path, scenario: str, m: int, args, with_reconstruction: 
     """The cache file of :func:`sortie2_cell` (case e: ``with_reconstruction``)."""
     case = 'e' if with_reconstruction else 'd'
     tag = (f'{models_tag(args.models)}-{scenario}-sortie2-{case}-m{m}-seed{args.seed}-e{args.evals}-i{args.init}'
+           + reward_tag(args)
            + (f'-tau{args.tau:g}-w{args.reconstructed_weight:g}-{args.width}x{args.height}'
               f'{capture_tag(capture_of(args))}-k{args.realizations}' if with_reconstruction else ''))
     return cache / 'plans' / f'{tag}.json'
@@ -117,7 +123,13 @@ def recon_tag(scenario: str, name: str, args) -> str:
     """The cache name of :func:`recon_cell`."""
     return (f'{models_tag(args.models)}-{scenario}-{name}-seed{args.seed}-e{args.evals}-{args.width}x{args.height}'
             f'{capture_tag(capture_of(args))}-k{args.realizations}'
-            + ('' if args.matching == 'auto' else f'-{args.matching}'))
+            + ('' if args.matching == 'auto' else f'-{args.matching}') + reward_tag(args))
+
+
+def reward_tag(args) -> str:
+    """The part of a cache name that names a non-default ``--reward`` ('' for the default, so
+    the caches written before the option keep their names)."""
+    return '' if args.reward in (None, DEFAULT_REWARD_MODEL) else f'-{args.reward}'
 
 
 def reconstruction_points(record: dict) -> np.ndarray:
@@ -138,7 +150,7 @@ def run(client, cache: Path, out: Path, args) -> dict:
     plan_of = {'a': ('egp', 1), 'b': ('egp', 0), 'c-circle': ('circle', 0), 'c-arc': ('arc', 0)}
 
     def plan_task(scenario: str, key: str, variant: str, cameras: int) -> Task:
-        a = (cache, scenario, variant, args.seed, args.evals, args.init, args.models, cameras)
+        a = (cache, scenario, variant, args.seed, args.evals, args.init, args.models, cameras, args.reward)
         return Task((scenario, key), plan_cell, a, plan_path(*a), f'{scenario} plan {key}')
 
     def recon_task(scenario: str, key: str, name: str, cameras) -> Task:
@@ -213,7 +225,8 @@ def write_results(args, out: Path, rows: dict) -> None:
              f'{machine()}; {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC; plants {models_tag(args.models)}; '
              f'egp {args.evals} evaluations ({args.init} initial), seed {args.seed}; {args.realizations} wind '
              f'realizations, {args.width} x {args.height} images, capture {capture_of(args).kind}; tau {args.tau} m, '
-             f'reconstructed weight {args.reconstructed_weight}; matching {args.matching}.', '',
+             f'reconstructed weight {args.reconstructed_weight}; matching {args.matching}; reward '
+             f'{args.reward or DEFAULT_REWARD_MODEL}.', '',
              'a: one sortie of N + M (egp); b: sortie 2 egp ignoring sortie 1; c: circle / arc of M; '
              'd: egp given the flown cameras; e: egp given the flown cameras and their reconstruction.', '',
              head, '|' + '---|' * (len(CASES) + 4)]

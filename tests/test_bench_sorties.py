@@ -72,3 +72,23 @@ def test_the_matching_is_part_of_a_reconstruction_s_cache_name() -> None:
         bench_sorties.recon_tag("three_row", "d-n6-m3", auto) + "-exhaustive")
     with pytest.raises(SystemExit):
         bench_sorties.parse_args(["--models", "", "--matching", "all"])
+
+
+def test_a_non_default_reward_is_part_of_every_cache_name(tmp_path: Path) -> None:
+    """``--reward coverage-graph`` plans and reconstructs again (its own cache files for the plans
+    of sortie 1, a-c, d, e and every reconstruction); the default keeps the names written before
+    the option existed, and an unknown model is refused."""
+    from common import plan_path
+
+    default = bench_sorties.parse_args(["--models", ""])
+    graph = bench_sorties.parse_args(["--models", "", "--reward", "coverage-graph"])
+    assert bench_sorties.recon_tag("one_plant", "e-n4-m2", default).endswith("-k2")
+    assert bench_sorties.recon_tag("one_plant", "e-n4-m2", graph) == (
+        bench_sorties.recon_tag("one_plant", "e-n4-m2", default) + "-coverage-graph")
+    for e in (False, True):
+        d_path = bench_sorties.sortie2_path(tmp_path, "one_plant", 2, default, e)
+        g_path = bench_sorties.sortie2_path(tmp_path, "one_plant", 2, graph, e)
+        assert "coverage-graph" not in d_path.name and "coverage-graph" in g_path.name
+    assert plan_path(tmp_path, "one_plant", "egp", 0, reward=graph.reward) != plan_path(tmp_path, "one_plant", "egp", 0)
+    with pytest.raises(SystemExit):
+        bench_sorties.parse_args(["--models", "", "--reward", "no-such-model"])
