@@ -65,9 +65,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument('--matching', default='auto', choices=MATCHINGS,
                     help="image pairs SIFT compares (vp_recon.pipeline.matching_method; 'auto': the pose-chosen "
                          "pairs from 8 images up, 'exhaustive': all of them)")
-    ap.add_argument('--reward', default=None, choices=sorted(REWARD_MODELS),
-                    help='reward model of every plan (default: the planner\'s, vp_planner.reward_models.'
-                         'DEFAULT_REWARD_MODEL); a non-default one is part of every cache name')
+    ap.add_argument('--reward', default=DEFAULT_REWARD_MODEL, choices=sorted(REWARD_MODELS),
+                    help='reward model of every plan (default: the planner\'s, %(default)s); a non-default one '
+                         'is part of every cache name')
     ap.add_argument('--out', default=str(ROOT / 'results'))
     add_capture(ap)
     add_cluster_args(ap)
@@ -85,8 +85,7 @@ def sortie2_cell(cache: Path, scenario: str, first: dict, m: int, args, reconstr
         noisy, _ = scene(scenario, args.models)
         res = plan_views(PlanRequest('egp', m, evaluations=args.evals, initial_evaluations=args.init, seed=args.seed,
                                      fixed_cameras=first['cameras'], reconstruction=reconstruction, tau=args.tau,
-                                     reconstructed_weight=args.reconstructed_weight,
-                                     **({} if args.reward is None else {'reward': args.reward})), noisy.points)
+                                     reconstructed_weight=args.reconstructed_weight, reward=args.reward), noisy.points)
         return {'cameras': np.asarray(res.cameras).tolist(), 'reward': float(res.reward), 'seconds': float(res.seconds),
                 'reconstructed_fraction': res.reconstructed_fraction}
     return cached(sortie2_path(cache, scenario, m, args, reconstruction is not None), compute)
@@ -129,7 +128,7 @@ def recon_tag(scenario: str, name: str, args) -> str:
 def reward_tag(args) -> str:
     """The part of a cache name that names a non-default ``--reward`` ('' for the default, so
     the caches written before the option keep their names)."""
-    return '' if args.reward in (None, DEFAULT_REWARD_MODEL) else f'-{args.reward}'
+    return '' if args.reward == DEFAULT_REWARD_MODEL else f'-{args.reward}'
 
 
 def reconstruction_points(record: dict) -> np.ndarray:
@@ -226,7 +225,7 @@ def write_results(args, out: Path, rows: dict) -> None:
              f'egp {args.evals} evaluations ({args.init} initial), seed {args.seed}; {args.realizations} wind '
              f'realizations, {args.width} x {args.height} images, capture {capture_of(args).kind}; tau {args.tau} m, '
              f'reconstructed weight {args.reconstructed_weight}; matching {args.matching}; reward '
-             f'{args.reward or DEFAULT_REWARD_MODEL}.', '',
+             f'{args.reward}.', '',
              'a: one sortie of N + M (egp); b: sortie 2 egp ignoring sortie 1; c: circle / arc of M; '
              'd: egp given the flown cameras; e: egp given the flown cameras and their reconstruction.', '',
              head, '|' + '---|' * (len(CASES) + 4)]
