@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 import platform
 import threading
@@ -159,7 +160,8 @@ def realization_entry(r) -> dict:
             'chamfer_shape': TABLE_SCALE * r.chamfer_shape, 'accuracy': TABLE_SCALE * r.accuracy,
             'completeness': TABLE_SCALE * r.completeness, 'fscore': r.fscore, 'points': int(len(r.points)),
             'images': r.images, 'sparse_models': r.sparse_models, 'source': r.source, 'matching': r.matching,
-            'matched_pairs': r.matched_pairs, 'seconds': r.seconds}
+            'matched_pairs': r.matched_pairs, 'centre_residual': float(r.centre_residual)
+            if math.isfinite(r.centre_residual) else None, 'seconds': r.seconds}
 
 
 def reconstructed(per: list) -> list:

@@ -19,7 +19,8 @@ def _result(k: int) -> SimpleNamespace:
     r = SimpleNamespace(realization=k, chamfer=0.01 * (k + 1), chamfer_shape=0.005 * (k + 1), accuracy=0.004,
                         completeness=0.006, fscore=0.7, points=np.full((5, 3), float(k)),
                         colors=np.zeros((5, 3), np.uint8), images=4, sparse_models=1, source="dense",
-                        matching="exhaustive", matched_pairs=6, seconds={"render": 1.0, "sparse": 2.0}, rendered=[])
+                        matching="exhaustive", matched_pairs=6, centre_residual=0.03,
+                        seconds={"render": 1.0, "sparse": 2.0}, rendered=[])
     return SimpleNamespace(realizations=[r])
 
 

@@ -101,6 +101,7 @@ def test_plan_becomes_scores_and_clouds(recon_system, tmp_path) -> None:
     assert 0 <= agg.fscore <= 1
     # the metrics without a ground truth (issue 20, part 4) travel in the score, appended fields
     assert agg.mean_reprojection_error > 0 and agg.mean_track_length >= 2 and agg.coverage_tau > 0
+    assert math.isnan(agg.centre_residual)  # the ideal capture: known poses, no SfM to check
     assert 0 < agg.coverage_of_prior <= 1 and len(agg.coverage_of_prior_per_plant) == 1
 
     late = client.add_node("late_subscriber")

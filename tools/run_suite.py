@@ -494,7 +494,8 @@ def run(args: argparse.Namespace) -> int:
             # what a real flight can check (README "From a real flight"): the aggregate's metrics without a truth
             'no_truth': {k: v for k, v in score_record(agg).items()
                          if k in ('registered_images', 'mean_reprojection_error', 'mean_track_length', 'points',
-                                  'coverage_of_prior', 'coverage_of_prior_per_plant', 'coverage_tau')},
+                                  'centre_residual', 'coverage_of_prior', 'coverage_of_prior_per_plant',
+                                  'coverage_tau')},
         }
         if fleet is not None:
             summary['fleet'] = {

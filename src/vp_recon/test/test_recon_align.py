@@ -128,3 +128,35 @@ def test_every_model_is_placed_on_its_own_poses_and_one_that_cannot_be_is_left_o
     with pytest.raises(SparseError, match="negative scale"):
         _merge_models(pycolmap, [model([0, 1, 2, 3], 1.0, np.eye(3), np.zeros(3), mirror=True), b], names,
                       cams[:, :3], R_cw)
+
+
+def test_self_check_fails_a_model_far_from_its_reported_poses() -> None:
+    """The self-check (vp_recon.sparse, 5): a consistent model's centre residual is ~0 and reported;
+    a smaller model whose images sit 0.6 m from where the drones said (false matches bend a model
+    so) is left out at the 0.2 m limit; the same model as the largest fails the reconstruction
+    with the residual named; without a limit it is kept and its residual reported."""
+    import pycolmap
+
+    from vp_recon.sparse import _merge_models
+
+    cams = flight(7, 150.0)
+    names = [f"view_{i:03d}.png" for i in range(7)]
+    R_cw = world_to_camera(cams)[0]
+    plant = np.array([[0.0, 0.0, 0.8], [0.1, 0.1, 1.2]])
+
+    def model(idx, offsets=None):
+        R, t, s = Rotation.from_euler("z", 40, degrees=True).as_matrix(), np.array([1.0, 0, 0]), 0.5
+        centres, mR = model_of(cams[idx], s, R, t)
+        if offsets is not None:
+            centres = centres + np.asarray(offsets) @ R / s
+        return _Model([_Image(names[i], c, r) for i, c, r in zip(idx, centres, mR)], (plant - t) @ R / s)
+
+    good = model([0, 1, 2, 3])
+    bent = model([4, 5, 6], [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 1.6]])
+    m = _merge_models(pycolmap, [good, bent], names, cams[:, :3], R_cw, max_residual=0.2)
+    assert m.models == 1 and m.registered == 4 and np.isnan(m.cameras[4:]).all()
+    assert m.centre_residual == pytest.approx(0.0, abs=1e-9)
+    kept = _merge_models(pycolmap, [good, bent], names, cams[:, :3], R_cw)
+    assert kept.models == 2 and 0.2 < kept.centre_residual < 1.6
+    with pytest.raises(SparseError, match=r"inconsistent: its camera centres lie 0\.\d\d m"):
+        _merge_models(pycolmap, [bent, model([0, 1])], names, cams[:, :3], R_cw, max_residual=0.2)

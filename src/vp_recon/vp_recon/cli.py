@@ -293,7 +293,8 @@ def run_images(args: argparse.Namespace) -> dict:
     write_image(out / "views.png", contact_sheet(views.images))
     sp = vr.sparse
     data = {**info, **no_truth_metrics(sp.registered, sp.mean_reprojection_error, sp.mean_track_length,
-                                       len(vr.points), vr.coverage), "cloud": vr.source, "chamfer_mean": None}
+                                       len(vr.points), vr.coverage, sp.centre_residual),
+            "cloud": vr.source, "chamfer_mean": None}
     if vr.coverage is not None:
         write_image(out / "uncovered.png", uncovered_image(noisy.points, vr.coverage))
     if truth is not None:

@@ -109,13 +109,17 @@ def write_image(path: PathLike, rgb: NDArray[np.uint8]) -> None:
 
 
 def no_truth_metrics(registered: int, mean_reprojection_error: float, mean_track_length: float, points: int,
-                     coverage: Any = None) -> dict:
+                     coverage: Any = None, centre_residual: float = float("nan")) -> dict:
     """The metrics a practitioner can check after a real flight (no ground truth; issue 20,
     part 4): registered images, mean reprojection error (pixels), mean track length (images a
-    sparse point is seen in), points of the cloud and, with a prior, coverage_of_prior (overall
-    and per plant, at coverage_tau metres; :func:`vp_recon.metrics.coverage_of_prior`)."""
+    sparse point is seen in), points of the cloud, the RMS distance (m) of the registered cameras
+    from the reported poses (``centre_residual``, null without SfM: the sparse step's self-check,
+    :mod:`vp_recon.sparse`) and, with a prior, coverage_of_prior (overall and per plant, at
+    coverage_tau metres; :func:`vp_recon.metrics.coverage_of_prior`)."""
+    residual = float(centre_residual)
     out = {"registered_images": int(registered), "mean_reprojection_error": float(mean_reprojection_error),
            "mean_track_length": float(mean_track_length), "points": int(points),
+           "centre_residual": residual if np.isfinite(residual) else None,
            "coverage_of_prior": None, "coverage_of_prior_per_plant": None, "coverage_tau": None}
     if coverage is not None:
         out.update(coverage_of_prior=coverage.fraction, coverage_of_prior_per_plant=list(coverage.per_plant),
@@ -164,7 +168,8 @@ def summary(result: Any, extra: Optional[dict] = None) -> dict:
             "visible_images": int(r.visible_images), "source": r.source, "sparse_points": int(r.sparse_points),
             "matching": r.matching, "matched_pairs": int(r.matched_pairs), "sparse_models": int(r.sparse_models),
             "seconds": {k: float(v) for k, v in r.seconds.items()},
-            **no_truth_metrics(r.images, r.mean_reprojection_error, r.mean_track_length, len(r.points), r.coverage),
+            **no_truth_metrics(r.images, r.mean_reprojection_error, r.mean_track_length, len(r.points), r.coverage,
+                               r.centre_residual),
         })
     out = {
         "units": "chamfer, chamfer_std, chamfer_shape, accuracy, completeness: metres x 100 (paper Table I); "
@@ -188,7 +193,7 @@ def _mean_no_truth(per: Sequence[dict]) -> dict:
     if not per:
         return {}
     out = {"registered_images": min(r["registered_images"] for r in per)}
-    for key in ("mean_reprojection_error", "mean_track_length", "points", "coverage_of_prior"):
+    for key in ("mean_reprojection_error", "mean_track_length", "points", "centre_residual", "coverage_of_prior"):
         vals = [r[key] for r in per if r[key] is not None]
         out[key] = float(np.mean(vals)) if vals else None
     return out

@@ -154,6 +154,8 @@ class ReconConfig:
         matching: ``'exhaustive'`` (all image pairs), ``'poses'`` (the pairs
             :func:`vp_recon.pairs.select_pairs` picks from the known poses and scene) or
             ``'auto'``: poses from :data:`MATCH_POSES_FROM` cameras up, exhaustive below.
+        connect_pairs: pose-chosen pairs join the parts of the view graph that share points
+            (rule 7 of :mod:`vp_recon.pairs`; False: rules 1-6, as before 2026-11-26).
     """
 
     width: int = 2000
@@ -175,6 +177,7 @@ class ReconConfig:
     num_threads: int = 0
     matching: str = "auto"
     capture: CaptureModel = REALISTIC
+    connect_pairs: bool = True
 
     @property
     def sparse_mode_used(self) -> str:
@@ -254,6 +257,8 @@ class RealizationResult(Scores):
         coverage: :class:`vp_recon.metrics.Coverage` of the planning cloud (no truth read).
         sparse_models: the structure-from-motion models merged, each registered to map on its own
             reported poses (parts of a plan that share no matches; :func:`vp_recon.sparse._merge_models`).
+        centre_residual: incremental: RMS distance, m, of the registered cameras from the reported
+            poses after the registration (the sparse step's self-check; no truth read); else NaN.
         reported, K: the poses the drones reported (N, 6) and the intrinsics: with ``rendered``,
             the capture set (:meth:`captured_views`).
     """
@@ -283,6 +288,7 @@ class RealizationResult(Scores):
     mean_reprojection_error: float = math.nan
     coverage: object = None
     sparse_models: int = 1
+    centre_residual: float = math.nan
     reported: Optional[NDArray[np.float64]] = field(default=None, repr=False)
     K: Optional[NDArray[np.float64]] = field(default=None, repr=False)
 
@@ -546,7 +552,8 @@ def reconstruct_views(views: object, config: Optional[ReconConfig] = None, workd
             matching = "exhaustive"  # no scene to choose pairs from (a flight folder without a prior)
         pairs = None
         if matching == "poses":
-            pairs = select_pairs(reported, cloud, CameraModel(*views.size, views.horizontal_fov))
+            pairs = select_pairs(reported, cloud, CameraModel(*views.size, views.horizontal_fov),
+                                 connect=bool(cfg.connect_pairs))
             if not pairs:
                 raise ReconError(RECONSTRUCTION_FAILED, f"no two of the {n} cameras see a common part of "
                                                         "the scene: no image pair to match (matching 'poses')")
@@ -678,7 +685,8 @@ def reconstruct_captured(noisy_scene: object, views: object, config: Optional[Re
         rendered=views.images if cfg.keep_images else [], seconds=seconds, chamfer_shape=shape.chamfer,
         capture=cfg.capture.to_dict(), sparse_mode=vr.mode, mean_track_length=sp.mean_track_length,
         mean_reprojection_error=sp.mean_reprojection_error, coverage=vr.coverage, sparse_models=sp.models,
-        reported=np.asarray(views.reported, dtype=np.float64), K=np.asarray(views.K, dtype=np.float64))
+        centre_residual=sp.centre_residual, reported=np.asarray(views.reported, dtype=np.float64),
+        K=np.asarray(views.K, dtype=np.float64))
 
 
 def plan_result(results: Sequence[RealizationResult], seconds: Optional[dict] = None) -> PlanReconResult:

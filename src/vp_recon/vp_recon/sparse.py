@@ -19,6 +19,14 @@ Pipeline (Schönberger & Frahm, "Structure-from-Motion Revisited", CVPR 2016):
    on its own poses (:func:`_merge_models`); before, only the largest was kept, and a field
    planned by parts lost every part but one. The centres alone (Umeyama 1991) left a 4-camera Corn50 arc 27 cm x100
    Chamfer off in map (shape 9.1); with the attitudes 3.9 (shape 1.3).
+5. *Self-check* (incremental): after the alignment each model's registered centres must lie near
+   the poses they were aligned on; a model whose RMS centre residual exceeds
+   ``MAX_RESIDUAL_SIGMAS`` (10) x ``prior_sigma`` is inconsistent (false matches among alike
+   plants can make a model that registers every image and is 1 m off: on six_rect with all
+   pairs matched, centres 0.8-2.2 m from the reported ones and two optical axes 133-161 degrees
+   off, against 0.02-0.05 m and under 1 degree for the pose-chosen pairs' models). The largest
+   such model fails the reconstruction (SparseError), a smaller one is left out. The RMS over the
+   kept models is reported (``centre_residual``, a metric without a ground truth).
 
 The 3D points come back in the world frame.
 """
@@ -38,9 +46,12 @@ from vp_scene.camera import check_cameras, principal_point_gl, world_to_camera
 
 from .pairs import check_pairs
 
-__all__ = ["SparseError", "SparseResult", "sparse_reconstruct", "MODES"]
+__all__ = ["SparseError", "SparseResult", "sparse_reconstruct", "MODES", "MAX_RESIDUAL_SIGMAS"]
 
 MODES = ("known_poses", "incremental", "refined_poses")
+#: Self-check (module docstring, 5): a model whose registered centres lie further than this many
+#: ``prior_sigma`` (RMS) from the poses it was aligned on is inconsistent.
+MAX_RESIDUAL_SIGMAS: float = 10.0
 
 
 class SparseError(RuntimeError):
@@ -69,6 +80,8 @@ class SparseResult:
             estimated poses after the alignment, NaN rows for images not registered.
         models: the models merged (``incremental``: every model of >= 3 registered images, each
             aligned to the world on its own, :func:`_merge_models`; 1 otherwise).
+        centre_residual: ``incremental``: RMS distance, m, of the registered images' centres after
+            the alignment from the given (reported) ones (the self-check's figure); NaN otherwise.
     """
 
     points: NDArray[np.float64]
@@ -83,6 +96,7 @@ class SparseResult:
     cameras: Optional[NDArray[np.float64]] = None
     mean_reprojection_error: float = float("nan")
     models: int = 1
+    centre_residual: float = float("nan")
 
 
 def _write_pairs(pairs: Sequence[tuple[int, int]], names: Sequence[str], path: Path) -> None:
@@ -149,7 +163,7 @@ def sparse_reconstruct(images: Sequence[NDArray[np.uint8]], cameras: NDArray[np.
         prior_centres: incremental mode: (N, 3) camera centres known to ``prior_sigma`` m per
             axis (a drone's reported positions), written as COLMAP pose priors and used by its
             bundle adjustment (``use_prior_position``); None: none (the alignment then uses the
-            centres of ``cameras``).
+            centres of ``cameras``). ``prior_sigma`` also scales the self-check (module docstring, 5).
 
     Raises:
         ValueError: bad mode, image count, image sizes or pairs.
@@ -280,24 +294,25 @@ def _sparse(pycolmap: object, images: Sequence[NDArray[np.uint8]], cameras: NDAr
                               f"registered ({verified} verified pairs)")
         anchor = cams[:, :3] if prior_centres is None else np.asarray(prior_centres, dtype=np.float64).reshape(-1, 3)
         # every model registered on the poses given (a flight: the reported ones), attitudes included
-        xyz, rgb, track, est, seen, reprojection, n_models = _merge_models(
-            pycolmap, list(models.values()), names, anchor, world_to_camera(cams)[0])
+        xyz, rgb, track, est, seen, reprojection, n_models, residual = _merge_models(
+            pycolmap, list(models.values()), names, anchor, world_to_camera(cams)[0],
+            MAX_RESIDUAL_SIGMAS * max(float(prior_sigma), 1e-3))
     if len(xyz) == 0:
         raise SparseError(f"no 3D point triangulated ({verified} verified image pairs, keypoints {keypoints})")
     seconds["triangulate"] = time.perf_counter() - t0
     if mode != "incremental":
-        reprojection, n_models = float(rec.compute_mean_reprojection_error()), 1
+        reprojection, n_models, residual = float(rec.compute_mean_reprojection_error()), 1, float("nan")
     return SparseResult(points=xyz, colors=rgb, registered=int(seen), keypoints=[int(k) for k in keypoints],
                         verified_pairs=verified, mean_track_length=track, pair_inliers=pair_inliers,
                         matched_pairs=matched, seconds=seconds, cameras=cams.copy() if mode == "known_poses" else est,
-                        mean_reprojection_error=reprojection, models=n_models)
+                        mean_reprojection_error=reprojection, models=n_models, centre_residual=residual)
 
 
 class MergedModels(NamedTuple):
     """What :func:`_merge_models` makes of the mapper's models: points (P, 3) in the world and
     their colours, mean track length and mean reprojection error (point-weighted over the
-    models), the (N, 6) camera estimates (NaN rows: not registered), the images registered and
-    the number of models merged."""
+    models), the (N, 6) camera estimates (NaN rows: not registered), the images registered, the
+    number of models merged and the RMS centre residual (m) of their images."""
 
     points: NDArray[np.float64]
     colors: NDArray[np.uint8]
@@ -306,10 +321,11 @@ class MergedModels(NamedTuple):
     registered: int
     mean_reprojection_error: float
     models: int
+    centre_residual: float
 
 
 def _merge_models(pycolmap: object, models: list, names: Sequence[str], anchor: NDArray[np.float64],
-                  attitudes: NDArray[np.float64]) -> MergedModels:
+                  attitudes: NDArray[np.float64], max_residual: float = float("inf")) -> MergedModels:
     """Every model COLMAP's incremental mapper made, each registered to the world on its own
     images' given poses (:func:`_align`), as one cloud.
 
@@ -321,7 +337,9 @@ def _merge_models(pycolmap: object, models: list, names: Sequence[str], anchor: 
     are left out (the scale of 2 centres 2 cm apart each is too loose); none of 3: SparseError.
     A smaller model that cannot be placed (its centres' spread in the model disagrees with the
     reported one: a negative scale, say) is left out too; the largest one must be placed
-    (SparseError), as when it was the only one kept.
+    (SparseError), as when it was the only one kept. Self-check: a model whose aligned centres
+    lie further than ``max_residual`` m (RMS) from their ``anchor`` ones is inconsistent, left
+    out, or SparseError when it is the largest.
     """
     models = sorted(models, key=lambda r: -r.num_reg_images())
     usable = [r for r in models if r.num_reg_images() >= 3]
@@ -334,6 +352,12 @@ def _merge_models(pycolmap: object, models: list, names: Sequence[str], anchor: 
         p, c, track = _read_points(rec)
         try:
             p, e = _align(pycolmap, rec, names, anchor, p, lambda im: im.has_pose, attitudes)
+            mine = np.isfinite(e[:, 0])
+            rms = float(np.sqrt(np.mean(np.sum((e[mine, :3] - anchor[mine]) ** 2, axis=1))))
+            if not rms <= max_residual:
+                raise SparseError(f"the model of {int(mine.sum())} registered images is inconsistent: its camera "
+                                  f"centres lie {rms:.2f} m (RMS) from the reported ones after the alignment "
+                                  f"(more than {max_residual:.2f} m; false matches between alike views?)")
         except SparseError:
             if rank == 0:
                 raise
@@ -346,9 +370,11 @@ def _merge_models(pycolmap: object, models: list, names: Sequence[str], anchor: 
         errors.append((float(rec.compute_mean_reprojection_error()), len(p)))
     n = sum(k for _, k in tracks)
     mean = (lambda pairs: float(sum(v * k for v, k in pairs) / n) if n else 0.0)
-    seen = int(np.isfinite(est[:, 0]).sum())
+    kept = np.isfinite(est[:, 0])
+    seen = int(kept.sum())
+    residual = float(np.sqrt(np.mean(np.sum((est[kept, :3] - anchor[kept]) ** 2, axis=1))))
     return MergedModels(np.concatenate(xyz), np.concatenate(rgb), mean(tracks), est, seen,
-                        mean(errors) if n else float("nan"), len(xyz))
+                        mean(errors) if n else float("nan"), len(xyz), residual)
 
 
 def _known_pose_model(pycolmap: object, db_cameras: list, db_images: dict, names: Sequence[str],

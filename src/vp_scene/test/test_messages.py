@@ -79,9 +79,11 @@ def test_drone_reports(pose_type: str) -> None:
 def test_scores() -> None:
     res = [SimpleNamespace(chamfer=0.01, accuracy=0.004, completeness=0.006, chamfer_shape=0.008, images=4,
                            fscore=0.7, points=np.zeros((100, 3)), mean_reprojection_error=0.5, mean_track_length=3.0,
+                           centre_residual=0.02,
                            coverage=SimpleNamespace(fraction=0.8, per_plant=(0.7, 0.9), tau=0.02)),
            SimpleNamespace(chamfer=0.03, accuracy=0.01, completeness=0.02, chamfer_shape=0.02, images=3,
                            fscore=0.5, points=np.zeros((300, 3)), mean_reprojection_error=0.7, mean_track_length=2.0,
+                           centre_residual=0.04,
                            coverage=SimpleNamespace(fraction=0.6, per_plant=(0.5, 0.7), tau=0.02))]
     info = SimpleNamespace(method="egp", reward=0.4, reward_model="paper")
     head = m.score_msg("map", PoseStamped().header.stamp, 0, 1, 4, 0.005, "ideal", "", info)
@@ -99,12 +101,15 @@ def test_scores() -> None:
         (0.5, 3.0, 0.8, 0.02) and list(one.coverage_of_prior_per_plant) == [0.7, 0.9]
     assert agg.mean_reprojection_error == pytest.approx(0.6) and agg.mean_track_length == pytest.approx(2.5)
     assert agg.coverage_of_prior == pytest.approx(0.7)
+    assert one.centre_residual == 0.02 and agg.centre_residual == pytest.approx(0.03)
     np.testing.assert_allclose(agg.coverage_of_prior_per_plant, [0.6, 0.8])
     err = m.error_score(m.score_msg("map", PoseStamped().header.stamp, -1, 1, 0, 0.005, "ideal"), 3, "no scene")
     assert (err.error_code, err.error_msg) == (3, "no scene") and math.isnan(err.chamfer)
+    assert math.isnan(err.centre_residual)
     rec = m.score_record(one)
     assert rec["chamfer"] == one.chamfer and rec["points"] == 100 and rec["error_code"] == 0
     assert rec["coverage_of_prior"] == 0.8 and rec["coverage_of_prior_per_plant"] == [0.7, 0.9]
+    assert rec["centre_residual"] == 0.02
 
 
 def test_scene_description_round_trip() -> None:

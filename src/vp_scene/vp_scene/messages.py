@@ -289,6 +289,7 @@ def _no_truth(msg: ReconstructionScore, per: Any) -> ReconstructionScore:
     NaN and no per-plant entries where a realization has no coverage of the prior)."""
     msg.mean_reprojection_error = float(np.mean([r.mean_reprojection_error for r in per]))
     msg.mean_track_length = float(np.mean([r.mean_track_length for r in per]))
+    msg.centre_residual = float(np.mean([r.centre_residual for r in per]))  # NaN where any had no SfM
     cov = [r.coverage for r in per]
     if all(c is not None for c in cov):
         msg.coverage_of_prior = float(np.mean([c.fraction for c in cov]))
@@ -319,6 +320,7 @@ def error_score(msg: ReconstructionScore, code: int, text: str) -> Reconstructio
     msg.error_code, msg.error_msg = int(code), text
     msg.chamfer = msg.accuracy = msg.completeness = msg.chamfer_shape = float('nan')
     msg.mean_reprojection_error = msg.mean_track_length = msg.coverage_of_prior = msg.coverage_tau = float('nan')
+    msg.centre_residual = float('nan')
     return msg
 
 
@@ -328,7 +330,7 @@ def score_record(msg: ReconstructionScore) -> dict:
             'registered_images': msg.registered_images, 'accuracy': msg.accuracy,
             'completeness': msg.completeness, 'fscore': msg.fscore, 'points': msg.num_points,
             'mean_reprojection_error': msg.mean_reprojection_error, 'mean_track_length': msg.mean_track_length,
-            'coverage_of_prior': msg.coverage_of_prior,
+            'centre_residual': msg.centre_residual, 'coverage_of_prior': msg.coverage_of_prior,
             'coverage_of_prior_per_plant': [float(x) for x in msg.coverage_of_prior_per_plant],
             'coverage_tau': msg.coverage_tau, 'error_code': msg.error_code, 'error_msg': msg.error_msg}
 
