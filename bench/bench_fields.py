@@ -41,7 +41,6 @@ from common import (ROOT, add_capture, cached, capture_of, capture_tag, chamfer_
                     known_realizations, machine, models_tag, reconstruct_record, reconstructed,
                     scene)
 from stats import describe, describe_difference, paired_difference, rank, summary  # noqa: E402
-from vp_recon.pipeline import matching_method  # noqa: E402
 
 #: (field, N) cells: the issue's targets, and N = 16 on the row (planned and reconstructed).
 FIELDS = (("grid_3x3", 8), ("row_12", 12), ("row_12", 16))
@@ -76,9 +75,6 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument("--height", type=int, default=1500)
     ap.add_argument("--threads", type=int, default=0, help="reconstruction threads (0: all cores)")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--pair-rule", default="connected", choices=("connected", "window"),
-                    help="pose-chosen pairs: 'connected' joins the parts of the view graph (rule 7 of "
-                         "vp_recon.pairs, the default), 'window' rules 1-6 alone (before 2026-11-26)")
     ap.add_argument("--out", default=str(ROOT / "results"))
     add_capture(ap)
     add_cluster_args(ap)
@@ -123,11 +119,8 @@ def plan_cell(cache: Path, field: str, n: int, label: str, args) -> dict:
 
 
 def recon_tag(field: str, n: int, label: str, args) -> str:
-    """The cache name of :func:`recon_cell`; '-connected' where pose-chosen pairs (from 8 images)
-    run under rule 7 of vp_recon.pairs (the caches written before it keep their names)."""
-    connected = args.pair_rule == "connected" and matching_method("auto", n) == "poses"
     return (f"{models_tag(args.models)}-{field}-n{n}-{label}-seed{args.seed}-{args.width}x{args.height}"
-            f"-k{args.realizations}{capture_tag(capture_of(args))}" + ("-connected" if connected else ""))
+            f"-k{args.realizations}{capture_tag(capture_of(args))}")
 
 
 def recon_cell(cache: Path, out: Path, field: str, n: int, label: str, plan: dict, args) -> dict:
@@ -139,7 +132,7 @@ def recon_cell(cache: Path, out: Path, field: str, n: int, label: str, plan: dic
     def compute() -> dict:
         noisy, _ = scene(field, args.models)
         cfg = ReconConfig(width=args.width, height=args.height, num_threads=args.threads,
-                          capture=capture_of(args), connect_pairs=args.pair_rule == "connected")
+                          capture=capture_of(args))
         ks = range(min(args.realizations, len(noisy.points)))
         return reconstruct_record(noisy, plan["cameras"], cfg, out / "recon" / "fields" / tag, ks,
                                   known_realizations(cache / "recon" / f"{tag}.json", out / "recon" / "fields" / tag))

@@ -36,7 +36,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from cluster import Task, add_cluster_args, open_client, run_tasks  # noqa: E402
 from vp_planner.reward_models import DEFAULT_REWARD_MODEL, REWARD_MODELS  # noqa: E402
-from vp_recon.pipeline import MATCHINGS, matching_method  # noqa: E402
+from vp_recon.pipeline import MATCHINGS  # noqa: E402
 from common import (ROOT, add_capture, cached, capture_of, capture_tag, chamfer_text, default_models,  # noqa: E402
                     machine, models_tag, plan_cell, plan_path, reconstruct_record, scene, write_json)
 
@@ -65,9 +65,6 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument('--matching', default='auto', choices=MATCHINGS,
                     help="image pairs SIFT compares (vp_recon.pipeline.matching_method; 'auto': the pose-chosen "
                          "pairs from 8 images up, 'exhaustive': all of them)")
-    ap.add_argument('--pair-rule', default='connected', choices=('connected', 'window'),
-                    help="pose-chosen pairs: 'connected' joins the parts of the view graph (rule 7 of "
-                         "vp_recon.pairs, the default), 'window' rules 1-6 alone (before 2026-11-26)")
     ap.add_argument('--reward', default=DEFAULT_REWARD_MODEL, choices=sorted(REWARD_MODELS),
                     help='reward model of every plan (default: the planner\'s, %(default)s); a non-default one '
                          'is part of every cache name')
@@ -108,12 +105,12 @@ def recon_cell(cache: Path, out: Path, scenario: str, name: str, cameras, args) 
     """Reconstruct cameras (all of both sorties) in the first ``--realizations`` realizations; cached."""
     from vp_recon.pipeline import ReconConfig
 
-    tag = recon_tag(scenario, name, args, len(cameras))
+    tag = recon_tag(scenario, name, args)
 
     def compute() -> dict:
         noisy, _ = scene(scenario, args.models)
         cfg = ReconConfig(width=args.width, height=args.height, num_threads=args.threads, capture=capture_of(args),
-                          matching=args.matching, connect_pairs=args.pair_rule == 'connected')
+                          matching=args.matching)
         record = reconstruct_record(noisy, np.asarray(cameras), cfg, out / 'recon' / tag,
                                     range(min(args.realizations, len(noisy.points))))
         record['folder'] = str(out / 'recon' / tag)
@@ -121,14 +118,11 @@ def recon_cell(cache: Path, out: Path, scenario: str, name: str, cameras, args) 
     return cached(cache / 'recon' / f'{tag}.json', compute)
 
 
-def recon_tag(scenario: str, name: str, args, images: int) -> str:
-    """The cache name of :func:`recon_cell` for a reconstruction from ``images`` images; '-connected'
-    where pose-chosen pairs run under rule 7 (the caches written before it keep their names)."""
-    connected = args.pair_rule == 'connected' and matching_method(args.matching, images) == 'poses'
+def recon_tag(scenario: str, name: str, args) -> str:
+    """The cache name of :func:`recon_cell`."""
     return (f'{models_tag(args.models)}-{scenario}-{name}-seed{args.seed}-e{args.evals}-{args.width}x{args.height}'
             f'{capture_tag(capture_of(args))}-k{args.realizations}'
-            + ('' if args.matching == 'auto' else f'-{args.matching}') + reward_tag(args)
-            + ('-connected' if connected else ''))
+            + ('' if args.matching == 'auto' else f'-{args.matching}') + reward_tag(args))
 
 
 def reward_tag(args) -> str:
@@ -160,8 +154,7 @@ def run(client, cache: Path, out: Path, args) -> dict:
 
     def recon_task(scenario: str, key: str, name: str, cameras) -> Task:
         return Task((scenario, key), recon_cell, (cache, out, scenario, name, np.asarray(cameras).tolist(), args),
-                    cache / 'recon' / f'{recon_tag(scenario, name, args, len(cameras))}.json',
-                    f'{scenario} recon {key}')
+                    cache / 'recon' / f'{recon_tag(scenario, name, args)}.json', f'{scenario} recon {key}')
 
     def sortie2_task(scenario: str, key: str, first: dict, reconstruction=None) -> Task:
         m = SORTIES[scenario][1]
@@ -231,8 +224,7 @@ def write_results(args, out: Path, rows: dict) -> None:
              f'{machine()}; {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC; plants {models_tag(args.models)}; '
              f'egp {args.evals} evaluations ({args.init} initial), seed {args.seed}; {args.realizations} wind '
              f'realizations, {args.width} x {args.height} images, capture {capture_of(args).kind}; tau {args.tau} m, '
-             f'reconstructed weight {args.reconstructed_weight}; matching {args.matching} (pair rule '
-             f'{args.pair_rule}); reward '
+             f'reconstructed weight {args.reconstructed_weight}; matching {args.matching}; reward '
              f'{args.reward}.', '',
              'a: one sortie of N + M (egp); b: sortie 2 egp ignoring sortie 1; c: circle / arc of M; '
              'd: egp given the flown cameras; e: egp given the flown cameras and their reconstruction.', '',

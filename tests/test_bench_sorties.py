@@ -67,27 +67,11 @@ def test_the_matching_is_part_of_a_reconstruction_s_cache_name() -> None:
     of the reconstructions made before the flag existed."""
     auto = bench_sorties.parse_args(["--models", ""])
     exhaustive = bench_sorties.parse_args(["--models", "", "--matching", "exhaustive"])
-    assert bench_sorties.recon_tag("three_row", "d-n6-m3", auto, 6).endswith("-k2")
-    assert bench_sorties.recon_tag("three_row", "d-n6-m3", exhaustive, 9) == (
-        bench_sorties.recon_tag("three_row", "d-n6-m3", auto, 6) + "-exhaustive")
+    assert bench_sorties.recon_tag("three_row", "d-n6-m3", auto).endswith("-k2")
+    assert bench_sorties.recon_tag("three_row", "d-n6-m3", exhaustive) == (
+        bench_sorties.recon_tag("three_row", "d-n6-m3", auto) + "-exhaustive")
     with pytest.raises(SystemExit):
         bench_sorties.parse_args(["--models", "", "--matching", "all"])
-
-
-def test_the_pair_rule_names_only_reconstructions_that_choose_pairs_from_poses() -> None:
-    """Rule 7 (the default) changes the pairs only where they are chosen from the poses (from 8
-    images under ``auto``): those reconstructions get '-connected' in their cache names, so a
-    rerun does not reuse the ones made under rules 1-6 (``--pair-rule window`` keeps those names);
-    the reconstructions of fewer images, matched exhaustively, keep theirs."""
-    connected = bench_sorties.parse_args(["--models", ""])
-    window = bench_sorties.parse_args(["--models", "", "--pair-rule", "window"])
-    assert connected.pair_rule == "connected"
-    assert bench_sorties.recon_tag("three_row", "d-n6-m3", connected, 9) == (
-        bench_sorties.recon_tag("three_row", "d-n6-m3", window, 9) + "-connected")
-    assert bench_sorties.recon_tag("one_plant", "d-n4-m2", connected, 6) == (
-        bench_sorties.recon_tag("one_plant", "d-n4-m2", window, 6))
-    exhaustive = bench_sorties.parse_args(["--models", "", "--matching", "exhaustive"])
-    assert not bench_sorties.recon_tag("three_row", "d-n6-m3", exhaustive, 9).endswith("-connected")
 
 
 def test_a_non_default_reward_is_part_of_every_cache_name(tmp_path: Path) -> None:
@@ -98,9 +82,9 @@ def test_a_non_default_reward_is_part_of_every_cache_name(tmp_path: Path) -> Non
 
     default = bench_sorties.parse_args(["--models", ""])
     graph = bench_sorties.parse_args(["--models", "", "--reward", "coverage-graph"])
-    assert bench_sorties.recon_tag("one_plant", "e-n4-m2", default, 6).endswith("-k2")
-    assert bench_sorties.recon_tag("one_plant", "e-n4-m2", graph, 6) == (
-        bench_sorties.recon_tag("one_plant", "e-n4-m2", default, 6) + "-coverage-graph")
+    assert bench_sorties.recon_tag("one_plant", "e-n4-m2", default).endswith("-k2")
+    assert bench_sorties.recon_tag("one_plant", "e-n4-m2", graph) == (
+        bench_sorties.recon_tag("one_plant", "e-n4-m2", default) + "-coverage-graph")
     for e in (False, True):
         d_path = bench_sorties.sortie2_path(tmp_path, "one_plant", 2, default, e)
         g_path = bench_sorties.sortie2_path(tmp_path, "one_plant", 2, graph, e)

@@ -25,24 +25,22 @@ and the scene points {X}:
    partners than ``min_partners`` when others pick it. A camera that shares no point with any
    other camera (sees nothing, or sees what no other sees) stays unpaired: there is nothing to
    triangulate.
-7. *Connected* (``connect``): SfM makes one model of a connected view graph only; rules 5 and 6
-   can leave it in parts (a second sortie's few cameras pair among themselves: on six_rect 6 + 3
-   not one of the 16 pairs linked the two sorties, and COLMAP made two models). While the pairs
-   chosen so far split the cameras into components of which some camera shares a point with a
-   camera of another (S_ij >= 1): the smallest such component C (fewest cameras, then the lowest
-   index) pairs each of its cameras i with its ``max(min_partners, 1)`` best cameras outside C
-   among those sharing a point with it (best as in 6). Each round joins C to another component,
-   so at most N rounds; cameras that share no point with any other stay apart.
 
-The result is the union of 5, 6 and 7 as (i, j) with i < j, sorted, no duplicates.
+The result is the union of 5 and 6 as (i, j) with i < j, sorted, no duplicates.
 
 Without an occlusion test two cameras on opposite sides of a plant "share" its points; the angle
 window (a_ij near 180 degrees) is what keeps them apart.
 
+The pairs may split the cameras into parts that share no pair (a second sortie's few cameras pair
+among themselves; COLMAP then makes one model per part, each registered on its own poses). Tried
+and rejected (2026-11-26, commit fa73d64): a rule joining the parts by each camera's 2 best
+cameras outside its part. Those pairs are 45-134 degrees apart, and on six_rect (six alike
+plants) they verified false matches: one model of all 9 images with its cameras 1.1-2.0 m from
+the reported ones (README "A second sortie").
+
 Cost: one projection per camera of at most ``max_points`` points, then a loop over cameras i
 whose arrays are (N - i - 1, S): memory O(N S) whatever the number of scene points, about 5 MB
-and well under a second for N = 100, S = 2000; rule 7 adds at most N rounds of an O(N^2)
-connected-components pass (scipy.sparse.csgraph). ROS-free.
+and well under a second for N = 100, S = 2000. ROS-free.
 """
 from __future__ import annotations
 
@@ -108,35 +106,6 @@ def pair_geometry(cameras: NDArray[np.float64], points: NDArray[np.float64], vis
     return shared, angle
 
 
-def _best(i: int, cand: NDArray[np.intp], gap: NDArray[np.float64], overlap: NDArray[np.float64],
-          k: int) -> NDArray[np.intp]:
-    """Camera i's ``k`` best partners among ``cand``: smallest angle gap, then larger overlap, then lower index."""
-    return cand[np.lexsort((cand, -overlap[i, cand], gap[i, cand]))][:k]
-
-
-def _connect(chosen: NDArray[np.bool_], shared: NDArray[np.int64], gap: NDArray[np.float64],
-             overlap: NDArray[np.float64], k: int) -> NDArray[np.bool_]:
-    """Rule 7: join the components of the pair graph ``chosen`` (N, N) that share points, smallest first."""
-    from scipy.sparse.csgraph import connected_components
-
-    chosen = chosen.copy()
-    while True:
-        count, label = connected_components(chosen | chosen.T, directed=False)
-        if count == 1:
-            return chosen
-        size = np.bincount(label, minlength=count)
-        first = np.full(count, len(label))
-        np.minimum.at(first, label, np.arange(len(label)))
-        outside_shared = [(shared[np.ix_(label == c, label != c)] > 0).any() for c in range(count)]
-        linkable = [c for c in range(count) if outside_shared[c]]
-        if not linkable:
-            return chosen
-        c = min(linkable, key=lambda c: (size[c], first[c]))
-        outside = np.flatnonzero(label != c)
-        for i in np.flatnonzero(label == c):
-            chosen[i, _best(i, outside[shared[i, outside] > 0], gap, overlap, k)] = True
-
-
 def _check_points(points: ArrayLike) -> NDArray[np.float64]:
     pts = np.asarray(points, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] != 3:
@@ -149,8 +118,8 @@ def _check_points(points: ArrayLike) -> NDArray[np.float64]:
 def select_pairs(cameras: ArrayLike, points: ArrayLike, model: CameraModel, *,
                  max_angle: float = DEFAULT_MAX_ANGLE, min_angle: float = 0.0, min_shared: int = 10,
                  min_overlap: float = 0.1, min_partners: int = DEFAULT_MIN_PARTNERS,
-                 max_points: int = 2000, connect: bool = True) -> list[tuple[int, int]]:
-    """The image pairs (i, j), i < j, sorted, that are worth matching (rules 1-7 of the module docstring).
+                 max_points: int = 2000) -> list[tuple[int, int]]:
+    """The image pairs (i, j), i < j, sorted, that are worth matching (rules 1-6 of the module docstring).
 
     Args:
         cameras: (N, 6) ``[c, v]``.
@@ -161,8 +130,6 @@ def select_pairs(cameras: ArrayLike, points: ArrayLike, model: CameraModel, *,
         min_overlap: S_ij / min(n_i, n_j) a qualifying pair needs, in [0, 1].
         min_partners: partners each camera that shares points keeps (0: the window alone decides).
         max_points: scene points sampled (bounds time and memory).
-        connect: rule 7, join the parts of the pair graph that share points (False: rules 1-6
-            alone, the rule before 2026-11-26).
 
     Raises:
         ValueError: malformed cameras or points, or a parameter out of range.
@@ -188,9 +155,9 @@ def select_pairs(cameras: ArrayLike, points: ArrayLike, model: CameraModel, *,
     chosen = qualify.copy()
     missing = np.maximum(int(min_partners) - qualify.sum(axis=1), 0)
     for i in np.flatnonzero(missing):
-        chosen[i, _best(i, np.flatnonzero(~qualify[i] & (shared[i] > 0)), gap, overlap, missing[i])] = True
-    if connect:
-        chosen = _connect(chosen, shared, gap, overlap, max(int(min_partners), 1))
+        cand = np.flatnonzero(~qualify[i] & (shared[i] > 0))
+        best = cand[np.lexsort((cand, -overlap[i, cand], gap[i, cand]))][:missing[i]]
+        chosen[i, best] = True
     a, b = np.nonzero(np.triu(chosen | chosen.T, 1))         # row-major: sorted by (i, j)
     return [(int(i), int(j)) for i, j in zip(a, b)]
 

@@ -154,8 +154,6 @@ class ReconConfig:
         matching: ``'exhaustive'`` (all image pairs), ``'poses'`` (the pairs
             :func:`vp_recon.pairs.select_pairs` picks from the known poses and scene) or
             ``'auto'``: poses from :data:`MATCH_POSES_FROM` cameras up, exhaustive below.
-        connect_pairs: pose-chosen pairs join the parts of the view graph that share points
-            (rule 7 of :mod:`vp_recon.pairs`; False: rules 1-6, as before 2026-11-26).
     """
 
     width: int = 2000
@@ -177,7 +175,6 @@ class ReconConfig:
     num_threads: int = 0
     matching: str = "auto"
     capture: CaptureModel = REALISTIC
-    connect_pairs: bool = True
 
     @property
     def sparse_mode_used(self) -> str:
@@ -552,8 +549,7 @@ def reconstruct_views(views: object, config: Optional[ReconConfig] = None, workd
             matching = "exhaustive"  # no scene to choose pairs from (a flight folder without a prior)
         pairs = None
         if matching == "poses":
-            pairs = select_pairs(reported, cloud, CameraModel(*views.size, views.horizontal_fov),
-                                 connect=bool(cfg.connect_pairs))
+            pairs = select_pairs(reported, cloud, CameraModel(*views.size, views.horizontal_fov))
             if not pairs:
                 raise ReconError(RECONSTRUCTION_FAILED, f"no two of the {n} cameras see a common part of "
                                                         "the scene: no image pair to match (matching 'poses')")
