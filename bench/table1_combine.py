@@ -37,18 +37,26 @@ from table1 import BASELINES  # noqa: E402
 SAME = ('capture', 'resolution', 'evaluations', 'models')
 
 
+def read_table(path: Path, tool: str, kind: str, keys: tuple = ('cells',)) -> dict:
+    """A benchmark's results JSON, or SystemExit naming ``tool`` and the file (unreadable, or not
+    a ``kind``: one of ``keys`` missing)."""
+    try:
+        table = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise SystemExit(f'{tool}: cannot read {path}: {exc}') from None
+    missing = [k for k in keys if k not in table]
+    if missing:
+        raise SystemExit(f'{tool}: {path} is not a {kind} (no {", ".join(repr(k) for k in missing)})')
+    return table
+
+
 def load(paths: list[Path]) -> tuple[dict, dict]:
     """({(scenario, row): {seed: (record, source)}}, the agreed metadata) of the files, in order."""
     meta: Optional[dict] = None
     plants: dict = {}
     cells: dict = {}
     for path in paths:
-        try:
-            table = json.loads(path.read_text())
-        except (OSError, ValueError) as exc:
-            raise SystemExit(f'table1_combine: cannot read {path}: {exc}') from None
-        if 'cells' not in table:
-            raise SystemExit(f'table1_combine: {path} is not a table1.json (no "cells")')
+        table = read_table(path, 'table1_combine', 'table1.json')
         mine = {k: table.get(k) for k in SAME}
         if meta is None:
             meta = mine
@@ -74,15 +82,22 @@ def seed_means(u: dict) -> dict:
     return {s: (None if any(v is None for v in vs) else sum(vs) / len(vs)) for s, vs in by.items()}
 
 
-def combine(cells: dict) -> dict:
-    """The combined table (JSON-ready)."""
-    scenarios = [s for s in SCENARIOS if any(s == c for c, _ in cells)]
+def combine(cells: dict, baselines=BASELINES, order=SCENARIOS, realizations: Optional[int] = None) -> dict:
+    """The combined table (JSON-ready) of cells {(column, row): {seed: (record, source)}}: a column
+    is a scenario (or a field, ``bench/fields_combine.py``), in ``order`` (None: as they come);
+    the paired differences are of every row not in ``baselines`` to the best of those. Every seed
+    counts ``realizations`` units (None: the most any record holds), so a plan that failed (no
+    realization) fails them all, even in a cell where no seed planned."""
+    if realizations is None:
+        realizations = max((len(r.get('per_realization') or []) for seeds in cells.values()
+                            for r, _ in seeds.values()), default=0)
+    columns = list(dict.fromkeys(c for c, _ in cells))
+    scenarios = columns if order is None else [s for s in order if s in columns]
     rows = list(dict.fromkeys(r for _, r in cells))
     out = {'cells': {}, 'paired': {}}
     chamfer = {}
     for (scenario, row), seeds in cells.items():
         records = {seed: record for seed, (record, _) in seeds.items()}
-        realizations = max((len(r.get('per_realization') or []) for r in records.values()), default=0)
         u = realization_units(records, realizations)
         chamfer[(scenario, row)] = u
         shape = realization_units(records, realizations, 'chamfer_shape')
@@ -92,12 +107,12 @@ def combine(cells: dict) -> dict:
             'seeds': sorted(seeds), 'sources': {str(s): src for s, (_, src) in sorted(seeds.items())},
             'per_unit': {f'{s}/{k}': v for (s, k), v in u.items()}}
     for scenario in scenarios:
-        base = [r for r in rows if r in BASELINES and (scenario, r) in chamfer]
+        base = [r for r in rows if r in baselines and (scenario, r) in chamfer]
         if not base:
             continue
         best = rank({r: summary(chamfer[(scenario, r)]) for r in base})[0]
         for row in rows:
-            if row in BASELINES or (scenario, row) not in chamfer:
+            if row in baselines or (scenario, row) not in chamfer:
                 continue
             a, b = chamfer[(scenario, row)], chamfer[(scenario, best)]
             sa, sb = seed_means(a), seed_means(b)
@@ -108,12 +123,14 @@ def combine(cells: dict) -> dict:
     return out
 
 
-def markdown(table: dict, meta: dict, paths: list[Path]) -> str:
+def markdown(table: dict, meta: dict, paths: list[Path], title: str = 'Table I', setting: str = '') -> str:
+    """The combined table as markdown; ``setting``: what was measured (default: Table I's metadata)."""
     scen, rows = table['scenarios'], table['rows']
-    lines = [f'# Table I, combined {table["date"]}', '',
+    setting = setting or (f'Capture {meta["capture"]["kind"]}, {meta["resolution"][0]} x {meta["resolution"][1]}, '
+                          f'{meta["evaluations"]} evaluations, plants {meta["models"]}.')
+    lines = [f'# {title}, combined {table["date"]}', '',
              'Joined from ' + ', '.join(f'`{p}`' for p in paths) + ' (a later file wins a seed both hold). '
-             f'Capture {meta["capture"]["kind"]}, {meta["resolution"][0]} x {meta["resolution"][1]}, '
-             f'{meta["evaluations"]} evaluations, plants {meta["models"]}. Chamfer x100 in map, mean +- sample std '
+             f'{setting} Chamfer x100 in map, mean +- sample std '
              'over (seed, realization) units (n: reconstructed; a failed unit is counted and ranks its row last); '
              'seeds in brackets.', '',
              '| method | ' + ' | '.join(scen) + ' |', '|---|' + '---|' * len(scen)]

@@ -79,3 +79,14 @@ def test_writes_the_table(tmp_path):
     md = (tmp_path / "out" / "table1_combined.md").read_text()
     assert "| egp | 2.250 +- 0.354 (n=2) [seeds 0] |" in md
     assert json.loads((tmp_path / "out" / "table1_combined.json").read_text())["paired"]["six_rect/egp"]["n"] == 2
+
+
+def test_a_row_whose_every_plan_failed_counts_every_unit_as_failed(tmp_path):
+    """A plan that failed has no realization in its record; where every seed of a cell failed so,
+    its units still count (the realizations of the other cells), failed, never n = 0 and nothing."""
+    only = _table(tmp_path / "a.json", {("six_rect", "arc"): {0: [3.0, 3.0, 3.0]},
+                                         ("six_rect", "egp"): {0: [], 1: []}})
+    table = table1_combine.combine(table1_combine.load([only])[0])
+    egp = table["cells"]["six_rect/egp"]["chamfer"]
+    assert (egp["n"], egp["failed"]) == (0, 6)
+    assert table["paired"]["six_rect/egp"]["only_a_failed"] == 3
