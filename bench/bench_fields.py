@@ -242,7 +242,7 @@ def write_results(args, out: Path, cells, plans, recons, subsampling) -> None:
               "resolution": [args.width, args.height], "realizations": args.realizations,
               "evaluations_per_part": EVALS_PER_PART, "cells": {}, "subsampling": subsampling}
     lines = [f"# Fields, measured {stamp} ({host})", "",
-             f"Plants: {'Corn50 (' + models_tag(args.models) + ')' if args.models else 'built-in procedural corn'} (scene seed {args.seed}). Reward: the default "
+             f"Plants: {'Corn50 (' + models_tag(args.models) + ')' if args.models else 'built-in procedural corn'} (scene seed 0; planning seed {args.seed}). Reward: the default "
              "model. Chamfer x100 (mean +- sample std (ddof 1, n successful; failures counted) over wind realizations "
              f"0..{args.realizations - 1}, {args.width} x {args.height}), lower is better. Planning seconds alone "
              "(one torch thread); reconstruction seconds per realization.", ""]
