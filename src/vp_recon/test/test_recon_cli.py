@@ -105,6 +105,8 @@ def test_cli_unwritable_out_and_bad_args(tmp_path: Path, capsys) -> None:
     _fails(tmp_path, capsys, ["--plan", str(_plan(tmp_path)), "--out", str(tmp_path), "--realizations", "a"],
            "comma-separated")
     _fails(tmp_path, capsys, ["--plan", str(_plan(tmp_path)), "--out", str(tmp_path), "--width", "3"], "width")
+    _fails(tmp_path, capsys, ["--plan", str(_plan(tmp_path)), "--out", str(tmp_path), "--dense-scale", "0"],
+           "dense_scale must be in (0, 1]")
 
 
 def test_cli_nothing_visible_records_error(tmp_path: Path, capsys) -> None:

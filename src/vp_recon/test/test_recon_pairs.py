@@ -175,3 +175,24 @@ def test_sparse_rejects_bad_pairs(renders, tmp_path) -> None:
         sparse_reconstruct(images, cams, K, tmp_path, pairs=[])
     with pytest.raises(ValueError, match="0..3"):
         sparse_reconstruct(images, cams, K, tmp_path, pairs=[(0, 4)])
+
+
+def test_scaled_views_keep_the_projection() -> None:
+    """A world point lands on u' = s (u + 1/2) - 1/2 of the half-size view (pixel centres at
+    integers), and a mask keeps the pixels that were mostly foreground."""
+    from vp_recon.dense import scaled_views
+    from vp_scene.camera import intrinsics
+
+    K = intrinsics(640, 480, math.pi / 2)
+    img = np.zeros((480, 640, 3), np.uint8)
+    mask = np.zeros((480, 640), bool)
+    mask[100:200, 300:302] = True            # 2 px wide: one column at half size
+    mask[300:302, 10:11] = True              # a quarter of one half-size pixel: dropped
+    (im2,), (m2,), K2 = scaled_views([img], [mask], K, 0.5)
+    assert im2.shape == (240, 320, 3) and m2.shape == (240, 320)
+    assert m2[50:100, 150].all() and m2.sum() == 50
+    X = np.array([0.3, -0.2, 2.0])           # camera frame, z forward
+    u = K @ X / X[2]
+    u2 = K2 @ X / X[2]
+    np.testing.assert_allclose(u2[:2], 0.5 * (u[:2] + 0.5) - 0.5)
+    np.testing.assert_allclose(K2, intrinsics(320, 240, math.pi / 2))   # the half-size camera itself

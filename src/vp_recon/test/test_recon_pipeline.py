@@ -185,6 +185,24 @@ def test_bad_config() -> None:
         ReconConfig(width=0).validate()
     with pytest.raises(ValueError, match="matching must be one of auto, exhaustive, poses"):
         ReconConfig(matching="magic").validate()
+    for scale in (0, -0.5, 1.5, float("nan")):
+        with pytest.raises(ValueError, match="dense_scale must be in"):
+            ReconConfig(dense_scale=scale).validate()
+    with pytest.raises(ValueError, match="sift_first_octave must be -1, 0 or 1"):
+        ReconConfig(sift_first_octave=2).validate()
+
+
+def test_faster_settings_still_reconstruct(noisy_scene, good) -> None:
+    """SIFT from the image's own resolution and stereo on half-size views (bench_recon_speed):
+    the plant still reconstructs, from fewer SIFT points and about a quarter of the raw stereo
+    points (640 x 480 here: SIFT from octave 0 then keeps only about half the sparse points)."""
+    cfg = ReconConfig(width=640, height=480, capture=IDEAL, sift_first_octave=0, dense_scale=0.5)
+    res = reconstruct_realization(noisy_scene, 1, ring(6, 30.0), cfg)
+    full = good[0]
+    assert res.source == "dense" and 0 < res.sparse_points < full.sparse_points
+    assert res.accuracy < 0.015 and res.chamfer < 0.03 and res.fscore > 0.8
+    raw, raw_full = sum(res.dense_pair_points), sum(full.dense_pair_points)
+    assert 0.1 * raw_full < raw < 0.5 * raw_full
 
 
 def test_target_is_inside_the_plant(noisy_scene) -> None:

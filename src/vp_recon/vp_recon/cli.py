@@ -111,6 +111,10 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
                         f"and scene (poses), or auto: poses from {MATCH_POSES_FROM} cameras up (default)")
     p.add_argument("--fscore-threshold", type=float, default=0.02, help="F-score threshold, metres")
     p.add_argument("--voxel", type=float, default=0.002, help="dense voxel downsampling, metres (0: none)")
+    p.add_argument("--dense-scale", type=float, default=1.0,
+                   help="match the dense stereo pairs on the images resized by this factor, (0, 1] (default 1)")
+    p.add_argument("--sift-first-octave", type=int, default=-1, choices=(-1, 0, 1),
+                   help="SIFT's first octave: -1 (COLMAP's default) doubles the image first, 0 does not")
     p.add_argument("--mesh-cache", default=None, help="cache folder of Poisson meshes of PLY plant models")
     p.add_argument("--keep-workdir", action="store_true", help="keep the COLMAP workspaces in OUT/work")
     p.add_argument("--ground", action=argparse.BooleanOptionalAction, default=None,
@@ -172,6 +176,7 @@ def run(args: argparse.Namespace) -> dict:
                              sparse_mode=args.sparse_mode, fscore_threshold=args.fscore_threshold,
                              voxel=args.voxel, mesh_cache=args.mesh_cache, keep_workdir=args.keep_workdir,
                              ground=args.ground, num_threads=args.threads, matching=args.matching,
+                             dense_scale=args.dense_scale, sift_first_octave=args.sift_first_octave,
                              capture=capture_from_args(args)).validate()
     except ValueError as exc:
         raise CliError(str(exc)) from None
@@ -267,6 +272,7 @@ def run_images(args: argparse.Namespace) -> dict:
                              sparse_mode=args.sparse_mode, fscore_threshold=args.fscore_threshold,
                              voxel=args.voxel, keep_workdir=args.keep_workdir, ground=args.ground,
                              num_threads=args.threads, matching=args.matching,
+                             dense_scale=args.dense_scale, sift_first_octave=args.sift_first_octave,
                              capture=capture_from_args(args)).validate()
     except ValueError as exc:
         raise CliError(str(exc)) from None

@@ -38,7 +38,8 @@ from numpy.typing import NDArray
 
 from vp_scene.camera import check_cameras, project_with, world_to_camera
 
-__all__ = ["DenseResult", "neighbour_pairs", "overlap_pairs", "dense_reconstruct", "voxel_downsample", "silhouette_filter",
+__all__ = ["DenseResult", "neighbour_pairs", "overlap_pairs", "dense_reconstruct", "scaled_views", "voxel_downsample",
+           "silhouette_filter",
            "crop_to_box"]
 
 
@@ -254,11 +255,32 @@ def _pair_points(img_i: NDArray[np.uint8], img_j: NDArray[np.uint8], mask_i: NDA
     return X_w, r1[valid][ok]
 
 
+def scaled_views(images: Sequence[NDArray[np.uint8]], masks: Sequence[NDArray[np.bool_]], K: NDArray[np.float64],
+                 scale: float) -> tuple[list[NDArray[np.uint8]], list[NDArray[np.bool_]], NDArray[np.float64]]:
+    """The views resized by ``scale`` (area averaging; a mask pixel is foreground where more than
+    half of its area was) and the calibration that goes with them.
+
+    Pixel centres sit at integer coordinates (OpenCV), so a column u of the original lies at
+    u' = s_x (u + 1/2) - 1/2 of the resized view, s_x = w' / w (w' = round(s w)); likewise rows:
+    f'_x = s_x f_x, c'_x = s_x (c_x + 1/2) - 1/2.
+    """
+    h, w = np.asarray(images[0]).shape[:2]
+    w2, h2 = max(16, int(round(scale * w))), max(16, int(round(scale * h)))
+    sx, sy = w2 / w, h2 / h
+    K2 = np.asarray(K, dtype=np.float64).copy()
+    K2[0, 0], K2[0, 1], K2[0, 2] = sx * K2[0, 0], sx * K2[0, 1], sx * (K2[0, 2] + 0.5) - 0.5
+    K2[1, 1], K2[1, 2] = sy * K2[1, 1], sy * (K2[1, 2] + 0.5) - 0.5
+    imgs = [cv2.resize(np.asarray(im), (w2, h2), interpolation=cv2.INTER_AREA) for im in images]
+    ms = [cv2.resize(np.asarray(m, np.float32), (w2, h2), interpolation=cv2.INTER_AREA) > 0.5 for m in masks]
+    return imgs, ms, K2
+
+
 def dense_reconstruct(images: Sequence[NDArray[np.uint8]], masks: Sequence[NDArray[np.bool_]],
                       cameras: NDArray[np.float64], K: NDArray[np.float64], box: NDArray[np.float64],
                       guide: Optional[NDArray[np.float64]] = None, center: Optional[NDArray[np.float64]] = None,
                       neighbours: int = 2, block: int = 5, voxel: float = 0.0,
-                      silhouette: bool = True, pair_inliers: Optional[dict] = None) -> DenseResult:
+                      silhouette: bool = True, pair_inliers: Optional[dict] = None, scale: float = 1.0
+                      ) -> DenseResult:
     """Fused SGBM cloud of neighbouring pairs, cropped to ``box`` ((2, 3) = [lo, hi]), cleaned.
 
     Args:
@@ -275,7 +297,12 @@ def dense_reconstruct(images: Sequence[NDArray[np.uint8]], masks: Sequence[NDArr
             images); a camera with no such partner falls back to :func:`neighbour_pairs`.
         voxel: voxel edge for downsampling, metres (0: none).
         silhouette: drop points that project onto background in some view.
+        scale: the stereo pairs are matched on the views resized by this factor (0 < scale <= 1;
+            :func:`scaled_views`): SGM's cost falls about as scale^3 (pixels x disparities), the
+            depth step grows as 1 / scale. The silhouette filter keeps the full-size masks.
     """
+    if not (isinstance(scale, (int, float)) and 0 < scale <= 1):
+        raise ValueError(f"scale must be in (0, 1], got {scale!r}")
     cams = check_cameras(cameras)
     if len(images) != len(cams) or len(masks) != len(cams):
         raise ValueError(f"{len(images)} images and {len(masks)} masks for {len(cams)} cameras")
@@ -287,6 +314,9 @@ def dense_reconstruct(images: Sequence[NDArray[np.uint8]], masks: Sequence[NDArr
     if len(g) < 10:
         axes = [np.linspace(box[0, k], box[1, k], 5) for k in range(3)]
         g = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    K_full, masks_full = K, masks
+    if scale < 1 and len(images):
+        images, masks, K = scaled_views(images, masks, K, scale)
     width = int(np.asarray(images[0]).shape[1]) if len(images) else 16
     max_disp = max(16, (max(width, np.asarray(images[0]).shape[0]) // 16) * 16) if len(images) else 16
     R, t = world_to_camera(cams)
@@ -313,7 +343,7 @@ def dense_reconstruct(images: Sequence[NDArray[np.uint8]], masks: Sequence[NDArr
     keep = crop_to_box(P, box[0], box[1])
     P, C = P[keep], C[keep]
     if silhouette and len(P):
-        keep = silhouette_filter(P, cams, K, masks)
+        keep = silhouette_filter(P, cams, K_full, masks_full)
         P, C = P[keep], C[keep]
     P, C = voxel_downsample(P, C, voxel)
     return DenseResult(P, C, used, raw, [len(p) for p in pts])

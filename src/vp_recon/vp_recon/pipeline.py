@@ -145,6 +145,10 @@ class ReconConfig:
         sift_masks: restrict SIFT to the (dilated) foreground masks.
         min_foreground: pixels of plant an image needs to count as seeing the plant.
         max_features: SIFT features per image.
+        sift_first_octave: SIFT's first octave (-1, COLMAP's default: the image doubled first; 0:
+            its own resolution, about 4x less work).
+        dense_scale: the dense step's stereo pairs are matched on the views resized by this factor
+            (0 < s <= 1; :func:`vp_recon.dense.scaled_views`; SGM's cost about s^3).
         ground: render a textured soil plane under the plants (True) or a blue screen (False);
             None (default): soil for a realistic capture, the blue screen for the ideal one.
             A realistic capture's masks come from its images alone (excess green on soil,
@@ -171,6 +175,8 @@ class ReconConfig:
     sift_masks: bool = False
     min_foreground: int = 50
     max_features: int = 8192
+    sift_first_octave: int = -1
+    dense_scale: float = 1.0
     ground: Optional[bool] = None
     num_threads: int = 0
     matching: str = "auto"
@@ -218,6 +224,10 @@ class ReconConfig:
             raise ValueError(f"num_threads must be an integer >= 0 (0: all cores), got {self.num_threads!r}")
         if int(self.neighbours) < 1 or int(self.min_foreground) < 1 or int(self.max_features) < 16:
             raise ValueError("neighbours and min_foreground must be >= 1, max_features >= 16")
+        if isinstance(self.sift_first_octave, bool) or self.sift_first_octave not in (-1, 0, 1):
+            raise ValueError(f"sift_first_octave must be -1, 0 or 1, got {self.sift_first_octave!r}")
+        if not (isinstance(self.dense_scale, (int, float)) and 0 < self.dense_scale <= 1):
+            raise ValueError(f"dense_scale must be in (0, 1], got {self.dense_scale!r}")
         return self
 
 
@@ -561,7 +571,8 @@ def reconstruct_views(views: object, config: Optional[ReconConfig] = None, workd
             sp = sparse_reconstruct(images, reported, K, wd, mode=mode,
                                     masks=masks if cfg.sift_masks else None, max_features=cfg.max_features,
                                     num_threads=cfg.num_threads or -1, pairs=pairs, prior_centres=priors,
-                                    prior_sigma=max(capture.report_position_sigma, 0.01))
+                                    prior_sigma=max(capture.report_position_sigma, 0.01),
+                                    sift_first_octave=cfg.sift_first_octave)
         except SparseError as exc:
             raise ReconError(RECONSTRUCTION_FAILED, f"sparse reconstruction failed: {exc}") from exc
         except OSError as exc:
@@ -589,7 +600,8 @@ def reconstruct_views(views: object, config: Optional[ReconConfig] = None, workd
         dn = None
         if cfg.dense:
             dn = dense_reconstruct(images, masks, geo, K, box, guide=sp.points,
-                                   neighbours=cfg.neighbours, voxel=cfg.voxel, pair_inliers=sp.pair_inliers)
+                                   neighbours=cfg.neighbours, voxel=cfg.voxel, pair_inliers=sp.pair_inliers,
+                                   scale=cfg.dense_scale)
             if len(dn.points):
                 points, colors, source = dn.points, dn.colors, "dense"
         seconds["dense"] = time.perf_counter() - t0

@@ -146,7 +146,7 @@ def sparse_reconstruct(images: Sequence[NDArray[np.uint8]], cameras: NDArray[np.
                        max_features: int = 8192, num_threads: int = -1, quiet: bool = True,
                        pairs: Optional[Sequence[tuple[int, int]]] = None,
                        prior_centres: Optional[NDArray[np.float64]] = None,
-                       prior_sigma: float = 0.02) -> SparseResult:
+                       prior_sigma: float = 0.02, sift_first_octave: int = -1) -> SparseResult:
     """SIFT + matching (all pairs, or the given ones) + triangulation of the rendered ``images`` (N RGB uint8).
 
     Args:
@@ -164,6 +164,8 @@ def sparse_reconstruct(images: Sequence[NDArray[np.uint8]], cameras: NDArray[np.
             axis (a drone's reported positions), written as COLMAP pose priors and used by its
             bundle adjustment (``use_prior_position``); None: none (the alignment then uses the
             centres of ``cameras``). ``prior_sigma`` also scales the self-check (module docstring, 5).
+        sift_first_octave: SIFT's first octave: -1 (COLMAP's default) doubles the image first, 0
+            starts at its own resolution (about 4x fewer pixels to filter, no sub-pixel-scale features).
 
     Raises:
         ValueError: bad mode, image count, image sizes or pairs.
@@ -176,7 +178,7 @@ def sparse_reconstruct(images: Sequence[NDArray[np.uint8]], cameras: NDArray[np.
         pycolmap.logging.minloglevel = 2
     try:
         return _sparse(pycolmap, images, cameras, K, Path(workdir), mode, masks, max_features, num_threads, pairs,
-                       prior_centres, prior_sigma)
+                       prior_centres, prior_sigma, sift_first_octave)
     finally:
         pycolmap.logging.minloglevel = level
 
@@ -184,7 +186,8 @@ def sparse_reconstruct(images: Sequence[NDArray[np.uint8]], cameras: NDArray[np.
 def _sparse(pycolmap: object, images: Sequence[NDArray[np.uint8]], cameras: NDArray[np.float64],
             K: NDArray[np.float64], workdir: Path, mode: str, masks: Optional[Sequence[NDArray[np.bool_]]],
             max_features: int, num_threads: int, pairs: Optional[Sequence[tuple[int, int]]],
-            prior_centres: Optional[NDArray[np.float64]] = None, prior_sigma: float = 0.02) -> SparseResult:
+            prior_centres: Optional[NDArray[np.float64]] = None, prior_sigma: float = 0.02,
+            sift_first_octave: int = -1) -> SparseResult:
     if mode not in MODES:
         raise ValueError(f"unknown sparse mode {mode!r}; expected one of {', '.join(MODES)}")
     cams = check_cameras(cameras)
@@ -214,6 +217,7 @@ def _sparse(pycolmap: object, images: Sequence[NDArray[np.uint8]], cameras: NDAr
     extraction = pycolmap.FeatureExtractionOptions()
     extraction.num_threads = num_threads
     extraction.sift.max_num_features = int(max_features)
+    extraction.sift.first_octave = int(sift_first_octave)
     device = pycolmap.Device.cpu
     pycolmap.extract_features(db_path, img_dir, image_names=names, camera_mode=pycolmap.CameraMode.SINGLE,
                               reader_options=reader, extraction_options=extraction, device=device)
