@@ -26,6 +26,8 @@ PKG = {"planner": "vp_planner", "recon": "vp_recon", "dispatcher": "vp_planner"}
     ("recon", {"fov": 4}, "fov must be in (0, pi)"),
     ("recon", {"matching": "magic"}, "matching must be one of auto, exhaustive, poses"),
     ("recon", {"image_transport": "theora"}, "image_transport must be raw or compressed, got 'theora'"),
+    ("recon", {"dense_scale": 0.0}, "dense_scale must be in (0, 1], got 0.0"),
+    ("recon", {"sift_first_octave": 2}, "sift_first_octave"),
     ("dispatcher", {}, 'drones must name at least one drone, e.g. -p "drones:=[d0, d1, d2, d3]"'),
     ("dispatcher", {"drones": "d0"}, "'drones' must be a list of strings"),
     ("dispatcher", {"drones": ["d0", "d1", "d0"]}, "drones names a drone twice: ['d0']"),
@@ -45,7 +47,7 @@ def test_bad_parameter_is_one_line_and_exit_2(exe, params, text, ros_env, start_
 
 @pytest.mark.parametrize("exe, params", [
     ("planner", {"fov": 2, "theta_match": 1, "min_separation": 0}),
-    ("recon", {"fov": 2, "fscore_threshold": 1}),
+    ("recon", {"fov": 2, "fscore_threshold": 1, "dense_scale": 1}),
     ("dispatcher", {"drones": ["d0"], "pose_timeout": 1, "fleet_frame": "plot", "fleet_x": 3}),
 ])
 def test_integers_where_floats_are_expected_are_accepted(exe, params, ros_env, start_node) -> None:

@@ -105,6 +105,10 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
                     help='the recon node reconstructs the wind realizations on a local Dask cluster of this many '
                          'one-thread workers (the planner is idle by then; 1: in the node, on the cores the '
                          'planner leaves)')
+    ap.add_argument('--sift-first-octave', type=int, default=-1, choices=(-1, 0, 1),
+                    help="recon: SIFT's first octave (-1, COLMAP's default: each image doubled first; 0: not)")
+    ap.add_argument('--dense-scale', type=float, default=1.0,
+                    help='recon: dense stereo on the images resized by this factor, (0, 1] (default 1)')
     ap.add_argument('--timeout', type=float, default=3600.0, help='seconds for the whole mission')
     ap.add_argument('--domain-id', type=int, default=None,
                     help='ROS_DOMAIN_ID of this run (default: $ROS_DOMAIN_ID, else derived from the process id)')
@@ -115,6 +119,8 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
         ap.error('--recon-workers must be >= 1')
     if args.evals < 1:
         ap.error('--evals must be >= 1')
+    if not 0 < args.dense_scale <= 1:
+        ap.error('--dense-scale must be in (0, 1]')
     if args.cameras2 < 0 or args.cameras2 == 1:
         ap.error('--cameras2 must be 0 (half of --cameras) or >= 2')
     args.cameras2 = args.cameras2 or max(2, args.cameras // 2)
@@ -443,7 +449,7 @@ def run(args: argparse.Namespace) -> int:
         nodes.append(start_node('recon', 'vp_recon', 'recon', {
             'output_folder': str(out), 'width': args.width, 'height': args.height,
             'method': args.method, 'num_threads': recon_threads, 'capture': args.capture, 'source': args.source,
-            **on_cluster}, {**env, 'OMP_NUM_THREADS': str(recon_threads)}, out))
+            'sift_first_octave': args.sift_first_octave, 'dense_scale': args.dense_scale, **on_cluster}, {**env, 'OMP_NUM_THREADS': str(recon_threads)}, out))
         if args.drones:
             drones = [f'd{k}' for k in range(args.drones)]
             nodes.append(start_node('dispatcher', 'vp_planner', 'dispatcher', {

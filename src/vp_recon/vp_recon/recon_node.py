@@ -105,6 +105,10 @@ PARAMS = {
     'dense': Param(True, 'CPU dense stereo (else the sparse cloud is scored)'),
     'matching': Param('auto', 'image pairs SIFT matches: auto (from the poses from 8 cameras up) | exhaustive | poses'),
     'fscore_threshold': Param(DEFAULT_FSCORE_THRESHOLD, 'F-score distance threshold, m', _M, False, '> 0'),
+    'sift_first_octave': Param(-1, "SIFT's first octave: -1 (COLMAP's default) doubles the image first, 0 does not",
+                               (-1, 1)),
+    'dense_scale': Param(1.0, 'dense stereo on the images resized by this factor (SGM cost about its cube)',
+                         (0.0, 1.0), False, 'above 0'),
     'method': Param('', 'label of the scores (default: the method from /camera_plan/info)'),
     'source': Param('render', 'render: the node renders each plan under the capture model | fleet: the drones\' '
                               'images (/fleet/capture, README "From a real flight")'),
@@ -174,7 +178,8 @@ def check_parameters(values: dict) -> dict:
         raise ValueError(f'capture_timeout must be > 0 s, got {v["capture_timeout"]}')
     if v.get('output_folder', 'x') == '' or v.get('frame_id', 'x') == '':
         raise ValueError('output_folder and frame_id must not be empty')
-    config_keys = ('width', 'height', 'fov', 'sparse_mode', 'dense', 'matching', 'fscore_threshold')
+    config_keys = ('width', 'height', 'fov', 'sparse_mode', 'dense', 'matching', 'fscore_threshold',
+                   'sift_first_octave', 'dense_scale')
     if any(k in v for k in config_keys):  # the rendering settings: ReconConfig's own checks
         defaults = {k: PARAMS[k][0] for k in config_keys}
         ReconConfig(**{**defaults, **{k: v[k] for k in config_keys if k in v}}).validate()
@@ -227,7 +232,8 @@ class ReconNode(Node):
         return ReconConfig(width=self._param('width'), height=self._param('height'), fov=self._param('fov'),
                            sparse_mode=self._param('sparse_mode'), dense=self._param('dense'),
                            matching=self._param('matching'), fscore_threshold=self._param('fscore_threshold'), keep_images=True,
-                           num_threads=self._param('num_threads'),
+                           num_threads=self._param('num_threads'), sift_first_octave=self._param('sift_first_octave'),
+                           dense_scale=self._param('dense_scale'),
                            capture=capture_model({k: self._param(k) for k in CAPTURE_KEYS})).validate()
 
     def on_shutdown(self, timeout: float) -> bool:
