@@ -24,6 +24,14 @@ def test_verdict_against_the_target() -> None:
     bad = row(a=1.0, b=1.05, c_circle=1.3, c_arc=1.25, d=1.1, e=1.08)
     assert bench_sorties.verdict(bad) == ("e does not beat b; e beats c-circle; e beats c-arc; +8.0 % of a (beyond 5 %)")
     assert bench_sorties.verdict(row(a=1.0)) == "e failed"
+    # a case that failed in one realization ranks behind e whatever its mean (six_rect's circle)
+    one_failed = row(a=1.0, b=1.2, c_circle=0.5, c_arc=1.25, d=1.1, e=1.04)
+    one_failed["cases"]["c-circle"]["failed"] = 1
+    assert bench_sorties.verdict(one_failed).startswith("e beats b; e beats c-circle; e beats c-arc;")
+    e_failed = row(a=1.0, b=1.2, c_circle=1.3, c_arc=1.25, d=1.1, e=0.9)
+    e_failed["cases"]["e"]["failed"] = 1
+    assert bench_sorties.verdict(e_failed) == ("e does not beat b; e does not beat c-circle; e does not beat c-arc; "
+                                               "-10.0 % of a (beyond 5 %; e failed in 1 realization(s))")
 
 
 def test_results_files(tmp_path: Path) -> None:
