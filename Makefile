@@ -26,6 +26,7 @@ OUT      ?= out/$(SCENE_TAG)-$(METHOD)-$(CAMERAS)cams-seed$(SEED)
 MODELS   ?=
 PLAN     ?= $(OUT)/plan.json
 RECON_ARGS ?=
+RUN_ARGS ?=
 IMAGES   ?=
 PRIOR    ?=
 # make view RUN=out/<run folder> [PORT=8080]: the run's recording in the browser (README "Looking at a plan")
@@ -47,7 +48,7 @@ test: setup
 run: setup
 	@$(ENV) python tools/run_suite.py --scenario $(SCENE_ARG) --method $(METHOD) --cameras $(CAMERAS) \
 	  --evals $(EVALS) --seed $(SEED) --out $(OUT) --drones $(DRONES) $(if $(MODELS),--models $(MODELS)) \
-	  $(if $(REWARD),--reward $(REWARD)) --rounds $(ROUNDS) --cameras2 $(CAMERAS2)
+	  $(if $(REWARD),--reward $(REWARD)) --rounds $(ROUNDS) --cameras2 $(CAMERAS2) $(RUN_ARGS)
 
 plan: setup
 	@$(ENV) python -m vp_planner.cli --scenario $(SCENE_ARG) --method $(METHOD) --cameras $(CAMERAS) \

@@ -8,7 +8,8 @@ settings cost in quality, per variant of :data:`VARIANTS`:
 
 * ``sift_first_octave=0``: SIFT starts at the image's own resolution instead of doubling it first
   (COLMAP's default -1), about 4x fewer pixels to filter;
-* ``dense_scale=0.5``: the stereo pairs are matched on half-size views (SGM's cost about 1/8).
+* ``dense_scale=0.5`` (or 0.7): the stereo pairs are matched on half-size views (SGM's cost about
+  1/8; at 0.7 about 1/3).
 
 Plans: egp (the default planner, seed 0, 100 evaluations, as ``make run``) of each scenario,
 shared with the other benchmarks' plan cache; every (scenario, variant, realization) is one
@@ -18,12 +19,11 @@ of ``--threads`` threads, with ``--workers`` tasks running at once (as ``make ru
 node: 2 one-thread workers); a failed realization is counted, never dropped.
 
     python bench/bench_recon_speed.py [--scenarios one_plant three_row] [--realizations 5]
-        [--variants full sift-octave0 dense-half both] [--workers 2 --threads 1] [--out results]
+        [--variants full sift-octave0 dense-half both both-0.7] [--workers 2 --threads 1] [--out results]
 """
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 import time
 from pathlib import Path
@@ -32,6 +32,7 @@ import numpy as np
 
 BENCH = Path(__file__).resolve().parent
 sys.path.insert(0, str(BENCH))
+from stats import paired_interval  # noqa: E402
 from common import ROOT, SCENARIOS, cached, default_models, machine, models_tag, plan_cell, write_json  # noqa: E402
 from cluster import Task, add_cluster_args, open_client, run_tasks  # noqa: E402
 
@@ -41,6 +42,7 @@ VARIANTS = {
     'sift-octave0': {'sift_first_octave': 0},
     'dense-half': {'dense_scale': 0.5},
     'both': {'sift_first_octave': 0, 'dense_scale': 0.5},
+    'both-0.7': {'sift_first_octave': 0, 'dense_scale': 0.7},   # make run's settings
 }
 STAGES = ('mesh', 'render', 'sparse', 'dense', 'score')
 
@@ -57,7 +59,7 @@ def recon_cell(cache: Path, out: Path, scenario: str, variant: str, k: int, came
         config = ReconConfig(width=args.width, height=args.height, keep_images=False, num_threads=args.threads,
                              **VARIANTS[variant]).validate()
         t = time.perf_counter()
-        record = reconstruct_record(noisy, cameras, config, out / 'recon_speed' / tag, realizations=[k])
+        record = reconstruct_record(noisy, cameras, config, out / 'recon' / 'speed' / tag, realizations=[k])
         record['wall'] = time.perf_counter() - t
         return record
     return cached(cache / 'recon_speed' / f'{tag}.json', compute)
@@ -76,19 +78,18 @@ def summary(records: list[dict]) -> dict:
             'chamfer_mean': float(ch.mean()) if len(ch) else None,
             'chamfer_std': float(ch.std(ddof=1)) if len(ch) > 1 else None,
             'chamfer_shape_mean': float(np.mean([p['chamfer_shape'] for p in ok])) if ok else None,
-            'chamfer': [p.get('chamfer') for p in per], 'seconds': seconds,
+            'chamfer': [p.get('chamfer') for p in per], 'chamfer_shape': [p.get('chamfer_shape') for p in per],
+            'seconds': seconds,
             'errors': [p.get('error') for p in per if p.get('chamfer') is None]}
 
 
 def paired(base: list, other: list) -> dict:
-    """other - base over the realizations both reconstructed: mean, 95 % t interval, n."""
-    from scipy import stats
+    """other - base per realization (both reconstructed): mean, 95 % t interval, n."""
+    return paired_interval(base, other)
 
-    d = np.array([o - b for b, o in zip(base, other) if b is not None and o is not None])
-    if len(d) < 2:
-        return {'n': int(len(d)), 'mean': float(d.mean()) if len(d) else None, 'ci95': None}
-    half = stats.t.ppf(0.975, len(d) - 1) * d.std(ddof=1) / math.sqrt(len(d))
-    return {'n': int(len(d)), 'mean': float(d.mean()), 'ci95': [float(d.mean() - half), float(d.mean() + half)]}
+
+def _interval(d) -> str:
+    return '-' if not d or d['ci95'] is None else f"{d['mean']:+.2f} [{d['ci95'][0]:+.2f}, {d['ci95'][1]:+.2f}]"
 
 
 def markdown(result: dict) -> str:
@@ -97,10 +98,10 @@ def markdown(result: dict) -> str:
              f"(seed {result['seed']}, 100 evaluations); realizations 0-{result['realizations'] - 1}, "
              f"{result['width']} x {result['height']}, capture realistic; {result['workers']} worker(s) of "
              f"{result['threads']} thread(s) at once.", '',
-             'Chamfer: mean +- sample std (n); vs full: paired difference, 95 % interval. Seconds: mean '
-             'per reconstructed realization.', '',
-             '| scenario | variant | Chamfer x100 | vs full | shape x100 | sparse s | dense s | total s |',
-             '|---|---|---|---|---|---|---|---|']
+             'Chamfer (in map) and shape (after ICP): mean +- sample std (n); vs full: paired difference per '
+             'realization, mean [95 % t interval]. Seconds: mean per reconstructed realization.', '',
+             '| scenario | variant | Chamfer x100 | vs full | shape x100 | vs full | sparse s | dense s | total s |',
+             '|---|---|---|---|---|---|---|---|---|']
     for scen, cells in result['scenarios'].items():
         for variant, c in cells.items():
             if c['chamfer_mean'] is None:
@@ -109,12 +110,10 @@ def markdown(result: dict) -> str:
                 std = f"{c['chamfer_std']:.2f}" if c['chamfer_std'] is not None else '-'
                 ch = f"{c['chamfer_mean']:.2f} +- {std} (n={c['n']}" + \
                     (f", {c['failed']} failed)" if c['failed'] else ')')
-            d = c.get('vs_full')
-            vs = '-' if not d or d['ci95'] is None else \
-                f"{d['mean']:+.2f} [{d['ci95'][0]:+.2f}, {d['ci95'][1]:+.2f}]"
+            vs, vs_shape = (_interval(c.get(key)) for key in ('vs_full', 'shape_vs_full'))
             sh = '-' if c['chamfer_shape_mean'] is None else f"{c['chamfer_shape_mean']:.2f}"
             s = c['seconds']
-            lines.append(f"| {scen} | {variant} | {ch} | {vs} | {sh} | " +
+            lines.append(f"| {scen} | {variant} | {ch} | {vs} | {sh} | {vs_shape} | " +
                          ' | '.join(f"{s[k]:.1f}" if k in s else '-' for k in ('sparse', 'dense', 'total')) + ' |')
     return '\n'.join(lines) + '\n'
 
@@ -165,6 +164,7 @@ def main() -> int:
             for v, c in cells.items():
                 if v != 'full':
                     c['vs_full'] = paired(cells['full']['chamfer'], c['chamfer'])
+                    c['shape_vs_full'] = paired(cells['full']['chamfer_shape'], c['chamfer_shape'])
         result['scenarios'][s] = cells
     write_json(out / 'bench_recon_speed.json', result)
     (out / 'bench_recon_speed.md').write_text(markdown(result))

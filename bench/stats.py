@@ -12,7 +12,7 @@
 from __future__ import annotations
 
 import math
-from typing import Hashable, Mapping, Optional
+from typing import Hashable, Mapping, Optional, Sequence
 
 import numpy as np
 
@@ -66,6 +66,14 @@ def paired_difference(a: Mapping[Hashable, Optional[float]], b: Mapping[Hashable
         half = float(t.ppf(0.5 + level / 2, len(d) - 1) * d.std(ddof=1) / math.sqrt(len(d)))
         out['low'], out['high'] = out['mean'] - half, out['mean'] + half
     return out
+
+
+def paired_interval(base: Sequence[Optional[float]], other: Sequence[Optional[float]], level: float = 0.95) -> dict:
+    """other - base, unit by unit in order (:func:`paired_difference`), as ``{'n', 'mean', 'ci95'}``:
+    ``mean`` None without a pair, ``ci95`` None with fewer than 2."""
+    d = paired_difference(dict(enumerate(other)), dict(enumerate(base)), level)
+    return {'n': d['n'], 'mean': d['mean'] if d['n'] else None,
+            'ci95': [d['low'], d['high']] if d['n'] > 1 else None}
 
 
 def describe(s: dict, digits: int = 3, note: str = '') -> str:

@@ -40,5 +40,5 @@ def test_markdown_shows_every_cell() -> None:
     result = {"machine": "m", "date": "d", "models": "", "seed": 0, "realizations": 2, "width": 2000,
               "height": 1500, "workers": 2, "threads": 1, "scenarios": {"one_plant": cells}}
     text = brs.markdown(result)
-    assert "| one_plant | full | 2.50 +- 0.71 (n=2) |" in text
+    assert "| one_plant | full | 2.50 +- 0.71 (n=2) | - | 1.25 | - |" in text
     assert "| one_plant | both | failed (2 of 2) |" in text

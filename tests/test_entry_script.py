@@ -66,6 +66,9 @@ def test_end_to_end_small_mission(ros_env, tmp_path) -> None:
     assert math.isfinite(summary["chamfer_mean"]) and summary["chamfer_mean"] > 0
     assert summary["capture"] == "ideal" and summary["chamfer_shape_mean"] > 0  # issue 18: the capture recorded
     assert summary["source"] == "fleet"  # issue 20: with drones, their images are reconstructed
+    # make run's faster reconstruction settings, recorded (README "Speed of a flight's reconstruction");
+    # SIFT keeps its doubled first octave below SIFT_OCTAVE0_FROM pixels (these are 800 wide)
+    assert summary["recon_settings"] == {"sift_first_octave": -1, "dense_scale": 0.7}
     assert 0 < summary["reward"] <= 1
     no_truth = summary["no_truth"]  # issue 20, part 4: what a real flight can check
     assert no_truth["registered_images"] >= 2 and 0 < no_truth["coverage_of_prior"] <= 1
@@ -294,6 +297,17 @@ def test_bad_layout_file_is_a_usage_error_before_any_node_starts(ros_env, tmp_pa
     last = proc.stderr.strip().splitlines()[-1]
     assert f"--scenario: {bad}: grid.rows must be an integer >= 1, got 'three'" in last, proc.stderr
     assert "started" not in proc.stdout and not (tmp_path / "run").exists()
+
+
+def test_make_runs_sift_octave_follows_the_image_width() -> None:
+    """make run's SIFT starts at the image's own resolution at the paper's 2000 x 1500, and keeps
+    COLMAP's doubled first octave on small images (too few keypoints without it); given, as given."""
+    import run_suite
+
+    assert run_suite.parse_args([]).sift_first_octave == 0 and run_suite.parse_args([]).dense_scale == 0.7
+    assert run_suite.parse_args(["--width", "800", "--height", "600"]).sift_first_octave == -1
+    assert run_suite.parse_args(["--width", "800", "--sift-first-octave", "0"]).sift_first_octave == 0
+    assert run_suite.parse_args(["--sift-first-octave", "-1"]).sift_first_octave == -1
 
 
 def test_the_script_offers_every_method_of_the_planner() -> None:

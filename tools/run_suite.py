@@ -69,6 +69,12 @@ RECONSTRUCTION_VOXEL = 0.005
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_NODE_DIED, EXIT_TIMEOUT, EXIT_INTERRUPTED = 0, 1, 2, 3, 4, 130
 
 
+#: image width (pixels) from which make run's SIFT starts at the image's own resolution: below it, too
+#: few keypoints are left without the doubled octave (800 x 600 views of one plant: 59-115 per image,
+#: no point triangulated; at 2000 x 1500 the Chamfer is unchanged, results/bench_recon_speed.md)
+SIFT_OCTAVE0_FROM = 1600
+
+
 def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0],
                                  formatter_class=argparse.ArgumentDefaultsHelpFormatter)
@@ -105,10 +111,15 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
                     help='the recon node reconstructs the wind realizations on a local Dask cluster of this many '
                          'one-thread workers (the planner is idle by then; 1: in the node, on the cores the '
                          'planner leaves)')
-    ap.add_argument('--sift-first-octave', type=int, default=-1, choices=(-1, 0, 1),
-                    help="recon: SIFT's first octave (-1, COLMAP's default: each image doubled first; 0: not)")
-    ap.add_argument('--dense-scale', type=float, default=1.0,
-                    help='recon: dense stereo on the images resized by this factor, (0, 1] (default 1)')
+    # make run's reconstruction settings: about 2x faster per realization than the recon node's defaults
+    # (the benchmarks' settings) at the same Chamfer within noise (README "Speed of a flight's
+    # reconstruction", results/bench_make_run.md); -1 and 1.0 give the benchmarks' settings
+    ap.add_argument('--sift-first-octave', type=int, default=None, choices=(-1, 0, 1),
+                    help="recon: SIFT's first octave (-1, COLMAP's default and the benchmarks': each image doubled "
+                         f"first; 0: the image as it is; default: 0 from {SIFT_OCTAVE0_FROM} pixels wide, else -1)")
+    ap.add_argument('--dense-scale', type=float, default=0.7,
+                    help='recon: dense stereo on the images resized by this factor, (0, 1] (default 0.7; '
+                         'the benchmarks: 1)')
     ap.add_argument('--timeout', type=float, default=3600.0, help='seconds for the whole mission')
     ap.add_argument('--domain-id', type=int, default=None,
                     help='ROS_DOMAIN_ID of this run (default: $ROS_DOMAIN_ID, else derived from the process id)')
@@ -121,6 +132,8 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
         ap.error('--evals must be >= 1')
     if not 0 < args.dense_scale <= 1:
         ap.error('--dense-scale must be in (0, 1]')
+    if args.sift_first_octave is None:
+        args.sift_first_octave = 0 if args.width >= SIFT_OCTAVE0_FROM else -1
     if args.cameras2 < 0 or args.cameras2 == 1:
         ap.error('--cameras2 must be 0 (half of --cameras) or >= 2')
     args.cameras2 = args.cameras2 or max(2, args.cameras // 2)
@@ -491,6 +504,7 @@ def run(args: argparse.Namespace) -> int:
             'chamfer_std': None if agg.error_code else agg.chamfer_std,
             'chamfer_shape_mean': None if agg.error_code else agg.chamfer_shape,
             'capture': agg.capture or args.capture, 'source': agg.source or args.source,
+            'recon_settings': {'sift_first_octave': args.sift_first_octave, 'dense_scale': args.dense_scale},
             'registered_images': agg.registered_images,
             'poses': poses, 'seconds': time.monotonic() - start,
             'evaluations': result.evaluations, 'trace': list(result.trace), 'seed': args.seed,

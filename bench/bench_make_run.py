@@ -1,0 +1,120 @@
+#!/usr/bin/env python3
+"""``make run``'s wall time and score under reconstruction settings: results/bench_make_run.{json,md}.
+
+Issue 18 asks for ``make run`` (one_plant, egp, 4 cameras, 100 evaluations, 5 wind realizations,
+realistic capture, 4 drones, after set-up) within 120 s on 2 cores. Each variant of
+:data:`VARIANTS` runs the whole mission once (``tools/run_suite.py`` as ``make run`` calls it,
+real nodes over DDS on this machine), one after the other, nothing else should be running; the
+record holds the wall time, the summary's seconds, Chamfer and shape per realization, and the
+paired difference per realization to the benchmarks' settings (``benchmarks``, the recon
+node's defaults). A run that fails is recorded with its exit status, never dropped. Each run
+has its own ROS_DOMAIN_ID and stays on this machine (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST).
+
+    python bench/bench_make_run.py [--variants benchmarks sift0 make-run sift0-dense0.5] [--out results]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+BENCH = Path(__file__).resolve().parent
+sys.path.insert(0, str(BENCH))
+from stats import paired_interval  # noqa: E402
+from common import ROOT, machine, write_json  # noqa: E402
+
+#: variant -> tools/run_suite.py reconstruction options
+VARIANTS = {
+    'benchmarks': ['--sift-first-octave', '-1', '--dense-scale', '1.0'],   # the recon node's defaults
+    'sift0': ['--sift-first-octave', '0', '--dense-scale', '1.0'],
+    'make-run': ['--sift-first-octave', '0', '--dense-scale', '0.7'],      # make run's defaults
+    'sift0-dense0.5': ['--sift-first-octave', '0', '--dense-scale', '0.5'],
+}
+BASE = 'benchmarks'
+
+
+def run_variant(name: str, domain: int, timeout: float) -> dict:
+    """One ``make run`` mission with the variant's options: its record."""
+    env = {**os.environ, 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST', 'ROS_DOMAIN_ID': str(domain)}
+    with tempfile.TemporaryDirectory(prefix='bench_make_run_') as tmp:
+        out = Path(tmp) / 'run'
+        cmd = ['make', '-s', 'run', f'OUT={out}', f'RUN_ARGS={" ".join(VARIANTS[name])}']
+        t = time.perf_counter()
+        try:
+            proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=timeout)
+            rc, tail = proc.returncode, (proc.stdout + proc.stderr)[-2000:]
+        except subprocess.TimeoutExpired:
+            rc, tail = None, f'timed out after {timeout:.0f} s'
+        wall = time.perf_counter() - t
+        summary_file = out / 'summary.json'
+        if rc != 0 or not summary_file.exists():
+            return {'options': VARIANTS[name], 'wall': wall, 'returncode': rc, 'error': tail.strip().splitlines()[-1:]}
+        s = json.loads(summary_file.read_text())
+    per = s.get('per_realization', [])
+    return {'options': VARIANTS[name], 'wall': wall, 'returncode': rc, 'seconds': s.get('seconds'),
+            'recon_settings': s.get('recon_settings'), 'reward': s.get('reward'),
+            'chamfer_mean': s.get('chamfer_mean'), 'chamfer_shape_mean': s.get('chamfer_shape_mean'),
+            'chamfer': [p.get('chamfer') for p in per], 'chamfer_shape': [p.get('chamfer_shape') for p in per]}
+
+
+def paired(base: list, other: list) -> dict:
+    """other - base per realization (both reconstructed): mean, 95 % t interval, n."""
+    return paired_interval(base, other)
+
+
+def markdown(result: dict) -> str:
+    def iv(d):
+        return '-' if not d or d.get('ci95') is None else \
+            f"{d['mean']:+.2f} [{d['ci95'][0]:+.2f}, {d['ci95'][1]:+.2f}]"
+
+    lines = ['# make run: wall time and score per reconstruction setting', '',
+             f"{result['machine']}; {result['date']}; `make run` (one_plant, procedural plant, egp, 4 cameras, "
+             "5 wind realizations, realistic capture, 4 drones), one run per row, one after the other. "
+             f"Target: {result['target_s']:.0f} s.", '',
+             '| variant | options | wall s | Chamfer x100 | vs benchmarks | shape x100 | vs benchmarks |',
+             '|---|---|---|---|---|---|---|']
+    for name, r in result['variants'].items():
+        if r.get('chamfer_mean') is None:
+            lines.append(f"| {name} | `{' '.join(r['options'])}` | {r['wall']:.1f} | failed (exit "
+                         f"{r['returncode']}) | - | - | - |")
+            continue
+        lines.append(f"| {name} | `{' '.join(r['options'])}` | {r['wall']:.1f} | {r['chamfer_mean']:.2f} | "
+                     f"{iv(r.get('vs_base'))} | {r['chamfer_shape_mean']:.2f} | {iv(r.get('shape_vs_base'))} |")
+    return '\n'.join(lines) + '\n'
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument('--variants', nargs='+', default=list(VARIANTS), choices=list(VARIANTS))
+    ap.add_argument('--timeout', type=float, default=900.0, help='seconds a run may take')
+    ap.add_argument('--domain-id', type=int, default=77, help='ROS_DOMAIN_ID of the first run (then +1 each)')
+    ap.add_argument('--out', default=str(ROOT / 'results'))
+    args = ap.parse_args()
+    runs = {}
+    for i, name in enumerate(args.variants):
+        print(f'make run, {name}: {" ".join(VARIANTS[name])}', flush=True)
+        runs[name] = run_variant(name, args.domain_id + i, args.timeout)
+        print(f"  {runs[name]['wall']:.1f} s, Chamfer x100 {runs[name].get('chamfer_mean')}", flush=True)
+    if BASE in runs and runs[BASE].get('chamfer'):
+        for name, r in runs.items():
+            if name != BASE and r.get('chamfer'):
+                r['vs_base'] = paired(runs[BASE]['chamfer'], r['chamfer'])
+                r['shape_vs_base'] = paired(runs[BASE]['chamfer_shape'], r['chamfer_shape'])
+    result = {'machine': machine(), 'date': time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime()), 'target_s': 120.0,
+              'variants': runs}
+    out = Path(args.out)
+    write_json(out / 'bench_make_run.json', result)
+    (out / 'bench_make_run.md').write_text(markdown(result))
+    print(markdown(result))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
