@@ -111,8 +111,9 @@ def main() -> int:
               'variants': runs}
     out = Path(args.out)
     write_json(out / 'bench_make_run.json', result)
-    (out / 'bench_make_run.md').write_text(markdown(result))
-    print(markdown(result))
+    text = markdown(result)
+    (out / 'bench_make_run.md').write_text(text)
+    print(text)
     return 0
 
 

@@ -47,22 +47,28 @@ VARIANTS = {
 STAGES = ('mesh', 'render', 'sparse', 'dense', 'score')
 
 
+def recon_path(cache: Path, scenario: str, variant: str, k: int, args) -> Path:
+    """The cache file of :func:`recon_cell` (its stem also names the folder of its clouds)."""
+    tag = f'{models_tag(args.models)}-{scenario}-egp-seed{args.seed}-{variant}-{args.width}x{args.height}-r{k}'
+    return cache / 'recon_speed' / f'{tag}.json'
+
+
 def recon_cell(cache: Path, out: Path, scenario: str, variant: str, k: int, cameras: list, args) -> dict:
     """Realization ``k`` of ``scenario`` seen by ``cameras``, reconstructed under ``variant``; cached."""
     from common import reconstruct_record, scene
     from vp_recon.pipeline import ReconConfig
 
-    tag = f'{models_tag(args.models)}-{scenario}-egp-seed{args.seed}-{variant}-{args.width}x{args.height}-r{k}'
+    path = recon_path(cache, scenario, variant, k, args)
 
     def compute() -> dict:
         noisy, _ = scene(scenario, args.models)
         config = ReconConfig(width=args.width, height=args.height, keep_images=False, num_threads=args.threads,
                              **VARIANTS[variant]).validate()
         t = time.perf_counter()
-        record = reconstruct_record(noisy, cameras, config, out / 'recon' / 'speed' / tag, realizations=[k])
+        record = reconstruct_record(noisy, cameras, config, out / 'recon' / 'speed' / path.stem, realizations=[k])
         record['wall'] = time.perf_counter() - t
         return record
-    return cached(cache / 'recon_speed' / f'{tag}.json', compute)
+    return cached(path, compute)
 
 
 def summary(records: list[dict]) -> dict:
@@ -144,22 +150,17 @@ def main() -> int:
                 continue
             for v in args.variants:
                 for k in range(args.realizations):
-                    tag = f'{models_tag(args.models)}-{s}-egp-seed{args.seed}-{v}-{args.width}x{args.height}-r{k}'
                     tasks.append(Task((s, v, k), recon_cell, (cache, out, s, v, k, plans[s]['cameras'], args),
-                                      cache / 'recon_speed' / f'{tag}.json', f'{s} {v} r{k}'))
+                                      recon_path(cache, s, v, k, args), f'{s} {v} r{k}'))
         records = run_tasks(client, tasks, desc='reconstructing')
     result = {'machine': machine(), 'date': time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime()),
               'models': args.models, 'seed': args.seed, 'realizations': args.realizations, 'width': args.width,
               'height': args.height, 'threads': args.threads, 'workers': args.workers,
               'variants': {v: VARIANTS[v] for v in args.variants}, 'scenarios': {}}
     for s in args.scenarios:
-        if plans[s].get('error'):  # counted: every variant of the scenario failed
-            result['scenarios'][s] = {v: {'n': 0, 'failed': args.realizations, 'chamfer_mean': None,
-                                          'chamfer_std': None, 'chamfer_shape_mean': None, 'seconds': {},
-                                          'errors': [plans[s]['error']] * args.realizations}
-                                      for v in args.variants}
-            continue
-        cells = {v: summary([records[(s, v, k)] for k in range(args.realizations)]) for v in args.variants}
+        # a scenario whose plan failed has no reconstruction task: its error counts in every realization
+        cells = {v: summary([records.get((s, v, k), plans[s]) for k in range(args.realizations)])
+                 for v in args.variants}
         if 'full' in cells:
             for v, c in cells.items():
                 if v != 'full':
@@ -167,8 +168,9 @@ def main() -> int:
                     c['shape_vs_full'] = paired(cells['full']['chamfer_shape'], c['chamfer_shape'])
         result['scenarios'][s] = cells
     write_json(out / 'bench_recon_speed.json', result)
-    (out / 'bench_recon_speed.md').write_text(markdown(result))
-    print(markdown(result))
+    text = markdown(result)
+    (out / 'bench_recon_speed.md').write_text(text)
+    print(text)
     return 0
 
 

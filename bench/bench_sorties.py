@@ -36,6 +36,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from cluster import Task, add_cluster_args, open_client, run_tasks  # noqa: E402
+from stats import rank_key  # noqa: E402
 from vp_planner.reward_models import DEFAULT_REWARD_MODEL, REWARD_MODELS  # noqa: E402
 from vp_recon.pipeline import MATCHINGS  # noqa: E402
 from common import (ROOT, add_capture, cached, capture_of, capture_tag, chamfer_text, default_models,  # noqa: E402
@@ -208,28 +209,31 @@ def run(client, cache: Path, out: Path, args) -> dict:
 
 
 def rank(record: dict) -> tuple:
-    """Sort key of a case (lower is better): a case with more failed realizations ranks behind one
-    with fewer whatever its mean (a failure is the worst result, as in every table here), then
-    the mean Chamfer; a case that failed in every realization ranks last."""
-    if record.get('chamfer_mean') is None:
-        return (math.inf, math.inf)
-    return (int(record.get('failed') or 0), float(record['chamfer_mean']))
+    """:func:`stats.rank_key` of a case's reconstruction record: a case with more failed
+    realizations ranks behind one with fewer whatever its mean (a failure is the worst result, as
+    in every table here), then the mean Chamfer; a case that failed in every realization (or whose
+    task raised: no count) ranks last."""
+    mean = record.get('chamfer_mean')
+    if mean is None:
+        return rank_key({'failed': math.inf, 'mean': math.nan})
+    return rank_key({'failed': int(record.get('failed') or 0), 'mean': float(mean)})
 
 
 def verdict(row: dict) -> str:
     """Whether e beats b and both c and comes within TARGET of a (lower Chamfer is better; a case
     with failed realizations ranks behind one without, :func:`rank`)."""
     cases = row['cases']
-    if cases.get('e', {}).get('chamfer_mean') is None:
+    e = cases.get('e', {})
+    if e.get('chamfer_mean') is None:
         return 'e failed'
-    e = rank(cases['e'])
-    notes = [f'e {"beats" if e < rank(cases[k]) else "does not beat"} {k}' for k in ('b', 'c-circle', 'c-arc')]
+    notes = [f'e {"beats" if rank(e) < rank(cases[k]) else "does not beat"} {k}' for k in ('b', 'c-circle', 'c-arc')]
     a = cases.get('a', {})
     if a.get('chamfer_mean') is not None:
-        gap = e[1] / a['chamfer_mean'] - 1.0
-        within = gap <= TARGET and e[0] <= rank(a)[0]
+        gap = e['chamfer_mean'] / a['chamfer_mean'] - 1.0
+        e_failed = int(e.get('failed') or 0)
+        within = gap <= TARGET and e_failed <= int(a.get('failed') or 0)
         notes.append(f'{100 * gap:+.1f} % of a ({"within" if within else "beyond"} {100 * TARGET:.0f} %'
-                     + (f'; e failed in {e[0]} realization(s)' if e[0] else '') + ')')
+                     + (f'; e failed in {e_failed} realization(s)' if e_failed else '') + ')')
     return '; '.join(notes)
 
 

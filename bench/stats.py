@@ -37,12 +37,15 @@ def summary(values: Mapping[Hashable, Optional[float]]) -> dict:
             'n': int(len(ok)), 'failed': int(len(values) - len(ok))}
 
 
+def rank_key(s: dict) -> tuple:
+    """Sort key of a :func:`summary` (lower is better): fewer failures first, then lower mean (NaN
+    means last)."""
+    return (s['failed'] > 0, s['failed'], math.isnan(s['mean']), s['mean'] if not math.isnan(s['mean']) else 0.0)
+
+
 def rank(summaries: Mapping[str, dict]) -> list[str]:
-    """Row names best first: fewer failures first, then lower mean (NaN means last)."""
-    def key(name: str):
-        s = summaries[name]
-        return (s['failed'] > 0, s['failed'], math.isnan(s['mean']), s['mean'] if not math.isnan(s['mean']) else 0.0)
-    return sorted(summaries, key=key)
+    """Row names best first: fewer failures first, then lower mean (NaN means last; :func:`rank_key`)."""
+    return sorted(summaries, key=lambda name: rank_key(summaries[name]))
 
 
 def paired_difference(a: Mapping[Hashable, Optional[float]], b: Mapping[Hashable, Optional[float]],

@@ -462,7 +462,8 @@ def run(args: argparse.Namespace) -> int:
         nodes.append(start_node('recon', 'vp_recon', 'recon', {
             'output_folder': str(out), 'width': args.width, 'height': args.height,
             'method': args.method, 'num_threads': recon_threads, 'capture': args.capture, 'source': args.source,
-            'sift_first_octave': args.sift_first_octave, 'dense_scale': args.dense_scale, **on_cluster}, {**env, 'OMP_NUM_THREADS': str(recon_threads)}, out))
+            'sift_first_octave': args.sift_first_octave, 'dense_scale': args.dense_scale, **on_cluster},
+            {**env, 'OMP_NUM_THREADS': str(recon_threads)}, out))
         if args.drones:
             drones = [f'd{k}' for k in range(args.drones)]
             nodes.append(start_node('dispatcher', 'vp_planner', 'dispatcher', {

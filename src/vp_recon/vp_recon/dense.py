@@ -39,8 +39,7 @@ from numpy.typing import NDArray
 from vp_scene.camera import check_cameras, project_with, world_to_camera
 
 __all__ = ["DenseResult", "neighbour_pairs", "overlap_pairs", "dense_reconstruct", "scaled_views", "voxel_downsample",
-           "silhouette_filter",
-           "crop_to_box"]
+           "silhouette_filter", "crop_to_box"]
 
 
 @dataclass
