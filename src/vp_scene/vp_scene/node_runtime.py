@@ -14,13 +14,21 @@ Why not rclpy's own signal handlers: they shut the context down the moment the s
 whatever the node is still doing (answering an action client, publishing, finishing its
 constructor) fails with RCLError tracebacks, and a main thread blocked in a
 MultiThreadedExecutor's wait was seen to miss the shutdown (issue 10, items 4, 6 and 10). Here
-the handler only sets an event (or, while the node is being constructed, ends the process:
-raising an exception into the constructor was swallowed where a library's import catches
-BaseException, as trimesh's does); the executor spins in a thread of its own; the main thread waits for the event,
-lets the node wind down (``node.on_shutdown(timeout)``, optional: e.g. abort an action goal and
+the handler only notes the time of the signal (or, while the node is being constructed, ends the
+process: raising an exception into the constructor was swallowed where a library's import catches
+BaseException, as trimesh's does); the executor spins in a thread of its own; the main thread polls
+for the signal, lets the node wind down (``node.on_shutdown(timeout)``, optional: e.g. abort an action goal and
 answer its client), shuts the executor and the context down and ends the process with
 ``os._exit`` (worker threads inside C++ libraries cannot block the exit). A watchdog ends the
 process at the deadline whatever happens.
+
+The handler takes no lock: Python runs it in the main thread between two bytecodes, possibly
+while that thread holds a lock, and taking the same lock there never returns. It did: the handler
+set a ``threading.Event`` that the main thread was waiting on, a signal that landed while
+``Event.wait`` held the event's lock hung the node for good, before its watchdog was started (one
+node in about 50 when ``make run``'s supervisor was killed with SIGKILL on a busy machine; gdb: the
+main thread in the handler, in ``Condition.__enter__``). So the handler writes a float, the main
+thread sleeps in steps of :data:`POLL_S` and starts the watchdog itself.
 
 Typed parameters: every parameter is declared with ``dynamic_typing=True`` and checked here,
 so that a wrong type is a one-line error like any other bad value (rclpy would raise
@@ -44,6 +52,7 @@ import os
 import signal
 import sys
 import threading
+import time
 import traceback
 from typing import Any, Callable, NamedTuple, Optional
 
@@ -55,6 +64,9 @@ __all__ = ["SHUTDOWN_DEADLINE", "EXIT_OK", "EXIT_CRASHED", "EXIT_BAD_PARAMETERS"
 SHUTDOWN_DEADLINE = 5.0
 #: Seconds a node gets to wind down (``on_shutdown``) within the deadline.
 SHUTDOWN_GRACE = 3.0
+
+#: s between two looks of the main thread for a signal (or a crashed executor).
+POLL_S = 0.1
 
 EXIT_OK, EXIT_CRASHED, EXIT_BAD_PARAMETERS = 0, 1, 2
 
@@ -274,18 +286,16 @@ def run_node(name: str, make_node: Callable[[], Any], args: Optional[list] = Non
     from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
 
-    stop = threading.Event()
+    signalled_at: list = []  # time.monotonic() of the first signal; the handler's only write
     constructing = [True]
-    watchdog = threading.Timer(deadline, _exit, args=(EXIT_OK,))
-    watchdog.daemon = True
 
     def on_signal(signum: int, _frame: Any) -> None:
-        if stop.is_set():  # a second signal: no more waiting
+        # no lock here, not even an Event's (see the module docstring)
+        if signalled_at:  # a second signal: no more waiting
             _exit(EXIT_OK)
         if constructing[0]:  # nothing runs yet that could be lost
             _exit(EXIT_OK)
-        stop.set()
-        watchdog.start()
+        signalled_at.append(time.monotonic())
 
     def install() -> None:
         for sig in (signal.SIGINT, signal.SIGTERM):
@@ -306,7 +316,7 @@ def run_node(name: str, make_node: Callable[[], Any], args: Optional[list] = Non
         constructing[0] = False
         logger.error(f"{error_prefix}: {' '.join(str(exc).split())}")
         _exit(EXIT_BAD_PARAMETERS)
-    if stop.is_set():  # the signal came right after the constructor
+    if signalled_at:  # the signal came right after the constructor
         _exit(EXIT_OK)
 
     executor = MultiThreadedExecutor(num_threads=num_threads) if num_threads > 1 else SingleThreadedExecutor()
@@ -318,11 +328,15 @@ def run_node(name: str, make_node: Callable[[], Any], args: Optional[list] = Non
             executor.spin()
         except Exception:  # noqa: BLE001 - reported below, exit 1
             crashed.append(traceback.format_exc())
-            stop.set()
 
     threading.Thread(target=spin, name=f"{name}-executor", daemon=True).start()
-    while not stop.wait(0.25):
-        pass
+    while not signalled_at and not crashed:
+        time.sleep(POLL_S)
+    if signalled_at:  # from here on the process ends by the deadline, whatever happens
+        watchdog = threading.Timer(max(0.0, deadline - (time.monotonic() - signalled_at[0])), _exit,
+                                   args=(EXIT_OK,))
+        watchdog.daemon = True
+        watchdog.start()
     if crashed:
         sys.stderr.write(crashed[0])
         logger.error("the executor crashed; exiting")
