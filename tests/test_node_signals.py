@@ -141,28 +141,23 @@ def test_a_signal_while_the_main_thread_holds_a_lock_still_ends_the_node(ros_env
     flaky `test_sigkill_of_the_script_takes_the_nodes_with_it` (1 node in about 50 on a busy
     machine). Where the main thread never holds such a lock while it spins, the test sends the
     signal itself, from outside."""
-    import subprocess
     import sys
+
+    from node_process import NodeProcess  # tools/, on sys.path through conftest.py
 
     script = tmp_path / "worst_moment.py"
     script.write_text(WORST_MOMENT_NODE)
-    proc = subprocess.Popen([sys.executable, str(script)], env=ros_env, stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True)
+    node = NodeProcess([sys.executable, str(script)], ros_env, tmp_path / "worst_moment.log")
     try:
-        try:
-            out, _ = proc.communicate(timeout=3.0)  # a node that did not get its own signal is still spinning
-        except subprocess.TimeoutExpired:
-            proc.send_signal(signal.SIGTERM)
+        code = node.wait(3.0)  # a node that did not get its own signal is still spinning
+        if code is None:
+            node.signal(signal.SIGTERM)
             t0 = time.monotonic()
-            out, _ = proc.communicate(timeout=10.0)
-            assert time.monotonic() - t0 < 5.0, out
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        out, _ = proc.communicate()
-        raise AssertionError(f"the node still ran 10 s after SIGTERM:\n{out}")
+            code = node.wait(10.0)
+            assert code is not None, f"the node still ran 10 s after SIGTERM:\n{node.output()}"
+            assert time.monotonic() - t0 < 5.0, node.output()
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
-    assert "spinning" in out and proc.returncode == 0, out
+        node.stop()
+    out = node.output()
+    assert "spinning" in out and code == 0, out
     assert "Traceback" not in out, out
