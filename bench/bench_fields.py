@@ -20,7 +20,10 @@ realization by default) changes the reward on these fields: Spearman's rho again
 all points over 80 plans a field, the mean shift, and the cost per plan.
 
 Writes ``results/bench_fields.md`` and ``results/bench_fields.json``; every plan and
-reconstruction is cached under ``results/cache/fields`` (a re-run resumes). Uses the Corn50 plants
+reconstruction is cached under ``results/cache/fields`` (a re-run resumes). The cache is not
+committed; the report is: a run into a folder whose ``bench_fields.json`` has the same settings
+starts from that report's plans and realizations (:func:`resume_from_report`), so a study grown by
+``--realizations`` 1, 2, ... goes on from a fresh clone, another machine or another session. Uses the Corn50 plants
 of ``../shared/data/corn50`` when present (``--models``), else procedural plants.
 """
 from __future__ import annotations
@@ -39,7 +42,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from cluster import Task, add_cluster_args, open_client, run_tasks  # noqa: E402
 from common import (ROOT, add_capture, cached, capture_of, capture_tag, chamfer_text, default_models,  # noqa: E402
                     known_realizations, machine, models_tag, reconstruct_record, reconstructed,
-                    scene)
+                    scene, write_json)
 from stats import describe, describe_difference, paired_difference, rank, summary  # noqa: E402
 
 #: (field, N) cells: the issue's targets, and N = 16 on the row (planned and reconstructed).
@@ -135,8 +138,68 @@ def recon_cell(cache: Path, out: Path, field: str, n: int, label: str, plan: dic
                           capture=capture_of(args))
         ks = range(min(args.realizations, len(noisy.points)))
         return reconstruct_record(noisy, plan["cameras"], cfg, out / "recon" / "fields" / tag, ks,
-                                  known_realizations(cache / "recon" / f"{tag}.json", out / "recon" / "fields" / tag))
+                                  known_realizations(cache / "recon" / f"{tag}.json", out / "recon" / "fields" / tag,
+                                                     clouds=False))
     return cached(cache / "recon" / f"{tag}.json", compute)
+
+
+def resume_from_report(out: Path, cache: Path, args) -> int:
+    """Seed the cache with the records of ``out/bench_fields.json`` (an earlier run's report) that
+    this run would otherwise recompute; returns how many files it wrote.
+
+    Each record goes where that run cached it: a plan under its plan file, a reconstruction of K
+    realizations under the tag with ``-k<K>``, which a run with more realizations reuses entry by
+    entry (:func:`common.known_realizations`; the report holds no clouds, and the fields benchmark
+    reads none). Nothing is written over an existing cache file, and nothing from a report of other
+    settings: another plant set, planning seed, image size or budget (the whole report is left
+    alone), or a reconstruction under another capture (that record alone). The subsampling
+    measurement goes where :func:`subsampling_cell` caches it. Failed tasks are not
+    records (the cache never keeps them; they run again), nor is a failed plan's stand-in record."""
+    from argparse import Namespace
+
+    report_file = out / "bench_fields.json"
+    if not report_file.exists():
+        return 0
+    try:
+        report = json.loads(report_file.read_text())
+    except json.JSONDecodeError as exc:
+        raise SystemExit(f"bench_fields: {report_file} is not JSON ({exc}); move it away to start afresh")
+    same = (report.get("models") == models_tag(args.models) and report.get("seed") == args.seed
+            and report.get("resolution") == [args.width, args.height]
+            and report.get("evaluations_per_part") == EVALS_PER_PART)
+    if not same:
+        print(f"bench_fields: {report_file} has other settings; not resumed from", flush=True)
+        return 0
+    capture = capture_of(args).to_dict()
+    as_run = Namespace(**{**vars(args), "realizations": int(report["realizations"])})
+    written = 0
+    for key, cell in report.get("cells", {}).items():
+        spec, _, label = key.partition("/")
+        field, _, n = spec.partition(":")
+        if label not in METHODS:
+            continue
+        plan, recon = cell.get("plan") or {}, cell.get("recon") or {}
+        targets = []
+        if "cameras" in plan and "error" not in plan:
+            targets.append((plan_path(cache, field, int(n), label, args)[0], plan))
+        if recon.get("per_realization") and recon.get("capture_params") == capture:
+            targets.append((cache / "recon" / f"{recon_tag(field, int(n), label, as_run)}.json", recon))
+        for path, record in targets:
+            if not path.exists():
+                write_json(path, record)
+                written += 1
+    for spec, record in report.get("subsampling", {}).items():
+        path = subsampling_path(cache, spec.partition(":")[0], int(spec.partition(":")[2]), args)
+        if not path.exists():
+            write_json(path, record)
+            written += 1
+    print(f"bench_fields: resumed from {report_file} ({report['realizations']} realization(s)): "
+          f"{written} record(s) into {cache}", flush=True)
+    return written
+
+
+def subsampling_path(cache: Path, field: str, n: int, args) -> Path:
+    return cache / "subsampling" / f"{models_tag(args.models)}-{field}-n{n}.json"
 
 
 def subsampling_cell(cache: Path, field: str, n: int, plans: dict, args) -> dict:
@@ -149,7 +212,7 @@ def subsampling_cell(cache: Path, field: str, n: int, plans: dict, args) -> dict
     from vp_planner.reward_models import CoverageParams, make_reward
     from vp_planner.space import ViewSpace
 
-    path = cache / "subsampling" / f"{models_tag(args.models)}-{field}-n{n}.json"
+    path = subsampling_path(cache, field, n, args)
 
     def compute() -> dict:
         torch.set_num_threads(1)
@@ -178,6 +241,7 @@ def main(argv=None) -> int:
     args = parse_args(argv)
     out = Path(args.out)
     cache = out / "cache" / "fields"
+    resume_from_report(out, cache, args)
     cells = []
     for spec in args.fields:
         name, _, n = spec.partition(":")

@@ -230,10 +230,14 @@ def split_realizations(stem: str) -> Optional[tuple[str, int, str]]:
     return (m.group(1), int(m.group(2)), m.group(3)) if m else None
 
 
-def known_realizations(cache_file: Path, folder: Path) -> dict:
+def known_realizations(cache_file: Path, folder: Path, clouds: bool = True) -> dict:
     """realization -> ``per_realization`` entry of the cached records of the same cell with fewer
     realizations (``<tag>-k<j><rest>.json`` beside ``cache_file`` = ``<tag>-k<n><rest>.json``, j < n), their
-    clouds copied into ``folder``: what a rerun with more realizations need not recompute."""
+    clouds copied into ``folder``: what a rerun with more realizations need not recompute.
+
+    ``clouds``: an entry whose cloud is gone is recomputed (Table I's clouds feed coverage_check and
+    the second sortie); False for a benchmark that reads the numbers alone (the fields benchmark,
+    resumed on a fresh clone from its committed report, which holds no clouds)."""
     import shutil
 
     split = split_realizations(cache_file.stem)
@@ -250,7 +254,7 @@ def known_realizations(cache_file: Path, folder: Path) -> dict:
             if k in known:
                 continue
             cloud = folder.parent / f'{base}-k{j}{rest}' / f'recon_{k}.ply'
-            if p.get('chamfer') is not None and not cloud.exists():
+            if clouds and p.get('chamfer') is not None and not cloud.exists():
                 continue  # its cloud is gone: recompute rather than leave a hole in the folder
             if cloud.exists():
                 folder.mkdir(parents=True, exist_ok=True)

@@ -100,3 +100,74 @@ def test_records_before_per_realization_failures_are_reused_by_position(tmp_path
     known = common.known_realizations(cache / "c-k3.json", recon / "c-k3")
     assert known == {0: {"chamfer": 1.5}}
     assert common.known_realizations(cache / "c.json", recon / "c") == {}  # no realization count: nothing to reuse
+
+
+def test_without_clouds_an_entry_whose_cloud_is_gone_is_reused(tmp_path) -> None:
+    """The fields benchmark reads numbers alone (clouds=False): a record resumed from a report,
+    whose clouds never travelled, still counts; Table I's default keeps recomputing it."""
+    cache, recon = tmp_path / "cache", tmp_path / "recon"
+    cache.mkdir()
+    (cache / "c-k2.json").write_text(json.dumps({"per_realization": [{"realization": 0, "chamfer": 1.5},
+                                                                     {"realization": 1, "chamfer": 2.5}]}))
+    assert common.known_realizations(cache / "c-k3.json", recon / "c-k3") == {}
+    known = common.known_realizations(cache / "c-k3.json", recon / "c-k3", clouds=False)
+    assert {k: p["chamfer"] for k, p in known.items()} == {0: 1.5, 1: 2.5}
+
+
+def _fields_report(args, capture: dict) -> dict:
+    """A bench_fields.json of one realization: grid_3x3 N=8 with a good egp, a failed circle plan
+    (and its stand-in reconstruction record), and an arc reconstructed under another capture."""
+    import bench_fields
+
+    plan = {"cameras": [[0.0, 2.0, 1.5, 0.0, 0.0, 0.0]] * 8, "reward": 0.5, "reward_model": "coverage",
+            "evaluations": 100, "seconds": 1.0, "parts": 2, "initial_best": 0.4}
+    entry = {"realization": 0, "chamfer": 2.0, "chamfer_shape": 1.0, "accuracy": 1.0, "completeness": 1.0,
+             "seconds": {"render": 1.0}}
+    recon = {"chamfer_mean": 2.0, "chamfer_std": 0.0, "failed": 0, "capture": capture["kind"],
+             "capture_params": capture, "per_realization": [entry]}
+    return {"models": "procedural", "seed": args.seed, "resolution": [args.width, args.height], "realizations": 1,
+            "evaluations_per_part": bench_fields.EVALS_PER_PART,
+            "cells": {"grid_3x3:8/egp": {"plan": plan, "recon": recon},
+                      "grid_3x3:8/circle": {"plan": {"error": "RuntimeError", "error_msg": "x"},
+                                            "recon": {"error": "RuntimeError", "error_msg": "planning failed: x",
+                                                      "per_realization": []}},
+                      "grid_3x3:8/arc": {"plan": plan, "recon": {**recon, "capture_params": {**capture, "seed": 7}}}},
+            "subsampling": {"grid_3x3:8": {"plans": 3, "sizes": {}}}}
+
+
+def test_a_fields_run_on_a_fresh_clone_resumes_from_the_committed_report(tmp_path, fake_pipeline) -> None:
+    """The cache is git-ignored; bench_fields.json is committed. A run into the report's folder with
+    one more realization writes the report's records where that run cached them and reconstructs
+    only the new realization; failures, other captures and other settings are not carried over."""
+    import bench_fields
+
+    calls, _ = fake_pipeline
+    out = tmp_path / "fields_seed1"
+    out.mkdir()
+    args = bench_fields.parse_args(["--models", "", "--fields", "grid_3x3:8", "--seed", "1", "--realizations", "2",
+                                    "--out", str(out)])
+    capture = common.capture_of(args).to_dict()
+    report = _fields_report(args, capture)
+    (out / "bench_fields.json").write_text(json.dumps(report))
+    cache = out / "cache" / "fields"
+    # another planning seed: the whole report is left alone
+    other = bench_fields.parse_args(["--models", "", "--seed", "2", "--out", str(out)])
+    assert bench_fields.resume_from_report(out, cache, other) == 0 and not cache.exists()
+
+    # egp's plan and recon, arc's plan (its reconstruction flew another capture), the subsampling
+    assert bench_fields.resume_from_report(out, cache, args) == 4
+    egp_plan = bench_fields.plan_path(cache, "grid_3x3", 8, "egp", args)[0]
+    assert json.loads(egp_plan.read_text()) == report["cells"]["grid_3x3:8/egp"]["plan"]
+    assert not bench_fields.plan_path(cache, "grid_3x3", 8, "circle", args)[0].exists()  # failures run again
+    assert sorted(p.name for p in (cache / "recon").iterdir()) == [
+        bench_fields.recon_tag("grid_3x3", 8, "egp", bench_fields.parse_args(
+            ["--models", "", "--seed", "1", "--realizations", "1"])) + ".json"]
+    assert bench_fields.resume_from_report(out, cache, args) == 0  # nothing written over the cache
+
+    rec = bench_fields.recon_cell(cache, out, "grid_3x3", 8, "egp", report["cells"]["grid_3x3:8/egp"]["plan"], args)
+    assert calls == [1]  # realization 0 came from the report
+    assert [p["chamfer"] for p in rec["per_realization"]] == [2.0, 2.0]  # the fake's realization 1: 0.02 x100
+
+    (out / "bench_fields.json").write_text("{torn")
+    with pytest.raises(SystemExit, match="is not JSON"):
+        bench_fields.resume_from_report(out, cache, args)
