@@ -94,6 +94,12 @@ def field_budget(field: str, n: int, models: str) -> tuple[int, int]:
     return parts, total_evaluations("egp", EVALS_PER_PART, parts)
 
 
+def field_cell(spec: str) -> tuple[str, int]:
+    """(field, N) of a ``FIELD:N`` cell (``--fields``, the report's keys)."""
+    field, _, n = spec.partition(":")
+    return field, int(n)
+
+
 def plan_path(cache: Path, field: str, n: int, label: str, args) -> tuple[Path, int]:
     """(cache file, evaluation budget) of :func:`plan_cell`."""
     parts, total = field_budget(field, n, args.models)
@@ -175,21 +181,21 @@ def resume_from_report(out: Path, cache: Path, args) -> int:
     written = 0
     for key, cell in report.get("cells", {}).items():
         spec, _, label = key.partition("/")
-        field, _, n = spec.partition(":")
+        field, n = field_cell(spec)
         if label not in METHODS:
             continue
         plan, recon = cell.get("plan") or {}, cell.get("recon") or {}
         targets = []
         if "cameras" in plan and "error" not in plan:
-            targets.append((plan_path(cache, field, int(n), label, args)[0], plan))
+            targets.append((plan_path(cache, field, n, label, args)[0], plan))
         if recon.get("per_realization") and recon.get("capture_params") == capture:
-            targets.append((cache / "recon" / f"{recon_tag(field, int(n), label, as_run)}.json", recon))
+            targets.append((cache / "recon" / f"{recon_tag(field, n, label, as_run)}.json", recon))
         for path, record in targets:
             if not path.exists():
                 write_json(path, record)
                 written += 1
     for spec, record in report.get("subsampling", {}).items():
-        path = subsampling_path(cache, spec.partition(":")[0], int(spec.partition(":")[2]), args)
+        path = subsampling_path(cache, *field_cell(spec), args)
         if not path.exists():
             write_json(path, record)
             written += 1
@@ -242,10 +248,7 @@ def main(argv=None) -> int:
     out = Path(args.out)
     cache = out / "cache" / "fields"
     resume_from_report(out, cache, args)
-    cells = []
-    for spec in args.fields:
-        name, _, n = spec.partition(":")
-        cells.append((name, int(n)))
+    cells = [field_cell(spec) for spec in args.fields]
     with open_client(args.scheduler, args.workers) as client:
         tasks = [Task((field, n, label), plan_cell, (cache, field, n, label, args),
                       plan_path(cache, field, n, label, args)[0], f"{field} N={n} {label}")
