@@ -297,8 +297,9 @@ def test_scene_planner_recon_and_dispatcher_on_three_hosts(lab, ros_env, tmp_pat
     wait(lambda: "plan received: 2 cameras" in recon.output() and "ground truth: 2 realizations" in recon.output()
          and "scene description: one_plant" in recon.output(), 90, "the late recon's plan and scene", recon)
     # and it works on them: it ends the plan with an aggregate score or a plan error, whatever the
-    # (tiny) reconstruction gives; read from its log, since /reconstruction/score is volatile and a
-    # recon that fails within a second can publish before the listener is matched
+    # (tiny) reconstruction gives; read from its log, since the probe listens to
+    # /reconstruction/score volatile and a recon that fails within a second can publish before the
+    # probe is matched
     wait(lambda: "aggregate: Chamfer" in recon.output() or "]: plan: realization" in recon.output(), 120,
          "the recon's result for the plan", recon)
 

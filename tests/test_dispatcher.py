@@ -167,10 +167,10 @@ def test_drones_fly_to_their_poses_and_a_new_plan_redispatches(ros_env, start_no
 
     params = AsyncParameterClient(fleet.client.node, "dispatcher")
     assert params.wait_for_services(timeout_sec=TIMEOUT)
-    set_ = fleet.client.spin_future(params.set_parameters([Parameter("assignment", value="min_max"),
+    set_ = fleet.client.call(lambda: params.set_parameters([Parameter("assignment", value="min_max"),
                                                           Parameter("orientation", value="optical")]), TIMEOUT)
     assert all(r.successful for r in set_.results), [r.reason for r in set_.results]
-    refused = fleet.client.spin_future(params.set_parameters([Parameter("drones", value=["d0"])]), TIMEOUT)
+    refused = fleet.client.call(lambda: params.set_parameters([Parameter("drones", value=["d0"])]), TIMEOUT)
     assert not refused.results[0].successful and "read-only parameter: drones" in refused.results[0].reason
 
     second = ring(4, radius=3.0, height=1.6, phase=0.9)
@@ -250,11 +250,11 @@ def test_refused_plans_and_the_missing_scene(ros_env, start_node, ros_node) -> N
     assert ans.error_code == FleetAssignment.NO_SCENE and "stand-off could not be checked" in ans.error_msg
     params = AsyncParameterClient(fleet.client.node, "dispatcher")
     assert params.wait_for_services(timeout_sec=TIMEOUT)
-    fleet.client.spin_future(params.set_parameters([Parameter("require_scene", value=False)]), TIMEOUT)
+    fleet.client.call(lambda: params.set_parameters([Parameter("require_scene", value=False)]), TIMEOUT)
     ans = fleet.send(ring(2), stamp=302)
     assert ans.error_code == FleetAssignment.NONE and not ans.standoff_checked, ans.error_msg
     assert "stand-off not checked" in dispatcher.output()
-    fleet.client.spin_future(params.set_parameters([Parameter("require_scene", value=True)]), TIMEOUT)
+    fleet.client.call(lambda: params.set_parameters([Parameter("require_scene", value=True)]), TIMEOUT)
     start_node("vp_scene", "scene", SCENE, ros_env)
     assert fleet.client.spin_until(lambda: "scene received" in dispatcher.output(), TIMEOUT), dispatcher.output()
     for d in drones:

@@ -105,11 +105,11 @@ def test_descriptors_show_the_limits_and_rclpy_enforces_them(name, ros_env, star
     lister = client.node.create_client(ListParameters, f"/{node_name}/list_parameters")
     describer = client.node.create_client(DescribeParameters, f"/{node_name}/describe_parameters")
     assert client.spin_until(lambda: lister.service_is_ready() and describer.service_is_ready(), 60.0), node.output()
-    names = [n for n in client.spin_future(lister.call_async(ListParameters.Request()), 60.0).result.names
+    names = [n for n in client.call(lambda: lister.call_async(ListParameters.Request()), 60.0).result.names
              if n not in ("use_sim_time", "start_type_description_service")]
     assert set(expected) <= set(names), names
-    descs = {d.name: d for d in client.spin_future(
-        describer.call_async(DescribeParameters.Request(names=names)), 60.0).descriptors}
+    descs = {d.name: d for d in client.call(
+        lambda: describer.call_async(DescribeParameters.Request(names=names)), 60.0).descriptors}
     assert set(descs) == set(names)
     for n, d in descs.items():
         assert d.description.strip(), f"{name}: parameter {n} has no description"
@@ -132,15 +132,15 @@ def test_descriptors_show_the_limits_and_rclpy_enforces_them(name, ros_env, star
     setter = AsyncParameterClient(client.node, node_name)
     assert setter.wait_for_services(timeout_sec=60.0)
     for prm_name, value in ([outside] if outside else []):
-        before = client.spin_future(setter.get_parameters([prm_name]), 60.0).values[0]
-        res = client.spin_future(setter.set_parameters([Parameter(prm_name, value=value)]), 60.0).results[0]
+        before = client.call(lambda: setter.get_parameters([prm_name]), 60.0).values[0]
+        res = client.call(lambda: setter.set_parameters([Parameter(prm_name, value=value)]), 60.0).results[0]
         assert not res.successful and "out of range" in res.reason and prm_name in res.reason, res.reason
-        after = client.spin_future(setter.get_parameters([prm_name]), 60.0).values[0]
+        after = client.call(lambda: setter.get_parameters([prm_name]), 60.0).values[0]
         assert after == before, (before, after)
     if fixed:
         prm_name, value = fixed
-        before = client.spin_future(setter.get_parameters([prm_name]), 60.0).values[0]
-        res = client.spin_future(setter.set_parameters([Parameter(prm_name, value=value)]), 60.0).results[0]
+        before = client.call(lambda: setter.get_parameters([prm_name]), 60.0).values[0]
+        res = client.call(lambda: setter.set_parameters([Parameter(prm_name, value=value)]), 60.0).results[0]
         assert not res.successful and f"read-only parameter: {prm_name}" in res.reason, res.reason
-        assert client.spin_future(setter.get_parameters([prm_name]), 60.0).values[0] == before
+        assert client.call(lambda: setter.get_parameters([prm_name]), 60.0).values[0] == before
     assert node.alive(), node.output()

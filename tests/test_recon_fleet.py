@@ -16,6 +16,7 @@ from vp_interfaces.msg import FleetAssignment, SceneDescription
 from vp_interfaces.msg import ReconstructionScore as Score
 
 from vp_recon.pipeline import ReconConfig, reconstruct_realization
+from vp_recon.recon_node import SCORES  # transient local: a score sent before the match is not lost
 from vp_scene.camera import cameras_to_poses, look_at
 from vp_scene.capture import IDEAL
 from vp_scene.messages import cameras_to_pose_array, fleet_assignment_msg, pose_msg, scene_of_description
@@ -47,7 +48,7 @@ def fly(cams: np.ndarray, drones: list, recon_params: dict, ros_env, start_node,
                                                "camera": True, "capture": "ideal", **SIZE}, ros_env,
                    args=("--ros-args", "-r", f"__node:=sim_{d}"))
     client = ros_node(ros_env)
-    scores = client.subscribe(Score, "/reconstruction/score", 20)
+    scores = client.subscribe(Score, "/reconstruction/score", SCORES)
     descriptions = client.subscribe(SceneDescription, "/scene/description", LATCHED)
     fleet_pub = client.node.create_publisher(FleetAssignment, "/fleet/assignment", LATCHED)
     plan_pub = client.node.create_publisher(type(cameras_to_pose_array(cams, "map", None)), "/camera_plan", LATCHED)

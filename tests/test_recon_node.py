@@ -22,6 +22,7 @@ from sensor_msgs.msg import PointCloud2
 from vp_interfaces.msg import CameraPlan, SceneDescription
 from vp_interfaces.msg import ReconstructionScore as Score
 
+from vp_recon.recon_node import SCORES  # transient local: a score sent before the match is not lost
 from vp_scene.camera import cameras_to_poses
 from vp_scene.cloud import pointcloud2_to_numpy
 
@@ -57,7 +58,7 @@ def recon_system(ros_env, start_node, ros_node, tmp_path):
         start_node("vp_scene", "scene", SCENE, ros_env)
         recon = start_node("vp_recon", "recon", {**RECON, "output_folder": str(tmp_path / "out"), **params}, ros_env)
         client = ros_node(ros_env)
-        scores = client.subscribe(Score, "/reconstruction/score", 10)
+        scores = client.subscribe(Score, "/reconstruction/score", SCORES)
         clouds = client.subscribe(PointCloud2, "/reconstruction/points", 10)
         pub = client.node.create_publisher(PoseArray, "/camera_plan", LATCHED)
         assert client.spin_until(lambda: client.node.count_subscribers("/camera_plan") >= 1, 60), recon.output()
@@ -76,12 +77,12 @@ def test_plan_becomes_scores_and_clouds(recon_system, tmp_path) -> None:
     client, pub, scores, clouds, recon = recon_system(method="ring")
     params = AsyncParameterClient(client.node, "recon")
     assert params.wait_for_services(timeout_sec=60)
-    refused = client.spin_future(params.set_parameters([Parameter("width", value=4)]), 60).results[0]
+    refused = client.call(lambda: params.set_parameters([Parameter("width", value=4)]), 60).results[0]
     assert not refused.successful and "width" in refused.reason
-    refused = client.spin_future(params.set_parameters([Parameter("max_realizations", value=-1)]), 60).results[0]
+    refused = client.call(lambda: params.set_parameters([Parameter("max_realizations", value=-1)]), 60).results[0]
     assert not refused.successful and "max_realizations" in refused.reason
     smaller = [Parameter("width", value=400), Parameter("height", value=300)]
-    assert all(r.successful for r in client.spin_future(params.set_parameters(smaller), 60).results)
+    assert all(r.successful for r in client.call(lambda: params.set_parameters(smaller), 60).results)
 
     info_pub = client.node.create_publisher(CameraPlan, "/camera_plan/info", LATCHED)
     plan = pose_array(ring(), stamp=7)
@@ -106,7 +107,9 @@ def test_plan_becomes_scores_and_clouds(recon_system, tmp_path) -> None:
 
     late = client.add_node("late_subscriber")
     late_clouds = client.subscribe(PointCloud2, "/reconstruction/points", LATCHED, node=late)
-    assert client.spin_until(lambda: late_clouds, 30)
+    late_scores = client.subscribe(Score, "/reconstruction/score", SCORES, node=late)
+    assert client.spin_until(lambda: late_clouds and len(late_scores) == 3, 30), len(late_scores)
+    assert [s.realization for s in late_scores] == [0, 1, Score.AGGREGATE]  # the plan's scores, kept
     pts, _, real = pointcloud2_to_numpy(late_clouds[0])
     assert len(late_clouds) == 1 and sorted(np.unique(real)) == [0, 1]
     assert [int((real == k).sum()) for k in (0, 1)] == [next(s.num_points for s in per if s.realization == k)
@@ -194,7 +197,7 @@ def test_scene_of_a_layout_file_is_rebuilt_from_the_description(ros_env, start_n
     blocker = tmp_path / "a_file"
     blocker.write_text("not a folder")
     recon = start_node("vp_recon", "recon", {**RECON, "output_folder": str(blocker / "sub")}, ros_env)
-    scores = client.subscribe(Score, "/reconstruction/score", 10)
+    scores = client.subscribe(Score, "/reconstruction/score", SCORES)
     pub = client.node.create_publisher(PoseArray, "/camera_plan", LATCHED)
     assert client.spin_until(lambda: client.node.count_subscribers("/camera_plan") >= 1, 60), recon.output()
     pub.publish(pose_array(ring()))
@@ -213,7 +216,7 @@ def test_bad_parameter_exits_non_zero(ros_env, start_node) -> None:
 def test_plan_without_scene_is_reported(ros_env, start_node, ros_node, tmp_path) -> None:
     recon = start_node("vp_recon", "recon", {**RECON, "output_folder": str(tmp_path), "scene_timeout": 1.0}, ros_env)
     client = ros_node(ros_env)
-    scores = client.subscribe(Score, "/reconstruction/score", 10)
+    scores = client.subscribe(Score, "/reconstruction/score", SCORES)
     pub = client.node.create_publisher(PoseArray, "/camera_plan", LATCHED)
     pub.publish(pose_array(ring()))
     assert client.spin_until(lambda: aggregate(scores), 60), recon.output()[-3000:]

@@ -191,10 +191,10 @@ def test_runtime_parameter_change(ros_env, start_node, ros_node, tmp_path) -> No
            (Parameter("plant_spacing", value=-1.0), "plant_spacing"),
            (Parameter("scenario", value=_bad_layout(tmp_path)), "bad_field.yaml: grid.rows")]
     for prm, reason in bad:
-        res = client.spin_future(params.set_parameters([prm]), TIMEOUT).results[0]
+        res = client.call(lambda: params.set_parameters([prm]), TIMEOUT).results[0]
         assert not res.successful and reason in res.reason, (prm.name, res.reason)
     assert node.alive(), node.output()
-    values = client.spin_future(params.get_parameters(["realizations", "scenario"]), TIMEOUT).values
+    values = client.call(lambda: params.get_parameters(["realizations", "scenario"]), TIMEOUT).values
     assert values[0].integer_value == 2 and values[1].string_value == "one_plant"
 
     # the old scene is still served (a new subscriber gets K = 2 and the same n_wind)
@@ -205,7 +205,7 @@ def test_runtime_parameter_change(ros_env, start_node, ros_node, tmp_path) -> No
     assert sorted(np.unique(real).tolist()) == [0, 1]
 
     # a valid change is applied and republished
-    res = client.spin_future(params.set_parameters([Parameter("realizations", value=3)]), TIMEOUT).results[0]
+    res = client.call(lambda: params.set_parameters([Parameter("realizations", value=3)]), TIMEOUT).results[0]
     assert res.successful, res.reason
     assert client.spin_until(lambda: len(got["/scene/noisy_points"]) >= 2 and len(got["/scene/description"]) >= 2,
                              TIMEOUT), node.output()

@@ -197,8 +197,11 @@ class Mission:
         self.aggregate = threading.Event()
         self.node.create_subscription(PointCloud2, '/scene/noisy_points',
                                       lambda _m: self.scene_ready.set(), latched)
-        self.node.create_subscription(ReconstructionScore, '/reconstruction/score',
-                                      self._on_score, 10)
+        # as the recon node offers it (vp_recon.recon_node.SCORES): a score sent before this
+        # subscription matched (an immediate error) still arrives
+        self.node.create_subscription(ReconstructionScore, '/reconstruction/score', self._on_score,
+                                      QoSProfile(depth=64, reliability=ReliabilityPolicy.RELIABLE,
+                                                 durability=DurabilityPolicy.TRANSIENT_LOCAL))
         self.assignments: List[object] = []
         self.node.create_subscription(FleetAssignment, '/fleet/assignment', self.assignments.append,
                                       QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,

@@ -26,7 +26,9 @@ and publishes
 
 * ``/reconstruction/score`` (vp_interfaces/ReconstructionScore): one per realization as it is
   done, then the aggregate (``realization = AGGREGATE``); on a failure, the failing
-  realization's error and an aggregate with the same error code;
+  realization's error and an aggregate with the same error code; transient local with depth
+  ``SCORE_HISTORY`` (64): a subscriber that asks for transient local durability gets the last 64
+  scores when it joins, a volatile one (``ros2 topic echo`` by default) those sent after;
 * ``/reconstruction/points`` (PointCloud2, field ``realization``, latched with depth 1): after
   each realization, the reconstructed clouds of *all* realizations of the plan done so far, so
   that a late subscriber gets every finished realization in the one message it receives.
@@ -81,6 +83,12 @@ from vp_scene.node_runtime import (INT_MAX, NewestWins, Param, declare_typed, pa
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 Score = ReconstructionScore
+#: /reconstruction/score keeps the last SCORE_HISTORY scores for a late subscriber that asks for
+#: them (transient local): a plan's scores outlast the moment they were sent, and an immediate
+#: error score is not lost to a subscriber whose match with this publisher is not complete yet.
+SCORE_HISTORY = 64
+SCORES = QoSProfile(depth=SCORE_HISTORY, reliability=ReliabilityPolicy.RELIABLE,
+                    durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 #: The node's parameters (:class:`vp_scene.node_runtime.Param`): default (its type is enforced),
 #: description, the range the node enforces; all are read for every plan.
@@ -211,7 +219,7 @@ class ReconNode(Node):
         self._scene = None  # rebuilt NoisyScene matching _description
         self._run_dir: Optional[Path] = None  # the plan folder being filled (see on_shutdown)
         self._flown: list = []  # fleet plans reconstructed and recorded: (cameras (N, 6), plan folder)
-        self.score_pub = self.create_publisher(Score, '/reconstruction/score', 10)
+        self.score_pub = self.create_publisher(Score, '/reconstruction/score', SCORES)
         self.points_pub = self.create_publisher(PointCloud2, '/reconstruction/points', LATCHED)
         self.create_subscription(SceneDescription, '/scene/description', self._on_description, LATCHED)
         self.create_subscription(PointCloud2, '/scene/noisy_points', self._on_truth, LATCHED)
