@@ -1,17 +1,22 @@
 """The viewer node (vp_recon viewer) seen in a real headless chromium driven by selenium: the page
-loads, shows the plan a planner published (N cameras: the GUI line the viewer writes with its N
-frustums appears in the page) and follows a new plan. Skipped only when /usr/bin/chromium is
-absent; nothing is downloaded (chromedriver and chromium from Debian, selenium-manager never
-runs); every wait has a deadline; chromium and chromedriver are ended on teardown. Also: a port in
-use is one line and exit 2.
+loads from the URL the node logs (its token included), shows the plan a planner published (N
+cameras: the GUI line the viewer writes with its N frustums appears in the page) and follows a new
+plan; a page of another origin in the same browser cannot open the viewer's WebSocket, not even
+with the token. Skipped only when /usr/bin/chromium is absent; nothing is downloaded (chromedriver
+and chromium from Debian, selenium-manager never runs); every wait has a deadline; chromium and
+chromedriver are ended on teardown. Also: a port in use is one line and exit 2.
 
 With VP_VIEWER_SCREENSHOT=path the test saves the page (README's docs/viewer.png comes from it).
 """
 from __future__ import annotations
 
+import contextlib
+import http.server
 import os
+import re
 import socket
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -61,16 +66,56 @@ def chromium():
         yield driver
 
 
+@contextlib.contextmanager
+def other_site():
+    """A web site of another origin (http://127.0.0.1:<another port>) serving one empty page."""
+    class Page(http.server.BaseHTTPRequestHandler):
+        def do_GET(self) -> None:
+            body = b"<!doctype html><title>another site</title>"
+            self.send_response(200)
+            self.send_header("Content-Type", "text/html")
+            self.send_header("Content-Length", str(len(body)))
+            self.end_headers()
+            self.wfile.write(body)
+
+        def log_message(self, *args) -> None:
+            pass
+
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Page)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    try:
+        yield f"http://127.0.0.1:{server.server_address[1]}/"
+    finally:
+        server.shutdown()
+        server.server_close()
+        thread.join(timeout=10)
+
+
+#: In the page: open a WebSocket to each URL with viser's subprotocol; 'open' or 'refused' each.
+TRY_SOCKETS = """
+const [urls, protocol, done] = arguments;
+Promise.all(urls.map(u => new Promise(settle => {
+  const ws = new WebSocket(u, [protocol]);
+  ws.onopen = () => { settle('open'); ws.close(); };
+  ws.onclose = () => settle('refused');
+}))).then(done);
+"""
+
+
 def test_the_page_shows_the_plan_and_follows_a_new_one(ros_env, start_node, ros_node, chromium) -> None:
+    import viser
+
     port = free_port()
     viewer = start_node("vp_recon", "viewer", {"port": port}, ros_env)
     assert viewer.wait_for_output(f"viewer at http://127.0.0.1:{port}", 60), viewer.output()[-2000:]
+    url = re.search(rf"viewer at (http://127\.0\.0\.1:{port}\S*)", viewer.output()).group(1)
     client = ros_node(ros_env)
     scene = client.node.create_publisher(PointCloud2, "/scene/noisy_points", LATCHED)
     plans = client.node.create_publisher(PoseArray, "/camera_plan", LATCHED)
     scene.publish(scene_msg())
     plans.publish(plan_msg(4, 1.5))
-    wait_page(chromium, f"http://127.0.0.1:{port}", 60)
+    wait_page(chromium, url, 60)  # the URL the node logged, token and all
     wait_text(chromium, "plan: 4 cameras", 90)
     wait_text(chromium, "4000 of 4000 points shown", 30)
     plans.publish(plan_msg(6, 2.0))  # a new plan: the page follows
@@ -80,6 +125,14 @@ def test_the_page_shows_the_plan_and_follows_a_new_one(ros_env, start_node, ros_
     if shot:
         time.sleep(3.0)  # let the clouds and frustums render
         chromium.save_screenshot(shot)
+    # Hardening III, item 3: a site of another origin open in the same browser cannot open the
+    # viewer's socket (it got 101 and could read the scene and the plan), even with the token
+    sockets = [f"ws://127.0.0.1:{port}", url.replace("http://", "ws://").rstrip("/")]
+    with other_site() as site:
+        chromium.get(site)
+        chromium.set_script_timeout(30)
+        tried = chromium.execute_async_script(TRY_SOCKETS, sockets, f"viser-v{viser.__version__}")
+    assert tried == ["refused", "refused"], dict(zip(sockets, tried))
     assert viewer.poll() is None, viewer.output()[-2000:]
 
 

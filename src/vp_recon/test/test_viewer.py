@@ -1,7 +1,10 @@
-"""vp_recon.viewer without a browser: the scene it builds from a recording (server side) and its
-bad-input errors. The page in a real chromium, fed by the live node: tests/test_viewer_browser.py."""
+"""vp_recon.viewer without a browser: the scene it builds from a recording (server side), its
+bad-input errors, and who may open it (the token, the Origin). The page in a real chromium, fed by
+the live node: tests/test_viewer_browser.py."""
 from __future__ import annotations
 
+import base64
+import os
 import socket
 import subprocess
 import sys
@@ -132,3 +135,52 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path) -> None:
     assert proc.stderr.strip().splitlines()[-1] == f"error: port {port} on 127.0.0.1 is in use (try --port / make view PORT=...)"
     with pytest.raises(ViewerError, match="no recording"):
         load_run(empty)
+
+
+def handshake(port: int, path: str, origin=None, websocket: bool = True) -> str:
+    """The status line the viewer answers to a WebSocket handshake (or a plain GET) for ``path``."""
+    import viser
+
+    lines = [f"GET {path} HTTP/1.1", f"Host: 127.0.0.1:{port}"]
+    if websocket:
+        lines += ["Upgrade: websocket", "Connection: Upgrade", "Sec-WebSocket-Version: 13",
+                  f"Sec-WebSocket-Key: {base64.b64encode(os.urandom(16)).decode()}",
+                  f"Sec-WebSocket-Protocol: viser-v{viser.__version__}"]  # what viser's page asks for
+    if origin is not None:
+        lines.append(f"Origin: {origin}")
+    with socket.create_connection(("127.0.0.1", port), timeout=10) as s:
+        s.sendall(("\r\n".join(lines) + "\r\n\r\n").encode())
+        data = b""
+        while b"\r\n" not in data:
+            chunk = s.recv(256)
+            if not chunk:
+                break
+            data += chunk
+    return data.split(b"\r\n")[0].decode()
+
+
+def test_only_the_printed_url_from_its_own_page_opens_the_websocket() -> None:
+    """Hardening III, item 3: a web page of another origin (``Origin: http://evil.example``) got
+    101 Switching Protocols, so any site open in a browser on this machine could read the scene
+    and the plan. Now a handshake needs the token of the printed URL and, from a browser, the
+    viewer's own origin: anything else is 403 before a byte of the scene is sent."""
+    port = free_port()
+    viewer = PlanViewer(port=port, max_points=100)
+    try:
+        own = f"http://127.0.0.1:{port}"
+        url = viewer.url
+        path = url[len(own):].rstrip("/") or "/"  # the socket viser's page opens: its own path
+        assert handshake(port, path, "http://evil.example").endswith(" 403 Forbidden")
+        assert handshake(port, path, "null").endswith(" 403 Forbidden")  # a sandboxed or file:// page
+        assert handshake(port, "/", own).endswith(" 403 Forbidden")  # no token
+        assert url.startswith(own + "/") and len(viewer.token) >= 16, url
+        assert handshake(port, "/" + "x" * len(viewer.token), own).endswith(" 403 Forbidden")
+        assert handshake(port, path, own).endswith(" 101 Switching Protocols")
+        assert handshake(port, path, f"http://localhost:{port}").endswith(" 101 Switching Protocols")
+        assert handshake(port, path).endswith(" 101 Switching Protocols")  # not a browser: the token alone
+        # the page: at the printed URL; elsewhere a 403 that says to use it
+        assert handshake(port, url[len(own):], websocket=False).endswith(" 200 OK")
+        assert handshake(port, "/", websocket=False).endswith(" 403 Forbidden")
+        assert handshake(port, "/index.html", websocket=False).endswith(" 403 Forbidden")
+    finally:
+        viewer.close()

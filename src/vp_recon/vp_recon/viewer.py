@@ -2,7 +2,11 @@
 
 :class:`PlanViewer` is ROS-free: it takes numpy arrays and draws them in a
 ``viser.ViserServer`` bound to 127.0.0.1 only (viser serves its own web client from the wheel;
-every browser that connects gets the same state):
+every browser that connects gets the same state). Only the printed URL opens it: it carries a
+token made at start (``http://127.0.0.1:<port>/<token>/``; viser's page derives its WebSocket
+address from the page's path, so the socket asks for ``/<token>`` too), and a WebSocket
+handshake without it, or from a page of another origin (a web site open in a browser on this
+machine), is refused with 403 before anything is sent (:func:`_guarded_serve`):
 
 * ``/scene``: the noisy scene cloud, one wind realization at a time (GUI "realization");
 * ``/plan/cam_<i>``: one frustum per camera, placed and shaped by :mod:`vp_scene.camera` (the
@@ -25,7 +29,11 @@ a readable MCAP, a port in use): one line, exit 2.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import dataclasses
+import http
 import math
+import secrets
 import sys
 import threading
 import time
@@ -76,17 +84,67 @@ def _subsample(n: int, max_points: int, seed: int = 0) -> np.ndarray:
     return np.sort(np.random.default_rng(seed).choice(n, max_points, replace=False))
 
 
+HOST = "127.0.0.1"
+_SERVE_LOCK = threading.Lock()
+
+
+@contextlib.contextmanager
+def _guarded_serve(token: str, port: int):
+    """While a ``viser.ViserServer`` starts in this block, its WebSocket server refuses (403) a
+    handshake whose path is not ``/<token>`` or whose ``Origin`` is not this viewer's page
+    (http://127.0.0.1:<port> or http://localhost:<port>; a client without an Origin, not a
+    browser, needs the token alone), and serves its page only under ``/<token>/``.
+
+    Why a hook: viser (1.1.1) offers neither an origin check nor a token and calls websockets'
+    ``serve`` itself with its own ``process_request`` (which serves the page); websockets' own
+    ``origins=`` cannot be passed through it. So ``websockets.asyncio.server.serve`` is wrapped for
+    the time viser's constructor takes (it returns once its server listens, and calls ``serve``
+    only then): our check runs first, viser's handler after it, unchanged."""
+    import websockets.asyncio.server as ws_server
+
+    origins = {f"http://{HOST}:{port}", f"http://localhost:{port}"}
+    prefix = f"/{token}"
+    original = ws_server.serve
+
+    def guard(connection, request, viser_process_request):
+        path = request.path.partition("?")[0]
+        if request.headers.get("Upgrade", "").lower() == "websocket":
+            origin = request.headers.get("Origin")
+            asked = path.rstrip("/").encode("utf-8", "surrogateescape")
+            if not secrets.compare_digest(asked, prefix.encode()) or (origin is not None and origin not in origins):
+                return connection.respond(http.HTTPStatus.FORBIDDEN, "403: open the URL this viewer printed\n")
+            return viser_process_request(connection, request) if viser_process_request else None
+        if not (path == prefix or path.startswith(prefix + "/")):
+            return connection.respond(http.HTTPStatus.FORBIDDEN, "403: open the URL this viewer printed "
+                                                                 "(it carries the viewer's token)\n")
+        request = dataclasses.replace(request, path=request.path[len(prefix):] or "/")
+        return viser_process_request(connection, request) if viser_process_request else None
+
+    def serve(*args, process_request=None, **kwargs):
+        return original(*args, process_request=lambda c, r: guard(c, r, process_request), **kwargs)
+
+    with _SERVE_LOCK:
+        ws_server.serve = serve
+        try:
+            yield
+        finally:
+            ws_server.serve = original
+
+
 class PlanViewer:
-    """The viewer's scene on a viser server at 127.0.0.1:``port``; ViewerError when the port is taken."""
+    """The viewer's scene on a viser server at 127.0.0.1:``port``, open at :attr:`url` only (its
+    token: ``token``, else a new random one); ViewerError when the port is taken."""
 
     def __init__(self, port: int = 8080, max_points: int = 60000, distance_scale: float = 0.02,
-                 model: CameraModel = CameraModel()):
+                 model: CameraModel = CameraModel(), token: Optional[str] = None):
         import viser
 
-        self.server = viser.ViserServer(host="127.0.0.1", port=port, verbose=False)
+        self.token = token or secrets.token_urlsafe(16)
+        with _guarded_serve(self.token, port):
+            self.server = viser.ViserServer(host=HOST, port=port, verbose=False)
         if self.server.get_port() != port:  # viser moves on to the next free port; we do not
             self.server.stop()
-            raise ViewerError(f"port {port} on 127.0.0.1 is in use (try --port / make view PORT=...)")
+            raise ViewerError(f"port {port} on {HOST} is in use (try --port / make view PORT=...)")
         self.port, self.max_points, self.distance_scale, self.model = port, max_points, distance_scale, model
         self.server.scene.set_up_direction("+z")  # REP-103: z up
         self._scene: Optional[tuple] = None  # points, colors, realization
@@ -116,7 +174,8 @@ class PlanViewer:
 
     @property
     def url(self) -> str:
-        return f"http://127.0.0.1:{self.port}"
+        """The page, with the token that opens it."""
+        return f"http://{HOST}:{self.port}/{self.token}/"
 
     # -------------------------------------------------------------- inputs
     def show_scene(self, points: np.ndarray, colors: Optional[np.ndarray], realization: Optional[np.ndarray]) -> None:

@@ -1,5 +1,5 @@
 """The ``viewer`` node: the run in the browser while it happens (:mod:`vp_recon.viewer`, viser on
-127.0.0.1 only).
+127.0.0.1 only, opened by the URL with a token it logs).
 
 Subscribes (reliable, transient local: what was published before it started still arrives)
 ``/scene/noisy_points``, ``/camera_plan``, ``/fleet/assignment``, ``/reconstruction/points``, and
@@ -11,7 +11,7 @@ vp_interfaces; vp_recon never imports vp_planner, and the viewer needs nothing f
 Signals, exit codes and parameter types follow :mod:`vp_scene.node_runtime` (a port in use: one
 line, exit 2).
 
-    ros2 run vp_recon viewer --ros-args -p port:=8080     # then open http://127.0.0.1:8080
+    ros2 run vp_recon viewer --ros-args -p port:=8080     # then open the URL it logs (token included)
 """
 from __future__ import annotations
 
