@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from cluster import Task, add_cluster_args, open_client, run_tasks  # noqa: E402
+from cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
 from common import (ROOT, add_capture, cached, capture_of, capture_tag, chamfer_text, default_models,  # noqa: E402
                     known_realizations, machine, models_tag, reconstruct_record, reconstructed,
                     scene, write_json)
@@ -249,7 +249,7 @@ def main(argv=None) -> int:
     cache = out / "cache" / "fields"
     resume_from_report(out, cache, args)
     cells = [field_cell(spec) for spec in args.fields]
-    with open_client(args.scheduler, args.workers) as client:
+    with cluster_client(args) as client:
         tasks = [Task((field, n, label), plan_cell, (cache, field, n, label, args),
                       plan_path(cache, field, n, label, args)[0], f"{field} N={n} {label}")
                  for field, n in cells for label in args.methods]

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from cluster import Task, add_cluster_args, open_client, run_tasks  # noqa: E402
+from cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
 from common import ROOT, SCENARIOS, VARIANTS, default_models, machine, models_tag, plan_cell, plan_path  # noqa: E402
 
 DEFAULT_VARIANTS = ('egp', 'egp-random-init', 'circle', 'arc', 'sa', 'random')
@@ -58,7 +58,7 @@ def main(argv=None) -> int:
                     tasks.append(Task((scenario, reward, variant, seed), plan_cell, a, plan_path(*a),
                                       f'{scenario} {reward} {variant} seed {seed}'))
     t0 = time.time()
-    with open_client(args.scheduler, args.workers) as client:
+    with cluster_client(args) as client:
         runs = run_tasks(client, tasks, 'planning')
     failed = {k: r for k, r in runs.items() if 'error' in r}
     for k, r in failed.items():

@@ -34,7 +34,7 @@ BENCH = Path(__file__).resolve().parent
 sys.path.insert(0, str(BENCH))
 from stats import paired_interval  # noqa: E402
 from common import ROOT, SCENARIOS, cached, default_models, machine, models_tag, plan_cell, write_json  # noqa: E402
-from cluster import Task, add_cluster_args, open_client, run_tasks  # noqa: E402
+from cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
 
 #: variant -> ReconConfig fields that differ from the default (``full``).
 VARIANTS = {
@@ -141,7 +141,7 @@ def main() -> int:
         ap.error('--realizations must be >= 1')
     out = Path(args.out)
     cache = out / 'cache'
-    with open_client(args.scheduler, args.workers) as client:
+    with cluster_client(args) as client:
         plans = run_tasks(client, [Task(s, plan_cell, (cache, s, 'egp', args.seed, 100, 50, args.models), None,
                                         f'{s} plan egp') for s in args.scenarios], desc='planning')
         tasks = []

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from cluster import Task, add_cluster_args, open_client, run_tasks  # noqa: E402
+from cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
 from stats import rank_key  # noqa: E402
 from vp_planner.reward_models import DEFAULT_REWARD_MODEL, REWARD_MODELS  # noqa: E402
 from vp_recon.pipeline import MATCHINGS  # noqa: E402
@@ -260,7 +260,7 @@ def main(argv=None) -> int:
     args = parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    with open_client(args.scheduler, args.workers) as client:
+    with cluster_client(args) as client:
         rows = run(client, out / 'cache', out, args)
     for scenario, row in rows.items():
         print(f'{scenario}: {verdict(row)}', flush=True)

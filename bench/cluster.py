@@ -47,21 +47,37 @@ class Task:
 def add_cluster_args(ap: argparse.ArgumentParser) -> None:
     """``--scheduler`` and ``--workers``, the same in every benchmark."""
     ap.add_argument('--scheduler', default=None,
-                    help="'local' (a LocalCluster on this machine) or the address of a running dask "
-                         "scheduler, e.g. tcp://10.0.0.5:8786 (default: $DASK_SCHEDULER_ADDRESS, else local)")
+                    help="'local' (a LocalCluster on this machine: 127.0.0.1, TLS with this run's credentials) or the "
+                         "address of a running dask scheduler, e.g. tls://10.0.0.5:8786 with --tls-* or "
+                         "tcp://10.0.0.5:8786 (default: $DASK_SCHEDULER_ADDRESS, else local)")
     ap.add_argument('--workers', type=int, default=1,
                     help='worker processes of the local cluster, one thread each (default 1)')
+    add_tls_args(ap)
 
 
 sys.path.insert(0, str(BENCH))
 from common import write_json  # noqa: E402
 from vp_scene.cluster import ONE_THREAD_ENV, OneThread  # noqa: E402,F401  (the suite's one home of the engine)
+from vp_scene.cluster import TlsFiles, add_tls_args, check_cluster_args  # noqa: E402
 from vp_scene.cluster import open_client as _open_client  # noqa: E402
 
 
-def open_client(scheduler: Optional[str] = None, workers: int = 1, quiet: bool = False):
+def open_client(scheduler: Optional[str] = None, workers: int = 1, quiet: bool = False, tls: TlsFiles = TlsFiles()):
     """:func:`vp_scene.cluster.open_client` whose local workers also import this folder."""
-    return _open_client(scheduler, workers, quiet, pythonpath=(str(BENCH),))
+    return _open_client(scheduler, workers, quiet, pythonpath=(str(BENCH),), tls=tls)
+
+
+def cluster_client(args: argparse.Namespace, quiet: bool = False):
+    """:func:`open_client` of the options of :func:`add_cluster_args`; options that do not go
+    together (TLS files for 'local' or a tcp:// address, a missing file...): one line
+    ``<prog>: error: ...`` and exit 2, before anything runs."""
+    tls = TlsFiles.from_args(args)
+    try:
+        check_cluster_args(args.scheduler, args.workers, tls)
+    except ValueError as exc:
+        print(f'{Path(sys.argv[0]).name}: error: {exc}', file=sys.stderr)
+        raise SystemExit(2) from None
+    return open_client(args.scheduler, args.workers, quiet, tls)
 
 
 def _record(fn: Callable[..., Any], args: tuple) -> tuple[bool, Any]:

@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from cluster import Task, add_cluster_args, open_client, run_tasks  # noqa: E402
+from cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
 from common import (ROOT, SCENARIOS, add_capture, cached, capture_of, capture_tag, default_models,  # noqa: E402
                     machine, models_tag, scene)
 
@@ -523,7 +523,7 @@ def print_table(result: dict) -> None:
 def main(argv=None) -> int:
     args = parse_args(argv)
     if args.phase in ('plans', 'all', 'recon'):
-        with open_client(args.scheduler, args.workers) as client:
+        with cluster_client(args) as client:
             study = run_plans(args, client)
             if args.phase in ('recon', 'all'):
                 run_recon(args, client, study)

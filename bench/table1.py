@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from cluster import Task, add_cluster_args, open_client, run_tasks  # noqa: E402
+from cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
 from common import (ROOT, SCENARIOS, cached, default_models, machine, models_tag, plan_cell,  # noqa: E402
                     add_capture, capture_of, capture_tag, known_realizations, plan_path, reconstruct_record,
                     scene)
@@ -152,7 +152,7 @@ def run(args, client) -> tuple[dict, dict]:
 def main(argv=None) -> int:
     args = parse_args(argv)
     recon_seeds(args)  # a slice with no seed fails before any work
-    with open_client(args.scheduler, args.workers) as client:
+    with cluster_client(args) as client:
         plans, recons = run(args, client)
     write_results(args, Path(args.out), plans, recons)
     return 0

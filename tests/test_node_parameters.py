@@ -28,6 +28,7 @@ PKG = {"planner": "vp_planner", "recon": "vp_recon", "dispatcher": "vp_planner"}
     ("recon", {"image_transport": "theora"}, "image_transport must be raw or compressed, got 'theora'"),
     ("recon", {"dense_scale": 0.0}, "dense_scale must be in (0, 1], got 0.0"),
     ("recon", {"sift_first_octave": 2}, "sift_first_octave"),
+    ("recon", {"scheduler": "tls://127.0.0.1:8786"}, "scheduler tls://127.0.0.1:8786 is tls://: give the CA file"),
     ("dispatcher", {}, 'drones must name at least one drone, e.g. -p "drones:=[d0, d1, d2, d3]"'),
     ("dispatcher", {"drones": "d0"}, "'drones' must be a list of strings"),
     ("dispatcher", {"drones": ["d0", "d1", "d0"]}, "drones names a drone twice: ['d0']"),

@@ -5,7 +5,7 @@
         [--realizations 0,1] [--sparse-only] [--sparse-mode known_poses|incremental]
         [--matching auto|exhaustive|poses]
         [--fscore-threshold 0.02] [--mesh-cache DIR] [--keep-workdir] [--[no-]ground] [--no-progress]
-        [--scheduler local|tcp://HOST:8786 [--workers N]]
+        [--scheduler local|tcp://HOST:8786|tls://HOST:8786 [--workers N] [--tls-ca-file --tls-cert --tls-key]]
 
 Rebuilds the scene from plan.json's ``scene`` dict (vp_scene.build.build_noisy_scene) and writes
 
@@ -128,13 +128,25 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.add_argument("--scheduler", default="",
                    help="reconstruct the realizations in parallel on Dask: 'local' (a local cluster of --workers "
-                        "processes, one thread each) or a running scheduler's address (tcp://host:8786); "
+                        "processes, one thread each; 127.0.0.1, TLS with this run's credentials) or a running "
+                        "scheduler's address (tls://host:8786 with --tls-*, or tcp://host:8786); "
                         "default: in this process, one after the other")
     p.add_argument("--workers", type=int, default=max(1, os.cpu_count() or 1),
                    help="worker processes of --scheduler local (default: the cores)")
+    from vp_scene.cluster import TlsFiles, add_tls_args, check_cluster_args
+
+    add_tls_args(p)
     args = p.parse_args(argv)
     if args.workers < 1:
         p.error(f"--workers must be >= 1, got {args.workers}")
+    tls = TlsFiles.from_args(args)
+    if tls != TlsFiles() and not args.scheduler:
+        p.error("--tls-ca-file, --tls-cert and --tls-key go with --scheduler tls://HOST:PORT")
+    if args.scheduler:
+        try:
+            check_cluster_args(args.scheduler, args.workers, tls)
+        except ValueError as exc:
+            p.error(str(exc))
     if args.prior and not args.images:
         p.error("--prior goes with --images (a plan brings its own scene)")
     if args.images:  # a flight folder has its own images: the options of rendering a plan do not apply
@@ -213,9 +225,10 @@ def run(args: argparse.Namespace) -> dict:
         with contextlib.ExitStack() as stack:
             client = None
             if args.scheduler:
-                from vp_scene.cluster import open_client
+                from vp_scene.cluster import TlsFiles, open_client
 
-                client = stack.enter_context(open_client(args.scheduler, args.workers, quiet=args.no_progress))
+                client = stack.enter_context(open_client(args.scheduler, args.workers, quiet=args.no_progress,
+                                                         tls=TlsFiles.from_args(args)))
             result = reconstruct_plan(noisy, cams, config, out_dir=out, realizations=ks, progress=progress,
                                       client=client)
     except ReconError as exc:

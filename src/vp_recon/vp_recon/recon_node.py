@@ -134,7 +134,12 @@ PARAMS = {
     # beside the planner (1 thread by default) the reconstruction takes the other cores
     'num_threads': Param(max(1, (os.cpu_count() or 2) - 1), 'threads of COLMAP, OpenCV and the renderer', (1, INT_MAX)),
     'scheduler': Param('', "Dask cluster the realizations reconstruct on in parallel: 'local' (workers processes "
-                           "here) or a scheduler address tcp://host:8786; '' (default): in this process"),
+                           "here; 127.0.0.1, TLS with this run's credentials) or a scheduler address "
+                           "tls://host:8786 (with tls_ca_file, tls_cert) or tcp://host:8786; '' (default): in this "
+                           "process"),
+    'tls_ca_file': Param('', 'scheduler tls://: the CA certificate (PEM) that signed the cluster\'s certificates'),
+    'tls_cert': Param('', 'scheduler tls://: this client\'s certificate (PEM)'),
+    'tls_key': Param('', 'scheduler tls://: this client\'s private key (PEM; default: in tls_cert\'s file)'),
     'workers': Param(max(1, (os.cpu_count() or 2) - 1), "worker processes of scheduler 'local', one thread each",
                      (1, INT_MAX)),
 }
@@ -167,6 +172,17 @@ def capture_model(values: dict) -> CaptureModel:
     return CaptureModel.named(full['capture'], seed=full['capture_seed'], **figures)
 
 
+#: The parameters of a tls:// scheduler's certificate files, in vp_scene.cluster.TlsFiles' order.
+TLS_KEYS = ('tls_ca_file', 'tls_cert', 'tls_key')
+
+
+def cluster_tls(values: dict):
+    """The TLS files (vp_scene.cluster.TlsFiles) of the parameter values."""
+    from vp_scene.cluster import TlsFiles
+
+    return TlsFiles(*(values.get(k, '') for k in TLS_KEYS))
+
+
 def check_parameters(values: dict) -> dict:
     """The parameter values ({name: value}, any subset of :data:`PARAMS`) typed and checked;
     ValueError naming the first bad one."""
@@ -186,6 +202,13 @@ def check_parameters(values: dict) -> dict:
         raise ValueError(f'capture_timeout must be > 0 s, got {v["capture_timeout"]}')
     if v.get('output_folder', 'x') == '' or v.get('frame_id', 'x') == '':
         raise ValueError('output_folder and frame_id must not be empty')
+    tls = cluster_tls(v)
+    if any(v.get(k) for k in TLS_KEYS) and not v.get('scheduler', ''):
+        raise ValueError('tls_ca_file, tls_cert and tls_key go with a scheduler tls://host:port')
+    if v.get('scheduler', ''):
+        from vp_scene.cluster import check_cluster_args
+
+        check_cluster_args(v['scheduler'], v.get('workers', PARAMS['workers'][0]), tls)
     config_keys = ('width', 'height', 'fov', 'sparse_mode', 'dense', 'matching', 'fscore_threshold',
                    'sift_first_octave', 'dense_scale')
     if any(k in v for k in config_keys):  # the rendering settings: ReconConfig's own checks
@@ -413,12 +436,13 @@ class ReconNode(Node):
             with contextlib.ExitStack() as stack:
                 client = None
                 if self._param('scheduler'):
-                    from vp_scene.cluster import open_client
+                    from vp_scene.cluster import dashboard, open_client
 
+                    tls = cluster_tls({k: self._param(k) for k in TLS_KEYS})
                     client = stack.enter_context(open_client(self._param('scheduler'), self._param('workers'),
-                                                             quiet=True))
-                    self.get_logger().info(f'realizations in parallel on Dask ({self._param("scheduler")}, '
-                                           f'dashboard {client.dashboard_link})')
+                                                             quiet=True, tls=tls))
+                    self.get_logger().info(f'realizations in parallel on Dask ({self._param("scheduler")}: '
+                                           f'{client.scheduler.address}, dashboard {dashboard(client)})')
                 if self._param('source') == 'fleet':
                     result = self._from_fleet(plan, scene, config, K, run_dir, progress, on_realization, client,
                                               located)

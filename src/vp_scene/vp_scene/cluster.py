@@ -9,6 +9,15 @@ reconstruction of a plan's realizations in parallel, :func:`vp_recon.pipeline.re
 OMP/MKL/OPENBLAS thread counts of 1 (Dask's ``distributed.nanny.pre-spawn-environ``, set here
 explicitly, plus torch's own count through :class:`OneThread`), so N workers never oversubscribe
 N cores. A worker of a remote cluster must import the suite (``install/setup.bash``).
+
+Who can get in (README, "Running the benchmarks on a cluster"): the local cluster listens on
+127.0.0.1 only (scheduler, nannies, workers and the dashboard) and speaks TLS with temporary
+credentials made for the run (dask's ``Security.temporary()``: a self-signed certificate and key
+held in memory, handed to the workers through the process pipe; both sides must present it), so a
+client of another local user, or of this one without the run's credentials, is refused: a plain
+``Client(address)`` could otherwise run any code in the workers (``client.run``). A remote
+scheduler is the user's: ``tls://`` with the certificate files of :class:`TlsFiles` (or dask's
+``distributed.comm.tls.*`` config), or ``tcp://`` as it is run.
 """
 from __future__ import annotations
 
@@ -17,9 +26,14 @@ import contextlib
 import logging
 import os
 import sys
+from dataclasses import dataclass
 from typing import Iterator, Optional, Sequence
 
-__all__ = ["ONE_THREAD_ENV", "OneThread", "open_client"]
+__all__ = ["LOCAL_HOST", "ONE_THREAD_ENV", "OneThread", "TlsFiles", "add_tls_args", "check_cluster_args",
+           "client_security", "dashboard", "open_client"]
+
+#: The only interface the local cluster listens on (scheduler, nannies, workers, dashboard).
+LOCAL_HOST = '127.0.0.1'
 
 #: Environment of every worker process of the local cluster (read before torch/numpy load).
 ONE_THREAD_ENV = {'OMP_NUM_THREADS': '1', 'MKL_NUM_THREADS': '1', 'OPENBLAS_NUM_THREADS': '1',
@@ -57,33 +71,118 @@ def close_cluster(cluster: object, timeout: float = CLOSE_TIMEOUT_S) -> None:
               'end with this process', file=sys.stderr)
 
 
-@contextlib.contextmanager
-def open_client(scheduler: Optional[str] = None, workers: int = 1, quiet: bool = False,
-                pythonpath: Sequence[str] = ()) -> Iterator:
-    """A ``distributed.Client`` for ``scheduler`` ('local', an address, or None: the environment's
-    ``DASK_SCHEDULER_ADDRESS`` else local); closes the client and any cluster it started.
-    ``pythonpath``: folders the local cluster's workers import from (besides the suite)."""
-    import dask
-    from distributed import Client, LocalCluster
+@dataclass(frozen=True)
+class TlsFiles:
+    """The PEM files a client of a ``tls://`` scheduler presents (dask's TLS: the CA that signed the
+    cluster's certificates, this client's certificate and its key; the key may be in the
+    certificate's file). All empty: dask's own config (``distributed.comm.tls.ca-file``,
+    ``.client.cert``, ``.client.key``, e.g. ``DASK_DISTRIBUTED__COMM__TLS__CA_FILE``) applies."""
+    ca_file: str = ''
+    cert: str = ''
+    key: str = ''
 
+    @classmethod
+    def from_args(cls, args) -> 'TlsFiles':
+        """From the options of :func:`add_tls_args`."""
+        return cls(args.tls_ca_file or '', args.tls_cert or '', args.tls_key or '')
+
+
+def add_tls_args(ap) -> None:
+    """``--tls-ca-file``, ``--tls-cert``, ``--tls-key`` (a ``tls://`` scheduler), the same in every tool."""
+    ap.add_argument('--tls-ca-file', default='', metavar='PEM',
+                    help='a tls:// scheduler: the CA certificate that signed the cluster\'s certificates')
+    ap.add_argument('--tls-cert', default='', metavar='PEM', help="a tls:// scheduler: this client's certificate")
+    ap.add_argument('--tls-key', default='', metavar='PEM',
+                    help="a tls:// scheduler: this client's private key (default: in --tls-cert's file)")
+
+
+def client_security(scheduler: str, tls: TlsFiles = TlsFiles()):
+    """The ``distributed.Security`` of a client of the scheduler address ``scheduler`` (not
+    'local'); ValueError (one line) when the files and the address do not go together: files for a
+    ``tcp://`` address, a ``tls://`` address without a CA and certificate (files or dask's config),
+    a file that does not exist."""
+    from distributed import Security
+
+    given = {name: path for name, path in (('CA file', tls.ca_file), ('certificate', tls.cert), ('key', tls.key))
+             if path}
+    is_tls = scheduler.startswith('tls://')
+    if given and not is_tls:
+        raise ValueError(f'TLS files are for a tls:// scheduler address, got {scheduler!r}')
+    for name, path in given.items():
+        if not os.path.isfile(path):
+            raise ValueError(f'TLS {name} {path}: no such file')
+    if given:
+        if not (tls.ca_file and tls.cert):
+            raise ValueError('TLS needs the CA file and the certificate (the key: its own file or in the '
+                             'certificate\'s)')
+        return Security(tls_ca_file=tls.ca_file, tls_client_cert=tls.cert, tls_client_key=tls.key or None,
+                        require_encryption=True)
+    security = Security()  # dask's config (distributed.comm.tls.*)
+    if is_tls and not (security.tls_ca_file and security.tls_client_cert):
+        raise ValueError(f'scheduler {scheduler} is tls://: give the CA file and this client\'s certificate '
+                         '(--tls-ca-file, --tls-cert, --tls-key; or dask\'s distributed.comm.tls config)')
+    return security
+
+
+def dashboard(client) -> str:
+    """Where the dashboard of ``client``'s cluster listens: of a local cluster, the socket its HTTP
+    server really bound (dask's ``dashboard_link`` names the scheduler's host, whatever the dashboard
+    bound to: it said 127.0.0.1 while the dashboard listened on all interfaces); of a remote one,
+    dask's link, as the scheduler reports it."""
+    cluster = getattr(client, 'cluster', None)
+    if cluster is None:
+        return f'{client.dashboard_link} (as the scheduler reports it)'
+    http = getattr(cluster.scheduler, 'http_server', None)
+    if http is None:
+        return 'off'
+    host = http.address if ':' not in http.address else f'[{http.address}]'
+    return f'http://{host}:{http.port}/status'
+
+
+def check_cluster_args(scheduler: Optional[str], workers: int = 1, tls: TlsFiles = TlsFiles()) -> tuple:
+    """(the scheduler: 'local' or an address, the client's ``distributed.Security`` of a remote one
+    else None) for :func:`open_client`'s arguments; ValueError (one line) for bad ones."""
     scheduler = scheduler or os.environ.get('DASK_SCHEDULER_ADDRESS') or 'local'
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise ValueError(f'workers must be an integer >= 1, got {workers!r}')
+    if scheduler == 'local':
+        if tls != TlsFiles():
+            raise ValueError("TLS files are for a tls:// scheduler address; the local cluster makes its own "
+                             "temporary credentials")
+        return scheduler, None
+    return scheduler, client_security(scheduler, tls)
+
+
+@contextlib.contextmanager
+def open_client(scheduler: Optional[str] = None, workers: int = 1, quiet: bool = False,
+                pythonpath: Sequence[str] = (), tls: TlsFiles = TlsFiles()) -> Iterator:
+    """A ``distributed.Client`` for ``scheduler`` ('local', an address, or None: the environment's
+    ``DASK_SCHEDULER_ADDRESS`` else local); closes the client and any cluster it started.
+    ``pythonpath``: folders the local cluster's workers import from (besides the suite).
+    ``tls``: the client's certificate files for a ``tls://`` scheduler (:func:`client_security`);
+    the local cluster makes its own temporary credentials. ValueError for bad arguments."""
+    import dask
+    from distributed import Client, LocalCluster, Security
+
+    scheduler, security = check_cluster_args(scheduler, workers, tls)
     env = dict(ONE_THREAD_ENV)
     path = [str(p) for p in pythonpath] + [os.environ.get('PYTHONPATH', '')]
     env['PYTHONPATH'] = os.pathsep.join(p for p in path if p)
     with contextlib.ExitStack() as stack:
         if scheduler == 'local':
+            security = Security.temporary()  # per run, in memory (needs the cryptography package)
             with dask.config.set({'distributed.nanny.pre-spawn-environ': env}):
                 cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, env=env,
-                                       dashboard_address=':0', silence_logs=logging.ERROR)
+                                       host=LOCAL_HOST, dashboard_address=f'{LOCAL_HOST}:0', security=security,
+                                       silence_logs=logging.ERROR)
             stack.callback(close_cluster, cluster)
-            client = stack.enter_context(Client(cluster))
+            client = stack.enter_context(Client(cluster, security=security))
         else:
-            client = stack.enter_context(Client(scheduler, timeout='30s'))
+            client = stack.enter_context(Client(scheduler, timeout='30s', security=security))
         client.register_plugin(OneThread(), name=OneThread.name)
         if not quiet:
-            where = 'local cluster' if scheduler == 'local' else scheduler
+            where = f'local cluster {client.scheduler.address} (TLS, this run\'s credentials)' \
+                if scheduler == 'local' else scheduler
             n = len(client.scheduler_info().get('workers', {}))
-            print(f'dask: {where}, {n} worker(s); dashboard {client.dashboard_link}', file=sys.stderr)
+            print(f'dask: {where}, {n} worker(s); dashboard {dashboard(client)}', file=sys.stderr)
         yield client
