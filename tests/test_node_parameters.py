@@ -29,6 +29,7 @@ PKG = {"planner": "vp_planner", "recon": "vp_recon", "dispatcher": "vp_planner"}
     ("recon", {"dense_scale": 0.0}, "dense_scale must be in (0, 1], got 0.0"),
     ("recon", {"sift_first_octave": 2}, "sift_first_octave"),
     ("recon", {"scheduler": "tls://127.0.0.1:8786"}, "scheduler tls://127.0.0.1:8786 is tls://: give the CA file"),
+    ("recon", {"max_cameras": 1}, "max_cameras must be an integer >= 2, got 1"),
     ("dispatcher", {}, 'drones must name at least one drone, e.g. -p "drones:=[d0, d1, d2, d3]"'),
     ("dispatcher", {"drones": "d0"}, "'drones' must be a list of strings"),
     ("dispatcher", {"drones": ["d0", "d1", "d0"]}, "drones names a drone twice: ['d0']"),
@@ -81,7 +82,8 @@ DESCRIBED = {
         ("levels", 0), None),
     "recon": ("vp_recon", "recon", {}, {
         "width": (INT, 16, INT64_MAX, False), "sensor_noise": (DOUBLE, 0.0, 0.5, False),
-        "hover_attitude_sigma": (DOUBLE, 0.0, 10.0, False), "max_realizations": (INT, 0, INT64_MAX, False)},
+        "hover_attitude_sigma": (DOUBLE, 0.0, 10.0, False), "max_realizations": (INT, 0, INT64_MAX, False),
+        "max_cameras": (INT, 2, INT64_MAX, False)},
         ("sensor_noise", 0.9), None),
     "sim_drone": ("vp_planner", "sim_drone", {"drone": "d0"}, {
         "speed": (DOUBLE, 0.0, math.inf, True), "drone": (None, None, None, True)},

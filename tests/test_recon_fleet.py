@@ -219,3 +219,77 @@ def test_a_second_fleet_sortie_reconstructs_with_the_first_sorties_images(ros_en
     assert agg.error_code == Score.CAPTURE_MISSING, agg.error_msg
     assert "1 of the 4 cameras already flown (indices [1])" in agg.error_msg, agg.error_msg
     assert recon.poll() is None
+
+
+def test_an_image_that_is_not_its_camera_infos_size_or_too_large_is_named(ros_env, start_node, ros_node,
+                                                                          tmp_path) -> None:
+    """Hardening III, items 5 and 7, over DDS (the test plays two drones): images of 320 x 240
+    with a camera_info of 640 x 480 (K for another size) were collected and reconstructed with the
+    wrong K, failing later with a misleading message: now the capture set is refused,
+    CAPTURE_MISSING naming the drone. With ``image_transport: compressed`` a PNG whose header says
+    30000 x 30000 (2.7 GB decoded) is refused from its header, naming its drone; the node serves on."""
+    from PIL import Image as PILImage
+    from rclpy.parameter import Parameter
+    from rclpy.parameter_client import AsyncParameterClient
+    from sensor_msgs.msg import CameraInfo, CompressedImage
+    from vp_interfaces.msg import CaptureTrigger
+
+    from vp_scene.camera import intrinsics
+    from vp_scene.messages import camera_info_msg, compressed_image_msg, image_msg
+
+    cams, drones = ring(2), ["d0", "d1"]
+    start_node("vp_scene", "scene", SCENE, ros_env)
+    recon = start_node("vp_recon", "recon", {**SIZE, "capture": "ideal", "source": "fleet", "capture_timeout": 60.0,
+                                             "output_folder": str(tmp_path / "out")}, ros_env)
+    client = ros_node(ros_env)
+    scores = client.subscribe(Score, "/reconstruction/score", SCORES)
+    triggers = client.subscribe(CaptureTrigger, "/fleet/capture", LATCHED)
+    fleet_pub = client.node.create_publisher(FleetAssignment, "/fleet/assignment", LATCHED)
+    plan_pub = client.node.create_publisher(type(cameras_to_pose_array(cams, "map", None)), "/camera_plan", LATCHED)
+    pubs = {(d, kind): client.node.create_publisher(t, f"/{d}/camera/{kind}", LATCHED) for d in drones
+            for kind, t in (("image_raw", Image), ("image_raw/compressed", CompressedImage),
+                            ("camera_info", CameraInfo), ("pose", PoseStamped))}
+    huge = tmp_path / "huge.png"
+    PILImage.new("1", (30000, 30000)).save(huge)
+
+    def capture(stamp: int, image_of) -> Score:
+        """Plan ``stamp``: the trigger, then each drone's image (``image_of(drone, now)``: kind, message),
+        its 640 x 480 camera_info and pose, with one stamp; the plan's aggregate score."""
+        scores.clear()
+        fleet_pub.publish(fleet_assignment_msg(stamp, drones, cams))
+        plan = cameras_to_pose_array(cams, "map", None)
+        plan.header.stamp.sec = stamp
+        plan_pub.publish(plan)
+        assert client.spin_until(lambda: any(t.plan_stamp.sec == stamp for t in triggers), 60), recon.output()[-3000:]
+        now = client.node.get_clock().now().to_msg()
+        for d, c in zip(drones, cams):
+            kind, msg = image_of(d, now)
+            pubs[(d, kind)].publish(msg)
+            info = camera_info_msg(intrinsics(640, 480), 640, 480, f"{d}/camera_optical", now)
+            pubs[(d, "camera_info")].publish(info)
+            pose = PoseStamped(pose=pose_msg(cameras_to_poses(c)))
+            pose.header.frame_id, pose.header.stamp = "map", now
+            pubs[(d, "pose")].publish(pose)
+        assert client.spin_until(lambda: aggregates(scores), 60), recon.output()[-3000:]
+        return aggregates(scores)[0]
+
+    small = np.zeros((240, 320, 3), np.uint8)
+    agg = capture(7, lambda d, now: ("image_raw", image_msg(small, f"{d}/camera_optical", now)))
+    assert agg.error_code == Score.CAPTURE_MISSING, agg.error_msg
+    assert "the image of d0 is 320x240 pixels, its camera_info says 640x480" in agg.error_msg, agg.error_msg
+
+    params = AsyncParameterClient(client.node, "recon")
+    assert params.wait_for_services(timeout_sec=60)
+    assert client.call(lambda: params.set_parameters([Parameter("image_transport", value="compressed")]),
+                       60).results[0].successful
+
+    def compressed(d, now):
+        msg = compressed_image_msg(np.zeros((480, 640, 3), np.uint8), f"{d}/camera_optical", now)
+        if d == "d1":
+            msg.data = huge.read_bytes()
+        return "image_raw/compressed", msg
+
+    agg = capture(8, compressed)
+    assert agg.error_code == Score.CAPTURE_MISSING, agg.error_msg
+    assert "the image of d1: compressed image (" in agg.error_msg and "30000x30000 pixels (900 MP)" in agg.error_msg
+    assert recon.poll() is None

@@ -168,6 +168,46 @@ def test_bad_plans_give_error_scores_and_node_keeps_running(recon_system) -> Non
     assert recon.alive()
 
 
+def test_a_plan_of_more_than_max_cameras_is_refused_at_once_and_the_node_serves_on(recon_system) -> None:
+    """Hardening III, item 4: a 10,000-pose PoseArray on /camera_plan grew the recon from 0.75 to
+    5.4 GB in 100 s (a MemoryError under 8 GB; every image of a realization is held at once).
+    A plan of more than max_cameras (default 256) is refused as it arrives, with PLAN_TOO_LARGE
+    and one log line; a second sortie whose flown cameras (/camera_plan/info) take it over the cap
+    is refused too; the next plan is reconstructed."""
+    client, pub, scores, _clouds, recon = recon_system(width=400, height=300, max_realizations=1, dense=False)
+    pub.publish(pose_array(np.tile(ring(), (1667, 1))[:10_000], stamp=1))
+    assert client.spin_until(lambda: aggregate(scores), 60), recon.output()[-3000:]
+    agg = aggregate(scores)[0]
+    assert (agg.error_code, agg.num_images) == (Score.PLAN_TOO_LARGE, 10_000), agg.error_msg
+    assert agg.error_msg.startswith("the plan has 10000 cameras; at most 256 are reconstructed (max_cameras")
+    assert [line for line in recon.output().splitlines() if "10000" in line] == \
+        [line for line in recon.output().splitlines() if "plan: the plan has 10000 cameras" in line] != []
+
+    params = AsyncParameterClient(client.node, "recon")
+    assert params.wait_for_services(timeout_sec=60)
+    refused = client.call(lambda: params.set_parameters([Parameter("max_cameras", value=1)]), 60).results[0]
+    assert not refused.successful and "max_cameras" in refused.reason
+    assert client.call(lambda: params.set_parameters([Parameter("max_cameras", value=8)]), 60).results[0].successful
+    info_pub = client.node.create_publisher(CameraPlan, "/camera_plan/info", LATCHED)
+    second = pose_array(ring(), stamp=2)  # 6 new cameras after the 6 flown: 12
+    info_pub.publish(CameraPlan(header=second.header, poses=second.poses, fixed_poses=pose_array(ring(), stamp=2).poses,
+                                reward=0.5, reward_model="coverage", method="egp"))
+    pub.publish(second)
+    assert client.spin_until(lambda: len(aggregate(scores)) >= 2, 60), recon.output()[-3000:]
+    agg = aggregate(scores)[1]
+    assert agg.error_code == Score.PLAN_TOO_LARGE and "12 cameras; at most 8" in agg.error_msg, agg.error_msg
+
+    pub.publish(pose_array(ring(), stamp=3))
+    assert client.spin_until(lambda: len(aggregate(scores)) >= 3, TIMEOUT), recon.output()[-3000:]
+    agg = aggregate(scores)[2]
+    assert agg.error_code == Score.NONE and agg.num_images == 6, agg.error_msg
+    assert recon.alive()
+    from vp_recon.pipeline import MAX_CAMERAS
+    from vp_recon.recon_node import PARAMS
+
+    assert PARAMS["max_cameras"][0] == MAX_CAMERAS == 256  # one default: the node's, the CLI's, the library's
+
+
 def test_unwritable_output_folder(recon_system, tmp_path) -> None:
     blocker = tmp_path / "a_file"
     blocker.write_text("not a folder")

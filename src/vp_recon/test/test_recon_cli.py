@@ -109,6 +109,35 @@ def test_cli_unwritable_out_and_bad_args(tmp_path: Path, capsys) -> None:
            "dense_scale must be in (0, 1]")
 
 
+def test_cli_refuses_a_plan_of_more_cameras_than_max_cameras(tmp_path: Path, capsys, monkeypatch) -> None:
+    """Hardening III, item 4: the CLI reconstructed a plan of any size (200 cameras: 7 minutes,
+    5.8 GB; every image of a realization is held at once). A plan of more than --max-cameras
+    (default MAX_CAMERAS, the recon node's max_cameras) is refused with exit 2 and one line
+    before its scene is built or anything rendered; the flag goes with --plan only."""
+    import vp_scene.build
+
+    a = np.deg2rad(np.linspace(0.0, 360.0, 257, endpoint=False))
+    c = np.stack([1.7 * np.cos(a), 1.7 * np.sin(a), np.full(len(a), 1.2)], axis=1)
+    big = _plan(tmp_path, cameras=np.concatenate([c, np.array([0.0, 0.0, 0.9]) - c], axis=1).tolist())
+    out = tmp_path / "out"
+    with monkeypatch.context() as tripwire:
+        tripwire.setattr(vp_scene.build, "build_noisy_scene", lambda **k: pytest.fail("the scene was built"))
+        _fails(tmp_path, capsys, ["--plan", str(big), "--out", str(out)],
+               f"{big}: the plan has 257 cameras; at most 256 are reconstructed (--max-cameras")
+        _fails(tmp_path, capsys, ["--plan", str(_plan(tmp_path)), "--out", str(out), "--max-cameras", "3"],
+               "the plan has 4 cameras; at most 3 are reconstructed")
+        for args, match in ((["--max-cameras", "1"], "--max-cameras must be >= 2"),
+                            (["--max-megapixels", "5000"], "--max-megapixels goes with --images")):
+            with pytest.raises(SystemExit) as ei:
+                main(["--plan", str(big), "--out", str(out), *args])
+            err = capsys.readouterr().err
+            assert ei.value.code == 2 and match in err and err.count("\n") == 1, err
+    assert not out.exists()
+    from vp_recon.pipeline import MAX_CAMERAS, MAX_MEGAPIXELS
+
+    assert (MAX_CAMERAS, MAX_MEGAPIXELS) == (256, 768)
+
+
 def test_cli_nothing_visible_records_error(tmp_path: Path, capsys) -> None:
     cams = [[1.4, 0.0, 1.2, 1.0, 0.0, 0.0], [0.0, 1.4, 1.2, 0.0, 1.0, 0.0]]      # looking away
     rc = main(["--plan", str(_plan(tmp_path, cameras=cams)), "--out", str(tmp_path / "o"), "--capture", "ideal", "--width", "320",

@@ -122,9 +122,9 @@ def _edit_poses(folder: Path, row: int, column: str, value: str) -> None:
         csv.writer(f).writerows(rows)
 
 
-def _refused(tmp_path: Path, folder: Path, capsys, *names: str) -> str:
+def _refused(tmp_path: Path, folder: Path, capsys, *names: str, args: tuple = ()) -> str:
     out = tmp_path / "never"
-    rc = main(["--images", str(folder), "--out", str(out), "--no-progress"])
+    rc = main(["--images", str(folder), "--out", str(out), "--no-progress", *args])
     err = capsys.readouterr().err
     assert rc == 2, err
     assert err.startswith("recon: error:") and err.count("\n") == 1, err
@@ -194,6 +194,42 @@ def test_bad_flight_folders_are_refused_naming_the_file(tmp_path: Path, capsys) 
     assert not (tmp_path / "never").exists()
     with pytest.raises(FlightError, match="not a folder"):
         read_flight(tmp_path / "nowhere")
+
+
+def test_an_oversize_or_truncated_image_is_refused_before_anything_is_decoded(tmp_path: Path, capsys,
+                                                                               monkeypatch) -> None:
+    """Hardening III, items 4-6: a 30000 x 30000 PNG (0.1 MB here, 2.7 GB decoded) was decoded in
+    full before its size was refused (34 s, 5.4 GB) and, with that size in poses.csv, ended in a
+    cv2 allocation traceback (exit 1); a truncated JPEG was read with its lower half grey and
+    reconstructed (exit 0); a folder's images are held at once, whatever their pixels. Now: exit
+    2, one line naming the file, and nothing is decoded of a folder whose headers are refused."""
+    from PIL import Image
+
+    f = _small_flight(tmp_path)
+    Image.new("1", (30000, 30000)).save(f / "im1.png")
+    with monkeypatch.context() as tripwire:  # OpenCV's decoders must not run
+        tripwire.setattr(cv2, "imdecode", lambda *a, **k: pytest.fail("an image was decoded"))
+        tripwire.setattr(cv2, "imread", lambda *a, **k: pytest.fail("an image was decoded"))
+        _refused(tmp_path, f, capsys, "im1.png", "30000x30000 pixels (900 MP); an image may have at most 150 MP")
+        for row in (1, 2, 3):  # the size declared in poses.csv as well
+            _edit_poses(f, row, "width", "30000")
+            _edit_poses(f, row, "height", "30000")
+        _refused(tmp_path, f, capsys, "im1.png", "30000x30000 pixels (900 MP)")
+        f = _small_flight(tmp_path)  # 3 images of 64 x 48
+        _refused(tmp_path, f, capsys, f"{f}: its 3 images have 0.009216 megapixels; at most 0.009 are reconstructed "
+                 "at once (--max-megapixels", args=("--max-megapixels", "0.009"))
+
+    rng = np.random.default_rng(2)
+    views = CapturedViews(names=[f"im{i}.jpg" for i in range(3)],
+                          images=[cv2.GaussianBlur(rng.integers(0, 255, (48, 64, 3), dtype=np.uint8), (5, 5), 2)
+                                  for _ in range(3)],
+                          reported=ring(3), K=np.array([[32.0, 0, 31.5], [0, 32.0, 23.5], [0, 0, 1]]))
+    f = write_flight(views, tmp_path / "jpeg_flight")
+    whole = (f / "im1.jpg").read_bytes()
+    (f / "im1.jpg").write_bytes(whole[: len(whole) * 2 // 3])
+    _refused(tmp_path, f, capsys, "im1.jpg", "corrupt or truncated JPEG")
+    with pytest.raises(FlightError, match=r"im1.jpg: corrupt or truncated JPEG"):
+        read_flight(f)
 
 
 def test_coverage_of_prior_per_plant_in_the_best_covered_realization() -> None:

@@ -1,11 +1,12 @@
 """Command line reconstruction of a plan: render, reconstruct and score every wind realization.
 
-    python -m vp_recon.cli --images DIR --out OUT [--prior plan.json] [--sparse-only] [...]
+    python -m vp_recon.cli --images DIR --out OUT [--prior plan.json] [--sparse-only] [--max-megapixels 768] [...]
     python -m vp_recon.cli --plan out/run/plan.json --out out/run [--width 2000 --height 1500]
         [--realizations 0,1] [--sparse-only] [--sparse-mode known_poses|incremental]
         [--matching auto|exhaustive|poses]
         [--fscore-threshold 0.02] [--mesh-cache DIR] [--keep-workdir] [--[no-]ground] [--no-progress]
         [--scheduler local|tcp://HOST:8786|tls://HOST:8786 [--workers N] [--tls-ca-file --tls-cert --tls-key]]
+        [--max-cameras 256]
 
 Rebuilds the scene from plan.json's ``scene`` dict (vp_scene.build.build_noisy_scene) and writes
 
@@ -85,7 +86,7 @@ def capture_from_args(args: argparse.Namespace) -> object:
 
 
 def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
-    from .pipeline import MATCH_POSES_FROM, MATCHINGS
+    from .pipeline import MATCH_POSES_FROM, MATCHINGS, MAX_CAMERAS, MAX_MEGAPIXELS
     from .sparse import MODES
 
     p = _Parser(prog=PROG, description="Render, reconstruct (COLMAP on CPU + SGBM) and score a view plan.")
@@ -125,6 +126,13 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     # 2.4x its time beside a reconstruction on all cores of 2; README "Results")
     p.add_argument("--threads", type=int, default=max(1, (os.cpu_count() or 2) - 1),
                    help="threads of COLMAP and OpenCV (default: cores - 1, leaving one to a planner; 0: all cores)")
+    p.add_argument("--max-cameras", type=int, default=None,
+                   help=f"--plan: a plan of more cameras is refused (exit 2; default {MAX_CAMERAS}: every image of a "
+                        "realization is held at once, about 23 MB a camera at 2000 x 1500)")
+    p.add_argument("--max-megapixels", type=float, default=None,
+                   help=f"--images: a folder whose images have more megapixels together is refused before any is "
+                        f"decoded (exit 2; default {MAX_MEGAPIXELS}: the memory of {MAX_CAMERAS} images of "
+                        "2000 x 1500)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.add_argument("--scheduler", default="",
                    help="reconstruct the realizations in parallel on Dask: 'local' (a local cluster of --workers "
@@ -147,11 +155,18 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
             check_cluster_args(args.scheduler, args.workers, tls)
         except ValueError as exc:
             p.error(str(exc))
+    if args.max_cameras is not None and args.max_cameras < 2:
+        p.error(f"--max-cameras must be >= 2, got {args.max_cameras}")
+    if args.max_megapixels is not None and not args.max_megapixels > 0:
+        p.error(f"--max-megapixels must be > 0, got {args.max_megapixels}")
+    if args.plan and args.max_megapixels is not None:
+        p.error("--max-megapixels goes with --images (a plan is bounded by --max-cameras)")
     if args.prior and not args.images:
         p.error("--prior goes with --images (a plan brings its own scene)")
     if args.images:  # a flight folder has its own images: the options of rendering a plan do not apply
         given = [f for f, v in (("--width", args.width), ("--height", args.height), ("--realizations", args.realizations),
-                                ("--mesh-cache", args.mesh_cache), ("--scheduler", args.scheduler)) if v]
+                                ("--mesh-cache", args.mesh_cache), ("--scheduler", args.scheduler),
+                                ("--max-cameras", args.max_cameras)) if v]
         if given:
             p.error(f"{', '.join(given)} go(es) with --plan, not --images (the folder's images are what they are)")
     return args
@@ -172,15 +187,18 @@ def run(args: argparse.Namespace) -> dict:
     from vp_scene.planfile import PlanFileError, load_plan
 
     from .outputs import contact_sheet, summary, uncovered_image, write_image, write_json, write_ply
-    from .pipeline import STAGES, ReconConfig, ReconError, ensure_writable_dir, validate_cameras
+    from .pipeline import MAX_CAMERAS, STAGES, ReconConfig, ReconError, check_plan_size, ensure_writable_dir, \
+        validate_cameras
 
     try:
         plan = load_plan(args.plan)
     except PlanFileError as exc:
         raise CliError(str(exc)) from None
     ks = parse_realizations(args.realizations)
+    max_cameras = MAX_CAMERAS if args.max_cameras is None else args.max_cameras
     try:
         cams = validate_cameras(plan.cameras)
+        check_plan_size(len(cams), max_cameras, "--max-cameras")  # before the scene is built
     except ReconError as exc:
         raise CliError(f"{args.plan}: {exc}") from None
     try:
@@ -189,7 +207,7 @@ def run(args: argparse.Namespace) -> dict:
                              voxel=args.voxel, mesh_cache=args.mesh_cache, keep_workdir=args.keep_workdir,
                              ground=args.ground, num_threads=args.threads, matching=args.matching,
                              dense_scale=args.dense_scale, sift_first_octave=args.sift_first_octave,
-                             capture=capture_from_args(args)).validate()
+                             capture=capture_from_args(args), max_cameras=max_cameras).validate()
     except ValueError as exc:
         raise CliError(str(exc)) from None
     try:  # before the output folder is made: a bad scene leaves nothing behind
@@ -272,10 +290,10 @@ def run_images(args: argparse.Namespace) -> dict:
     from .flight import FlightError, read_flight
     from .metrics import chamfer, chamfer_after_icp
     from .outputs import contact_sheet, no_truth_metrics, uncovered_image, write_image, write_json, write_ply
-    from .pipeline import Prior, ReconConfig, ReconError, ensure_writable_dir, reconstruct_views
+    from .pipeline import MAX_MEGAPIXELS, Prior, ReconConfig, ReconError, ensure_writable_dir, reconstruct_views
 
     try:  # every input checked before OUT is made: nothing half-written
-        views = read_flight(args.images)
+        views = read_flight(args.images, MAX_MEGAPIXELS if args.max_megapixels is None else args.max_megapixels)
     except FlightError as exc:
         raise CliError(str(exc)) from None
     noisy = _prior_scene(args.prior) if args.prior else None
@@ -333,7 +351,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         os.environ.setdefault("LP_NUM_THREADS", str(args.threads))
     import pycolmap  # noqa: F401  (first: it installs glog's SIGTERM handler, replaced below)
 
-    from .pipeline import EMPTY_PLAN, NO_SCENE, OUTPUT_NOT_WRITABLE, ReconError
+    from .pipeline import EMPTY_PLAN, NO_SCENE, OUTPUT_NOT_WRITABLE, PLAN_TOO_LARGE, ReconError
 
     signal.signal(signal.SIGTERM, _terminate)  # SIGTERM ends the run as Ctrl-C does: exit 130
     try:
@@ -346,7 +364,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return 2
     except ReconError as exc:
         print(f"{PROG}: error: [{exc.name}] {' '.join(str(exc).split())}", file=sys.stderr)
-        return 2 if exc.code in (EMPTY_PLAN, NO_SCENE, OUTPUT_NOT_WRITABLE) else 1
+        return 2 if exc.code in (EMPTY_PLAN, NO_SCENE, OUTPUT_NOT_WRITABLE, PLAN_TOO_LARGE) else 1
     except (ValueError, OSError) as exc:
         print(f"{PROG}: error: {' '.join(str(exc).split())}", file=sys.stderr)
         return 2

@@ -36,7 +36,8 @@ COLMAP reads the model), plus ``flight.json`` (what is known of a simulated flig
 realization and capture model). Every problem of a folder is a :class:`FlightError` with one
 line naming the file.
 
-ROS-free: numpy, OpenCV, scipy.
+Images are read by :mod:`vp_scene.images` (the header checked before anything is decoded; a
+truncated or corrupt image refused). ROS-free: numpy, OpenCV, Pillow, scipy.
 """
 from __future__ import annotations
 
@@ -55,6 +56,9 @@ from scipy.spatial.transform import Rotation
 
 from vp_scene.camera import (body_from_optical, cameras_to_poses, poses_to_cameras, principal_point_gl, roll_of,
                              world_to_camera)
+from vp_scene.images import ImageError, image_size, read_image
+
+from .pipeline import MAX_MEGAPIXELS
 
 __all__ = ["POSES_FILE", "POSES_COLUMNS", "IMAGE_SUFFIXES", "FRAME", "MAX_ROLL_DEG", "FlightError", "CapturedViews",
            "write_flight", "read_flight", "capture_folder", "locate_flown", "flown_views", "join_views"]
@@ -282,10 +286,13 @@ def _read_colmap_text(folder: Path) -> tuple[list, NDArray[np.float64], list]:
     return names, np.array(poses, dtype=np.float64).reshape(-1, 7), intr
 
 
-def read_flight(folder: PathLike) -> CapturedViews:
+def read_flight(folder: PathLike, max_megapixels: float = MAX_MEGAPIXELS) -> CapturedViews:
     """The capture set of a flight folder (module docstring); FlightError naming the file for a
-    missing or corrupt image, a size not matching its intrinsics, a missing or NaN pose, an
-    image without a pose, duplicate names, intrinsics that differ, or fewer than 2 images."""
+    missing, corrupt or truncated image, a size not matching its intrinsics, a missing or NaN
+    pose, an image without a pose, duplicate names, intrinsics that differ, or fewer than 2
+    images. Every image's header is read before any is decoded: an image of more than
+    :data:`vp_scene.images.MAX_IMAGE_PIXELS` pixels, or images of more than ``max_megapixels``
+    together (:data:`vp_recon.pipeline.MAX_MEGAPIXELS`: memory), are refused before decoding."""
     d = Path(folder)
     if not d.is_dir():
         raise FlightError(f"{d}: not a folder")
@@ -314,18 +321,33 @@ def read_flight(folder: PathLike) -> CapturedViews:
     fx, fy, cx, cy, w, h = intr[0]
     if not (fx > 0 and fy > 0 and w >= 16 and h >= 16 and w == int(w) and h == int(h)):
         raise FlightError(f"{source}: bad intrinsics fx {fx} fy {fy} size {w}x{h}")
-    images = []
-    for name in names:
+    pixels = 0
+    for name in names:  # the headers first: nothing is decoded of a folder that is refused
         path = d / name
         if not path.is_file():
             raise FlightError(f"{path}: missing (listed in {source.name})")
-        im = cv2.imread(str(path), cv2.IMREAD_COLOR)
-        if im is None:
-            raise FlightError(f"{path}: cannot read the image (corrupt or not an image)")
+        try:
+            with open(path, "rb") as f:
+                _, iw, ih = image_size(f, str(path))
+        except OSError as exc:
+            raise FlightError(f"{path}: cannot read: {exc.strerror or exc}") from None
+        except ImageError as exc:
+            raise FlightError(str(exc)) from None
+        pixels += iw * ih
+    if pixels > max_megapixels * 1e6:
+        raise FlightError(f"{d}: its {len(names)} images have {pixels / 1e6:.4g} megapixels; at most "
+                          f"{max_megapixels:g} are reconstructed at once (--max-megapixels; memory)")
+    images = []
+    for name in names:
+        path = d / name
+        try:
+            im = read_image(path)
+        except ImageError as exc:
+            raise FlightError(str(exc)) from None
         if (im.shape[1], im.shape[0]) != (int(w), int(h)):
             raise FlightError(f"{path}: {im.shape[1]}x{im.shape[0]} pixels, but {source.name} gives "
                               f"{int(w)}x{int(h)}")
-        images.append(cv2.cvtColor(im, cv2.COLOR_BGR2RGB))
+        images.append(im)
     K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
     realization = None
     if (d / "flight.json").is_file():
@@ -384,7 +406,7 @@ def flown_views(located: Sequence[tuple[Path, int]], k: int) -> CapturedViews:
             if not (d / POSES_FILE).is_file():
                 raise FlightError(f"{d}: no capture set of realization {k} kept (the recon node's "
                                   "record_captures was off, or the folder was removed)")
-            sets[folder] = read_flight(d)
+            sets[folder] = read_flight(d, max_megapixels=math.inf)  # the node's own, bounded when made
         v = sets[folder]
         if j >= len(v.images):
             raise FlightError(f"{capture_folder(folder, k)}: {len(v.images)} images, camera {j} is not among them")

@@ -61,7 +61,8 @@ from .metrics import DEFAULT_FSCORE_THRESHOLD, CloudScore, EmptyCloudError, Scor
 
 __all__ = [
     "NONE", "UNKNOWN", "EMPTY_PLAN", "NO_SCENE", "NOTHING_VISIBLE", "RECONSTRUCTION_FAILED",
-    "OUTPUT_NOT_WRITABLE", "WRONG_FRAME", "CAPTURE_MISSING", "ERROR_NAMES", "STAGES", "ReconError", "ReconCancelled", "ReconConfig",
+    "OUTPUT_NOT_WRITABLE", "WRONG_FRAME", "CAPTURE_MISSING", "PLAN_TOO_LARGE", "ERROR_NAMES", "MAX_CAMERAS",
+    "MAX_MEGAPIXELS", "check_plan_size", "STAGES", "ReconError", "ReconCancelled", "ReconConfig",
     "RealizationResult", "PlanReconResult", "MATCHINGS", "MATCH_POSES_FROM", "matching_method", "validate_cameras",
     "ensure_writable_dir", "crop_box", "Prior", "ViewsResult", "render_flight", "reconstruct_views",
     "reconstruct_captured", "plan_result",
@@ -78,10 +79,25 @@ RECONSTRUCTION_FAILED = 5
 OUTPUT_NOT_WRITABLE = 6
 WRONG_FRAME = 7
 CAPTURE_MISSING = 8
+PLAN_TOO_LARGE = 9
 ERROR_NAMES = {NONE: "NONE", UNKNOWN: "UNKNOWN", EMPTY_PLAN: "EMPTY_PLAN", NO_SCENE: "NO_SCENE",
                NOTHING_VISIBLE: "NOTHING_VISIBLE", RECONSTRUCTION_FAILED: "RECONSTRUCTION_FAILED",
                OUTPUT_NOT_WRITABLE: "OUTPUT_NOT_WRITABLE", WRONG_FRAME: "WRONG_FRAME",
-               CAPTURE_MISSING: "CAPTURE_MISSING"}
+               CAPTURE_MISSING: "CAPTURE_MISSING", PLAN_TOO_LARGE: "PLAN_TOO_LARGE"}
+
+#: The most cameras a plan may have (a second sortie's flown cameras included): ``ReconConfig.
+#: max_cameras``, the recon node's parameter ``max_cameras`` and ``--max-cameras`` of ``make
+#: recon``; a larger plan is refused with PLAN_TOO_LARGE before anything is rendered. Every image
+#: of a realization is held at once: measured peak RSS of ``python -m vp_recon.cli --plan`` (one
+#: realization, 2000 x 1500, realistic capture, one_plant) 1.56 GB with 8 cameras, 2.12 GB with
+#: 32, about 23 MB a camera (a 200-camera plan took 5.8 GB), so 256 cameras need about 7.3 GB.
+#: The planner plans at most 100 cameras a sortie; 256 hold 16 drones over 16 sorties.
+MAX_CAMERAS = 256
+#: The most megapixels the images of a flight folder may have together (``--images``,
+#: ``--max-megapixels``), read from their headers before any is decoded: a folder's memory is
+#: its pixels (about 7.7 MB a megapixel, as above), whatever their number. The memory of
+#: MAX_CAMERAS cameras of 2000 x 1500: hundreds of images of a few megapixels, 64 of 12 MP.
+MAX_MEGAPIXELS = MAX_CAMERAS * 2000 * 1500 // 1_000_000
 
 #: Stages reported to the progress callback, in order.
 STAGES = ("render", "sparse", "dense", "score")
@@ -158,6 +174,7 @@ class ReconConfig:
         matching: ``'exhaustive'`` (all image pairs), ``'poses'`` (the pairs
             :func:`vp_recon.pairs.select_pairs` picks from the known poses and scene) or
             ``'auto'``: poses from :data:`MATCH_POSES_FROM` cameras up, exhaustive below.
+        max_cameras: a plan of more cameras is refused (PLAN_TOO_LARGE, :func:`check_plan_size`).
     """
 
     width: int = 2000
@@ -181,6 +198,7 @@ class ReconConfig:
     num_threads: int = 0
     matching: str = "auto"
     capture: CaptureModel = REALISTIC
+    max_cameras: int = MAX_CAMERAS
 
     @property
     def sparse_mode_used(self) -> str:
@@ -228,6 +246,9 @@ class ReconConfig:
             raise ValueError(f"sift_first_octave must be -1, 0 or 1, got {self.sift_first_octave!r}")
         if not (isinstance(self.dense_scale, (int, float)) and 0 < self.dense_scale <= 1):
             raise ValueError(f"dense_scale must be in (0, 1], got {self.dense_scale!r}")
+        if isinstance(self.max_cameras, bool) or not isinstance(self.max_cameras, (int, np.integer)) \
+                or self.max_cameras < 2:
+            raise ValueError(f"max_cameras must be an integer >= 2, got {self.max_cameras!r}")
         return self
 
 
@@ -358,6 +379,14 @@ def validate_cameras(cameras: object) -> NDArray[np.float64]:
     if len(cams) < 2:
         raise ReconError(EMPTY_PLAN, f"a reconstruction needs at least 2 cameras, the plan has {len(cams)}")
     return cams
+
+
+def check_plan_size(num_cameras: int, max_cameras: int = MAX_CAMERAS, setting: str = "max_cameras") -> None:
+    """ReconError(PLAN_TOO_LARGE) for a plan of more than ``max_cameras`` cameras (``setting``:
+    the name the user knows the cap by, in the message)."""
+    if num_cameras > max_cameras:
+        raise ReconError(PLAN_TOO_LARGE, f"the plan has {num_cameras} cameras; at most {max_cameras} are "
+                         f"reconstructed ({setting}: every image of a realization is held at once)")
 
 
 def _check_scene(noisy_scene: object) -> NDArray[np.float64]:
@@ -793,11 +822,13 @@ def reconstruct_plan(noisy_scene: object, cameras: ArrayLike, config: Optional[R
 
     Raises:
         ReconError as :func:`reconstruct_realization`, with ``.realization`` set to the failing
-        realization's k (plan-level problems, such as an unknown realization, have None).
+        realization's k (plan-level problems, such as an unknown realization, have None);
+        PLAN_TOO_LARGE for more than ``config.max_cameras`` cameras, before anything is rendered.
         ReconCancelled: ``progress`` returned False.
     """
     cfg = (config or ReconConfig()).validate()
     cams = validate_cameras(cameras)
+    check_plan_size(len(cams), cfg.max_cameras)
     pts = _check_scene(noisy_scene)
     K = pts.shape[0]
     ks = list(range(K)) if realizations is None else [int(x) for x in realizations]

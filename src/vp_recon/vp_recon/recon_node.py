@@ -43,9 +43,9 @@ The work runs on a worker thread, so the node's callbacks keep running. Queueing
 plan in progress is finished; of the plans that arrive meanwhile only the newest is kept
 (it replaces an older queued one, which is logged), because a newer plan supersedes older ones.
 Bad input (an empty plan, cameras that see no plant, nothing reconstructed, an unwritable output
-folder, no scene yet, a wrong frame) gives a score message with an error code and message and a
-log line; the node keeps running. Signals, exit codes and parameter types follow
-:mod:`vp_scene.node_runtime`.
+folder, no scene yet, a wrong frame, more than ``max_cameras`` cameras: refused as it arrives)
+gives a score message with an error code and message and a log line; the node keeps running.
+Signals, exit codes and parameter types follow :mod:`vp_scene.node_runtime`.
 """
 from __future__ import annotations
 
@@ -68,9 +68,9 @@ from vp_interfaces.msg import CameraPlan, ReconstructionScore, SceneDescription
 from vp_recon.flight import FlightError, flown_views, join_views, locate_flown, write_flight
 from vp_recon.metrics import DEFAULT_FSCORE_THRESHOLD
 from vp_recon.outputs import contact_sheet, new_run_folder, remove_if_empty, write_image, write_ply
-from vp_recon.pipeline import (CAPTURE_MISSING, STAGES, ReconCancelled, ReconConfig, ReconError, RealizationResult,
-                               ensure_writable_dir, plan_result, reconstruct_captured, reconstruct_plan,
-                               worker_call, worker_result)
+from vp_recon.pipeline import (CAPTURE_MISSING, MAX_CAMERAS, STAGES, ReconCancelled, ReconConfig, ReconError,
+                               RealizationResult, check_plan_size, ensure_writable_dir, plan_result,
+                               reconstruct_captured, reconstruct_plan, worker_call, worker_result)
 from vp_scene.capture import IDEAL, REALISTIC, CaptureModel
 from vp_scene.camera import poses_to_cameras
 from vp_scene.messages import (aggregate_score, camera_info_intrinsics, compressed_image_array, drone_topic,
@@ -129,6 +129,9 @@ PARAMS = {
                                    'to <plan folder>/captures/realization_<k>: `make recon IMAGES=...` re-runs it, '
                                    'and a second fleet sortie reads the flown cameras\' images from it'),
     'max_realizations': Param(0, 'reconstruct only the first n realizations (0: all)', (0, INT_MAX)),
+    'max_cameras': Param(MAX_CAMERAS, 'a plan of more cameras (a second sortie\'s flown ones included) is refused '
+                                      'at once with PLAN_TOO_LARGE (every image of a realization is held at once: '
+                                      'about 23 MB a camera at 2000 x 1500)', (2, INT_MAX)),
     'scene_timeout': Param(10.0, 's a plan that arrives before the scene waits for it', _M),
     'frame_id': Param('map', 'frame of the plans and of the published clouds', None, False, 'not empty'),
     # beside the planner (1 thread by default) the reconstruction takes the other cores
@@ -210,7 +213,7 @@ def check_parameters(values: dict) -> dict:
 
         check_cluster_args(v['scheduler'], v.get('workers', PARAMS['workers'][0]), tls)
     config_keys = ('width', 'height', 'fov', 'sparse_mode', 'dense', 'matching', 'fscore_threshold',
-                   'sift_first_octave', 'dense_scale')
+                   'sift_first_octave', 'dense_scale', 'max_cameras')
     if any(k in v for k in config_keys):  # the rendering settings: ReconConfig's own checks
         defaults = {k: PARAMS[k][0] for k in config_keys}
         ReconConfig(**{**defaults, **{k: v[k] for k in config_keys if k in v}}).validate()
@@ -264,7 +267,7 @@ class ReconNode(Node):
                            sparse_mode=self._param('sparse_mode'), dense=self._param('dense'),
                            matching=self._param('matching'), fscore_threshold=self._param('fscore_threshold'), keep_images=True,
                            num_threads=self._param('num_threads'), sift_first_octave=self._param('sift_first_octave'),
-                           dense_scale=self._param('dense_scale'),
+                           dense_scale=self._param('dense_scale'), max_cameras=self._param('max_cameras'),
                            capture=capture_model({k: self._param(k) for k in CAPTURE_KEYS})).validate()
 
     def on_shutdown(self, timeout: float) -> bool:
@@ -312,6 +315,11 @@ class ReconNode(Node):
             return self._infos.get(key)
 
     def _on_plan(self, msg: PoseArray) -> None:
+        try:  # refused at once, not queued: it replaces no plan waiting to be reconstructed
+            check_plan_size(len(msg.poses), self._param('max_cameras'))
+        except ReconError as exc:
+            self._publish_error(exc.code, str(exc), Score.AGGREGATE, len(msg.poses), msg)
+            return
         self._plans.offer(msg)
         self.get_logger().info(f'plan received: {len(msg.poses)} cameras (frame {msg.header.frame_id!r})')
 
@@ -379,6 +387,7 @@ class ReconNode(Node):
                 self.get_logger().info(f'a second sortie: {len(info.fixed_poses)} cameras already flown and '
                                        f'{n_cams} new ones')
                 n_cams = len(cameras)
+            check_plan_size(n_cams, config.max_cameras)  # the flown cameras count, and max_cameras may have changed
             if not np.all(np.isfinite(cameras)):
                 raise ReconError(Score.EMPTY_PLAN, 'the plan has non-finite poses')
             located = None
@@ -705,6 +714,11 @@ class FleetCaptures:
             bad = [(d, sets[d]['image']) for d in drones if isinstance(sets[d]['image'], Exception)]
             if bad:
                 raise ValueError(f'the image of {bad[0][0]}: {bad[0][1]}')
+            for d, (_, w, h) in zip(drones, intr):  # K is the camera_info's size's: another size is another camera
+                im = sets[d]['image']
+                if (im.shape[1], im.shape[0]) != (w, h):
+                    raise ValueError(f'the image of {d} is {im.shape[1]}x{im.shape[0]} pixels, its camera_info '
+                                     f'says {w}x{h}')
             return CapturedViews(
                 names=[f'view_{e.pose_index:03d}.png' for e in entries],
                 images=[sets[d]['image'] for d in drones],

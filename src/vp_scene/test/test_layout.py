@@ -332,6 +332,35 @@ def test_command_line_scenario_is_a_name_or_a_file_read_at_once(tmp_path: Path) 
         read_scenario(str(tmp_path / "field.json"))
 
 
+def test_a_huge_layout_file_is_refused_before_it_is_parsed(tmp_path: Path, monkeypatch) -> None:
+    """Hardening III, item 11: a YAML layout of 100,000 plants (2.4 MB) was parsed whole (18 s,
+    640 MB) before its plant count was refused. A file over MAX_LAYOUT_BYTES is refused unparsed,
+    in one line naming it; a layout of MAX_PLANTS plants with every key and a comment a plant is
+    well under the cap."""
+    import yaml
+
+    huge = tmp_path / "huge.yaml"
+    huge.write_text("plants:\n" + "".join(f"  - {{x: {0.2 * i:.1f}, y: 0.0}}\n" for i in range(100_000)))
+    with monkeypatch.context() as tripwire:
+        tripwire.setattr(yaml, "safe_load", lambda *a, **k: pytest.fail("the file was parsed"))
+        tripwire.setattr(json, "loads", lambda *a, **k: pytest.fail("the file was parsed"))
+        for path in (huge, tmp_path / "huge.json"):
+            huge.rename(path)
+            with pytest.raises(LayoutError) as err:
+                load_layout(path)
+            assert str(err.value) == f"{path}: larger than 256 KiB; a layout file of at most 200 plants is smaller"
+    from vp_scene.layout import MAX_LAYOUT_BYTES, MAX_PLANTS
+
+    assert MAX_LAYOUT_BYTES == 256 * 1024
+    full = tmp_path / "full.yaml"
+    full.write_text("# " + "a long comment " * 20 + "\nname: full\nplants:\n" + "".join(
+        f"  # plant {i}: row {i // 20}, column {i % 20}, a model of its own, turned and scaled\n"
+        f"  - {{x: {0.5 * (i % 20) - 4.75:.6f}, y: {0.8 * (i // 20) - 3.6:.6f}, yaw: 1.570796, scale: 1.05, "
+        f"model: procedural-{1000 + i}}}\n" for i in range(MAX_PLANTS)))
+    assert full.stat().st_size < MAX_LAYOUT_BYTES / 8
+    assert len(load_layout(full).plants) == MAX_PLANTS
+
+
 def test_dict_errors_name_the_given_source() -> None:
     with pytest.raises(LayoutError) as err:
         layout_from_dict({"plants": [{"x": 0, "y": None}]}, "out/plan.json", field_prefix="scene.scenario.")

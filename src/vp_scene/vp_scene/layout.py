@@ -37,7 +37,8 @@ File format (a mapping; unknown keys are errors)::
 
 The grid's plant (row i, column j), i < rows, j < columns, stands at
 x = (j - (columns - 1) / 2) plant_spacing, y = (i - (rows - 1) / 2) row_spacing, row after row.
-Limits: 1 to :data:`MAX_PLANTS` plants, at least :data:`MIN_PLANT_DISTANCE` m apart (before
+Limits: a file of at most :data:`MAX_LAYOUT_BYTES` (checked before it is parsed), 1 to
+:data:`MAX_PLANTS` plants, at least :data:`MIN_PLANT_DISTANCE` m apart (before
 jitter), every plant within :data:`MAX_EXTENT` m of the origin of ``map`` in x and in y (a field
 of 200 m x 200 m; beyond, a plan is not a drone sortie: a plant at x = 1e9 was planned with
 cameras 1e9 m up), scale in (0, :data:`MAX_SCALE`]. Every error is a :class:`LayoutError` of one line that
@@ -56,7 +57,7 @@ from typing import Any, Iterable, NoReturn, Optional, Union
 
 import numpy as np
 
-__all__ = ["LayoutError", "PlantSpec", "Layout", "BUILTIN_LAYOUTS", "LAYOUT_SUFFIXES", "MAX_PLANTS",
+__all__ = ["LayoutError", "PlantSpec", "Layout", "BUILTIN_LAYOUTS", "LAYOUT_SUFFIXES", "MAX_PLANTS", "MAX_LAYOUT_BYTES",
            "MIN_PLANT_DISTANCE", "MAX_SCALE", "MAX_EXTENT", "grid_layout", "builtin_layout", "layout_from_dict",
            "load_layout", "read_scenario", "resolve_layout", "is_layout_file"]
 
@@ -72,6 +73,11 @@ BUILTIN_LAYOUTS: dict[str, tuple[int, int]] = {
 LAYOUT_SUFFIXES = (".yaml", ".yml", ".json")
 #: At most this many plants in a layout.
 MAX_PLANTS = 200
+#: A layout file is at most this many bytes, checked before it is parsed: a 100,000-plant YAML
+#: took 18 s and 640 MB to parse before its plant count was refused (PyYAML parses about 0.2 MB
+#: a second: 256 KiB in about 1 s). MAX_PLANTS plants with every key and a comment each take
+#: 30 KiB.
+MAX_LAYOUT_BYTES = 256 * 1024
 #: m: the plants of a layout file stand at least this far apart (before jitter).
 MIN_PLANT_DISTANCE = 0.1
 #: Largest scale a spec may give.
@@ -378,9 +384,15 @@ def is_layout_file(scenario: str) -> bool:
 
 
 def _read(path: Path) -> object:
-    """The parsed content of a .json or .yaml/.yml file (LayoutError naming the file)."""
+    """The parsed content of a .json or .yaml/.yml file of at most :data:`MAX_LAYOUT_BYTES`
+    (LayoutError naming the file; a larger one is refused before it is parsed)."""
     try:
-        text = path.read_text(encoding="utf-8")
+        with open(path, "rb") as f:
+            data = f.read(MAX_LAYOUT_BYTES + 1)  # no more than that is read, whatever the file
+        if len(data) > MAX_LAYOUT_BYTES:
+            raise LayoutError(f"{path}: larger than {MAX_LAYOUT_BYTES // 1024} KiB; a layout file of at most "
+                              f"{MAX_PLANTS} plants is smaller")
+        text = data.decode("utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise LayoutError(f"cannot read layout file {path}: {getattr(exc, 'strerror', None) or exc}") from None
     if path.suffix.lower() == ".json":

@@ -391,14 +391,13 @@ def compressed_image_msg(image: ArrayLike, frame_id: str, stamp: Any, fmt: str =
 
 
 def compressed_image_array(msg: CompressedImage) -> NDArray[np.uint8]:
-    """RGB (H, W, 3) uint8 of a ``sensor_msgs/CompressedImage`` (PNG or JPEG); ValueError when it
-    does not decode."""
-    import cv2
+    """RGB (H, W, 3) uint8 of a ``sensor_msgs/CompressedImage`` (PNG or JPEG); ValueError
+    (:class:`vp_scene.images.ImageError`) for one of more than
+    :data:`vp_scene.images.MAX_IMAGE_PIXELS` pixels (refused from its header, before decoding),
+    or one that is truncated or does not decode."""
+    from .images import decode_image
 
-    a = cv2.imdecode(np.frombuffer(bytes(msg.data), dtype=np.uint8), cv2.IMREAD_COLOR)
-    if a is None:
-        raise ValueError(f"compressed image ({msg.format or 'no format'}, {len(msg.data)} bytes) does not decode")
-    return np.ascontiguousarray(a[..., ::-1])
+    return decode_image(bytes(msg.data), f"compressed image ({msg.format or 'no format'}, {len(msg.data)} bytes)")
 
 
 def camera_info_msg(K: ArrayLike, width: int, height: int, frame_id: str, stamp: Any) -> CameraInfo:
