@@ -115,7 +115,7 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path) -> None:
     truncated = tmp_path / "truncated"
     truncated.mkdir()
     data = (folder / "run.mcap").read_bytes()
-    (truncated / "run.mcap").write_bytes(data[: len(data) // 2])
+    (truncated / "run.mcap").write_bytes(data[:200])  # cut inside its first chunk: no message in it
     cases = [(empty, "no recording (run.mcap)"), (tmp_path / "nowhere", "no such run folder"),
              (truncated, "not a readable MCAP recording")]
     for run, said in cases:
@@ -132,3 +132,17 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path) -> None:
     assert proc.stderr.strip().splitlines()[-1] == f"error: port {port} on 127.0.0.1 is in use (try --port / make view PORT=...)"
     with pytest.raises(ViewerError, match="no recording"):
         load_run(empty)
+
+
+def test_a_recording_cut_by_a_kill_is_shown_up_to_then(tmp_path, capfd) -> None:
+    """Hardening III, item 9: a run.mcap whose recorder was killed (no summary, its end cut) is read
+    up to its last complete chunk, with one line saying it was cut (it was refused as unreadable)."""
+    folder = write_run(tmp_path / "run", ring(3))
+    data = (folder / "run.mcap").read_bytes()
+    cut = tmp_path / "cut"
+    cut.mkdir()
+    (cut / "run.mcap").write_bytes(data[: len(data) // 2])  # the chunk whole, the summary and footer cut
+    capfd.readouterr()
+    assert load_run(folder).keys() == load_run(cut).keys()
+    err = capfd.readouterr().err
+    assert err.count("\n") == 1 and f"{cut / 'run.mcap'} was cut" in err, err
