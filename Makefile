@@ -22,7 +22,10 @@ CAMERAS2 ?= 0
 EVALS    ?= 100
 SEED     ?= 0
 REWARD   ?=
+# make run again: the earlier run in OUT is moved to OUT-<time> first (README "Two commands")
 OUT      ?= out/$(SCENE_TAG)-$(METHOD)-$(CAMERAS)cams-seed$(SEED)
+# OVERWRITE=1: make plan / make recon replace the plan / reconstruction OUT holds (else refused)
+OVERWRITE ?=
 MODELS   ?=
 PLAN     ?= $(OUT)/plan.json
 RECON_ARGS ?=
@@ -52,12 +55,13 @@ run: setup
 
 plan: setup
 	@$(ENV) python -m vp_planner.cli --scenario $(SCENE_ARG) --method $(METHOD) --cameras $(CAMERAS) \
-	  --evals $(EVALS) --seed $(SEED) --out $(OUT) $(if $(MODELS),--models $(MODELS)) $(if $(REWARD),--reward $(REWARD))
+	  --evals $(EVALS) --seed $(SEED) --out $(OUT) $(if $(MODELS),--models $(MODELS)) $(if $(REWARD),--reward $(REWARD)) \
+	  $(if $(OVERWRITE),--overwrite)
 
 # make recon IMAGES=DIR [PRIOR=plan.json]: a flight folder (README "From a real flight") into
 # DIR-recon (or OUT=... given on the command line); without IMAGES: render and reconstruct PLAN
 recon: setup
-	@$(ENV) python -m vp_recon.cli $(if $(IMAGES),--images $(IMAGES) --out $(if $(filter file,$(origin OUT)),$(patsubst %/,%,$(IMAGES))-recon,$(OUT)) $(if $(PRIOR),--prior $(PRIOR)),--plan $(PLAN) --out $(OUT)) $(RECON_ARGS)
+	@$(ENV) python -m vp_recon.cli $(if $(IMAGES),--images $(IMAGES) --out $(if $(filter file,$(origin OUT)),$(patsubst %/,%,$(IMAGES))-recon,$(OUT)) $(if $(PRIOR),--prior $(PRIOR)),--plan $(PLAN) --out $(OUT)) $(if $(OVERWRITE),--overwrite) $(RECON_ARGS)
 
 score: setup
 	@$(ENV) python -m vp_planner.cli score --plan $(PLAN) $(if $(REWARD),--reward $(REWARD))

@@ -198,6 +198,68 @@ def test_recon_on_a_cluster_fails_with_the_first_failing_realization(tmp_path, m
     assert err.value.code == NOTHING_VISIBLE and err.value.realization == 0
 
 
+def dask_scheduler(tmp_path: Path, env: dict):
+    """A ``dask scheduler`` on 127.0.0.1 (a free port) with one ``dask worker`` of one thread, as
+    processes: (scheduler, worker, address). Stop both (``.stop()``) when done."""
+    import re
+
+    from node_process import NodeProcess  # tools/, on the path through conftest
+
+    dask = str(Path(sys.executable).with_name("dask"))
+    sched = NodeProcess([dask, "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard"], env,
+                        tmp_path / "scheduler.log")
+    deadline = time.monotonic() + 60
+    while not (found := re.search(r"Scheduler at:\s+(tcp://127\.0\.0\.1:\d+)", sched.output())):
+        if time.monotonic() > deadline or not sched.alive():
+            sched.stop()
+            raise AssertionError(sched.output())
+        time.sleep(0.1)
+    address = found.group(1)
+    worker = NodeProcess([dask, "worker", address, "--host", "127.0.0.1", "--nthreads", "1", "--no-dashboard"],
+                         env, tmp_path / "worker.log")
+    return sched, worker, address
+
+
+def test_a_scheduler_lost_mid_reconstruction_is_one_line_and_a_recorded_failure(tmp_path):
+    """Hardening III, item 10: ``recon --scheduler tcp://...`` whose scheduler is SIGKILLed while
+    the realizations reconstruct on its worker ended in three FutureCancelledError tracebacks (64
+    lines), exit 1 and no recon.json. Now: one line naming the scheduler, exit 1 (a reconstruction
+    failure, as the CLI documents), and OUT holds a recon.json that says what failed, alone."""
+    import json
+
+    from node_process import NodeProcess
+
+    env = dict(os.environ, PYOPENGL_PLATFORM="egl", OMP_NUM_THREADS="1", PYTHONUNBUFFERED="1")
+    env.pop("DASK_SCHEDULER_ADDRESS", None)
+    sched, worker, address = dask_scheduler(tmp_path, env)
+    cli = None
+    try:
+        assert sched.wait_for_output("Register worker", 60), sched.output()
+        out = tmp_path / "out"
+        cli = NodeProcess([sys.executable, "-m", "vp_recon.cli", "--plan", str(_recon_plan(tmp_path)), "--width",
+                           "1280", "--height", "960", "--capture", "ideal", "--threads", "1", "--no-progress",
+                           "--keep-workdir", "--scheduler", address, "--out", str(out)], env, tmp_path / "cli.log")
+        deadline = time.monotonic() + 180
+        # realization 0 rendered on the worker, its COLMAP workspace made (in work/ of OUT's stage): mid-run
+        while not list(out.rglob("realization_0")):
+            assert time.monotonic() < deadline and cli.alive(), cli.output()
+            time.sleep(0.05)
+        sched.signal(signal.SIGKILL)
+        code = cli.wait(120)
+        text = cli.output()
+    finally:
+        for proc in (cli, worker, sched):
+            if proc is not None:
+                proc.stop()
+    assert code == 1, text
+    lines = text.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"recon: error: [UNKNOWN] lost the Dask scheduler {address} "), text
+    record = json.loads((out / "recon.json").read_text())
+    assert record["chamfer_mean"] is None and record["scheduler"] == address
+    assert record["error"]["name"] == "UNKNOWN" and f"lost the Dask scheduler {address}" in record["error"]["message"]
+    assert sorted(p.name for p in out.iterdir()) == ["recon.json", "work"]  # --keep-workdir: the workspaces
+
+
 def test_a_cluster_slow_to_stop_is_a_warning_not_a_lost_result(capsys):
     """A local cluster whose workers do not stop in time (a loaded machine: a benchmark ended with
     the nanny's TimeoutError after all its results were cached, and wrote none of them): a warning;

@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from node_process import NodeProcess  # tools/, on sys.path through conftest.py
 
@@ -262,6 +263,10 @@ def test_a_dead_node_is_reported_last_without_tracebacks(ros_env, tmp_path) -> N
     """Issue 10, item 11: the recon exits at once with a one-line error (bad width); the script
     stops the other two; its last line names the node and repeats that error, and no node prints
     a traceback while being stopped."""
+    earlier = tmp_path / "run"  # Hardening III, item 8: make run twice lost (and mixed) the first run
+    earlier.mkdir()
+    (earlier / "summary.json").write_text('{"earlier": true}')
+    (earlier / "run.mcap").write_bytes(b"the earlier recording")
     script = start_script(ros_env, tmp_path, "--method", "circle", "--evals", "4", "--width", "4",
                           "--timeout", "120")
     try:
@@ -273,6 +278,25 @@ def test_a_dead_node_is_reported_last_without_tracebacks(ros_env, tmp_path) -> N
     last = text.strip().splitlines()[-1]
     assert 'node "recon" died (exit code 2)' in last and "width" in last, text[-3000:]
     assert "Traceback" not in text and "KeyboardInterrupt" not in text, text[-6000:]
+    # the earlier run was moved aside, whole, before this one started: nothing lost, nothing mixed
+    (moved,) = [p for p in tmp_path.iterdir() if re.fullmatch(r"run-\d{8}-\d{6}", p.name)]
+    assert f"the earlier output in {earlier} was moved to {moved}" in text, text[-3000:]
+    assert sorted(p.name for p in moved.iterdir()) == ["run.mcap", "summary.json"]
+    assert (moved / "summary.json").read_text() == '{"earlier": true}'
+    assert not (earlier / "summary.json").exists() and (earlier / "recon.log").exists()
+
+
+def test_an_out_of_other_files_is_refused(tmp_path) -> None:
+    """Hardening III, item 8: an --out that holds files that are not an output of the suite is
+    refused (the run's files would mix with them; a later run would move the folder aside)."""
+    import run_suite
+
+    (tmp_path / "notes.txt").write_text("mine")
+    with pytest.raises(FileExistsError, match="holds other files"):
+        run_suite.prepare_out(tmp_path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
+    assert run_suite.prepare_out(tmp_path / "new") is None and (tmp_path / "new").is_dir()
+    assert run_suite.prepare_out(tmp_path / "new") is None  # empty: used as it is
 
 
 def test_layout_file_goes_to_the_scene_node_as_an_absolute_path(monkeypatch) -> None:

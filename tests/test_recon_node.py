@@ -144,6 +144,35 @@ def test_realizations_on_a_local_dask_cluster(recon_system) -> None:
     assert recon.poll() is None, recon.output()[-2000:]
 
 
+def test_a_lost_scheduler_is_an_error_score_and_the_node_serves_on(recon_system, tmp_path) -> None:
+    """Hardening III, item 10: parameter scheduler, a running scheduler's address, SIGKILLed while
+    the node reconstructs on its worker: the plan's aggregate score has error UNKNOWN and names the
+    scheduler (it said FutureCancelledError, without the address), no traceback in the log, and
+    the node serves on."""
+    import os
+
+    from test_cluster import dask_scheduler  # tests/: a dask scheduler and worker as processes
+
+    env = dict(os.environ, OMP_NUM_THREADS="1", PYOPENGL_PLATFORM="egl")
+    env.pop("DASK_SCHEDULER_ADDRESS", None)
+    sched, worker, address = dask_scheduler(tmp_path, env)
+    try:
+        assert sched.wait_for_output("Register worker", 60), sched.output()
+        client, pub, scores, _clouds, recon = recon_system(scheduler=address, width=1280, height=960)
+        pub.publish(pose_array(ring()))
+        assert recon.wait_for_output(f"realizations in parallel on Dask ({address}", TIMEOUT), recon.output()[-3000:]
+        time.sleep(1.0)  # its 2 realizations take about 5 s each on the one worker
+        sched.signal(signal.SIGKILL)
+        assert client.spin_until(lambda: aggregate(scores), 60), recon.output()[-3000:]
+    finally:
+        worker.stop()
+        sched.stop()
+    agg = aggregate(scores)[0]
+    assert agg.error_code == Score.UNKNOWN and f"lost the Dask scheduler {address}" in agg.error_msg, agg.error_msg
+    time.sleep(1.0)
+    assert recon.alive() and "Traceback" not in recon.output(), recon.output()[-3000:]
+
+
 def test_bad_plans_give_error_scores_and_node_keeps_running(recon_system) -> None:
     client, pub, scores, _clouds, recon = recon_system()
     pub.publish(pose_array(np.zeros((0, 6))))

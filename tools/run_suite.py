@@ -25,8 +25,13 @@ plan's capture sets). summary.json's
 ``rounds`` holds one record per sortie (its cameras, reward, the Chamfer distance of the
 reconstruction after it, seconds); its top-level plan fields are the last sortie's.
 
+Nothing of an earlier run is lost: an ``--out`` that holds one (``make run`` twice) is renamed to
+``<out>-<YYYYmmdd-HHMMSS>`` (the time it was last written) before the run starts, and the run
+writes into a new, empty ``<out>``; a folder of other files is refused (exit 2). ``run.mcap`` is
+readable up to a few seconds before a kill, also a SIGKILL (:mod:`vp_recon.recording`).
+
 Exit codes: 0 success, 1 the plan or the reconstruction failed (the error is printed),
-2 bad arguments or missing build, 3 a node died, 4 timed out, 130 interrupted.
+2 bad arguments, an ``--out`` of other files or missing build, 3 a node died, 4 timed out, 130 interrupted.
 
 Run after ``make setup`` (``make run`` does both)::
 
@@ -67,6 +72,10 @@ RECORDING = 'run.mcap'
 RECONSTRUCTION_VOXEL = 0.005
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_NODE_DIED, EXIT_TIMEOUT, EXIT_INTERRUPTED = 0, 1, 2, 3, 4, 130
+
+#: Entries that make a folder an earlier output of the suite (a run, a plan, a reconstruction): a
+#: run never writes into one (its files would mix), it moves it aside first (:func:`prepare_out`).
+EARLIER_OUTPUT = (RECORDING, 'summary.json', 'recorder.log', 'plan.json', 'recon.json', 'plan-*')
 
 
 #: image width (pixels) from which make run's SIFT starts at the image's own resolution: below it, too
@@ -155,6 +164,23 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
     if args.scenario_file is not None:  # the scene node gets the file, wherever it runs from
         args.scenario = args.scenario_file
     return args
+
+
+def prepare_out(out: Path) -> Optional[Path]:
+    """Make ``out`` the run's folder, empty: made when missing; a folder holding an earlier output
+    (:data:`EARLIER_OUTPUT`: ``make run`` twice) is first renamed to ``<out>-<the time it was last
+    written>`` (returned; nothing is deleted); a folder of other files is refused with
+    FileExistsError (the run's files would mix with them, and a later run would move them aside)."""
+    from vp_recon.outputs import move_aside
+
+    moved = None
+    if out.is_dir() and any(out.iterdir()):
+        if not any(any(out.glob(name)) for name in EARLIER_OUTPUT):
+            raise FileExistsError(f'--out {out} holds other files, not an output of the suite: give a new or an '
+                                  'empty folder')
+        moved = move_aside(out)
+    out.mkdir(parents=True, exist_ok=True)
+    return moved
 
 
 def check_scenario(ap: argparse.ArgumentParser, scenario: str) -> tuple:
@@ -413,7 +439,13 @@ def run(args: argparse.Namespace) -> int:
     from vp_scene.messages import msgs_to_poses, point_array, pose_array, score_record  # conversions' one home
 
     out = Path(args.out).resolve()
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        moved = prepare_out(out)
+    except OSError as exc:
+        print(f'error: {exc}', flush=True)
+        return EXIT_USAGE
+    if moved is not None:
+        print(f'vp-suite: the earlier output in {out} was moved to {moved}', flush=True)
     env = dict(os.environ)
     env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     if args.domain_id is not None:

@@ -55,6 +55,28 @@ def test_cli_writes_plan(tmp_path: Path) -> None:
     np.testing.assert_allclose(make_noisy_scene(s, cfg, scene["seed"]).points, pts)
 
 
+def test_a_plan_is_not_overwritten_without_overwrite(tmp_path: Path, capsys) -> None:
+    """Hardening III, item 8: planning again into an OUT that holds a plan is refused (one line,
+    exit 2, the hint --overwrite; the plan untouched, also its noisy_points.npy); --overwrite
+    replaces both; files of others in OUT (a reconstruction) are left as they are."""
+    out = tmp_path / "run"
+    args = ["--scenario", "one_plant", "--method", "random", "--cameras", "2", "--evals", "3",
+            "--points-per-plant", "150", "--realizations", "2", "--no-progress", "--out", str(out)]
+    assert main(args + ["--seed", "1"]) == 0
+    (out / "recon.json").write_text("{}")
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    capsys.readouterr()
+    assert main(args + ["--seed", "2"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"plan: error: {out} already holds a result (noisy_points.npy, plan.json)") and \
+        "--overwrite" in err and err.count("\n") == 1, err
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert main(args + ["--seed", "2", "--overwrite"]) == 0
+    assert json.loads((out / "plan.json").read_text())["seed"] == 2
+    assert sorted(p.name for p in out.iterdir()) == ["noisy_points.npy", "plan.json", "recon.json"]
+    assert (out / "recon.json").read_text() == "{}"
+
+
 def test_cli_errors(tmp_path: Path) -> None:
     env = dict(os.environ)
     src = str(Path(__file__).resolve().parents[1])

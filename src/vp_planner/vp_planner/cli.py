@@ -1,7 +1,7 @@
 """Command line planner: plan views on a noisy scene (write plan.json), or score a plan.
 
     python -m vp_planner.cli [plan] --scenario one_plant --method egp --cameras 4 --evals 100 \\
-        --init 50 --seed 0 --out out/run [--reward coverage] [--models FOLDER] [...]
+        --init 50 --seed 0 --out out/run [--overwrite] [--reward coverage] [--models FOLDER] [...]
     python -m vp_planner.cli score --plan out/run/plan.json [--reward paper]
 
 A second sortie: ``--fixed PLAN.json`` (repeatable) gives the cameras already flown, which every
@@ -14,8 +14,9 @@ together with the fixed cameras (README "A second sortie").
 cameras [[cx,cy,cz,vx,vy,vz], ...], poses [[x,y,z,qx,qy,qz,qw], ...], reward, trace,
 evaluations, initial_evaluations, seed, seconds, scene (every argument needed to rebuild the
 identical scene), fov, theta_match, image_size, simple_regret, ...) and ``OUT/noisy_points.npy``
-(the K x P x 3 realizations the reward was computed on). A progress bar with the best reward
-goes to stderr.
+(the K x P x 3 realizations the reward was computed on), both together when the planning is done
+(an interrupt or an error writes nothing). An OUT that holds a plan is refused (exit 2) unless
+``--overwrite``; other files in OUT are not touched. A progress bar with the best reward goes to stderr.
 
 ``--scenario`` is a layout name or a layout file (.yaml, .yml, .json), read at once (a bad file:
 one line, exit 2); plan.json's ``scene.scenario`` then holds the layout itself (its canonical
@@ -40,6 +41,9 @@ from typing import TYPE_CHECKING, Any, Optional, Sequence
 import numpy as np
 
 from vp_scene.layout import BUILTIN_LAYOUTS, LayoutError, read_scenario
+
+#: The entries of a plan in OUT: what --overwrite replaces, together.
+RESULT = ("plan.json", "noisy_points.npy")
 
 if TYPE_CHECKING:
     from .request import PlanRequest
@@ -116,7 +120,8 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
         p.add_argument("--cameras", type=int, default=4, help="number of cameras N (>= 2)")
         p.add_argument("--evals", type=int, default=100, help="reward evaluations (initial design included)")
         p.add_argument("--init", type=int, default=50, help="initial design size of egp/gp")
-        p.add_argument("--out", required=True, help="output folder")
+        p.add_argument("--out", required=True, help="output folder (one that holds a plan is refused)")
+        p.add_argument("--overwrite", action="store_true", help="replace the plan OUT holds (when this run succeeds)")
         _reward_args(p, DEFAULT_REWARD_MODEL)
         p.add_argument("--min-standoff", type=float, default=0.5)
         p.add_argument("--min-altitude", type=float, default=0.3)
@@ -243,6 +248,7 @@ def request_of(args: argparse.Namespace) -> "PlanRequest":
 
 def plan(args: argparse.Namespace) -> dict:
     """Plan views; write OUT/plan.json and OUT/noisy_points.npy; return the plan dict."""
+    from vp_recon.outputs import ResultFolder
     from vp_scene.camera import cameras_to_poses
     from vp_scene.planfile import write_plan
 
@@ -253,8 +259,8 @@ def plan(args: argparse.Namespace) -> dict:
         raise CliError(f"--threads must be >= 1, got {args.threads}")
     request = replace(request, fixed_cameras=fixed_cameras_of(args.fixed),
                       reconstruction=reconstruction_of(args.reconstructed))
+    result_dir = ResultFolder(args.out, RESULT, "plan", args.overwrite).check()  # before the planning
     set_threads(args.threads)
-    out = Path(args.out)
     image_size = request.image_size
     scene = scene_of(args)
     realizations, layout_name = build_scene(scene)
@@ -314,9 +320,10 @@ def plan(args: argparse.Namespace) -> dict:
             "reconstructed_weight": args.reconstructed_weight, "fraction": res.reconstructed_fraction},
         "scene": scene,
     }
-    out.mkdir(parents=True, exist_ok=True)
-    np.save(out / "noisy_points.npy", realizations)
-    write_plan(out / "plan.json", data)
+    with result_dir:  # both files, together
+        np.save(result_dir.stage / "noisy_points.npy", realizations)
+        write_plan(result_dir.stage / "plan.json", data)
+        result_dir.commit()
     return data
 
 

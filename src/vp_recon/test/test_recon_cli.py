@@ -146,6 +146,62 @@ def test_cli_nothing_visible_records_error(tmp_path: Path, capsys) -> None:
     assert rc == 1 and "[NOTHING_VISIBLE]" in err
     data = json.loads((tmp_path / "o" / "recon.json").read_text())
     assert data["error"]["code"] == 4 and data["error"]["name"] == "NOTHING_VISIBLE"
+    assert [p.name for p in (tmp_path / "o").iterdir()] == ["recon.json"]  # no stage left behind
+
+
+def _entries(folder: Path) -> dict:
+    return {p.name: p.read_bytes() for p in folder.iterdir()}  # hidden ones too
+
+
+def test_a_reused_out_is_refused_and_replaced_only_by_a_success(tmp_path: Path, capsys) -> None:
+    """Hardening III, item 8: a second run into an OUT that holds a reconstruction is refused with
+    the hint --overwrite, and touches nothing; with --overwrite a run that fails keeps the earlier
+    result whole (its error recon.json is not put beside the earlier recon_1.ply) and one that
+    succeeds replaces it as a whole (recon_1.ply goes with it); the plan beside them stays."""
+    out = tmp_path / "out"
+    plan = _plan(tmp_path)
+    out.mkdir()
+    (out / "plan.json").write_bytes(plan.read_bytes())  # make plan, then make recon, into one folder
+    base = ["--out", str(out), "--capture", "ideal", "--width", "640", "--height", "480", "--sparse-only",
+            "--no-progress"]
+    assert main(["--plan", str(plan), "--realizations", "1"] + base) == 0, capsys.readouterr().err
+    capsys.readouterr()
+    first = _entries(out)
+    assert {"plan.json", "recon.json", "recon_1.ply"} <= set(first)
+
+    rc = main(["--plan", str(plan), "--realizations", "0"] + base)
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("\n") == 1, err
+    assert err.startswith(f"recon: error: {out} already holds a result (recon.json, recon_1.ply") and "--overwrite" in err
+    assert _entries(out) == first
+
+    (tmp_path / "away").mkdir()
+    away = _plan(tmp_path / "away", cameras=[[1.4, 0.0, 1.2, 1.0, 0.0, 0.0], [0.0, 1.4, 1.2, 0.0, 1.0, 0.0]])
+    rc = main(["--plan", str(away), "--overwrite"] + base)
+    err = capsys.readouterr().err
+    assert rc == 1 and err.count("\n") == 1 and "[NOTHING_VISIBLE]" in err and "keeps its earlier result" in err, err
+    assert _entries(out) == first
+
+    assert main(["--plan", str(plan), "--realizations", "0", "--overwrite"] + base) == 0, capsys.readouterr().err
+    now = _entries(out)
+    assert sorted(now) == ["plan.json", "recon.json", "recon_0.ply", "uncovered_0.png", "views.png"], sorted(now)
+    assert now["plan.json"] == first["plan.json"]
+    assert [r["realization"] for r in json.loads(now["recon.json"])["per_realization"]] == [0]
+
+
+def test_no_scheduler_at_the_address_is_one_line_and_leaves_no_folder(tmp_path: Path, capfd, monkeypatch) -> None:
+    """Hardening III, item 11: nothing listens at the --scheduler address: exit 2, one line naming
+    it (every line on the process's stderr: capfd), and no empty OUT left behind. Dask retries a
+    refused connection until the client's connect timeout, 10 s (vp_scene.cluster), 1 s here."""
+    import vp_scene.cluster
+
+    monkeypatch.setattr(vp_scene.cluster, "CONNECT_TIMEOUT_S", 1.0, raising=False)
+    out = tmp_path / "o"
+    rc = main(["--plan", str(_plan(tmp_path)), "--out", str(out), "--capture", "ideal", "--width", "320",
+               "--height", "240", "--no-progress", "--scheduler", "tcp://127.0.0.1:1"])
+    err = capfd.readouterr().err
+    assert rc == 2 and err.startswith("recon: error:") and err.count("\n") == 1 and "tcp://127.0.0.1:1" in err, err
+    assert not out.exists()
 
 
 def test_sigterm_after_colmap_ran_exits_quietly(tmp_path: Path) -> None:
@@ -177,3 +233,4 @@ def test_sigterm_after_colmap_ran_exits_quietly(tmp_path: Path) -> None:
     err += rest
     assert proc.returncode == 130, err[-2000:]
     assert "Aborted" not in err and "Traceback" not in err and err.rstrip().endswith("recon: interrupted")
+    assert not (tmp_path / "o").exists()  # Hardening III, item 11: no empty (or half-written) OUT

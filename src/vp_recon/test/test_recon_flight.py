@@ -232,6 +232,24 @@ def test_an_oversize_or_truncated_image_is_refused_before_anything_is_decoded(tm
         read_flight(f)
 
 
+def test_a_truncated_png_is_refused_in_one_line(tmp_path: Path, capfd) -> None:
+    """Hardening III, item 11: a flight folder with a truncated PNG is refused with exit 2 and one
+    line on the process's stderr (capfd: the file descriptor, where libpng printed its own
+    'libpng error: Read Error' before the CLI's line), and no OUT."""
+    rng = np.random.default_rng(1)
+    views = CapturedViews(names=["im0.png", "im1.png"],
+                          images=[rng.integers(0, 255, (240, 320, 3), dtype=np.uint8) for _ in range(2)],
+                          reported=ring(2), K=np.array([[160.0, 0, 159.5], [0, 160.0, 119.5], [0, 0, 1]]))
+    folder = write_flight(views, tmp_path / "flight")
+    data = (folder / "im1.png").read_bytes()
+    (folder / "im1.png").write_bytes(data[:len(data) // 2])
+    out = tmp_path / "never"
+    assert main(["--images", str(folder), "--out", str(out), "--no-progress"]) == 2
+    err = capfd.readouterr().err
+    assert err.startswith("recon: error:") and "im1.png" in err and err.count("\n") == 1, err
+    assert not out.exists()
+
+
 def test_coverage_of_prior_per_plant_in_the_best_covered_realization() -> None:
     """Two plants, two realizations of the prior: in realization 1 half of plant 0 is within tau
     and all of plant 1 (0.75); realization 0 is covered less (0.25): the wind of the moment is

@@ -118,7 +118,7 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path) -> None:
     truncated = tmp_path / "truncated"
     truncated.mkdir()
     data = (folder / "run.mcap").read_bytes()
-    (truncated / "run.mcap").write_bytes(data[: len(data) // 2])
+    (truncated / "run.mcap").write_bytes(data[:200])  # cut inside its first chunk: no message in it
     cases = [(empty, "no recording (run.mcap)"), (tmp_path / "nowhere", "no such run folder"),
              (truncated, "not a readable MCAP recording")]
     for run, said in cases:
@@ -184,3 +184,17 @@ def test_only_the_printed_url_from_its_own_page_opens_the_websocket() -> None:
         assert handshake(port, "/index.html", websocket=False).endswith(" 403 Forbidden")
     finally:
         viewer.close()
+
+
+def test_a_recording_cut_by_a_kill_is_shown_up_to_then(tmp_path, capfd) -> None:
+    """Hardening III, item 9: a run.mcap whose recorder was killed (no summary, its end cut) is read
+    up to its last complete chunk, with one line saying it was cut (it was refused as unreadable)."""
+    folder = write_run(tmp_path / "run", ring(3))
+    data = (folder / "run.mcap").read_bytes()
+    cut = tmp_path / "cut"
+    cut.mkdir()
+    (cut / "run.mcap").write_bytes(data[: len(data) // 2])  # the chunk whole, the summary and footer cut
+    capfd.readouterr()
+    assert load_run(folder).keys() == load_run(cut).keys()
+    err = capfd.readouterr().err
+    assert err.count("\n") == 1 and f"{cut / 'run.mcap'} was cut" in err, err

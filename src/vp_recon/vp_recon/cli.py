@@ -1,7 +1,7 @@
 """Command line reconstruction of a plan: render, reconstruct and score every wind realization.
 
-    python -m vp_recon.cli --images DIR --out OUT [--prior plan.json] [--sparse-only] [--max-megapixels 768] [...]
-    python -m vp_recon.cli --plan out/run/plan.json --out out/run [--width 2000 --height 1500]
+    python -m vp_recon.cli --images DIR --out OUT [--overwrite] [--prior plan.json] [--sparse-only] [--max-megapixels 768] [...]
+    python -m vp_recon.cli --plan out/run/plan.json --out out/run [--overwrite] [--width 2000 --height 1500]
         [--realizations 0,1] [--sparse-only] [--sparse-mode known_poses|incremental]
         [--matching auto|exhaustive|poses]
         [--fscore-threshold 0.02] [--mesh-cache DIR] [--keep-workdir] [--[no-]ground] [--no-progress]
@@ -28,11 +28,19 @@ a ground truth: registered images, mean reprojection error, mean track length, p
 the realization of the prior's scene it flew), ``OUT/recon.ply``, ``OUT/views.png`` and, with a
 prior, ``OUT/uncovered.png``. Every input is checked before OUT is made.
 
+Nothing is lost or mixed: these files (:data:`RESULT`, with ``work/``) are written into a hidden
+folder in OUT and moved into OUT together when the run ends; an error or an interrupt leaves OUT
+as it was (and no OUT when there was none). An OUT that holds a reconstruction is refused (exit
+2) unless ``--overwrite``, which replaces it as a whole when the run succeeds (a run that fails
+keeps it and writes nothing). Other files in OUT (the plan) are never touched.
+
 With ``--scheduler`` the realizations reconstruct in parallel on a Dask cluster
-(:mod:`vp_scene.cluster`; the same records as in this process).
+(:mod:`vp_scene.cluster`; the same records as in this process). An address where no scheduler
+answers is bad input (exit 2, within 10 s); a scheduler lost mid-run is a reconstruction failure
+(``recon: error: [UNKNOWN] lost the Dask scheduler ADDRESS ...``, recon.json says so, exit 1).
 
 Progress bars (one per stage) go to stderr. Exit codes: 0 ok, 2 bad input (``recon: error: ...``),
-1 reconstruction failure (``recon: error: [CODE] ...``), 130 interrupted.
+1 reconstruction failure (``recon: error: [CODE] ...``; OUT/recon.json holds the error), 130 interrupted.
 """
 from __future__ import annotations
 
@@ -49,6 +57,9 @@ from typing import Any, Optional, Sequence
 import numpy as np
 
 PROG = "recon"
+
+#: The entries of a reconstruction in OUT (--plan and --images); what --overwrite replaces, together.
+RESULT = ("recon.json", "recon.ply", "recon_*.ply", "views.png", "uncovered.png", "uncovered_*.png", "work")
 
 
 class CliError(Exception):
@@ -97,7 +108,10 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     p.add_argument("--prior", default=None,
                    help="with --images: plan.json whose scene is the planning cloud (coverage_of_prior, crop box, "
                         "pairs; Chamfer when flight.json names the realization)")
-    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--out", required=True, help="output folder (its reconstruction files are written together at "
+                                                  "the end; one that holds a reconstruction is refused)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace the reconstruction OUT holds (when this run succeeds; a failed run keeps it)")
     p.add_argument("--width", type=int, default=None, help="--plan: rendered image width, pixels (default and paper: 2000)")
     p.add_argument("--height", type=int, default=None, help="--plan: rendered image height, pixels (default and paper: 1500)")
     p.add_argument("--realizations", default=None, help="comma-separated realization indices (default: all)")
@@ -186,10 +200,10 @@ def run(args: argparse.Namespace) -> dict:
     from vp_scene.build import build_noisy_scene
     from vp_scene.planfile import PlanFileError, load_plan
 
-    from .outputs import contact_sheet, summary, uncovered_image, write_image, write_json, write_ply
-    from .pipeline import MAX_CAMERAS, STAGES, ReconConfig, ReconError, check_plan_size, ensure_writable_dir, \
-        validate_cameras
+    from .outputs import ResultFolder
+    from .pipeline import MAX_CAMERAS, ReconConfig, ReconError, check_plan_size, ensure_writable_dir, validate_cameras
 
+    result_dir = ResultFolder(args.out, RESULT, PROG, args.overwrite).check()
     try:
         plan = load_plan(args.plan)
     except PlanFileError as exc:
@@ -214,7 +228,18 @@ def run(args: argparse.Namespace) -> dict:
         noisy, _ = build_noisy_scene(**plan.scene)
     except (TypeError, ValueError, OSError) as exc:
         raise CliError(f"cannot rebuild the scene of {args.plan}: {exc}") from None
-    out = ensure_writable_dir(args.out)
+    ensure_writable_dir(args.out)
+    with result_dir:  # an error or an interrupt leaves OUT as it was
+        return _reconstruct_plan(args, result_dir, plan, noisy, cams, config, ks)
+
+
+def _reconstruct_plan(args: argparse.Namespace, result_dir: Any, plan: Any, noisy: Any, cams: Any, config: Any,
+                      ks: Optional[list]) -> dict:
+    """:func:`run` once the inputs are checked: the reconstruction into ``result_dir``'s stage."""
+    from .outputs import contact_sheet, summary, uncovered_image, write_image, write_json, write_ply
+    from .pipeline import STAGES, reconstruct_plan
+
+    out = result_dir.stage
     K = noisy.points.shape[0]
     n_real = K if ks is None else len(ks)
 
@@ -229,8 +254,6 @@ def run(args: argparse.Namespace) -> dict:
         if stage in bars:
             bars[stage].update(1)
         return True
-
-    from .pipeline import reconstruct_plan
 
     info = {"plan": str(Path(args.plan).resolve()), "method": plan.data.get("method"),
             "scenario": noisy.scene.scenario, "reward": plan.data.get("reward"),
@@ -249,11 +272,11 @@ def run(args: argparse.Namespace) -> dict:
                                                          tls=TlsFiles.from_args(args)))
             result = reconstruct_plan(noisy, cams, config, out_dir=out, realizations=ks, progress=progress,
                                       client=client)
-    except ReconError as exc:
-        # record the failure for batch tools (Table I counts failed plans), then report it
-        write_json(out / "recon.json", {**info, "chamfer_mean": None,
-                                        "error": {"code": exc.code, "name": exc.name, "message": str(exc)}})
-        raise
+    except Exception as exc:
+        failure = _record_failure(result_dir, info, exc)
+        if failure is exc:
+            raise
+        raise failure from None
     finally:
         for b in bars.values():
             b.close()
@@ -268,7 +291,32 @@ def run(args: argparse.Namespace) -> dict:
         write_image(out / "views.png", contact_sheet(first.rendered))
     data = summary(result, extra=info)
     write_json(out / "recon.json", data)
+    result_dir.commit()
     return data
+
+
+def _record_failure(result_dir: Any, info: dict, exc: Exception) -> Exception:
+    """The exception to raise for ``exc``, which stopped a reconstruction: a ReconError (the Dask
+    scheduler lost, :class:`vp_scene.cluster.SchedulerLost`, becomes one, ``UNKNOWN``, naming it)
+    is recorded in a recon.json that says what failed (batch tools: Table I counts failed plans),
+    which becomes OUT's result; with --overwrite over an earlier result that one is kept and the
+    failure only reported. Any other exception is returned as it is, nothing recorded."""
+    from vp_scene.cluster import SchedulerLost
+
+    from .outputs import write_json
+    from .pipeline import UNKNOWN, ReconError
+
+    if isinstance(exc, SchedulerLost):
+        exc = ReconError(UNKNOWN, str(exc))
+    if not isinstance(exc, ReconError):
+        return exc
+    if result_dir.earlier():
+        return ReconError(exc.code, f"{exc} (nothing written: {result_dir.out} keeps its earlier result)",
+                          exc.realization)
+    write_json(result_dir.stage / "recon.json", {**info, "chamfer_mean": None,
+                                                  "error": {"code": exc.code, "name": exc.name, "message": str(exc)}})
+    result_dir.commit()
+    return exc
 
 
 def _prior_scene(path: str) -> object:
@@ -289,9 +337,10 @@ def run_images(args: argparse.Namespace) -> dict:
     """Reconstruct a flight folder (``--images``); returns the recon.json dict (also written)."""
     from .flight import FlightError, read_flight
     from .metrics import chamfer, chamfer_after_icp
-    from .outputs import contact_sheet, no_truth_metrics, uncovered_image, write_image, write_json, write_ply
-    from .pipeline import MAX_MEGAPIXELS, Prior, ReconConfig, ReconError, ensure_writable_dir, reconstruct_views
+    from .outputs import ResultFolder, contact_sheet, no_truth_metrics, uncovered_image, write_image, write_json, write_ply
+    from .pipeline import MAX_MEGAPIXELS, Prior, ReconConfig, ensure_writable_dir, reconstruct_views
 
+    result_dir = ResultFolder(args.out, RESULT, PROG, args.overwrite).check()
     try:  # every input checked before OUT is made: nothing half-written
         views = read_flight(args.images, MAX_MEGAPIXELS if args.max_megapixels is None else args.max_megapixels)
     except FlightError as exc:
@@ -311,34 +360,38 @@ def run_images(args: argparse.Namespace) -> dict:
     truth = None
     if noisy is not None and isinstance(k, int) and 0 <= k < noisy.points.shape[0]:
         truth = noisy.points[k]
-    out = ensure_writable_dir(args.out)
-    info = {"source": "images", "images": str(Path(args.images).resolve()), "num_images": len(views.images),
-            "prior": str(Path(args.prior).resolve()) if args.prior else None, "realization": k,
-            "width": width, "height": height, "fov": config.fov, "dense": config.dense, "ground": config.ground_used,
-            "sparse_mode": config.sparse_mode_used, "matching": config.matching,
-            "capture": config.capture.to_dict(),
-            "units": "chamfer, chamfer_shape: metres x 100 (paper Table I); mean_reprojection_error: pixels; "
-                     "coverage_tau: metres"}
-    try:
-        vr = reconstruct_views(views, config, workdir=out / "work" if args.keep_workdir else None,
-                               prior=Prior.of_scene(noisy) if noisy is not None else None)
-    except ReconError as exc:
-        write_json(out / "recon.json", {**info, "chamfer_mean": None,
-                                        "error": {"code": exc.code, "name": exc.name, "message": str(exc)}})
-        raise
-    write_ply(out / "recon.ply", vr.points, vr.colors)
-    write_image(out / "views.png", contact_sheet(views.images))
-    sp = vr.sparse
-    data = {**info, **no_truth_metrics(sp.registered, sp.mean_reprojection_error, sp.mean_track_length,
-                                       len(vr.points), vr.coverage, sp.centre_residual),
-            "cloud": vr.source, "chamfer_mean": None}
-    if vr.coverage is not None:
-        write_image(out / "uncovered.png", uncovered_image(noisy.points, vr.coverage))
-    if truth is not None:
-        data["chamfer_mean"] = chamfer(vr.points, truth, config.fscore_threshold).chamfer * 100.0
-        data["chamfer_shape_mean"] = chamfer_after_icp(vr.points, truth, config.fscore_threshold).chamfer * 100.0
-    write_json(out / "recon.json", data)
-    return data
+    ensure_writable_dir(args.out)
+    with result_dir:  # an error or an interrupt leaves OUT as it was
+        out = result_dir.stage
+        info = {"source": "images", "images": str(Path(args.images).resolve()), "num_images": len(views.images),
+                "prior": str(Path(args.prior).resolve()) if args.prior else None, "realization": k,
+                "width": width, "height": height, "fov": config.fov, "dense": config.dense, "ground": config.ground_used,
+                "sparse_mode": config.sparse_mode_used, "matching": config.matching,
+                "capture": config.capture.to_dict(),
+                "units": "chamfer, chamfer_shape: metres x 100 (paper Table I); mean_reprojection_error: pixels; "
+                         "coverage_tau: metres"}
+        try:
+            vr = reconstruct_views(views, config, workdir=out / "work" if args.keep_workdir else None,
+                                   prior=Prior.of_scene(noisy) if noisy is not None else None)
+        except Exception as exc:
+            failure = _record_failure(result_dir, info, exc)
+            if failure is exc:
+                raise
+            raise failure from None
+        write_ply(out / "recon.ply", vr.points, vr.colors)
+        write_image(out / "views.png", contact_sheet(views.images))
+        sp = vr.sparse
+        data = {**info, **no_truth_metrics(sp.registered, sp.mean_reprojection_error, sp.mean_track_length,
+                                           len(vr.points), vr.coverage, sp.centre_residual),
+                "cloud": vr.source, "chamfer_mean": None}
+        if vr.coverage is not None:
+            write_image(out / "uncovered.png", uncovered_image(noisy.points, vr.coverage))
+        if truth is not None:
+            data["chamfer_mean"] = chamfer(vr.points, truth, config.fscore_threshold).chamfer * 100.0
+            data["chamfer_shape_mean"] = chamfer_after_icp(vr.points, truth, config.fscore_threshold).chamfer * 100.0
+        write_json(out / "recon.json", data)
+        result_dir.commit()
+        return data
 
 
 def _terminate(signum: int, _frame: object) -> None:

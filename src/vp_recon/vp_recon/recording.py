@@ -14,8 +14,12 @@ The schema of a channel is the type's full message definition as rosbag2 builds 
 come from the interface packages' share folders (``<prefix>/share/<pkg>/msg/<Type>.msg``: the
 ament prefixes, then the Python prefix, where the PyPI Jazzy wheels install them).
 
-Closing: :meth:`RunRecording.close` writes the summary and footer; a file whose writer was killed
-(SIGKILL) lacks them, and MCAP's streaming reader still reads its complete chunks.
+Closing: :meth:`RunRecording.close` writes the summary and footer. Until then the messages go to
+the file in chunks, each one finished and handed to the OS at most :data:`FLUSH_S` after its
+first message (mcap's ``Writer.flush``; before, nothing reached the disk before 1 MiB or the
+close, and a SIGKILLed run left a 0-byte run.mcap): a file whose writer was killed lacks the
+summary and footer, and MCAP's streaming reader reads every message up to FLUSH_S before the
+kill (:func:`read_messages`).
 """
 from __future__ import annotations
 
@@ -28,7 +32,10 @@ from pathlib import Path
 from typing import Callable, Dict, Iterable, List, Optional
 
 __all__ = ["RunRecording", "RecordingError", "message_definition", "find_msg_file", "qos_profiles_yaml",
-           "RUN_TOPICS"]
+           "RUN_TOPICS", "FLUSH_S", "read_messages"]
+
+#: s at most between a message being written and its reaching the file (what a SIGKILL loses)
+FLUSH_S = 2.0
 
 #: The topics ``make run`` records (fnmatch patterns; ``*`` matches across ``/``): the noisy scene, the
 #: plan and its info and markers, the fleet's assignment, every drone's pose and goal, the
@@ -149,6 +156,8 @@ class RunRecording:
             raise RecordingError(f"cannot write {self.path}: {exc.strerror or exc}") from exc
         self._writer = Writer(self._file, compression=CompressionType.ZSTD)
         self._writer.start(profile="ros2", library=f"vp_recon recording (mcap-ros2-support {mcap_ros2_version})")
+        self._writer.flush()  # the header: a recording killed before its first message is still MCAP
+        self._dirty = False  # messages not flushed yet
         self._definition = definition
         self._schemas: Dict[str, int] = {}
         self._channels: Dict[str, int] = {}
@@ -156,6 +165,22 @@ class RunRecording:
         self.counts: Dict[str, int] = {}
         self._lock = threading.Lock()
         self._closed = False
+        # a thread, not the writes, flushes: the last messages before a quiet spell reach the file too
+        self._stop = threading.Event()
+        threading.Thread(target=self._flush_every, name="mcap-flush", daemon=True).start()
+
+    def _flush_every(self) -> None:
+        while not self._stop.wait(FLUSH_S):
+            self.flush()
+
+    def flush(self) -> None:
+        """Finish the chunk in progress and hand the file's bytes to the OS (a SIGKILL of this
+        process then loses none of them; no fsync: an OS crash may)."""
+        with self._lock:
+            if self._closed or not self._dirty:
+                return
+            self._dirty = False
+            self._writer.flush()
 
     def add_topic(self, topic: str, type_name: str, qos_yaml: str = "") -> None:
         """Register ``topic`` of ``type_name`` ('pkg/msg/Type'); RecordingError when its definition
@@ -182,6 +207,7 @@ class RunRecording:
                                      sequence=self._sequence[topic], data=bytes(data))
             self._sequence[topic] += 1
             self.counts[topic] += 1
+            self._dirty = True
 
     def total(self) -> int:
         """Messages written so far, all topics."""
@@ -189,6 +215,7 @@ class RunRecording:
             return sum(self.counts.values())
 
     def close(self) -> None:
+        self._stop.set()
         with self._lock:
             if self._closed:
                 return
@@ -203,3 +230,15 @@ class RunRecording:
 
     def __exit__(self, *_exc) -> None:
         self.close()
+
+
+def read_messages(path: os.PathLike, decoder_factories: Iterable = ()) -> Iterable[tuple]:
+    """(schema, channel, message, decoded) of every message of an MCAP file, in file order, with
+    MCAP's streaming reader: a file whose writer was killed (no summary, its end cut) gives the
+    messages of its complete chunks, then :class:`mcap.exceptions.EndOfFile` (the caller says
+    the recording was cut). Other McapErrors: a file that is not a recording."""
+    from mcap.reader import NonSeekingReader
+
+    with open(path, "rb") as f:
+        yield from NonSeekingReader(f, decoder_factories=list(decoder_factories)).iter_decoded_messages(
+            log_time_order=False)

@@ -23,8 +23,9 @@ Clouds larger than ``max_points`` are shown as a uniform random subset (the GUI 
 Live: the ``viewer`` node (:mod:`vp_recon.viewer_node`) feeds it from the run's topics.
 Offline (``make view RUN=out/...``): ``python -m vp_recon.viewer RUN_FOLDER --port 8080``
 replays the latest message of each topic of ``RUN_FOLDER/run.mcap`` (``make run`` records it,
-:mod:`vp_recon.recording`) and serves until Ctrl-C. Bad input (no recording, a file that is not
-a readable MCAP, a port in use): one line, exit 2.
+:mod:`vp_recon.recording`) and serves until Ctrl-C; a recording cut by a kill is shown up to
+then, with a one-line note. Bad input (no recording, a file that is not a readable MCAP, a port
+in use): one line, exit 2.
 """
 from __future__ import annotations
 
@@ -291,23 +292,28 @@ class PlanViewer:
 
 
 # ------------------------------------------------------------------ offline: a run folder
-def _last_messages(path: Path) -> Dict[str, object]:
-    """topic -> its latest decoded message in an MCAP file; ViewerError when unreadable."""
-    from mcap.exceptions import McapError
-    from mcap.reader import make_reader
+def _last_messages(path: Path) -> tuple[Dict[str, object], bool]:
+    """(topic -> its latest decoded message in an MCAP file, whether the file was cut: its writer
+    killed before it closed; :func:`vp_recon.recording.read_messages` reads it up to then);
+    ViewerError when unreadable."""
+    from mcap.exceptions import EndOfFile, McapError
     from mcap_ros2.decoder import DecoderFactory
+
+    from .recording import read_messages
 
     last: Dict[str, object] = {}
     try:
-        with open(path, "rb") as f:
-            reader = make_reader(f, decoder_factories=[DecoderFactory()])
-            for _schema, channel, _message, decoded in reader.iter_decoded_messages(log_time_order=False):
-                last[channel.topic] = decoded
+        for _schema, channel, _message, decoded in read_messages(path, [DecoderFactory()]):
+            last[channel.topic] = decoded
+    except EndOfFile:
+        if last:
+            return last, True
+        raise ViewerError(f"{path}: not a readable MCAP recording (it ends before its first message)") from None
     except (McapError, EOFError, ValueError, KeyError, OSError) as exc:
         raise ViewerError(f"{path}: not a readable MCAP recording ({type(exc).__name__}: {exc})") from exc
     except Exception as exc:  # noqa: BLE001 - a corrupt file can fail anywhere in the decoders
         raise ViewerError(f"{path}: not a readable MCAP recording ({type(exc).__name__}: {exc})") from exc
-    return last
+    return last, False
 
 
 def _poses(msg) -> np.ndarray:
@@ -317,15 +323,19 @@ def _poses(msg) -> np.ndarray:
 
 def load_run(run_folder: Path) -> Dict[str, object]:
     """topic -> latest message of a run folder's recording; ViewerError (one line) when it has none
-    or it cannot be read."""
+    or it cannot be read; a recording cut by a kill is read up to then, with a one-line note on
+    stderr."""
     path = Path(run_folder) / "run.mcap"
     if not Path(run_folder).is_dir():
         raise ViewerError(f"{run_folder}: no such run folder")
     if not path.is_file():
         raise ViewerError(f"{run_folder}: no recording (run.mcap); make run writes one")
-    last = _last_messages(path)
+    last, cut = _last_messages(path)
     if not last:
         raise ViewerError(f"{path}: the recording holds no messages")
+    if cut:
+        print(f"viewer: note: {path} was cut (its recorder was killed): what it holds up to then is shown",
+              file=sys.stderr, flush=True)
     return last
 
 
