@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import time
 from datetime import datetime, timezone
@@ -40,30 +39,25 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
-from common import (ROOT, add_capture, cached, capture_of, capture_tag, chamfer_text, default_models,  # noqa: E402
-                    known_realizations, machine, models_tag, reconstruct_record, reconstructed,
-                    scene, write_json)
+from common import (ROOT, VARIANTS, add_capture, baselines, cached, capture_of, capture_tag,  # noqa: E402
+                    chamfer_text, default_models, known_realizations, machine, models_tag, reconstruct_record,
+                    reconstructed, scene, variant_request, variants_of, write_json)
 from stats import describe, describe_difference, paired_difference, rank, summary  # noqa: E402
 
 #: (field, N) cells: the issue's targets, and N = 16 on the row (planned and reconstructed).
 FIELDS = (("grid_3x3", 8), ("row_12", 12), ("row_12", 16))
-#: Method label -> PlanRequest fields (``evaluations`` filled in per field).
+#: The method labels: the variants of ``common.VARIANTS`` this benchmark runs (``evaluations``
+#: filled in per field).
+METHODS = variants_of("fields")
 #: The baselines of the paired differences (every METHODS row that is not egp).
-BASELINES = ("circle", "arc", "sa", "lawnmower", "lawnmower-oblique")
-METHODS = {
-    "egp": {"method": "egp"},
-    "egp-one-space": {"method": "egp", "parts": 1},
-    "circle": {"method": "circle"},
-    "arc": {"method": "arc"},
-    "sa": {"method": "sa"},
-    "lawnmower": {"method": "lawnmower"},
-    "lawnmower-oblique": {"method": "lawnmower", "lawnmower_tilt": math.radians(30.0)},
-}
+BASELINES = baselines(METHODS)
 EVALS_PER_PART = 100
 SUBSAMPLE_SIZES = (1500, 3000, 6000, 12000, 0)
 
 
 def parse_args(argv=None) -> argparse.Namespace:
+    from vp_scene.camera import IMAGE_SIZE
+
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--models", default=default_models(),
                     help="folder of PLY plant models (default: ../shared/data/corn50 if present; '' procedural)")
@@ -74,8 +68,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument("--recon-methods", nargs="+", default=None, choices=list(METHODS),
                     help="methods to reconstruct (default: all of --methods)")
     ap.add_argument("--realizations", type=int, default=2, help="wind realizations reconstructed per plan")
-    ap.add_argument("--width", type=int, default=2000)
-    ap.add_argument("--height", type=int, default=1500)
+    ap.add_argument("--width", type=int, default=IMAGE_SIZE[0])
+    ap.add_argument("--height", type=int, default=IMAGE_SIZE[1])
     ap.add_argument("--threads", type=int, default=0, help="reconstruction threads (0: all cores)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default=str(ROOT / "results"))
@@ -103,17 +97,24 @@ def field_cell(spec: str) -> tuple[str, int]:
 def plan_path(cache: Path, field: str, n: int, label: str, args) -> tuple[Path, int]:
     """(cache file, evaluation budget) of :func:`plan_cell`."""
     parts, total = field_budget(field, n, args.models)
-    evals = EVALS_PER_PART if label == "egp" else total
+    evals = EVALS_PER_PART if by_parts(label) else total
     return cache / "plans" / f"{models_tag(args.models)}-{field}-n{n}-{label}-seed{args.seed}-e{evals}.json", evals
+
+
+def by_parts(label: str) -> bool:
+    """Whether the variant plans a field by parts (egp/gp with automatic parts): it gets
+    :data:`EVALS_PER_PART` a part, the others egp's total."""
+    variant = VARIANTS[label]
+    return not variant.baseline and variant.request.get("parts", 0) != 1
 
 
 def plan_cell(cache: Path, field: str, n: int, label: str, args) -> dict:
     """One planning run (cached), timed alone with one torch thread."""
-    from vp_planner.optimizers import PlanRequest, plan_views
+    from vp_planner.optimizers import plan_views
 
     path, evals = plan_path(cache, field, n, label, args)
-    request = PlanRequest(**METHODS[label], num_cameras=n, evaluations=evals, initial_evaluations=min(50, evals),
-                          seed=args.seed)
+    request = variant_request(label, num_cameras=n, evaluations=evals, initial_evaluations=min(50, evals),
+                              seed=args.seed)
 
     def compute() -> dict:
         import torch

@@ -380,11 +380,13 @@ def drone_processes(args, env: dict) -> dict:
 
 
 def main() -> int:
+    from vp_scene.camera import IMAGE_SIZE
+
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     ap.add_argument('--mode', choices=('transport', 'recon', 'drones'), default='transport')
     ap.add_argument('--drones', type=int, default=16)
-    ap.add_argument('--width', type=int, default=2000)
-    ap.add_argument('--height', type=int, default=1500)
+    ap.add_argument('--width', type=int, default=IMAGE_SIZE[0])
+    ap.add_argument('--height', type=int, default=IMAGE_SIZE[1])
     ap.add_argument('--repeats', type=int, default=3)
     ap.add_argument('--sparse-seconds', type=float, default=20.0, help='recon: seconds of the sparse step measured')
     ap.add_argument('--set-timeout', type=float, default=300.0, help='drones: s a capture set may take')

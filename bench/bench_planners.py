@@ -28,17 +28,15 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
-from common import ROOT, SCENARIOS, VARIANTS, default_models, machine, models_tag, plan_cell, plan_path  # noqa: E402
-
-DEFAULT_VARIANTS = ('egp', 'egp-random-init', 'circle', 'arc', 'sa', 'random')
-BASELINES = ('circle', 'arc', 'sa', 'random')
+from common import (ROOT, SCENARIOS, VARIANTS, baselines, default_models, machine, models_tag, plan_cell,  # noqa: E402
+                    plan_path, variants_of)
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     ap.add_argument('--models', default=default_models(), help="PLY folder ('' for procedural plants)")
     ap.add_argument('--scenarios', nargs='+', default=list(SCENARIOS), choices=list(SCENARIOS))
-    ap.add_argument('--variants', nargs='+', default=list(DEFAULT_VARIANTS), choices=list(VARIANTS))
+    ap.add_argument('--variants', nargs='+', default=list(variants_of('planners')), choices=list(VARIANTS))
     ap.add_argument('--rewards', nargs='+', default=['coverage', 'paper'], choices=['coverage', 'paper'])
     ap.add_argument('--seeds', type=int, default=5)
     ap.add_argument('--evals', type=int, default=100)
@@ -99,10 +97,10 @@ def main(argv=None) -> int:
             verdict = []
             for scenario in args.scenarios:
                 e = report['cells'][f'{reward}/{scenario}/egp']['final_mean']
-                beaten = [b for b in BASELINES if b in args.variants
-                          and report['cells'][f'{reward}/{scenario}/{b}']['final_mean'] >= e]
+                beaten = [b for b in baselines(args.variants)
+                          if report['cells'][f'{reward}/{scenario}/{b}']['final_mean'] >= e]
                 verdict.append(f'{scenario}: egp {"above every baseline" if not beaten else "not above " + ", ".join(beaten)}')
-            lines += ['Acceptance (egp mean above circle, arc, sa, random): ' + '; '.join(verdict), '']
+            lines += [f'Acceptance (egp mean above {", ".join(baselines(args.variants))}): ' + '; '.join(verdict), '']
     out.mkdir(parents=True, exist_ok=True)
     (out / 'bench_planners.json').write_text(json.dumps(report, indent=1))
     (out / 'bench_planners.md').write_text('\n'.join(lines) + '\n')

@@ -34,7 +34,8 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 from vp_scene.build import build_noisy_scene  # noqa: E402
 from vp_scene.capture import IDEAL, REALISTIC  # noqa: E402
 
-from vp_planner.optimizers import PlanRequest, plan_views  # noqa: E402
+from vp_planner.optimizers import plan_views  # noqa: E402
+from vp_planner.request import PlanRequest  # noqa: E402
 from vp_recon.meshing import scene_meshes  # noqa: E402
 from vp_recon.pipeline import ReconConfig, ReconError, reconstruct_plan  # noqa: E402
 from vp_recon.render import Renderer  # noqa: E402
@@ -73,8 +74,8 @@ def main() -> int:
     p.add_argument("--models", default=None, help="folder of PLY plants (default: procedural corn)")
     p.add_argument("--out", default=str(ROOT / "results" / "bench_recon.json"))
     a = p.parse_args()
-    width = a.width or (1000 if a.quick else 2000)
-    height = a.height or (750 if a.quick else 1500)
+    width = a.width or (1000 if a.quick else ReconConfig.width)
+    height = a.height or (750 if a.quick else ReconConfig.height)
     ppp = 2000 if a.quick else 4000
     frames = 5 if a.quick else 20
     ks = list(range(a.realizations))
@@ -114,7 +115,7 @@ def main() -> int:
         sc, _ = build_noisy_scene(name, models=a.models, seed=0, points_per_plant=ppp,
                                   realizations=max(1, len(ks)))
         # the tuned circle baseline
-        cams = plan_views(PlanRequest("circle", n, evaluations=100, seed=0), sc.points).cameras
+        cams = plan_views(PlanRequest.of("circle", n, evaluations=100, seed=0), sc.points).cameras
         try:
             res = reconstruct_plan(sc, cams, cfg, realizations=ks)
             r0 = res.realizations

@@ -125,14 +125,16 @@ def markdown(result: dict) -> str:
 
 
 def main() -> int:
+    from vp_scene.camera import IMAGE_SIZE
+
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--models', default=default_models(), help="PLY plant folder ('' = procedural)")
     ap.add_argument('--scenarios', nargs='+', default=['one_plant', 'three_row'], choices=sorted(SCENARIOS))
     ap.add_argument('--variants', nargs='+', default=list(VARIANTS), choices=list(VARIANTS))
     ap.add_argument('--realizations', type=int, default=5)
     ap.add_argument('--seed', type=int, default=0, help='planning seed of the egp plans')
-    ap.add_argument('--width', type=int, default=2000)
-    ap.add_argument('--height', type=int, default=1500)
+    ap.add_argument('--width', type=int, default=IMAGE_SIZE[0])
+    ap.add_argument('--height', type=int, default=IMAGE_SIZE[1])
     ap.add_argument('--threads', type=int, default=1, help='threads of each reconstruction (default 1)')
     ap.add_argument('--out', default=str(ROOT / 'results'))
     add_cluster_args(ap)

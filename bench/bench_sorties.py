@@ -37,20 +37,28 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
 from stats import rank_key  # noqa: E402
-from vp_planner.reward_models import DEFAULT_REWARD_MODEL, REWARD_MODELS  # noqa: E402
+from vp_planner.reward_models import (DEFAULT_RECONSTRUCTED_WEIGHT, DEFAULT_REWARD_MODEL, DEFAULT_TAU,  # noqa: E402
+                                      REWARD_MODELS)
 from vp_recon.pipeline import MATCHINGS  # noqa: E402
-from common import (ROOT, add_capture, cached, capture_of, capture_tag, chamfer_text, default_models,  # noqa: E402
-                    machine, models_tag, plan_cell, plan_path, reconstruct_record, scene, write_json)
+from common import (ROOT, add_capture, baselines, cached, capture_of, capture_tag, chamfer_text,  # noqa: E402
+                    default_models, machine, models_tag, plan_cell, plan_path, reconstruct_record, scene,
+                    variant_request, variants_of, write_json)
 
 #: scenario -> (N cameras of sortie 1, M cameras of sortie 2).
 SORTIES = {'one_plant': (4, 2), 'three_row': (6, 3), 'six_rect': (6, 3), 'grid_3x3': (8, 4)}
+#: The planner variant (common.VARIANTS) of sortie 1 and of cases a, b, d, e.
+PLANNER = 'egp'
+#: The cases c: sortie 2 = a baseline variant of M (common.VARIANTS: the ``sorties`` baselines).
+C_CASES = {f'c-{v}': v for v in baselines(variants_of('sorties'))}
 #: The cases after sortie 2, in the table's order (module docstring).
-CASES = ('a', 'b', 'c-circle', 'c-arc', 'd', 'e')
+CASES = ('a', 'b', *C_CASES, 'd', 'e')
 #: How close to ``a`` (relative Chamfer) ``e`` should come.
 TARGET = 0.05
 
 
 def parse_args(argv=None) -> argparse.Namespace:
+    from vp_scene.camera import IMAGE_SIZE
+
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     ap.add_argument('--models', default=default_models(),
                     help="folder of PLY plant models (default: ../shared/data/corn50 if present; '' procedural)")
@@ -59,11 +67,11 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument('--init', type=int, default=50)
     ap.add_argument('--seed', type=int, default=0)
     ap.add_argument('--realizations', type=int, default=2, help='wind realizations reconstructed')
-    ap.add_argument('--width', type=int, default=2000)
-    ap.add_argument('--height', type=int, default=1500)
+    ap.add_argument('--width', type=int, default=IMAGE_SIZE[0])
+    ap.add_argument('--height', type=int, default=IMAGE_SIZE[1])
     ap.add_argument('--threads', type=int, default=0, help='threads of the reconstruction (0: all cores)')
-    ap.add_argument('--tau', type=float, default=0.03)
-    ap.add_argument('--reconstructed-weight', type=float, default=0.1)
+    ap.add_argument('--tau', type=float, default=DEFAULT_TAU)
+    ap.add_argument('--reconstructed-weight', type=float, default=DEFAULT_RECONSTRUCTED_WEIGHT)
     ap.add_argument('--matching', default='auto', choices=MATCHINGS,
                     help="image pairs SIFT compares (vp_recon.pipeline.matching_method; 'auto': the pose-chosen "
                          "pairs from 8 images up, 'exhaustive': all of them)")
@@ -78,16 +86,17 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 def sortie2_cell(cache: Path, scenario: str, first: dict, m: int, args, reconstruction=None) -> dict:
     """An egp plan of M cameras given sortie 1's cameras (d), and its reconstruction (e); cached."""
-    from vp_planner.optimizers import PlanRequest, plan_views
+    from vp_planner.optimizers import plan_views
 
     def compute() -> dict:
         import torch
 
         torch.set_num_threads(1)  # as the planner node and CLI
         noisy, _ = scene(scenario, args.models)
-        res = plan_views(PlanRequest('egp', m, evaluations=args.evals, initial_evaluations=args.init, seed=args.seed,
-                                     fixed_cameras=first['cameras'], reconstruction=reconstruction, tau=args.tau,
-                                     reconstructed_weight=args.reconstructed_weight, reward=args.reward), noisy.points)
+        request = variant_request(PLANNER, num_cameras=m, evaluations=args.evals, initial_evaluations=args.init,
+                                  seed=args.seed, fixed_cameras=first['cameras'], reconstruction=reconstruction,
+                                  tau=args.tau, reconstructed_weight=args.reconstructed_weight, reward=args.reward)
+        res = plan_views(request, noisy.points)
         return {'cameras': np.asarray(res.cameras).tolist(), 'reward': float(res.reward), 'seconds': float(res.seconds),
                 'reconstructed_fraction': res.reconstructed_fraction}
     return cached(sortie2_path(cache, scenario, m, args, reconstruction is not None), compute)
@@ -148,7 +157,7 @@ def run(client, cache: Path, out: Path, args) -> dict:
     (3) the plans of e (from sortie 1's reconstruction); (4) the reconstructions of d and e.
     A task that fails is a record with its error (counted, never dropped)."""
     kw = dict(evals=args.evals, init=args.init, models=args.models)
-    plan_of = {'a': ('egp', 1), 'b': ('egp', 0), 'c-circle': ('circle', 0), 'c-arc': ('arc', 0)}
+    plan_of = {'a': (PLANNER, 1), 'b': (PLANNER, 0), **{c: (v, 0) for c, v in C_CASES.items()}}
 
     def plan_task(scenario: str, key: str, variant: str, cameras: int) -> Task:
         a = (cache, scenario, variant, args.seed, args.evals, args.init, args.models, cameras, args.reward)
@@ -164,7 +173,7 @@ def run(client, cache: Path, out: Path, args) -> dict:
                     sortie2_path(cache, scenario, m, args, reconstruction is not None), f'{scenario} plan {key}')
 
     sizes = {s: SORTIES[s] for s in args.scenarios}
-    plans = run_tasks(client, [plan_task(s, 'sortie1', 'egp', n) for s, (n, m) in sizes.items()]
+    plans = run_tasks(client, [plan_task(s, 'sortie1', PLANNER, n) for s, (n, m) in sizes.items()]
                       + [plan_task(s, c, v, m + n * extra) for s, (n, m) in sizes.items()
                          for c, (v, extra) in plan_of.items()], 'planning')
 
@@ -178,7 +187,8 @@ def run(client, cache: Path, out: Path, args) -> dict:
         return (s, case) in plans and 'error' not in plans[(s, case)]
 
     ok = [s for s in sizes if planned(s, 'sortie1')]
-    recons = run_tasks(client, [recon_task(s, 'sortie1', f'sortie1-egp-n{sizes[s][0]}', plans[(s, 'sortie1')]['cameras'])
+    recons = run_tasks(client, [recon_task(s, 'sortie1', f'sortie1-{PLANNER}-n{sizes[s][0]}',
+                                           plans[(s, 'sortie1')]['cameras'])
                                 for s in ok]
                        + [sortie2_task(s, 'd', plans[(s, 'sortie1')]) for s in ok]
                        + [case_task(s, c) for s in ok for c in plan_of if planned(s, c)], 'sortie 1, a-c')

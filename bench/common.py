@@ -6,10 +6,13 @@ import math
 import os
 import platform
 import threading
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Optional
 
 import numpy as np
+
+from vp_planner.methods import BY_NAME
 
 ROOT = Path(__file__).resolve().parent.parent
 #: The paper's scenarios and their camera counts (Sec. V).
@@ -64,17 +67,57 @@ def models_tag(models: str) -> str:
     return Path(models).name if models else 'procedural'
 
 
-#: Planner variants of the benchmarks: name -> PlanRequest fields (:mod:`vp_planner.request`).
+@dataclass(frozen=True)
+class Variant:
+    """A planner variant of the benchmarks: its ``request`` fields (flat names of
+    :data:`vp_planner.request.FLAT`: the method and its settings; a benchmark cell adds cameras,
+    budget, seed and reward) and the ``benchmarks`` that run it by default."""
+
+    request: dict
+    benchmarks: tuple[str, ...] = ()
+
+    @property
+    def baseline(self) -> bool:
+        """A baseline of the paired differences against egp: what a drone operator flies anyway and
+        the paper's SA (every method that is not Bayesian optimization, from the registry)."""
+        return not BY_NAME[self.request['method']].bayesian
+
+
+#: The planner variants of the benchmarks, the one table they all read: name (the reports' label
+#: and part of every cache name) -> :class:`Variant`. Benchmarks: ``planners`` (bench_planners),
+#: ``fields`` (bench_fields), ``sorties`` (bench_sorties: egp's cases, the baselines' c-cases);
+#: table1's rows name a variant and a reward model each.
 VARIANTS = {
-    'egp': {'method': 'egp'},                                           # the default planner
-    'egp-random-init': {'method': 'egp', 'structured_init': 0},          # the paper's random design
-    'egp-paper-config': {'method': 'egp', 'structured_init': 0, 'bo_mode': 'global'},  # the paper's BO
-    'gp': {'method': 'gp'},
-    'circle': {'method': 'circle'},
-    'arc': {'method': 'arc'},
-    'sa': {'method': 'sa'},
-    'random': {'method': 'random'},
+    'egp': Variant({'method': 'egp'}, ('planners', 'fields', 'sorties')),       # the default planner
+    'egp-random-init': Variant({'method': 'egp', 'structured_init': 0}, ('planners',)),  # the paper's random design
+    'egp-paper-config': Variant({'method': 'egp', 'structured_init': 0, 'bo_mode': 'global'}),  # the paper's BO
+    'egp-one-space': Variant({'method': 'egp', 'parts': 1}, ('fields',)),       # a field in one 6N-dim space
+    'gp': Variant({'method': 'gp'}),
+    'circle': Variant({'method': 'circle'}, ('planners', 'fields', 'sorties')),
+    'arc': Variant({'method': 'arc'}, ('planners', 'fields', 'sorties')),
+    'sa': Variant({'method': 'sa'}, ('planners', 'fields')),
+    'random': Variant({'method': 'random'}, ('planners',)),
+    'lawnmower': Variant({'method': 'lawnmower'}, ('fields',)),                 # nadir, 70 % overlap
+    'lawnmower-oblique': Variant({'method': 'lawnmower', 'lawnmower_tilt': math.radians(30.0)}, ('fields',)),
 }
+
+
+def variants_of(benchmark: str) -> tuple[str, ...]:
+    """The variants ``benchmark`` runs by default, in the table's order."""
+    return tuple(name for name, v in VARIANTS.items() if benchmark in v.benchmarks)
+
+
+def baselines(names) -> tuple[str, ...]:
+    """The baseline variants among ``names`` (:attr:`Variant.baseline`), in their order."""
+    return tuple(name for name in names if VARIANTS[name].baseline)
+
+
+def variant_request(variant: str, **cell: Any):
+    """The :class:`vp_planner.request.PlanRequest` of ``variant`` in a benchmark cell (flat fields:
+    num_cameras, evaluations, initial_evaluations, seed, reward, ...)."""
+    from vp_planner.request import PlanRequest
+
+    return PlanRequest.from_dict({**VARIANTS[variant].request, **cell})
 
 
 def plan_path(cache: Path, scenario: str, variant: str, seed: int, evals: int = 100, init: int = 50,
@@ -92,13 +135,13 @@ def plan_cell(cache: Path, scenario: str, variant: str, seed: int, evals: int = 
     """One planning run (cached): cameras, reward, best-so-far trace, seconds, the initial
     design's best and the BO steps (egp/gp). ``variant`` is a key of :data:`VARIANTS`;
     ``reward`` a reward model (None: the planner's default)."""
-    from vp_planner.optimizers import PlanRequest, plan_views
+    from vp_planner.optimizers import plan_views
     from vp_planner.reward_models import DEFAULT_REWARD_MODEL
 
     n = num_cameras or SCENARIOS[scenario]
     reward = reward or DEFAULT_REWARD_MODEL
-    request = PlanRequest(**VARIANTS[variant], num_cameras=n, evaluations=evals, initial_evaluations=init, seed=seed,
-                          reward=reward)
+    request = variant_request(variant, num_cameras=n, evaluations=evals, initial_evaluations=init, seed=seed,
+                              reward=reward)
     path = plan_path(cache, scenario, variant, seed, evals, init, models, num_cameras, reward)
 
     def compute() -> dict:

@@ -35,7 +35,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
 from common import (ROOT, SCENARIOS, add_capture, cached, capture_of, capture_tag, default_models,  # noqa: E402
-                    machine, models_tag, scene)
+                    machine, models_tag, scene, variant_request)
 
 CACHE = ROOT / 'results' / 'cache' / 'plan_quality'
 #: what a variant's Spearman ranks against: the dense cloud's Chamfer in map (the main figure),
@@ -47,14 +47,16 @@ SPLIT_SEED = 0
 
 
 def parse_args(argv=None) -> argparse.Namespace:
+    from vp_scene.camera import IMAGE_SIZE
+
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     ap.add_argument('--models', default=default_models(), help='folder of PLY plants (default ../shared/data/corn50)')
     ap.add_argument('--scenarios', nargs='+', default=['one_plant', 'three_row'], choices=list(SCENARIOS))
     ap.add_argument('--realizations', default='0,1', help='wind realizations to reconstruct (comma-separated)')
-    ap.add_argument('--width', type=int, default=2000)
+    ap.add_argument('--width', type=int, default=IMAGE_SIZE[0])
     ap.add_argument('--threads', type=int, default=0,
                     help='threads of the reconstruction (0: all cores; 1 when something else runs beside it)')
-    ap.add_argument('--height', type=int, default=1500)
+    ap.add_argument('--height', type=int, default=IMAGE_SIZE[1])
     ap.add_argument('--ground', action=argparse.BooleanOptionalAction, default=None,
                     help='render a textured soil plane under the plants (default: by the capture, as vp_recon.cli)')
     ap.add_argument('--phase', default='all', choices=['plans', 'recon', 'analyze', 'all', 'check'],
@@ -86,7 +88,7 @@ def _space(scenario: str, models: str):
 
 def plan_families(scenario: str, models: str) -> list[dict]:
     """The study's plans: [{id, family, params, cameras}], feasible only, deterministic."""
-    from vp_planner.optimizers import PlanRequest, plan_views
+    from vp_planner.optimizers import plan_views
     from vp_planner.patterns import arc, cap, ring
 
     noisy, space = _space(scenario, models)
@@ -136,14 +138,15 @@ def plan_families(scenario: str, models: str) -> list[dict]:
     # random feasible plans of the planner's space
     for U in space.sample(14, np.random.default_rng(5)):
         add('random', {}, space.decode(U))
-    # optimizer outputs (100 evaluations): the paper reward's, then plans optimized for coverage
-    # (a reward that can be gamed would show up here as high reward, poor reconstruction)
-    for method, seeds, reward in (('circle', (0,), 'paper'), ('sa', (0, 1, 2, 3), 'paper'), ('egp', (0, 1, 2), 'paper'),
-                                  ('gp', (0,), 'paper'), ('egp', (0, 1, 2), 'coverage'), ('arc', (0,), 'coverage')):
+    # optimizer outputs (100 evaluations) of variants of common.VARIANTS: the paper reward's, then plans
+    # optimized for coverage (a reward that can be gamed would show up here as high reward, poor reconstruction)
+    for variant, seeds, reward in (('circle', (0,), 'paper'), ('sa', (0, 1, 2, 3), 'paper'),
+                                   ('egp', (0, 1, 2), 'paper'), ('gp', (0,), 'paper'), ('egp', (0, 1, 2), 'coverage'),
+                                   ('arc', (0,), 'coverage')):
         for seed in seeds:
-            res = plan_views(PlanRequest(method, N, evaluations=100, initial_evaluations=50, seed=seed, reward=reward),
-                             R)
-            add(method if reward == 'paper' else f'{method}-{reward}', {'seed': seed, 'reward_model': reward},
+            res = plan_views(variant_request(variant, num_cameras=N, evaluations=100, initial_evaluations=50, seed=seed,
+                                             reward=reward), R)
+            add(variant if reward == 'paper' else f'{variant}-{reward}', {'seed': seed, 'reward_model': reward},
                 res.cameras)
     return plans
 

@@ -28,7 +28,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
-from common import (ROOT, SCENARIOS, cached, default_models, machine, models_tag, plan_cell,  # noqa: E402
+from common import (ROOT, SCENARIOS, VARIANTS, cached, default_models, machine, models_tag, plan_cell,  # noqa: E402
                     add_capture, capture_of, capture_tag, known_realizations, plan_path, reconstruct_record,
                     scene)
 from stats import describe, describe_difference, paired_difference, rank, realization_units, summary  # noqa: E402
@@ -42,8 +42,8 @@ ROWS = {
     'egp (paper configuration)': ('egp-paper-config', 'paper'),
     'egp (coverage-graph)': ('egp', 'coverage-graph'),
 }
-#: The baseline rows (what a drone operator flies anyway, and the paper's SA).
-BASELINES = ('circle', 'arc', 'sa')
+#: The baseline rows (what a drone operator flies anyway, and the paper's SA): those of a baseline variant.
+BASELINES = tuple(row for row, (variant, _) in ROWS.items() if VARIANTS[variant].baseline)
 PAPER = {  # Table I of the paper, Chamfer x100 (mean, std)
     'one_plant': {'circle': (4.127, 0.194), 'sa': (3.844, 0.224), 'egp (paper configuration)': (3.256, 0.245)},
     'three_row': {'circle': (2.817, 0.079), 'sa': (2.43, 0.192), 'egp (paper configuration)': (1.614, 0.166)},
@@ -52,6 +52,8 @@ PAPER = {  # Table I of the paper, Chamfer x100 (mean, std)
 
 
 def parse_args(argv=None) -> argparse.Namespace:
+    from vp_scene.camera import IMAGE_SIZE
+
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     ap.add_argument('--models', default=default_models(),
                     help="folder of PLY plant models (default: ../shared/data/corn50 if present; '' procedural)")
@@ -60,10 +62,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument('--seeds', type=int, default=5, help='planning seeds for the regret figure')
     ap.add_argument('--evals', type=int, default=100)
     ap.add_argument('--init', type=int, default=50)
-    ap.add_argument('--width', type=int, default=2000)
+    ap.add_argument('--width', type=int, default=IMAGE_SIZE[0])
     ap.add_argument('--threads', type=int, default=0,
                     help='threads of the reconstruction (0: all cores; 1 when something else runs beside it)')
-    ap.add_argument('--height', type=int, default=1500)
+    ap.add_argument('--height', type=int, default=IMAGE_SIZE[1])
     ap.add_argument('--realizations', type=int, default=0,
                     help='reconstruct the first n wind realizations of each plan (0: all K)')
     ap.add_argument('--recon-seeds', type=int, default=1,

@@ -25,6 +25,8 @@ from common import (ROOT, add_capture, cached, capture_of, capture_tag, chamfer_
 
 
 def parse_args(argv=None) -> argparse.Namespace:
+    from vp_scene.camera import IMAGE_SIZE
+
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     ap.add_argument('--table', default=str(ROOT / 'results' / 'ideal' / 'table1.json'),
                     help='Table I results with the plans (default: the ideal-capture table)')
@@ -32,8 +34,8 @@ def parse_args(argv=None) -> argparse.Namespace:
                     help="the plants Table I used (its 'models' entry names them)")
     ap.add_argument('--scenarios', nargs='+', default=['one_plant', 'three_row'])
     ap.add_argument('--realizations', type=int, default=2)
-    ap.add_argument('--width', type=int, default=2000)
-    ap.add_argument('--height', type=int, default=1500)
+    ap.add_argument('--width', type=int, default=IMAGE_SIZE[0])
+    ap.add_argument('--height', type=int, default=IMAGE_SIZE[1])
     ap.add_argument('--threads', type=int, default=0)
     ap.add_argument('--out', default=str(ROOT / 'results'))
     add_capture(ap)

@@ -52,7 +52,8 @@ from pathlib import Path
 from typing import Dict, List, Optional
 
 from node_process import NodeProcess, node_command
-from vp_planner.methods import METHODS  # the registry (torch-free)
+from vp_planner.methods import DEFAULT_METHOD, METHODS  # the registry (torch-free)
+from vp_scene.camera import IMAGE_SIZE
 
 #: s between the action server being ready and the goal: server_is_ready() sees the request side of
 #: the action's services only; a goal response sent before its reply path is matched is dropped by
@@ -90,7 +91,7 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
     ap.add_argument('--scenario', default='one_plant', metavar='NAME_OR_FILE',
                     help='a layout name (one_plant, three_row, six_rect, grid_3x3, row_12) or a layout file '
                          "(.yaml, .yml, .json; README 'Your own field')")
-    ap.add_argument('--method', default='egp', choices=METHODS)
+    ap.add_argument('--method', default=DEFAULT_METHOD, choices=METHODS)
     ap.add_argument('--cameras', type=int, default=4)
     ap.add_argument('--evals', type=int, default=100, help='reward evaluations')
     ap.add_argument('--init', type=int, default=50, help='initial random design (egp, gp)')
@@ -99,8 +100,8 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
     ap.add_argument('--models', default='', help='folder of PLY plant models (default: procedural)')
     ap.add_argument('--realizations', type=int, default=5, help='K wind realizations')
     ap.add_argument('--points-per-plant', type=int, default=4000)
-    ap.add_argument('--width', type=int, default=2000, help='rendered image width')
-    ap.add_argument('--height', type=int, default=1500, help='rendered image height')
+    ap.add_argument('--width', type=int, default=IMAGE_SIZE[0], help='rendered image width')
+    ap.add_argument('--height', type=int, default=IMAGE_SIZE[1], help='rendered image height')
     ap.add_argument('--capture', default='realistic', choices=['realistic', 'ideal'],
                     help="the recon node's capture model (README 'Capture model'): realistic (hover and "
                          "localization errors, sensor noise, SfM with the reported poses) or ideal")

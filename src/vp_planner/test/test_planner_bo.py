@@ -75,10 +75,11 @@ def test_bo_improves_on_its_initial_design(small_realizations) -> None:
     design) the BO phase must beat the best plan of its initial design, under the default reward
     and the paper's. The BO of commit 8effa61 (EI over the whole cube) gained 0.0065 and 0.0000
     here: it never left the structured incumbent; the trust region gains 0.087 and 0.016."""
-    from vp_planner.optimizers import PlanRequest, plan_views
+    from vp_planner.optimizers import plan_views
+    from vp_planner.request import PlanRequest
 
     for reward, margin in (("coverage", 0.03), ("paper", 0.005)):
-        res = plan_views(PlanRequest("egp", 3, evaluations=30, initial_evaluations=15, seed=0, reward=reward),
+        res = plan_views(PlanRequest.of("egp", 3, evaluations=30, initial_evaluations=15, seed=0, reward=reward),
                          small_realizations)
         assert res.initial_best is not None
         assert res.reward > res.initial_best + margin, (reward, res.initial_best, res.reward)

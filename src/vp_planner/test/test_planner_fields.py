@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from vp_planner.optimizers import InvalidNumCamerasError, PlanRequest, plan_views
+from vp_planner.optimizers import plan_views
+from vp_planner.request import InvalidNumCamerasError, PlanRequest
 from vp_planner.parts import JointSpace, allocate_cameras, auto_parts, partition
 from vp_planner.patterns import footprint, lawnmower
 from vp_planner.reward_models import make_reward
@@ -82,7 +83,7 @@ def test_egp_by_parts_plans_every_plant_and_counts_every_evaluation(two_plants) 
     trace 0), then the joint refinement's."""
     R, plant = two_plants
     seen = []
-    res = plan_views(PlanRequest("egp", 4, evaluations=12, initial_evaluations=6, seed=0, parts=2), R,
+    res = plan_views(PlanRequest.of("egp", 4, evaluations=12, initial_evaluations=6, seed=0, parts=2), R,
                      callback=lambda done, total, best, w: seen.append((done, total, best)) is None)
     assert res.evaluations == 30 and not res.stopped and res.cameras.shape == (4, 6)
     assert [s[0] for s in seen] == list(range(1, 31)) and all(s[1] == 30 for s in seen)
@@ -99,7 +100,7 @@ def test_egp_by_parts_plans_every_plant_and_counts_every_evaluation(two_plants) 
 
 def test_cancel_while_planning_a_part(two_plants) -> None:
     R, _ = two_plants
-    res = plan_views(PlanRequest("egp", 4, evaluations=12, initial_evaluations=6, parts=2), R,
+    res = plan_views(PlanRequest.of("egp", 4, evaluations=12, initial_evaluations=6, parts=2), R,
                      callback=lambda done, total, best, w: done < 5)
     assert res.stopped and res.evaluations == 5 and res.cameras.shape == (0, 6)
 
@@ -107,9 +108,9 @@ def test_cancel_while_planning_a_part(two_plants) -> None:
 def test_too_many_parts_for_the_cameras(two_plants) -> None:
     R, _ = two_plants
     with pytest.raises(InvalidNumCamerasError, match="parts = 3 needs at least 6 cameras"):
-        plan_views(PlanRequest("egp", 4, evaluations=12, initial_evaluations=6, parts=3), R)
-    with pytest.raises(ValueError, match="parts must be an integer"):
-        plan_views(PlanRequest("egp", 4, evaluations=12, initial_evaluations=6, parts=-1), R)
+        plan_views(PlanRequest.of("egp", 4, evaluations=12, initial_evaluations=6, parts=3), R)
+    with pytest.raises(ValueError, match="parts must be >= 0"):
+        plan_views(PlanRequest.of("egp", 4, evaluations=12, initial_evaluations=6, parts=-1), R)
 
 
 # ---------------------------------------------------------------------- lawnmower
@@ -167,7 +168,7 @@ def test_oblique_survey_flies_back_and_forth(two_plants) -> None:
 def test_lawnmower_method_is_one_feasible_survey(two_plants) -> None:
     R, _ = two_plants
     seen = []
-    res = plan_views(PlanRequest("lawnmower", 6, evaluations=50), R,
+    res = plan_views(PlanRequest.of("lawnmower", 6, evaluations=50), R,
                      callback=lambda done, total, *_: seen.append((done, total)))
     assert res.evaluations == 1 and not res.stopped and res.cameras.shape == (6, 6)
     assert seen == [(1, 1)]                       # its progress says 1 of 1, not 1 of 50
@@ -180,6 +181,6 @@ def test_lawnmower_method_is_one_feasible_survey(two_plants) -> None:
                                                   float(lower[0, 2] - R[..., 2].max()), 6, space.image, 0.7,
                                                   min_spacing=0.5) is None   # the lowest such survey
     with pytest.raises(ValueError, match="overlap"):
-        plan_views(PlanRequest("lawnmower", 6, lawnmower_overlap=1.0), R)
+        plan_views(PlanRequest.of("lawnmower", 6, lawnmower_overlap=1.0), R)
     with pytest.raises(ValueError, match="tilt"):
-        plan_views(PlanRequest("lawnmower", 6, lawnmower_tilt=math.radians(70)), R)
+        plan_views(PlanRequest.of("lawnmower", 6, lawnmower_tilt=math.radians(70)), R)

@@ -15,7 +15,8 @@ import trimesh
 
 from vp_planner import optimizers, request
 from vp_planner.cli import main
-from vp_planner.optimizers import InvalidFixedCamerasError, InvalidReconstructionError, PlanRequest, plan_views
+from vp_planner.optimizers import plan_views
+from vp_planner.request import InvalidFixedCamerasError, InvalidReconstructionError, PlanRequest
 from vp_planner.reward_models import (CoverageParams, make_reward, point_coverage, reconstructed_mask,
                                       reconstructed_weights)
 from vp_planner.space import ViewSpace
@@ -89,20 +90,20 @@ def test_a_hole_attracts_the_next_cameras() -> None:
     # weigh 0.1) the same search (same seed, same candidates) goes to the hole B
     A, B = blobs()
     R = np.concatenate([A, B])[None]
-    first = plan_views(PlanRequest("random", 3, evaluations=100, seed=0), R)
+    first = plan_views(PlanRequest.of("random", 3, evaluations=100, seed=0), R)
     cov = point_coverage(first.cameras, R)[0]
     assert cov[:600].mean() > cov[600:].mean()
-    second = plan_views(PlanRequest("random", 3, evaluations=100, seed=0, reconstruction=A), R)
+    second = plan_views(PlanRequest.of("random", 3, evaluations=100, seed=0, reconstruction=A), R)
     cov = point_coverage(second.cameras, R)[0]
     assert cov[600:].mean() > 2 * cov[:600].mean()
     assert second.reconstructed_fraction == pytest.approx(0.75)
 
 
 def test_every_method_counts_the_fixed_cameras_and_ignores_their_separation(realizations) -> None:
-    fixed = plan_views(PlanRequest("circle", 3, evaluations=4, seed=0), realizations).cameras
+    fixed = plan_views(PlanRequest.of("circle", 3, evaluations=4, seed=0), realizations).cameras
     score = make_reward("coverage", realizations, fixed_cameras=fixed)
     for method in ("circle", "random", "lawnmower", "sa"):
-        res = plan_views(PlanRequest(method, 2, evaluations=6, seed=1, fixed_cameras=fixed), realizations)
+        res = plan_views(PlanRequest.of(method, 2, evaluations=6, seed=1, fixed_cameras=fixed), realizations)
         assert res.fixed_cameras == 3
         assert res.reward == pytest.approx(float(score(res.cameras)), rel=1e-6), method
     # a camera on a fixed camera's position is feasible: separation is within a sortie only
@@ -119,27 +120,28 @@ def test_every_method_counts_the_fixed_cameras_and_ignores_their_separation(real
 ])
 def test_bad_fixed_cameras_are_refused(realizations, fixed, text) -> None:
     with pytest.raises(InvalidFixedCamerasError, match=text):
-        plan_views(PlanRequest("random", 2, evaluations=3, fixed_cameras=np.asarray(fixed, dtype=float)), realizations)
+        plan_views(PlanRequest.of("random", 2, evaluations=3, fixed_cameras=np.asarray(fixed, dtype=float)),
+                   realizations)
 
 
 def test_fixed_cameras_beyond_the_memory_are_refused(realizations, monkeypatch) -> None:
-    plan_views(PlanRequest("random", 2, evaluations=2, fixed_cameras=[ring_camera(0)]), realizations)
+    plan_views(PlanRequest.of("random", 2, evaluations=2, fixed_cameras=[ring_camera(0)]), realizations)
     need = optimizers.estimate_memory(2 + 50, realizations.shape[0], realizations.shape[1], "coverage")
     monkeypatch.setattr(request, "available_memory", lambda: int(need))  # the plan alone fits
     optimizers.check_memory(2, realizations.shape, "coverage")
     with pytest.raises(InvalidFixedCamerasError, match="memory|GiB"):
-        plan_views(PlanRequest("random", 2, evaluations=2, fixed_cameras=np.tile(ring_camera(0), (50, 1))),
+        plan_views(PlanRequest.of("random", 2, evaluations=2, fixed_cameras=np.tile(ring_camera(0), (50, 1))),
                    realizations)
 
 
 def test_bad_reconstructions_are_refused(realizations, monkeypatch) -> None:
     with pytest.raises(InvalidReconstructionError, match="non-finite"):
-        plan_views(PlanRequest("random", 2, evaluations=2, reconstruction=[[0.0, np.nan, 0.0]]), realizations)
+        plan_views(PlanRequest.of("random", 2, evaluations=2, reconstruction=[[0.0, np.nan, 0.0]]), realizations)
     with pytest.raises(InvalidReconstructionError, match="tau"):
-        plan_views(PlanRequest("random", 2, evaluations=2, reconstruction=[[0.0, 0.0, 0.0]], tau=-1.0), realizations)
+        plan_views(PlanRequest.of("random", 2, evaluations=2, reconstruction=[[0.0, 0.0, 0.0]], tau=-1.0), realizations)
     with pytest.raises(InvalidReconstructionError, match="reconstructed_weight"):
-        plan_views(PlanRequest("random", 2, evaluations=2, reconstruction=[[0.0, 0.0, 0.0]], reconstructed_weight=1.5),
-                   realizations)
+        plan_views(PlanRequest.of("random", 2, evaluations=2, reconstruction=[[0.0, 0.0, 0.0]],
+                                  reconstructed_weight=1.5), realizations)
     monkeypatch.setattr(request, "available_memory", lambda: 1000)
     with pytest.raises(InvalidReconstructionError, match="GiB"):
         optimizers.sortie_weights(realizations, np.zeros((100, 3)), 0.03, 0.1)

@@ -4,6 +4,8 @@ and ``lawnmower`` (the methods' descriptions: :mod:`vp_planner.optimizers`).
 Each ``plan_<method>(space, obj, ...)`` spends its budget on the :class:`~vp_planner.objective.Objective`
 ``obj`` of the :class:`~vp_planner.space.ViewSpace` ``space`` (which records every evaluation and
 the best feasible plan, reports progress and sees a cancel); none returns a plan of its own.
+``run_<method>(space, obj, request, rng, parts)`` is the registry's planner of each
+(:class:`vp_planner.methods.Method`): the method's settings read from the request.
 """
 from __future__ import annotations
 
@@ -13,10 +15,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .objective import Objective
+from .request import PlanRequest
 from .space import NoFeasiblePlanError, ViewSpace
 
 __all__ = ["CircleFamily", "ARC_PHASES", "batch_size", "evaluate_plans", "plan_circle", "plan_arc", "plan_sa",
-           "plan_random", "plan_lawnmower", "sa_candidates"]
+           "plan_random", "plan_lawnmower", "sa_candidates", "run_circle", "run_arc", "run_sa", "run_random",
+           "run_lawnmower"]
 
 #: Plans evaluated per reward call by the non-BO methods (bounds how late a cancel is seen) ...
 _BATCH = 16
@@ -110,8 +114,7 @@ def evaluate_plans(obj: Objective, cams: NDArray[np.float64], candidate: bool = 
 ARC_PHASES = 8
 
 
-def plan_arc(space: ViewSpace, obj: Objective, evaluations: int, rng: np.random.Generator,
-         spacing: float = math.radians(30.0)) -> None:
+def plan_arc(space: ViewSpace, obj: Objective, evaluations: int, rng: np.random.Generator, spacing: float) -> None:
     """The ``arc`` baseline (module docstring): tune the circle, then place the arc on it. N
     cameras ``spacing`` apart would wrap past a full turn when N spacing > 2 pi (N > 12 at 30
     degrees): the arc is then the full ring, 2 pi / N apart."""
@@ -261,3 +264,25 @@ def plan_sa(space: ViewSpace, obj: Objective, evaluations: int, rng: np.random.G
         r_new = float(obj.record(nanU, cand[prop][None])[0])
         if r_new >= r_cur or rng.random() < math.exp((r_new - r_cur) / max(T, 1e-300)):
             cur, r_cur = prop, r_new
+
+
+# ---------------------------------------------------------------------- the registry's planners
+def run_circle(space: ViewSpace, obj: Objective, request: PlanRequest, rng: np.random.Generator, parts: int) -> None:
+    plan_circle(space, obj, request.evaluations, rng)
+
+
+def run_arc(space: ViewSpace, obj: Objective, request: PlanRequest, rng: np.random.Generator, parts: int) -> None:
+    plan_arc(space, obj, request.evaluations, rng, request.arc.spacing)
+
+
+def run_sa(space: ViewSpace, obj: Objective, request: PlanRequest, rng: np.random.Generator, parts: int) -> None:
+    plan_sa(space, obj, request.evaluations, rng)
+
+
+def run_random(space: ViewSpace, obj: Objective, request: PlanRequest, rng: np.random.Generator, parts: int) -> None:
+    plan_random(space, obj, request.evaluations, rng)
+
+
+def run_lawnmower(space: ViewSpace, obj: Objective, request: PlanRequest, rng: np.random.Generator,
+                  parts: int) -> None:
+    plan_lawnmower(space, obj, request.lawnmower.overlap, request.lawnmower.tilt)

@@ -12,10 +12,12 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 
+from .methods import BY_NAME
 from .objective import Objective
+from .request import PlanRequest
 from .space import Callback, NoFeasiblePlanError, StopCheck, ViewSpace
 
-__all__ = ["initial_design", "plan_bo", "plan_bo_by_parts", "optimize_in"]
+__all__ = ["initial_design", "plan_bo", "plan_bo_by_parts", "optimize_in", "run_bo"]
 
 
 def initial_design(space: ViewSpace, n: int, rng: np.random.Generator, structured: int = 20,
@@ -34,6 +36,18 @@ def initial_design(space: ViewSpace, n: int, rng: np.random.Generator, structure
         raise NoFeasiblePlanError(f"{exc}; egp/gp plan up to about 40 cameras a plant (more: circle, arc, sa "
                                   f"or lawnmower, or a field planned by parts)") from None
     return np.concatenate([S, rest], axis=0)
+
+
+def run_bo(space: ViewSpace, obj: Objective, request: PlanRequest, rng: np.random.Generator, parts: int) -> dict:
+    """The registry's planner of egp and gp (:class:`vp_planner.methods.Method`): BO in ``space``,
+    or by ``parts`` parts when there are more than 1, with the request's ``bo`` settings; an
+    ensemble of GPs where the method's entry says so."""
+    ensemble, bo = BY_NAME[request.method].ensemble, request.bo
+    if parts > 1:
+        return plan_bo_by_parts(space, obj, request.evaluations, bo.initial_evaluations, request.seed, ensemble,
+                                bo.structured_init, bo.mode, parts)
+    return plan_bo(space, obj, request.evaluations, bo.initial_evaluations, request.seed, rng, ensemble,
+                   bo.structured_init, bo.mode)
 
 
 def plan_bo(space: ViewSpace, obj: Objective, evaluations: int, initial_evaluations: int, seed: int,

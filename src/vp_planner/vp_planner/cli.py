@@ -34,7 +34,6 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Optional, Sequence
 
@@ -89,19 +88,24 @@ def _scene_args(p: argparse.ArgumentParser) -> None:
 
 
 def _reward_args(p: argparse.ArgumentParser, default: Optional[str]) -> None:
+    from vp_scene.camera import IMAGE_SIZE
+
     from .reward_models import REWARD_MODELS
 
     p.add_argument("--reward", default=default, choices=REWARD_MODELS,
                    help="reward model (paper: eqs. 2-7; coverage: expected reconstructed fraction; coverage-graph: "
                         "coverage times the view graph's connectivity)")
-    p.add_argument("--image-width", type=int, default=None, help="image width of the cameras, pixels (2000)")
-    p.add_argument("--image-height", type=int, default=None, help="image height of the cameras, pixels (1500)")
+    p.add_argument("--image-width", type=int, default=None,
+                   help=f"image width of the cameras, pixels ({IMAGE_SIZE[0]})")
+    p.add_argument("--image-height", type=int, default=None,
+                   help=f"image height of the cameras, pixels ({IMAGE_SIZE[1]})")
 
 
 def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
-    """Arguments of ``plan`` (the default command) or ``score``; ``args.command`` says which."""
+    """Arguments of ``plan`` (the default command) or ``score``; ``args.command`` says which.
+    The plan flags' defaults are the request's (:data:`vp_planner.request.DEFAULTS`)."""
     from .methods import METHODS
-    from .reward_models import DEFAULT_REWARD_MODEL
+    from .request import BO_MODES, DEFAULTS as D
 
     argv = list(sys.argv[1:] if argv is None else argv)
     command = argv.pop(0) if argv and argv[0] in ("plan", "score") else "plan"
@@ -116,29 +120,31 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     else:
         p = _Parser(prog="plan", description="EGP-VP view planning on a noisy corn scene.")
         _scene_args(p)
-        p.add_argument("--method", default="egp", choices=METHODS)
-        p.add_argument("--cameras", type=int, default=4, help="number of cameras N (>= 2)")
-        p.add_argument("--evals", type=int, default=100, help="reward evaluations (initial design included)")
-        p.add_argument("--init", type=int, default=50, help="initial design size of egp/gp")
+        p.add_argument("--method", default=D["method"], choices=METHODS)
+        p.add_argument("--cameras", type=int, default=D["num_cameras"], help="number of cameras N (>= 2)")
+        p.add_argument("--evals", type=int, default=D["evaluations"],
+                       help="reward evaluations (initial design included)")
+        p.add_argument("--init", type=int, default=D["initial_evaluations"], help="initial design size of egp/gp")
         p.add_argument("--out", required=True, help="output folder (one that holds a plan is refused)")
         p.add_argument("--overwrite", action="store_true", help="replace the plan OUT holds (when this run succeeds)")
-        _reward_args(p, DEFAULT_REWARD_MODEL)
-        p.add_argument("--min-standoff", type=float, default=0.5)
-        p.add_argument("--min-altitude", type=float, default=0.3)
-        p.add_argument("--min-separation", type=float, default=0.5)
-        p.add_argument("--fov", type=float, default=math.pi / 2)
-        p.add_argument("--theta-match", type=float, default=math.pi / 4)
-        p.add_argument("--structured-init", type=int, default=20,
+        _reward_args(p, D["reward"])
+        p.add_argument("--min-standoff", type=float, default=D["min_standoff"])
+        p.add_argument("--min-altitude", type=float, default=D["min_altitude"])
+        p.add_argument("--min-separation", type=float, default=D["min_separation"])
+        p.add_argument("--fov", type=float, default=D["fov"])
+        p.add_argument("--theta-match", type=float, default=D["theta_match"])
+        p.add_argument("--structured-init", type=int, default=D["structured_init"],
                        help="structured plans in the egp/gp initial design (0: purely random, as the paper)")
-        p.add_argument("--bo-mode", default="trust_region", choices=("trust_region", "global"),
+        p.add_argument("--bo-mode", default=D["bo_mode"], choices=BO_MODES,
                        help="egp/gp: EI in a trust region about the incumbent, or over the whole space (paper)")
-        p.add_argument("--arc-spacing", type=float, default=math.radians(30.0),
-                       help="arc: rad between neighbouring cameras (default 30 degrees)")
-        p.add_argument("--parts", type=int, default=0,
+        p.add_argument("--arc-spacing", type=float, default=D["arc_spacing"],
+                       help=f"arc: rad between neighbouring cameras (default {math.degrees(D['arc_spacing']):g} "
+                            f"degrees)")
+        p.add_argument("--parts", type=int, default=D["parts"],
                        help="egp/gp: plan the field by this many parts (0: automatic, 1: none)")
-        p.add_argument("--lawnmower-overlap", type=float, default=0.7,
+        p.add_argument("--lawnmower-overlap", type=float, default=D["lawnmower_overlap"],
                        help="lawnmower: image overlap along and across the flight lines (0..0.95)")
-        p.add_argument("--lawnmower-tilt", type=float, default=0.0,
+        p.add_argument("--lawnmower-tilt", type=float, default=D["lawnmower_tilt"],
                        help="lawnmower: camera tilt from nadir, rad (0: nadir; oblique up to 60 degrees)")
         p.add_argument("--fixed", action="append", default=[], metavar="PLAN.json",
                        help="cameras already flown (a plan file; repeatable): the reward counts them with "
@@ -146,10 +152,10 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
         p.add_argument("--reconstructed", default=None, metavar="PLY",
                        help="what an earlier sortie reconstructed (a PLY in the scene's frame): planning-cloud "
                             "points within --tau of it weigh --reconstructed-weight")
-        p.add_argument("--tau", type=float, default=0.03, help="m: a point this close to the reconstruction "
-                                                                "counts as reconstructed (0.03)")
-        p.add_argument("--reconstructed-weight", type=float, default=0.1,
-                       help="weight in [0, 1] of a reconstructed point in the reward (others 1; 0.1)")
+        p.add_argument("--tau", type=float, default=D["tau"], help="m: a point this close to the reconstruction "
+                                                                    "counts as reconstructed (%(default)s)")
+        p.add_argument("--reconstructed-weight", type=float, default=D["reconstructed_weight"],
+                       help="weight in [0, 1] of a reconstructed point in the reward (others 1; %(default)s)")
         p.add_argument("--threads", type=int, default=1,
                        help="torch threads (default 1: leaves the other cores to a reconstruction beside it)")
         p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -196,12 +202,11 @@ def build_scene(scene: dict) -> tuple[np.ndarray, str]:
     return np.asarray(noisy.points, dtype=np.float64), noisy.scene.scenario
 
 
-def _image_size(args: argparse.Namespace, default: tuple[int, int] = (2000, 1500)) -> tuple[int, int]:
+def _image_size(args: argparse.Namespace, default: Sequence[int]) -> tuple[int, int]:
+    """(--image-width, --image-height), each ``default``'s where not given (the request checks them)."""
     w = args.image_width if args.image_width is not None else default[0]
     h = args.image_height if args.image_height is not None else default[1]
-    if w < 16 or h < 16:
-        raise CliError(f"image size must be at least 16 x 16 pixels, got {w} x {h}")
-    return int(w), int(h)
+    return w, h
 
 
 def fixed_cameras_of(paths: Sequence[str]) -> np.ndarray:
@@ -232,18 +237,20 @@ def reconstruction_of(path: Optional[str]) -> Optional[np.ndarray]:
         raise CliError(f"--reconstructed: {exc}") from None
 
 
-def request_of(args: argparse.Namespace) -> "PlanRequest":
-    """The :class:`~vp_planner.request.PlanRequest` of the plan flags (validated there; the cameras
-    already flown and the reconstruction are read from their files later)."""
-    from .request import PlanRequest
+#: Plan flags (argparse's names) that are fields of a request under another name; every other
+#: flag named as a field of :data:`vp_planner.request.FLAT` (``--min-standoff``, ``--bo-mode``, ...)
+#: is that field.
+REQUEST_FLAGS = {"cameras": "num_cameras", "evals": "evaluations", "init": "initial_evaluations"}
 
-    return PlanRequest(args.method, args.cameras, args.evals, args.init, seed=args.seed,
-                       min_standoff=args.min_standoff, min_altitude=args.min_altitude,
-                       min_separation=args.min_separation, fov=args.fov, theta_match=args.theta_match,
-                       structured_init=args.structured_init, reward=args.reward, image_size=_image_size(args),
-                       bo_mode=args.bo_mode, arc_spacing=args.arc_spacing, parts=args.parts,
-                       lawnmower_overlap=args.lawnmower_overlap, lawnmower_tilt=args.lawnmower_tilt,
-                       tau=args.tau, reconstructed_weight=args.reconstructed_weight)
+
+def request_of(args: argparse.Namespace) -> "PlanRequest":
+    """The :class:`~vp_planner.request.PlanRequest` of the plan flags, built and validated in one
+    place (the cameras already flown and the reconstruction are read from their files later)."""
+    from .request import DEFAULTS, FLAT, PlanRequest
+
+    values = {REQUEST_FLAGS.get(k, k): v for k, v in vars(args).items() if REQUEST_FLAGS.get(k, k) in FLAT}
+    values["image_size"] = _image_size(args, DEFAULTS["image_size"])
+    return PlanRequest.from_dict(values)
 
 
 def plan(args: argparse.Namespace) -> dict:
@@ -252,16 +259,16 @@ def plan(args: argparse.Namespace) -> dict:
     from vp_scene.camera import cameras_to_poses
     from vp_scene.planfile import write_plan
 
+    from .methods import BY_NAME
     from .optimizers import plan_views
 
     request = request_of(args)  # fail before reading files or building the scene
     if args.threads < 1:
         raise CliError(f"--threads must be >= 1, got {args.threads}")
-    request = replace(request, fixed_cameras=fixed_cameras_of(args.fixed),
-                      reconstruction=reconstruction_of(args.reconstructed))
+    request = request.replace(fixed_cameras=fixed_cameras_of(args.fixed),
+                              reconstruction=reconstruction_of(args.reconstructed))
     result_dir = ResultFolder(args.out, RESULT, "plan", args.overwrite).check()  # before the planning
     set_threads(args.threads)
-    image_size = request.image_size
     scene = scene_of(args)
     realizations, layout_name = build_scene(scene)
 
@@ -269,7 +276,7 @@ def plan(args: argparse.Namespace) -> dict:
     if not args.no_progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=args.evals, desc=f"{args.method}", unit="eval", file=sys.stderr, dynamic_ncols=True)
+        bar = tqdm(total=request.evaluations, desc=request.method, unit="eval", file=sys.stderr, dynamic_ncols=True)
 
     def progress(done: int, total: int, best: float, weights: Optional[list]) -> bool:
         if bar is not None:
@@ -284,40 +291,42 @@ def plan(args: argparse.Namespace) -> dict:
         if bar is not None:
             bar.close()
     poses = cameras_to_poses(res.cameras)
+    entry, cams, bo, feas, sortie = BY_NAME[request.method], request.cameras, request.bo, request.feasibility, \
+        request.sortie
     data = {
         "scenario": layout_name,
-        "method": args.method,
+        "method": request.method,
         "reward_model": res.reward_model,
-        "num_cameras": int(args.cameras),
+        "num_cameras": cams.num_cameras,
         "cameras": [[float(x) for x in row] for row in res.cameras],
         "poses": [[float(x) for x in row] for row in poses],
         "reward": float(res.reward),
         "trace": [float(x) for x in res.trace],
         "simple_regret": [float(x) for x in res.simple_regret()],
         "evaluations": int(res.evaluations),
-        "initial_evaluations": int(args.init) if args.method in ("egp", "gp") else None,
-        "structured_init": int(args.structured_init) if args.method in ("egp", "gp") else None,
-        "bo_mode": args.bo_mode if args.method in ("egp", "gp") else None,
+        "initial_evaluations": bo.initial_evaluations if entry.settings == "bo" else None,
+        "structured_init": bo.structured_init if entry.settings == "bo" else None,
+        "bo_mode": bo.mode if entry.settings == "bo" else None,
         "initial_best": res.initial_best,
         "parts": res.parts,
-        "lawnmower": ({"overlap": args.lawnmower_overlap, "tilt": args.lawnmower_tilt}
-                      if args.method == "lawnmower" else None),
+        "lawnmower": ({"overlap": request.lawnmower.overlap, "tilt": request.lawnmower.tilt}
+                      if entry.settings == "lawnmower" else None),
         "steps": res.steps,
-        "seed": int(args.seed),
+        "seed": request.seed,
         "seconds": float(res.seconds),
-        "fov": float(args.fov),
-        "theta_match": float(args.theta_match),
-        "image_size": list(image_size),
-        "feasibility": {"min_standoff": args.min_standoff, "min_altitude": args.min_altitude,
-                        "min_separation": args.min_separation},
+        "fov": cams.fov,
+        "theta_match": request.reward.theta_match,
+        "image_size": list(cams.image_size),
+        "feasibility": {"min_standoff": feas.min_standoff, "min_altitude": feas.min_altitude,
+                        "min_separation": feas.min_separation},
         "ensemble_weights": res.ensemble_weights,
         "model_names": res.model_names,
-        "fixed_cameras": [[float(x) for x in row] for row in request.fixed_cameras],
+        "fixed_cameras": [[float(x) for x in row] for row in sortie.fixed_cameras],
         "fixed_from": [str(Path(f).resolve()) for f in args.fixed],
-        "reconstructed": None if request.reconstruction is None else {
-            "path": str(Path(args.reconstructed).resolve()), "points": int(len(request.reconstruction)),
-            "tau": args.tau,
-            "reconstructed_weight": args.reconstructed_weight, "fraction": res.reconstructed_fraction},
+        "reconstructed": None if sortie.reconstruction is None else {
+            "path": str(Path(args.reconstructed).resolve()), "points": int(len(sortie.reconstruction)),
+            "tau": sortie.tau,
+            "reconstructed_weight": sortie.reconstructed_weight, "fraction": res.reconstructed_fraction},
         "scene": scene,
     }
     with result_dir:  # both files, together
@@ -348,8 +357,10 @@ def score(args: argparse.Namespace) -> float:
     the default model) on the plan's scene."""
     from vp_scene.planfile import PlanFileError, load_plan
 
+    from vp_scene.camera import IMAGE_SIZE, CameraModel
+
+    from .request import CameraSpec
     from .reward_models import DEFAULT_REWARD_MODEL, check_reward_model, make_reward
-    from vp_scene.camera import CameraModel
 
     try:
         pf = load_plan(args.plan, require_scene=False)
@@ -361,7 +372,8 @@ def score(args: argparse.Namespace) -> float:
     model = check_reward_model(args.reward or pf.data.get("reward_model") or DEFAULT_REWARD_MODEL)
     fov = args.fov if args.fov is not None else pf.fov
     theta = args.theta_match if args.theta_match is not None else pf.theta_match
-    image = CameraModel(*_image_size(args, pf.image_size or (2000, 1500)), fov)
+    spec = CameraSpec(fov=fov, image_size=_image_size(args, pf.image_size or IMAGE_SIZE))  # its checks
+    image = CameraModel(*spec.image_size, spec.fov)
     realizations, layout_name = build_scene(scene)
     fixed, weights = _sortie_of(pf.data, realizations)
     value = float(np.asarray(make_reward(model, realizations, fov, theta, image, fixed_cameras=fixed,

@@ -43,6 +43,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profi
 from sensor_msgs.msg import PointCloud2
 
 from vp_interfaces.msg import DroneAssignment, FleetAssignment
+from vp_planner.feasibility import Feasibility
 from vp_planner.fleet import (ASSIGNMENTS, ORIENTATIONS, AssignmentError, FleetTransform, assign, goal_orientations,
                               plan_problems)
 from vp_scene.camera import poses_to_cameras
@@ -79,9 +80,9 @@ PARAMS = {
     'fleet_yaw': Param(0.0, 'rad, rotation of fleet_frame about the z axis of frame_id'),
     'pose_timeout': Param(2.0, 's: a drone whose last pose is older is silent and the dispatch fails', _M, False,
                           '> 0'),
-    'min_standoff': Param(0.5, 'm from every scene point (the planner\'s rule)', _M),
-    'min_altitude': Param(0.3, 'm above the ground (the planner\'s rule)', _M),
-    'min_separation': Param(0.5, 'm between cameras (the planner\'s rule)', _M),
+    'min_standoff': Param(Feasibility.min_standoff, 'm from every scene point (the planner\'s rule)', _M),
+    'min_altitude': Param(Feasibility.min_altitude, 'm above the ground (the planner\'s rule)', _M),
+    'min_separation': Param(Feasibility.min_separation, 'm between cameras (the planner\'s rule)', _M),
     'require_scene': Param(True, 'refuse a plan when no scene arrived to check the stand-off (false: dispatch '
                                  'with a warning)'),
     'scene_timeout': Param(10.0, 's a plan that arrives before the scene waits for it', _M),
@@ -119,9 +120,9 @@ def check_parameters(values: dict) -> dict:
             raise ValueError(f'{name} must not be empty')
     if v.get('pose_timeout', 1.0) <= 0.0:
         raise ValueError(f'pose_timeout must be > 0 s, got {v["pose_timeout"]}')
-    for name in ('min_standoff', 'min_altitude', 'min_separation', 'scene_timeout'):
-        if v.get(name, 0.0) < 0.0:
-            raise ValueError(f'{name} must be >= 0, got {v[name]}')
+    Feasibility(**{n: v[n] for n in ('min_standoff', 'min_altitude', 'min_separation') if n in v})  # its checks
+    if v.get('scene_timeout', 0.0) < 0.0:
+        raise ValueError(f'scene_timeout must be >= 0, got {v["scene_timeout"]}')
     if all(k in v for k in ('frame_id', 'fleet_frame', 'fleet_x', 'fleet_y', 'fleet_z', 'fleet_yaw')):
         if v['frame_id'] == v['fleet_frame'] and not _transform(v).is_identity:
             raise ValueError(f"fleet_frame is frame_id ({v['frame_id']!r}): fleet_x, fleet_y, fleet_z and "

@@ -19,17 +19,20 @@ the (chunk, N, N) distance array holds at most ``SEPARATION_ELEMENTS`` numbers w
 
 :class:`vp_planner.space.ViewSpace` (the optimizers' search space) and
 :func:`vp_planner.fleet.plan_problems` (the dispatcher's check) both use :class:`FeasibilityRules`.
+The rules' minima and their defaults have one home, :class:`Feasibility` (a plan request's
+``feasibility``, the planner's and the dispatcher's parameters, the CLI's flags read it).
 """
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any, Optional
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-__all__ = ["FeasibilityRules", "check_minima", "check_realizations", "SEPARATION_ELEMENTS"]
+__all__ = ["Feasibility", "FeasibilityRules", "check_minima", "check_realizations", "SEPARATION_ELEMENTS"]
 
 #: Bound on the elements of the pairwise-distance array of one feasibility chunk.
 SEPARATION_ELEMENTS = 1 << 20
@@ -59,8 +62,28 @@ def check_minima(min_standoff: float, min_altitude: float, min_separation: float
     """ValueError unless the rules' minima are finite and >= 0."""
     for name, val in (("min_standoff", min_standoff), ("min_altitude", min_altitude),
                       ("min_separation", min_separation)):
-        if not math.isfinite(val) or val < 0:
+        try:
+            ok = math.isfinite(val) and val >= 0
+        except TypeError:
+            ok = False
+        if not ok:
             raise ValueError(f"{name} must be finite and >= 0, got {val}")
+
+
+@dataclass(frozen=True)
+class Feasibility:
+    """The minima of the feasibility rules (m), validated on construction (finite, >= 0;
+    ValueError naming the field): ``min_standoff`` from every scene point, ``min_altitude``
+    above the ground, ``min_separation`` between cameras. The defaults here are the suite's."""
+
+    min_standoff: float = 0.5
+    min_altitude: float = 0.3
+    min_separation: float = 0.5
+
+    def __post_init__(self) -> None:
+        check_minima(self.min_standoff, self.min_altitude, self.min_separation)
+        for name in ("min_standoff", "min_altitude", "min_separation"):
+            object.__setattr__(self, name, float(getattr(self, name)))
 
 
 class FeasibilityRules:
@@ -75,8 +98,9 @@ class FeasibilityRules:
             keep ``min_separation`` from.
     """
 
-    def __init__(self, obstacles: Any, num_cameras: int, min_standoff: float = 0.5, min_altitude: float = 0.3,
-                 min_separation: float = 0.5, fixed_positions: Any = None) -> None:
+    def __init__(self, obstacles: Any, num_cameras: int, min_standoff: float = Feasibility.min_standoff,
+                 min_altitude: float = Feasibility.min_altitude, min_separation: float = Feasibility.min_separation,
+                 fixed_positions: Any = None) -> None:
         check_minima(min_standoff, min_altitude, min_separation)
         self.num_cameras = int(num_cameras)
         self.min_standoff = float(min_standoff)

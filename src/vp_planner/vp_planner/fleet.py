@@ -57,7 +57,7 @@ from scipy.spatial.transform import Rotation
 
 from vp_scene.camera import check_cameras, express_poses, optical_orientation
 
-from .feasibility import FeasibilityRules
+from .feasibility import Feasibility, FeasibilityRules
 
 __all__ = [
     "ASSIGNMENTS",
@@ -240,8 +240,9 @@ def goal_orientations(quaternions: ArrayLike, orientation: str = "body") -> NDAr
     raise ValueError(f"unknown orientation {orientation!r}; one of {', '.join(ORIENTATIONS)}")
 
 
-def plan_problems(cameras: ArrayLike, realizations: Optional[ArrayLike], min_standoff: float = 0.5,
-                  min_altitude: float = 0.3, min_separation: float = 0.5) -> list[str]:
+def plan_problems(cameras: ArrayLike, realizations: Optional[ArrayLike], min_standoff: float = Feasibility.min_standoff,
+                  min_altitude: float = Feasibility.min_altitude,
+                  min_separation: float = Feasibility.min_separation) -> list[str]:
     """Why the plan breaks the planner's feasibility rules ([] when it does not).
 
     ``cameras`` (N, 6) = [c, v] in the scene's frame; ``realizations`` (K, P, 3) the scene's wind

@@ -3,8 +3,9 @@
 The rooms: :mod:`vp_planner.request` (:class:`~vp_planner.request.PlanRequest`, what to plan, its
 validation and its checks against the scene and the memory), :mod:`vp_planner.baselines` (circle,
 arc, sa, random, lawnmower), :mod:`vp_planner.bo_planning` (egp, gp, by parts); this module
-dispatches a request to them and returns a :class:`PlanResult` (the names of the other rooms
-that callers use are re-exported here).
+builds the space and the objective of a request, hands them to the method's entry of the
+registry (:class:`vp_planner.methods.Method`, which knows the room that plans it) and returns a
+:class:`PlanResult` (the names of the other rooms that callers use are re-exported here).
 
 Methods (all maximize the noisy reward r~ of eq. 7 with the same evaluation budget E, report
 the best-so-far reward after every evaluation, and return the best *feasible* plan):
@@ -71,9 +72,9 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 
-from .baselines import plan_arc, plan_circle, plan_lawnmower, plan_random, plan_sa, sa_candidates
-from .bo_planning import initial_design, plan_bo, plan_bo_by_parts
-from .methods import MAX_EVALUATIONS, METHODS
+from .baselines import sa_candidates
+from .bo_planning import initial_design
+from .methods import BY_NAME, MAX_EVALUATIONS, METHODS
 from .request import (MAX_CAMERAS, BudgetTooLargeError, InvalidBudgetError, InvalidFixedCamerasError,
                       InvalidNumCamerasError, InvalidReconstructionError, InvalidRequestError, PlanRequest,
                       UnknownMethodError, UnknownRewardModelError, available_memory, check_budget_memory,
@@ -194,9 +195,9 @@ class PlanResult:
 # ---------------------------------------------------------------------- entry point
 def plan_views(request: PlanRequest, realizations: Any, callback: Optional[Callback] = None,
                should_stop: Optional[StopCheck] = None) -> PlanResult:
-    """Plan ``request.num_cameras`` views of the noisy scene with ``request.method`` (one of
-    :data:`METHODS`); every setting is a field of the :class:`~vp_planner.request.PlanRequest`
-    (validated there, its docstring gives the units and rules).
+    """Plan ``request.cameras.num_cameras`` views of the noisy scene with ``request.method`` (one of
+    :data:`METHODS`, planned by its registry entry's planner); every setting is a field of the
+    :class:`~vp_planner.request.PlanRequest` (validated there, its docstring gives the units and rules).
 
     Args:
         request: what to plan: method, N, budget, seed, feasibility rules, reward, the method's
@@ -209,12 +210,12 @@ def plan_views(request: PlanRequest, realizations: Any, callback: Optional[Callb
             feasible-plan searches (rejection sampling, BO candidate batches, SA's start); True
             stops the run as a callback returning False does (a cancel, a node shutting down).
 
-    Planning by parts (egp/gp, ``request.parts``): each part gets ``evaluations``, the joint
+    Planning by parts (egp/gp, ``request.bo.parts``): each part gets ``evaluations``, the joint
     refinement ``evaluations // 2``, all counted in the result; 0: :func:`vp_planner.parts.auto_parts`
-    (1 for N <= 7); 1: one space. Cameras already flown (``request.fixed_cameras``) count in every
+    (1 for N <= 7); 1: one space. Cameras already flown (``request.sortie.fixed_cameras``) count in every
     method's reward with the plan (pairs with them like pairs within it); the plan need not keep
     min_separation from them (README "A second sortie"). The realizations' points within ``tau``
-    of ``request.reconstruction`` weigh ``reconstructed_weight`` in the reward, the others 1
+    of ``request.sortie.reconstruction`` weigh ``reconstructed_weight`` in the reward, the others 1
     (:func:`vp_planner.reward_models.reconstructed_weights`).
 
     Raises:
@@ -228,51 +229,37 @@ def plan_views(request: PlanRequest, realizations: Any, callback: Optional[Callb
     """
     if not isinstance(request, PlanRequest):
         raise TypeError(f"plan_views takes a vp_planner.request.PlanRequest, got {type(request).__name__}")
-    q = request
-    method, num_cameras, evaluations = q.method, q.num_cameras, q.evaluations
+    q, entry = request, BY_NAME[request.method]
+    num_cameras, model = q.cameras.num_cameras, q.reward.name
     try:
         R = check_realizations(realizations)
     except ValueError as exc:
         raise InvalidSceneError(str(exc)) from None
-    check_memory(num_cameras, R.shape, q.reward)
-    F = q.fixed_cameras
+    check_memory(num_cameras, R.shape, model)
+    F = q.sortie.fixed_cameras
     if len(F):
         try:
-            check_memory(num_cameras + len(F), R.shape, q.reward)
+            check_memory(num_cameras + len(F), R.shape, model)
         except ValueError as exc:
             raise InvalidFixedCamerasError(f"fixed cameras: {exc}") from None
-    W, done = (None, None) if q.reconstruction is None else sortie_weights(R, q.reconstruction, q.tau,
-                                                                            q.reconstructed_weight)
-    n_parts = check_parts(q.parts, method, R, num_cameras)
-    budget = total_evaluations(method, evaluations, n_parts)
-    check_budget_memory(method, num_cameras, budget)
+    sortie = q.sortie
+    W, done = (None, None) if sortie.reconstruction is None else sortie_weights(
+        R, sortie.reconstruction, sortie.tau, sortie.reconstructed_weight)
+    n_parts = check_parts(q.bo.parts, q.method, R, num_cameras)
+    budget = total_evaluations(q.method, q.evaluations, n_parts)
+    check_budget_memory(q.method, num_cameras, budget)
     start = time.perf_counter()
-    space = ViewSpace(R, num_cameras, min_standoff=q.min_standoff, min_altitude=q.min_altitude,
-                      min_separation=q.min_separation, fov=q.fov, theta_match=q.theta_match,
-                      shell_depth=q.shell_depth, reward_model=q.reward, image_size=q.image_size, fixed_cameras=F,
-                      point_weights=W)
-    obj = Objective(space, budget, callback=callback, dtype=getattr(torch, q.dtype), should_stop=should_stop)
-    seed = q.seed
-    rng = np.random.default_rng(seed)
-    torch.manual_seed(seed)
+    feas = q.feasibility
+    space = ViewSpace(R, num_cameras, min_standoff=feas.min_standoff, min_altitude=feas.min_altitude,
+                      min_separation=feas.min_separation, fov=q.cameras.fov, theta_match=q.reward.theta_match,
+                      shell_depth=q.cameras.shell_depth, reward_model=model, image_size=q.cameras.image_size,
+                      fixed_cameras=F, point_weights=W)
+    obj = Objective(space, budget, callback=callback, dtype=getattr(torch, q.reward.dtype), should_stop=should_stop)
+    rng = np.random.default_rng(q.seed)
+    torch.manual_seed(q.seed)
     info: dict = {}
     try:
-        if method == "circle":
-            plan_circle(space, obj, evaluations, rng)
-        elif method == "arc":
-            plan_arc(space, obj, evaluations, rng, q.arc_spacing)
-        elif method == "sa":
-            plan_sa(space, obj, evaluations, rng)
-        elif method == "random":
-            plan_random(space, obj, evaluations, rng)
-        elif method == "lawnmower":
-            plan_lawnmower(space, obj, q.lawnmower_overlap, q.lawnmower_tilt)
-        elif n_parts > 1:
-            info = plan_bo_by_parts(space, obj, evaluations, q.initial_evaluations, seed, method == "egp",
-                                q.structured_init, q.bo_mode, n_parts)
-        else:
-            info = plan_bo(space, obj, evaluations, q.initial_evaluations, seed, rng, method == "egp",
-                       q.structured_init, q.bo_mode)
+        info = entry.plan(space, obj, q, rng, n_parts)
     except PlanningCancelled:
         pass
     stopped = obj.cancelled or obj.count < budget
@@ -281,14 +268,14 @@ def plan_views(request: PlanRequest, realizations: Any, callback: Optional[Callb
         if not stopped:
             raise NoFeasiblePlanError(f"no feasible plan among the {obj.count} evaluated plans")
         best = np.zeros((0, 6))
-    weights = info.get("weights") if method == "egp" else None
+    weights = info.get("weights") if entry.ensemble else None
     names = None
-    if method == "egp":
+    if entry.ensemble:
         from .gp import MODEL_NAMES
 
         names = info.get("model_names") or list(MODEL_NAMES)
     return PlanResult(
-        method=method,
+        method=q.method,
         cameras=np.asarray(best, dtype=np.float64),
         reward=float(obj.best_value),
         trace=obj.trace(),
@@ -298,7 +285,7 @@ def plan_views(request: PlanRequest, realizations: Any, callback: Optional[Callb
         model_names=names,
         stopped=bool(stopped),
         rewards=np.asarray(obj.values, dtype=np.float64),
-        reward_model=q.reward,
+        reward_model=model,
         steps=info.get("steps"),
         initial_best=info.get("initial_best"),
         parts=info.get("parts"),

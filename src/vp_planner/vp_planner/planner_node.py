@@ -26,7 +26,6 @@ from __future__ import annotations
 import math
 import threading
 import time
-from dataclasses import replace
 from typing import Optional
 
 import numpy as np
@@ -44,10 +43,10 @@ from vp_interfaces.msg import CameraPlan
 from vp_planner.gp import MODEL_NAMES
 from vp_planner.optimizers import InvalidSceneError, NoFeasiblePlanError, PlanResult, plan_views
 from vp_planner.methods import MAX_EVALUATIONS, METHODS
-from vp_planner.request import (MAX_CAMERAS, BudgetTooLargeError, InvalidBudgetError, InvalidFixedCamerasError,
-                                InvalidNumCamerasError, InvalidReconstructionError, PlanRequest, UnknownMethodError,
-                                UnknownRewardModelError, check_lawnmower)
-from vp_planner.reward_models import DEFAULT_RECONSTRUCTED_WEIGHT, DEFAULT_REWARD_MODEL, DEFAULT_TAU, REWARD_MODELS
+from vp_planner.request import (BO_MODES, DEFAULTS, FLAT, MAX_CAMERAS, BudgetTooLargeError, InvalidBudgetError,
+                                InvalidFixedCamerasError, InvalidNumCamerasError, InvalidReconstructionError,
+                                PlanRequest, UnknownMethodError, UnknownRewardModelError, check_fields)
+from vp_planner.reward_models import REWARD_MODELS
 from vp_scene.messages import (cameras_to_pose_array, camera_plan_msg, frustum_markers, pose_array_to_cameras,
                                pointcloud2_to_numpy, realizations_from_cloud)
 from vp_scene.node_runtime import (INT_MAX, Param, declare_typed, parameter_value, refuse_bad_changes, run_node,
@@ -75,83 +74,83 @@ def error_code(exc: Exception) -> int:
 
 
 #: The node's parameters (:class:`vp_scene.node_runtime.Param`): default (its type is enforced),
-#: description, the range the node enforces, read_only where a change is not honoured.
+#: description, the range the node enforces, read_only where a change is not honoured. Those of a
+#: plan request take their defaults from the request (:data:`vp_planner.request.DEFAULTS`), and
+#: their names are the request's flat names (image_width and image_height: its image_size).
 _EVALS = (1, max(MAX_EVALUATIONS.values()))
 _OPEN = 'the ends are excluded'
+D = DEFAULTS
 PARAMS = {
-    'num_cameras': Param(4, f'N, 2..{MAX_CAMERAS} (autostart, and goals that leave it 0)', (2, MAX_CAMERAS)),
-    'method': Param('egp', 'planning method (autostart, and goals that leave it empty)', None, False,
+    'num_cameras': Param(D['num_cameras'], f'N, 2..{MAX_CAMERAS} (autostart, and goals that leave it 0)',
+                         (2, MAX_CAMERAS)),
+    'method': Param(D['method'], 'planning method (autostart, and goals that leave it empty)', None, False,
                     'one of ' + ', '.join(METHODS)),
-    'evaluations': Param(100, 'reward evaluations (goals that leave it 0)', _EVALS, False,
+    'evaluations': Param(D['evaluations'], 'reward evaluations (goals that leave it 0)', _EVALS, False,
                          'at most ' + ', '.join(f'{m} {n}' for m, n in MAX_EVALUATIONS.items())),
-    'initial_evaluations': Param(50, 'initial design of egp/gp (goals that leave it 0)', _EVALS),
-    'seed': Param(0, 'random seed (goals with seed -1)', (0, INT_MAX)),
-    'reward': Param(DEFAULT_REWARD_MODEL, 'reward model', None, False, 'one of ' + ', '.join(REWARD_MODELS)),
-    'image_width': Param(2000, 'image width of the cameras, pixels (the coverage reward)', (16, INT_MAX)),
-    'image_height': Param(1500, 'image height of the cameras, pixels', (16, INT_MAX)),
-    'bo_mode': Param('trust_region', 'egp/gp: search of the acquisition', None, False, 'one of trust_region, global'),
-    'structured_init': Param(20, 'structured plans in the egp/gp initial design (0: random, as the paper)',
-                             (0, INT_MAX)),
-    'arc_spacing': Param(math.radians(30.0), 'arc: rad between neighbouring cameras', (0.0, 2 * math.pi), False,
+    'initial_evaluations': Param(D['initial_evaluations'], 'initial design of egp/gp (goals that leave it 0)', _EVALS),
+    'seed': Param(D['seed'], 'random seed (goals with seed -1)', (0, INT_MAX)),
+    'reward': Param(D['reward'], 'reward model', None, False, 'one of ' + ', '.join(REWARD_MODELS)),
+    'image_width': Param(D['image_size'][0], 'image width of the cameras, pixels (the coverage reward)',
+                         (16, INT_MAX)),
+    'image_height': Param(D['image_size'][1], 'image height of the cameras, pixels', (16, INT_MAX)),
+    'bo_mode': Param(D['bo_mode'], 'egp/gp: search of the acquisition', None, False, 'one of ' + ', '.join(BO_MODES)),
+    'structured_init': Param(D['structured_init'],
+                             'structured plans in the egp/gp initial design (0: random, as the paper)', (0, INT_MAX)),
+    'arc_spacing': Param(D['arc_spacing'], 'arc: rad between neighbouring cameras', (0.0, 2 * math.pi), False,
                          _OPEN),
-    'parts': Param(0, 'egp/gp: plan the field by this many parts (0: automatic, 1: none)', (0, INT_MAX)),
-    'lawnmower_overlap': Param(0.7, 'lawnmower: image overlap along and across the flight lines', (0.0, 0.95)),
-    'lawnmower_tilt': Param(0.0, 'lawnmower: camera tilt from nadir, rad (0: nadir, up to 60 degrees)',
+    'parts': Param(D['parts'], 'egp/gp: plan the field by this many parts (0: automatic, 1: none)', (0, INT_MAX)),
+    'lawnmower_overlap': Param(D['lawnmower_overlap'], 'lawnmower: image overlap along and across the flight lines',
+                               (0.0, 0.95)),
+    'lawnmower_tilt': Param(D['lawnmower_tilt'], 'lawnmower: camera tilt from nadir, rad (0: nadir, up to 60 degrees)',
                             (0.0, math.radians(60.0))),
     'num_threads': Param(1, 'torch threads (set at start)', (1, INT_MAX), True),
     'autostart': Param(False, 'plan with the parameters as soon as a scene arrives'),
-    'min_standoff': Param(0.5, 'm from every scene point', (0.0, math.inf)),
-    'min_altitude': Param(0.3, 'm above the ground', (0.0, math.inf)),
-    'min_separation': Param(0.5, 'm between cameras', (0.0, math.inf)),
-    'fov': Param(math.pi / 2, 'horizontal field of view, rad', (0.0, math.pi), False, _OPEN),
-    'theta_match': Param(math.pi / 4, 'matching angle of the reward, rad', (0.0, math.pi), False, _OPEN),
+    'min_standoff': Param(D['min_standoff'], 'm from every scene point', (0.0, math.inf)),
+    'min_altitude': Param(D['min_altitude'], 'm above the ground', (0.0, math.inf)),
+    'min_separation': Param(D['min_separation'], 'm between cameras', (0.0, math.inf)),
+    'fov': Param(D['fov'], 'horizontal field of view, rad', (0.0, math.pi), False, _OPEN),
+    'theta_match': Param(D['theta_match'], 'matching angle of the reward, rad', (0.0, math.pi), False, _OPEN),
     'frame_id': Param('map', 'frame of the plans; the scene cloud must be in it', None, False, 'not empty'),
     'scene_timeout': Param(10.0, 's a goal that arrives before the scene waits for it', (0.0, math.inf)),
-    'tau': Param(DEFAULT_TAU, 'm: a scene point this close to a goal\'s reconstruction counts as reconstructed',
+    'tau': Param(D['tau'], 'm: a scene point this close to a goal\'s reconstruction counts as reconstructed',
                  (0.0, math.inf)),
-    'reconstructed_weight': Param(DEFAULT_RECONSTRUCTED_WEIGHT,
+    'reconstructed_weight': Param(D['reconstructed_weight'],
                                   'reward weight of a reconstructed scene point (the others weigh 1)', (0.0, 1.0)),
 }
 
 
+def request_values(params: dict, goal: Optional[PlanViews.Goal] = None) -> dict:
+    """The flat request values (:data:`vp_planner.request.FLAT`) of the node's parameters
+    ({name: typed value}, all of :data:`PARAMS`) and a goal's fields, which override their
+    parameter unless left 0, empty or (seed) -1."""
+    values = {name: value for name, value in params.items() if name in FLAT}
+    values['image_size'] = (params['image_width'], params['image_height'])
+    if goal is not None:
+        given = {'num_cameras': int(goal.num_cameras), 'method': goal.method, 'evaluations': int(goal.evaluations),
+                 'initial_evaluations': int(goal.initial_evaluations), 'reward': goal.reward}
+        values.update({name: value for name, value in given.items() if value})
+        if goal.seed >= 0:
+            values['seed'] = int(goal.seed)
+    return values
+
+
+def request_of(params: dict, goal: Optional[PlanViews.Goal] = None) -> PlanRequest:
+    """The one builder of the node's requests: the PlanRequest of its parameters and a goal
+    (:func:`request_values`), validated by the request (its ValueError for a bad one)."""
+    return PlanRequest.from_dict(request_values(params, goal))
+
+
 def check_parameters(values: dict) -> dict:
-    """The parameter values ({name: value}, any subset of :data:`PARAMS`) typed and checked;
-    ValueError naming the first bad one."""
+    """The parameter values ({name: value}, any subset of :data:`PARAMS`: the others are their
+    defaults) typed and checked; ValueError naming the first bad one. The request's fields are
+    checked by the request (:func:`vp_planner.request.check_fields`: each alone, since a goal may
+    override method, budget and initial design), the node's own here."""
     v = typed_values(PARAMS, values)
-    if 'num_cameras' in v and not 2 <= v['num_cameras'] <= MAX_CAMERAS:
-        raise ValueError(f'num_cameras must be from 2 to {MAX_CAMERAS}, got {v["num_cameras"]}')
-    if v.get('method', 'egp') not in METHODS:
-        raise ValueError(f'unknown method {v["method"]!r}; one of {", ".join(METHODS)}')
-    if v.get('reward', DEFAULT_REWARD_MODEL) not in REWARD_MODELS:
-        raise ValueError(f'unknown reward model {v["reward"]!r}; one of {", ".join(REWARD_MODELS)}')
-    if v.get('bo_mode', 'global') not in ('trust_region', 'global'):
-        raise ValueError("bo_mode must be 'trust_region' or 'global'")
-    if v.get('structured_init', 0) < 0:
-        raise ValueError('structured_init must be >= 0')
-    if not 0.0 < v.get('arc_spacing', 1.0) < 2 * math.pi:
-        raise ValueError('arc_spacing must be in (0, 2 pi) rad')
-    if v.get('parts', 0) < 0:
-        raise ValueError('parts must be >= 0 (0: automatic)')
-    if 'lawnmower_overlap' in v or 'lawnmower_tilt' in v:
-        check_lawnmower(v.get('lawnmower_overlap', 0.7), v.get('lawnmower_tilt', 0.0))
+    check_fields(request_values({**{n: p.default for n, p in PARAMS.items()}, **v}))
     if v.get('num_threads', 1) < 1:
         raise ValueError('num_threads must be >= 1')
-    for name in ('image_width', 'image_height'):
-        if v.get(name, 16) < 16:
-            raise ValueError(f'{name} must be >= 16 pixels')
-    for name in ('evaluations', 'initial_evaluations'):
-        if v.get(name, 1) < 1:
-            raise ValueError(f'{name} must be >= 1')
-    if v.get('seed', 0) < 0:
-        raise ValueError('seed must be >= 0')
-    for name in ('fov', 'theta_match'):
-        if not 0.0 < v.get(name, 1.0) < math.pi:
-            raise ValueError(f'{name} must be in (0, pi) rad')
-    if not 0.0 <= v.get('reconstructed_weight', 0.0) <= 1.0:
-        raise ValueError('reconstructed_weight must be in [0, 1]')
-    for name in ('min_standoff', 'min_altitude', 'min_separation', 'scene_timeout', 'tau'):
-        if v.get(name, 0.0) < 0.0:
-            raise ValueError(f'{name} must be >= 0')
+    if v.get('scene_timeout', 0.0) < 0.0:
+        raise ValueError('scene_timeout must be >= 0')
     if v.get('frame_id', 'map') == '':
         raise ValueError('frame_id must not be empty')
     return v
@@ -188,6 +187,10 @@ class PlannerNode(Node):
     # ---------------------------------------------------------------- parameters
     def _param(self, name: str):
         return parameter_value(self, PARAMS, name)
+
+    def _params(self) -> dict:
+        """Every parameter now, typed."""
+        return typed_values(PARAMS, {name: self.get_parameter(name).value for name in PARAMS})
 
     def _enter(self) -> None:
         with self._running_lock:
@@ -242,8 +245,7 @@ class PlannerNode(Node):
             return
         self._enter()
         try:
-            request = self._request(self._param('method'), self._param('num_cameras'), self._param('evaluations'),
-                                    self._param('initial_evaluations'), self._param('seed'), self._param('reward'))
+            request = request_of(self._params())
             result = self._plan(request, progress=self._log_progress, should_stop=self._stopping)
             if result.stopped:
                 self.get_logger().info(f'autostart planning stopped after {result.evaluations} evaluations')
@@ -262,25 +264,12 @@ class PlannerNode(Node):
         return not self._stopping()
 
     # ---------------------------------------------------------------- planning
-    def _request(self, method: str, num_cameras: int, evaluations: int, initial: int, seed: int,
-                 reward: str) -> PlanRequest:
-        """The PlanRequest of a goal's fields (or the parameters they default to) and the node's
-        parameters; the request's ValueError (:mod:`vp_planner.request`) for a bad one."""
-        return PlanRequest(
-            method, num_cameras, evaluations, initial, seed=seed, min_standoff=self._param('min_standoff'),
-            min_altitude=self._param('min_altitude'), min_separation=self._param('min_separation'),
-            fov=self._param('fov'), theta_match=self._param('theta_match'), reward=reward,
-            image_size=(self._param('image_width'), self._param('image_height')), bo_mode=self._param('bo_mode'),
-            structured_init=self._param('structured_init'), arc_spacing=self._param('arc_spacing'),
-            parts=self._param('parts'), lawnmower_overlap=self._param('lawnmower_overlap'),
-            lawnmower_tilt=self._param('lawnmower_tilt'), tau=self._param('tau'),
-            reconstructed_weight=self._param('reconstructed_weight'))
-
     def _plan(self, request: PlanRequest, progress, should_stop) -> PlanResult:
         realizations = self._realizations
         assert realizations is not None
-        self.get_logger().info(f'planning {request.num_cameras} cameras with {request.method} ({request.reward} '
-                               f'reward): {request.evaluations} evaluations, seed {request.seed}')
+        self.get_logger().info(f'planning {request.cameras.num_cameras} cameras with {request.method} '
+                               f'({request.reward.name} reward): {request.evaluations} evaluations, '
+                               f'seed {request.seed}')
         return plan_views(request, realizations, callback=progress, should_stop=should_stop)
 
     def _publish_plan(self, result: PlanResult, fixed: Optional[np.ndarray] = None) -> PoseArray:
@@ -354,12 +343,6 @@ class PlannerNode(Node):
     def _execute_goal(self, goal_handle) -> PlanViews.Result:
         goal = goal_handle.request
         result = PlanViews.Result()
-        num_cameras = int(goal.num_cameras) or self._param('num_cameras')
-        method = goal.method or self._param('method')
-        evaluations = goal.evaluations or self._param('evaluations')
-        initial = goal.initial_evaluations or self._param('initial_evaluations')
-        seed = goal.seed if goal.seed >= 0 else self._param('seed')
-        reward = goal.reward or self._param('reward')
 
         def finish(code: int, text: str, succeed: bool = False) -> PlanViews.Result:
             """The one terminal transition of this goal (never a second one)."""
@@ -378,7 +361,7 @@ class PlannerNode(Node):
             return finish(code, text)
 
         try:  # the request's own checks (vp_planner.request), mapped to the action's error codes
-            request = self._request(method, num_cameras, evaluations, initial, seed, reward)
+            request = request_of(self._params(), goal)
         except ValueError as exc:
             return abort(error_code(exc), str(exc))
         try:
@@ -390,7 +373,7 @@ class PlannerNode(Node):
         except ValueError as exc:
             return abort(PlanViews.Result.INVALID_RECONSTRUCTION, str(exc))
         try:  # NaN poses, a non-finite reconstruction
-            request = replace(request, fixed_cameras=fixed, reconstruction=reconstruction)
+            request = request.replace(fixed_cameras=fixed, reconstruction=reconstruction)
         except ValueError as exc:
             return abort(error_code(exc), str(exc))
         if not self._wait_for_scene():

@@ -1,21 +1,39 @@
 """One planning request: :class:`PlanRequest`, everything :func:`vp_planner.optimizers.plan_views`
-needs besides the scene realizations and the callbacks, typed and validated in one place.
+needs besides the scene realizations and the callbacks, typed, grouped and validated in one place.
+
+A request is the method, its budget and seed, and typed groups, each validated in its own
+constructor, each field's default written once (in the group's class):
+
+==================  ========================================================================================
+``cameras``         :class:`CameraSpec`: num_cameras, fov, image_size, shell_depth
+``feasibility``     :class:`vp_planner.feasibility.Feasibility`: min_standoff, min_altitude, min_separation
+``reward``          :class:`RewardSpec`: name (the reward model), theta_match, dtype
+``bo``              :class:`BOSpec`, egp/gp's settings: initial_evaluations, structured_init, mode, parts
+``arc``             :class:`ArcSpec`, arc's setting: spacing
+``lawnmower``       :class:`LawnmowerSpec`, lawnmower's settings: overlap, tilt
+``sortie``          :class:`Sortie`, a second sortie: fixed_cameras, reconstruction, tau, reconstructed_weight
+==================  ========================================================================================
 
 The planner node builds it from a goal and its parameters, the CLI from its flags, the benchmarks
-from their cell arguments; ``plan_views(request, realizations, callback, should_stop)`` plans it.
-A request is frozen and validated on construction (``dataclasses.replace`` validates again), so a
-request that exists is one ``plan_views`` accepts up to the checks that need the scene (its memory,
-the parts' camera count) or the machine (:func:`vp_planner.optimizers.check_memory`).
+from their variants (``bench/common.py``), all through the flat names below
+(:meth:`PlanRequest.from_dict`; :meth:`PlanRequest.as_dict` writes them, the form of JSON records);
+``plan_views(request, realizations, callback, should_stop)`` plans it. A request is frozen and
+validated on construction (``dataclasses.replace`` and :meth:`PlanRequest.replace` validate again),
+so a request that exists is one ``plan_views`` accepts up to the checks that need the scene (its
+memory, the parts' camera count) or the machine (:func:`check_memory`). :func:`check_fields`
+checks flat values one field at a time (not the budget against the method and the initial design):
+the planner node's parameters, which a goal may override.
 
-Fields (units; validation; the error raised, every one a ValueError):
+Flat names (units; validation; the error raised, every one a ValueError; :data:`DEFAULTS` holds
+every default):
 
 ==========================  ===========================================================================
 ``method``                  one of :data:`vp_planner.methods.METHODS` (UnknownMethodError)
 ``num_cameras``             N, an integer in [2, :data:`MAX_CAMERAS`] (InvalidNumCamerasError)
 ``evaluations``             the budget E of reward evaluations (eq. 7), an integer >= 1 (InvalidBudgetError)
                             and <= :data:`vp_planner.methods.MAX_EVALUATIONS` [method] (BudgetTooLargeError)
-``initial_evaluations``     egp/gp: initial design size, an integer in [1, E] (InvalidBudgetError);
-                            ignored by the other methods
+``initial_evaluations``     egp/gp: initial design size, an integer >= 1 (InvalidBudgetError), <= E for
+                            egp/gp (InvalidBudgetError)
 ``seed``                    random seed of numpy and torch, an integer >= 0
 ``min_standoff``            m from every scene point, finite >= 0 (feasibility, :mod:`vp_planner.feasibility`)
 ``min_altitude``            m above the ground, finite >= 0
@@ -43,9 +61,8 @@ Fields (units; validation; the error raised, every one a ValueError):
 ``dtype``                   reward precision, ``'float64'`` or ``'float32'``
 ==========================  ===========================================================================
 
-Other bad fields raise :class:`InvalidRequestError`. :meth:`PlanRequest.as_dict` and
-:meth:`PlanRequest.from_dict` convert to and from plain (JSON) data; ``from_dict`` refuses keys
-that are not fields.
+Other bad fields raise :class:`InvalidRequestError` (the feasibility minima: ValueError, from
+:class:`~vp_planner.feasibility.Feasibility`); ``from_dict`` refuses names that are not fields.
 
 The checks of a request against the scene and the machine live here too, run by ``plan_views``
 before anything is allocated: :func:`check_memory` (one evaluation of N cameras),
@@ -54,14 +71,18 @@ before anything is allocated: :func:`check_memory` (one evaluation of N cameras)
 """
 from __future__ import annotations
 
+import dataclasses
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from typing import Any, Mapping, Optional
 
 import numpy as np
 from numpy.typing import NDArray
 
-from .methods import BAYESIAN, MAX_EVALUATIONS, METHODS
+from vp_scene.camera import IMAGE_SIZE
+
+from .feasibility import Feasibility
+from .methods import BY_NAME, DEFAULT_METHOD, METHODS
 from .reward import DEFAULT_FOV, DEFAULT_THETA_MATCH
 from .reward_models import (DEFAULT_RECONSTRUCTED_WEIGHT, DEFAULT_REWARD_MODEL, DEFAULT_TAU, check_fixed_cameras,
                             check_reward_model)
@@ -69,6 +90,16 @@ from .reward_models import (DEFAULT_RECONSTRUCTED_WEIGHT, DEFAULT_REWARD_MODEL, 
 __all__ = [
     "MAX_CAMERAS",
     "PlanRequest",
+    "CameraSpec",
+    "RewardSpec",
+    "BOSpec",
+    "ArcSpec",
+    "LawnmowerSpec",
+    "Sortie",
+    "GROUPS",
+    "FLAT",
+    "DEFAULTS",
+    "check_fields",
     "InvalidRequestError",
     "InvalidNumCamerasError",
     "UnknownMethodError",
@@ -142,7 +173,7 @@ def _integer(name: str, value: Any, lo: int, hi: Optional[int] = None, error: ty
         ok = False
     if not ok or value < lo or (hi is not None and value > hi):
         bound = f"from {lo} to {hi}" if hi is not None else f">= {lo}"
-        raise error(f"{name} must be an integer {bound}, got {value!r}")
+        raise error(f"{name} must be {bound} (an integer), got {value!r}")
     return int(value)
 
 
@@ -193,108 +224,284 @@ def _read_only(a: NDArray[np.float64]) -> NDArray[np.float64]:
     return a
 
 
-@dataclass(frozen=True, eq=False)
-class PlanRequest:
-    """What to plan (see the module docstring for every field's unit and rule)."""
+def _put(obj: Any, name: str, value: Any) -> None:
+    object.__setattr__(obj, name, value)
 
-    method: str
-    num_cameras: int
-    evaluations: int = 100
-    initial_evaluations: int = 50
-    seed: int = 0
-    min_standoff: float = 0.5
-    min_altitude: float = 0.3
-    min_separation: float = 0.5
+
+def _flat(default: Any, name: str) -> Any:
+    """A group field whose flat name (:data:`FLAT`) is not its own."""
+    return field(default=default, metadata={"flat": name})
+
+
+# ---------------------------------------------------------------------- the groups
+@dataclass(frozen=True)
+class CameraSpec:
+    """The cameras of the plan: how many (N), their horizontal field of view (rad), their images'
+    (width, height) in pixels, and how far they may be (``shell_depth``, m beyond the scene's box
+    grown by the stand-off; None: automatic)."""
+
+    num_cameras: int = 4
     fov: float = DEFAULT_FOV
-    theta_match: float = DEFAULT_THETA_MATCH
+    image_size: tuple[int, int] = IMAGE_SIZE
     shell_depth: Optional[float] = None
-    structured_init: int = 20
-    reward: str = DEFAULT_REWARD_MODEL
-    image_size: tuple[int, int] = (2000, 1500)
-    bo_mode: str = "trust_region"
-    arc_spacing: float = math.radians(30.0)
-    parts: int = 0
-    lawnmower_overlap: float = 0.7
-    lawnmower_tilt: float = 0.0
-    fixed_cameras: Any = None
-    reconstruction: Any = None
-    tau: float = DEFAULT_TAU
-    reconstructed_weight: float = DEFAULT_RECONSTRUCTED_WEIGHT
-    dtype: str = "float64"
 
     def __post_init__(self) -> None:
-        def put(name: str, value: Any) -> None:
-            object.__setattr__(self, name, value)
-
-        # the goal's own fields first, in the order the planner's error codes were always checked
-        if not isinstance(self.method, str) or self.method not in METHODS:
-            raise UnknownMethodError(f"unknown method {self.method!r}; one of {', '.join(METHODS)}")
-        put("num_cameras", _integer("num_cameras", self.num_cameras, 2, MAX_CAMERAS, InvalidNumCamerasError))
-        put("evaluations", _integer("evaluations", self.evaluations, 1, None, InvalidBudgetError))
-        if self.evaluations > MAX_EVALUATIONS[self.method]:
-            raise BudgetTooLargeError(f"evaluations = {self.evaluations} is above the bound of "
-                                      f"{MAX_EVALUATIONS[self.method]} for method {self.method} "
-                                      f"(README, 'Planner node')")
-        if self.method in BAYESIAN:
-            put("initial_evaluations", _integer("initial_evaluations", self.initial_evaluations, 1, None,
-                                                InvalidBudgetError))
-            if self.evaluations < self.initial_evaluations:
-                raise InvalidBudgetError(f"evaluation budget {self.evaluations} is smaller than the initial "
-                                         f"design ({self.initial_evaluations})")
-        try:
-            check_reward_model(self.reward)
-        except ValueError as exc:
-            raise UnknownRewardModelError(str(exc)) from None
-        put("seed", _integer("seed", self.seed, 0))
-        for name in ("min_standoff", "min_altitude", "min_separation"):
-            put(name, _real(name, getattr(self, name), 0.0))
-        for name in ("fov", "theta_match"):
-            put(name, _real(name, getattr(self, name), 0.0, math.pi, open_ends=True))
+        _put(self, "num_cameras", _integer("num_cameras", self.num_cameras, 2, MAX_CAMERAS, InvalidNumCamerasError))
+        _put(self, "fov", _real("fov", self.fov, 0.0, math.pi, open_ends=True))
         if self.shell_depth is not None:
-            put("shell_depth", _real("shell_depth", self.shell_depth, 0.0, open_ends=True))
-        put("structured_init", _integer("structured_init", self.structured_init, 0))
+            _put(self, "shell_depth", _real("shell_depth", self.shell_depth, 0.0, open_ends=True))
         try:
             width, height = self.image_size
         except (TypeError, ValueError):
             raise InvalidRequestError(f"image_size must be (width, height), got {self.image_size!r}") from None
-        put("image_size", (_integer("image width", width, 16), _integer("image height", height, 16)))
-        if self.bo_mode not in BO_MODES:
-            raise InvalidRequestError(f"bo_mode must be one of {', '.join(BO_MODES)}, got {self.bo_mode!r}")
-        put("arc_spacing", _real("arc_spacing", self.arc_spacing, 0.0, 2 * math.pi, open_ends=True))
-        put("parts", _integer("parts", self.parts, 0))  # 0: automatic
-        check_lawnmower(self.lawnmower_overlap, self.lawnmower_tilt)
+        _put(self, "image_size", (_integer("image width", width, 16), _integer("image height", height, 16)))
+
+
+@dataclass(frozen=True)
+class RewardSpec:
+    """The reward the plan maximizes: its model (``name``), the matching angle (rad) and the
+    precision of its sums."""
+
+    name: str = _flat(DEFAULT_REWARD_MODEL, "reward")
+    theta_match: float = DEFAULT_THETA_MATCH
+    dtype: str = "float64"
+
+    def __post_init__(self) -> None:
         try:
-            put("fixed_cameras", _read_only(check_fixed_cameras(self.fixed_cameras)))
+            check_reward_model(self.name)
         except ValueError as exc:
-            raise InvalidFixedCamerasError(f"fixed cameras: {exc}") from None
-        if self.reconstruction is not None:
-            put("reconstruction", _read_only(check_reconstruction(self.reconstruction)))
-        check_sortie_weighting(self.tau, self.reconstructed_weight)
+            raise UnknownRewardModelError(str(exc)) from None
+        _put(self, "theta_match", _real("theta_match", self.theta_match, 0.0, math.pi, open_ends=True))
         if self.dtype not in DTYPES:
             raise InvalidRequestError(f"dtype must be one of {', '.join(DTYPES)}, got {self.dtype!r}")
 
-    def as_dict(self) -> dict:
-        """The request as plain data (lists for the arrays), :meth:`from_dict`'s input."""
-        out = {f.name: getattr(self, f.name) for f in fields(self)}
-        out["image_size"] = list(self.image_size)
-        out["fixed_cameras"] = self.fixed_cameras.tolist()
-        out["reconstruction"] = None if self.reconstruction is None else self.reconstruction.tolist()
-        return out
+
+@dataclass(frozen=True)
+class BOSpec:
+    """egp/gp's settings: the initial design's size and how many of it are structured plans, the
+    acquisition's search (``mode``) and the parts a field is planned by (0: automatic)."""
+
+    initial_evaluations: int = 50
+    structured_init: int = 20
+    mode: str = _flat("trust_region", "bo_mode")
+    parts: int = 0
+
+    def __post_init__(self) -> None:
+        _put(self, "initial_evaluations", _integer("initial_evaluations", self.initial_evaluations, 1, None,
+                                                   InvalidBudgetError))
+        _put(self, "structured_init", _integer("structured_init", self.structured_init, 0))
+        if self.mode not in BO_MODES:
+            raise InvalidRequestError(f"bo_mode must be one of {', '.join(BO_MODES)}, got {self.mode!r}")
+        _put(self, "parts", _integer("parts", self.parts, 0))  # 0: automatic
+
+
+@dataclass(frozen=True)
+class ArcSpec:
+    """arc's setting: rad between neighbouring cameras."""
+
+    spacing: float = _flat(math.radians(30.0), "arc_spacing")
+
+    def __post_init__(self) -> None:
+        _put(self, "spacing", _real("arc_spacing", self.spacing, 0.0, 2 * math.pi, open_ends=True))
+
+
+@dataclass(frozen=True)
+class LawnmowerSpec:
+    """lawnmower's settings: the images' overlap along and across the flight lines, the camera's
+    tilt from nadir (rad)."""
+
+    overlap: float = _flat(0.7, "lawnmower_overlap")
+    tilt: float = _flat(0.0, "lawnmower_tilt")
+
+    def __post_init__(self) -> None:
+        check_lawnmower(self.overlap, self.tilt)
+
+
+@dataclass(frozen=True, eq=False)
+class Sortie:
+    """A second sortie's context: the cameras already flown (stored read-only, (0, 6) for none),
+    what they reconstructed (read-only, or None), and how a reconstructed scene point weighs."""
+
+    fixed_cameras: Any = None
+    reconstruction: Any = None
+    tau: float = DEFAULT_TAU
+    reconstructed_weight: float = DEFAULT_RECONSTRUCTED_WEIGHT
+
+    def __post_init__(self) -> None:
+        try:
+            _put(self, "fixed_cameras", _read_only(check_fixed_cameras(self.fixed_cameras)))
+        except ValueError as exc:
+            raise InvalidFixedCamerasError(f"fixed cameras: {exc}") from None
+        if self.reconstruction is not None:
+            _put(self, "reconstruction", _read_only(check_reconstruction(self.reconstruction)))
+        check_sortie_weighting(self.tau, self.reconstructed_weight)
+
+
+#: The request's groups: attribute -> class, in the order a request is validated.
+GROUPS: dict[str, type] = {"cameras": CameraSpec, "feasibility": Feasibility, "reward": RewardSpec, "bo": BOSpec,
+                           "arc": ArcSpec, "lawnmower": LawnmowerSpec, "sortie": Sortie}
+
+
+def _check_method(method: Any) -> str:
+    if not isinstance(method, str) or method not in BY_NAME:
+        raise UnknownMethodError(f"unknown method {method!r}; one of {', '.join(METHODS)}")
+    return method
+
+
+def _check_evaluations(evaluations: Any, method: Optional[str]) -> int:
+    """The budget: an integer >= 1, and within the bound of ``method`` (None: not checked)."""
+    n = _integer("evaluations", evaluations, 1, None, InvalidBudgetError)
+    if method is not None and n > BY_NAME[method].max_evaluations:
+        raise BudgetTooLargeError(f"evaluations = {n} is above the bound of {BY_NAME[method].max_evaluations} "
+                                  f"for method {method} (README, 'Planner node')")
+    return n
+
+
+def _check_design(method: str, evaluations: int, bo: BOSpec) -> None:
+    """egp/gp: the initial design fits in the budget."""
+    if BY_NAME[method].bayesian and evaluations < bo.initial_evaluations:
+        raise InvalidBudgetError(f"evaluation budget {evaluations} is smaller than the initial "
+                                 f"design ({bo.initial_evaluations})")
+
+
+def _check_seed(seed: Any) -> int:
+    return _integer("seed", seed, 0)
+
+
+@dataclass(frozen=True, eq=False)
+class PlanRequest:
+    """What to plan: the method, its budget and seed, and the groups (the module docstring gives
+    every field's unit and rule). Build one from flat values with :meth:`from_dict` (or
+    :meth:`of`), change one with :meth:`replace`."""
+
+    method: str = DEFAULT_METHOD
+    cameras: CameraSpec = field(default_factory=CameraSpec)
+    evaluations: int = 100
+    seed: int = 0
+    feasibility: Feasibility = field(default_factory=Feasibility)
+    reward: RewardSpec = field(default_factory=RewardSpec)
+    bo: BOSpec = field(default_factory=BOSpec)
+    arc: ArcSpec = field(default_factory=ArcSpec)
+    lawnmower: LawnmowerSpec = field(default_factory=LawnmowerSpec)
+    sortie: Sortie = field(default_factory=Sortie)
+
+    def __post_init__(self) -> None:
+        _check_method(self.method)
+        for name, cls in GROUPS.items():
+            if not isinstance(getattr(self, name), cls):
+                raise InvalidRequestError(f"{name} must be a {cls.__name__}, got {getattr(self, name)!r}")
+        _put(self, "evaluations", _check_evaluations(self.evaluations, self.method))
+        _check_design(self.method, self.evaluations, self.bo)
+        _put(self, "seed", _check_seed(self.seed))
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> "PlanRequest":
-        """A request of plain data (:meth:`as_dict`, a JSON record); InvalidRequestError naming
-        keys that are not fields (and the field's own error for a bad value)."""
-        names = {f.name for f in fields(cls)}
-        unknown = sorted(set(data) - names)
-        if unknown:
-            raise InvalidRequestError(f"not fields of a plan request: {', '.join(unknown)}")
-        return cls(**dict(data))
+        """A request of flat values (:data:`FLAT` names, any subset: the others default; the form
+        of :meth:`as_dict`, of JSON records, node parameters and CLI flags); InvalidRequestError
+        naming names that are not fields, else the first bad field's error, in the order a goal's
+        fields were always checked (method, num_cameras, evaluations, initial_evaluations, reward,
+        ...)."""
+        return cls(**_build(data, between=True))
+
+    @classmethod
+    def of(cls, method: str, num_cameras: int, **values: Any) -> "PlanRequest":
+        """``from_dict`` of ``method``, ``num_cameras`` and flat ``values``: the short form of code
+        and tests (``PlanRequest.of("sa", 3, evaluations=30, seed=1)``)."""
+        return cls.from_dict({"method": method, "num_cameras": num_cameras, **values})
+
+    def as_dict(self) -> dict:
+        """The request as flat plain data (lists for the arrays), :meth:`from_dict`'s input."""
+        out: dict = {}
+        for name, (group, attr) in FLAT.items():
+            out[name] = getattr(self if group is None else getattr(self, group), attr)
+        out["image_size"] = list(self.cameras.image_size)
+        out["fixed_cameras"] = self.sortie.fixed_cameras.tolist()
+        rec = self.sortie.reconstruction
+        out["reconstruction"] = None if rec is None else rec.tolist()
+        return out
+
+    def replace(self, **values: Any) -> "PlanRequest":
+        """This request with the flat ``values`` changed (validated again)."""
+        _refuse_unknown(values)
+        top: dict = {}
+        changes: dict = {}
+        for name, value in values.items():
+            group, attr = FLAT[name]
+            if group is None:
+                top[attr] = value
+            else:
+                changes.setdefault(group, {})[attr] = value
+        return dataclasses.replace(self, **top, **{g: dataclasses.replace(getattr(self, g), **kw)
+                                                   for g, kw in changes.items()})
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, PlanRequest):
             return NotImplemented
         return self.as_dict() == other.as_dict()
+
+    __hash__ = None  # type: ignore[assignment]
+
+
+def _flat_fields() -> dict[str, tuple[Optional[str], str]]:
+    top = [f.name for f in fields(PlanRequest) if f.name not in GROUPS]
+    out: dict[str, tuple[Optional[str], str]] = {name: (None, name) for name in top}
+    for group, cls in GROUPS.items():
+        for f in fields(cls):
+            out[f.metadata.get("flat", f.name)] = (group, f.name)
+    return out
+
+
+#: Flat name (JSON records, node parameters, CLI flags) -> (group of :data:`GROUPS` or None for
+#: the request's own fields, the field's name there).
+FLAT: dict[str, tuple[Optional[str], str]] = _flat_fields()
+
+
+def _default(group: Optional[str], attr: str) -> Any:
+    cls = PlanRequest if group is None else GROUPS[group]
+    f = next(f for f in fields(cls) if f.name == attr)
+    return f.default
+
+
+#: Flat name -> its default: the one home of every default of a request (the groups' classes).
+DEFAULTS: dict[str, Any] = {name: _default(group, attr) for name, (group, attr) in FLAT.items()}
+
+
+def _refuse_unknown(values: Mapping[str, Any]) -> None:
+    unknown = sorted(set(values) - set(FLAT))
+    if unknown:
+        raise InvalidRequestError(f"not fields of a plan request: {', '.join(unknown)}")
+
+
+def _group(name: str, values: Mapping[str, Any]) -> Any:
+    """The group ``name`` of the flat ``values`` it has (the others default), validated."""
+    kw = {attr: values[flat] for flat, (group, attr) in FLAT.items() if group == name and flat in values}
+    return GROUPS[name](**kw)
+
+
+def _build(values: Mapping[str, Any], between: bool) -> dict:
+    """PlanRequest's keyword arguments of flat ``values``: each field validated where it lives,
+    in the order of the goal's checks; ``between``: also the checks between fields (the budget's
+    bound for the method, the initial design within the budget)."""
+    _refuse_unknown(values)
+    method = _check_method(values.get("method", DEFAULTS["method"]))
+    out: dict = {"method": method, "cameras": _group("cameras", values)}
+    out["evaluations"] = _check_evaluations(values.get("evaluations", DEFAULTS["evaluations"]),
+                                            method if between else None)
+    out["bo"] = _group("bo", values)
+    if between:
+        _check_design(method, out["evaluations"], out["bo"])
+    out["reward"] = _group("reward", values)
+    out["seed"] = _check_seed(values.get("seed", DEFAULTS["seed"]))
+    for name in ("feasibility", "arc", "lawnmower", "sortie"):
+        out[name] = _group(name, values)
+    return out
+
+
+def check_fields(values: Mapping[str, Any]) -> None:
+    """Check flat ``values`` (any subset of :data:`FLAT`) one field at a time, as a request does,
+    but not against each other (the method's budget bound, the initial design within the budget):
+    a node's parameters, which a goal may override. The field's ValueError."""
+    _build(values, between=False)
 
 
 # ---------------------------------------------------------------------- against the scene and the machine
@@ -341,7 +548,7 @@ def estimate_run_memory(method: str, num_cameras: int, evaluations: int) -> int:
     (four models of about six float64 matrices: 192 n^2 bytes)."""
     N, E = int(num_cameras), int(evaluations)
     need = E * (300 + 96 * N) + E * 48 * N
-    if method in BAYESIAN:
+    if BY_NAME[method].bayesian:
         need += 192 * E * E
     return need
 
@@ -385,9 +592,9 @@ def check_memory(num_cameras: int, realizations_shape: tuple, reward: str,
 
 def check_parts(parts: int, method: str, realizations: NDArray[np.float64], num_cameras: int) -> int:
     """The number of parts a run plans by (1 for methods other than egp/gp): ``parts`` (an integer
-    >= 0, :class:`PlanRequest`), or :func:`vp_planner.parts.auto_parts` for 0.
+    >= 0, :class:`BOSpec`), or :func:`vp_planner.parts.auto_parts` for 0.
     InvalidNumCamerasError for more parts than pairs of cameras."""
-    if method not in BAYESIAN:
+    if not BY_NAME[method].bayesian:
         return 1
     if parts == 0:
         from .parts import auto_parts
@@ -400,10 +607,12 @@ def check_parts(parts: int, method: str, realizations: NDArray[np.float64], num_
 
 def total_evaluations(method: str, evaluations: int, parts: int) -> int:
     """Reward evaluations a run makes: ``evaluations``; for egp/gp by G > 1 parts, G times that
-    (one plan's budget a part) plus ``evaluations // 2`` for the joint refinement; for
-    ``lawnmower`` 1 (a survey is flown as planned, not tuned)."""
-    if method == "lawnmower":
-        return 1
-    if method in BAYESIAN and parts > 1:
+    (one plan's budget a part) plus ``evaluations // 2`` for the joint refinement; for a method
+    whose entry fixes its evaluations (:attr:`vp_planner.methods.Method.evaluations`), that number
+    (``lawnmower``: 1, a survey is flown as planned, not tuned)."""
+    entry = BY_NAME[method]
+    if entry.evaluations is not None:
+        return entry.evaluations
+    if entry.bayesian and parts > 1:
         return parts * int(evaluations) + max(1, int(evaluations) // 2)
     return int(evaluations)

@@ -38,6 +38,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from vp_planner.fleet import fly_toward
+from vp_scene.camera import IMAGE_SIZE
 from vp_scene.messages import (POSE_TYPES, camera_info_msg, compressed_image_msg, drone_topic, image_msg, pose_array,
                                pose_report, scene_of_description)
 from vp_scene.node_runtime import Param, declare_typed, run_node, typed_values
@@ -65,8 +66,8 @@ PARAMS = {
     'camera': Param(False, 'take pictures on /fleet/capture (README "From a real flight")', None, True),
     'camera_topic': Param('/{drone}/camera', 'camera topics template: image_raw, image_raw/compressed, '
                                              'camera_info, pose', None, True),
-    'width': Param(2000, 'camera image width, pixels', (16, 100000), True),
-    'height': Param(1500, 'camera image height, pixels', (16, 100000), True),
+    'width': Param(IMAGE_SIZE[0], 'camera image width, pixels', (16, 100000), True),
+    'height': Param(IMAGE_SIZE[1], 'camera image height, pixels', (16, 100000), True),
     'fov': Param(math.pi / 2, 'camera horizontal field of view, rad', (0.0, math.pi), True, 'the ends are excluded'),
     'capture': Param('realistic', 'capture model: realistic (RTK multirotor defaults) | ideal', None, True),
     'capture_seed': Param(0, 'seed of the capture draws (as the recon node\'s)', (0, 2 ** 31 - 1), True),

@@ -53,9 +53,9 @@ import torch
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from vp_scene.camera import CameraModel
+from vp_scene.camera import IMAGE_SIZE, CameraModel
 
-from .feasibility import FeasibilityRules, check_minima, check_realizations
+from .feasibility import Feasibility, FeasibilityRules, check_minima, check_realizations
 from .reward import DEFAULT_FOV, DEFAULT_THETA_MATCH
 from .reward_models import DEFAULT_REWARD_MODEL, RewardFunction, check_fixed_cameras, make_reward
 
@@ -150,16 +150,16 @@ class ViewSpace:
         self,
         realizations: Any,
         num_cameras: int,
-        min_standoff: float = 0.5,
-        min_altitude: float = 0.3,
-        min_separation: float = 0.5,
+        min_standoff: float = Feasibility.min_standoff,
+        min_altitude: float = Feasibility.min_altitude,
+        min_separation: float = Feasibility.min_separation,
         fov: float = DEFAULT_FOV,
         theta_match: float = DEFAULT_THETA_MATCH,
         shell_depth: Optional[float] = None,
         elevation_range: tuple[float, float] = (math.radians(-20.0), math.radians(89.0)),
         target_scale: float = 1.0,
         reward_model: Any = DEFAULT_REWARD_MODEL,
-        image_size: tuple[int, int] = (2000, 1500),
+        image_size: tuple[int, int] = IMAGE_SIZE,
         obstacles: Any = None,
         fixed_positions: Any = None,
         fixed_cameras: Any = None,

@@ -97,7 +97,7 @@ def capture_from_args(args: argparse.Namespace) -> object:
 
 
 def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
-    from .pipeline import MATCH_POSES_FROM, MATCHINGS, MAX_CAMERAS, MAX_MEGAPIXELS
+    from .pipeline import MATCH_POSES_FROM, MATCHINGS, MAX_CAMERAS, MAX_MEGAPIXELS, ReconConfig
     from .sparse import MODES
 
     p = _Parser(prog=PROG, description="Render, reconstruct (COLMAP on CPU + SGBM) and score a view plan.")
@@ -112,8 +112,10 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
                                                   "the end; one that holds a reconstruction is refused)")
     p.add_argument("--overwrite", action="store_true",
                    help="replace the reconstruction OUT holds (when this run succeeds; a failed run keeps it)")
-    p.add_argument("--width", type=int, default=None, help="--plan: rendered image width, pixels (default and paper: 2000)")
-    p.add_argument("--height", type=int, default=None, help="--plan: rendered image height, pixels (default and paper: 1500)")
+    p.add_argument("--width", type=int, default=None,
+                   help=f"--plan: rendered image width, pixels (default and paper: {ReconConfig.width})")
+    p.add_argument("--height", type=int, default=None,
+                   help=f"--plan: rendered image height, pixels (default and paper: {ReconConfig.height})")
     p.add_argument("--realizations", default=None, help="comma-separated realization indices (default: all)")
     p.add_argument("--sparse-only", action="store_true", help="score the sparse cloud (no dense stereo)")
     p.add_argument("--sparse-mode", default="auto", choices=("auto",) + MODES,
@@ -216,7 +218,8 @@ def run(args: argparse.Namespace) -> dict:
     except ReconError as exc:
         raise CliError(f"{args.plan}: {exc}") from None
     try:
-        config = ReconConfig(width=args.width or 2000, height=args.height or 1500, fov=plan.fov, dense=not args.sparse_only,
+        config = ReconConfig(width=args.width or ReconConfig.width, height=args.height or ReconConfig.height,
+                             fov=plan.fov, dense=not args.sparse_only,
                              sparse_mode=args.sparse_mode, fscore_threshold=args.fscore_threshold,
                              voxel=args.voxel, mesh_cache=args.mesh_cache, keep_workdir=args.keep_workdir,
                              ground=args.ground, num_threads=args.threads, matching=args.matching,

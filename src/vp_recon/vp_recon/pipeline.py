@@ -55,6 +55,7 @@ from typing import Callable, Optional, Sequence, Union
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from vp_scene.camera import IMAGE_SIZE
 from vp_scene.capture import CaptureModel, REALISTIC
 
 from .metrics import DEFAULT_FSCORE_THRESHOLD, CloudScore, EmptyCloudError, Scores, chamfer, chamfer_after_icp
@@ -177,8 +178,8 @@ class ReconConfig:
         max_cameras: a plan of more cameras is refused (PLAN_TOO_LARGE, :func:`check_plan_size`).
     """
 
-    width: int = 2000
-    height: int = 1500
+    width: int = IMAGE_SIZE[0]
+    height: int = IMAGE_SIZE[1]
     fov: float = math.pi / 2
     sparse_mode: str = "auto"
     dense: bool = True

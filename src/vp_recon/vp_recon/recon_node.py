@@ -72,7 +72,7 @@ from vp_recon.pipeline import (CAPTURE_MISSING, MAX_CAMERAS, STAGES, ReconCancel
                                RealizationResult, check_plan_size, ensure_writable_dir, plan_result,
                                reconstruct_captured, reconstruct_plan, worker_call, worker_result)
 from vp_scene.capture import IDEAL, REALISTIC, CaptureModel
-from vp_scene.camera import poses_to_cameras
+from vp_scene.camera import IMAGE_SIZE, poses_to_cameras
 from vp_scene.messages import (aggregate_score, camera_info_intrinsics, compressed_image_array, drone_topic,
                                error_score, image_array,
                                numpy_to_pointcloud2, plan_key, pose_array, pose_array_to_cameras, realization_score,
@@ -96,8 +96,8 @@ _M = (0.0, math.inf)
 PARAMS = {
     'output_folder': Param(str(Path.home() / '.ros' / 'vp_recon'), 'a plan-<time> folder per plan goes here', None,
                            False, 'not empty'),
-    'width': Param(2000, 'rendered image width, pixels', (16, INT_MAX)),
-    'height': Param(1500, 'rendered image height, pixels', (16, INT_MAX)),
+    'width': Param(IMAGE_SIZE[0], 'rendered image width, pixels', (16, INT_MAX)),
+    'height': Param(IMAGE_SIZE[1], 'rendered image height, pixels', (16, INT_MAX)),
     'fov': Param(math.pi / 2, 'horizontal field of view, rad (the planner\'s)', (0.0, math.pi), False,
                  'the ends are excluded'),
     'sparse_mode': Param('auto', 'auto (incremental for a realistic capture, known_poses for the ideal one) | '

@@ -51,6 +51,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "OPTICAL_IN_BODY",
+    "IMAGE_SIZE",
     "CameraModel",
     "rotation_matrix",
     "cameras_to_poses",
@@ -199,17 +200,22 @@ def look_at(positions: ArrayLike, targets: ArrayLike) -> NDArray[np.float64]:
     return np.concatenate([c, t - c], axis=-1)
 
 
+#: (width, height) of the cameras' images, pixels, by default (the paper's): the one home of the
+#: suite's default image size (planner, simulated drones, reconstruction, entry script, benchmarks).
+IMAGE_SIZE: tuple[int, int] = (2000, 1500)
+
+
 @dataclass(frozen=True)
 class CameraModel:
     """Pinhole intrinsics shared by all cameras of a plan: image size and horizontal field of view.
 
     Attributes:
-        width, height: pixels (the paper: 2000 x 1500).
+        width, height: pixels (default :data:`IMAGE_SIZE`, the paper's 2000 x 1500).
         fov: horizontal field of view, rad, in (0, pi) (the paper: pi / 2).
     """
 
-    width: int = 2000
-    height: int = 1500
+    width: int = IMAGE_SIZE[0]
+    height: int = IMAGE_SIZE[1]
     fov: float = math.pi / 2
 
     def __post_init__(self) -> None:
