@@ -209,6 +209,8 @@ def test_a_plan_of_more_than_max_cameras_is_refused_at_once_and_the_node_serves_
     agg = aggregate(scores)[0]
     assert (agg.error_code, agg.num_images) == (Score.PLAN_TOO_LARGE, 10_000), agg.error_msg
     assert agg.error_msg.startswith("the plan has 10000 cameras; at most 256 are reconstructed (max_cameras")
+    # the node's log reaches the test through a pipe and a reader thread: wait for it, then count
+    assert client.spin_until(lambda: "plan: the plan has 10000 cameras" in recon.output(), 20), recon.output()[-3000:]
     assert [line for line in recon.output().splitlines() if "10000" in line] == \
         [line for line in recon.output().splitlines() if "plan: the plan has 10000 cameras" in line] != []
 
