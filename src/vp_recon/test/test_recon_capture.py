@@ -52,10 +52,10 @@ def test_realistic_capture_reconstructs_and_a_plan_without_baseline_does_not_pas
     (Chamfer x100, measured); flown (hover and localization errors, sensor noise, SfM with the
     reported poses as priors, registered to the reported centres) it fails or scores far worse."""
     cfg = ReconConfig(width=2000, height=1500, num_threads=1)
-    assert cfg.capture == REALISTIC and cfg.sparse_mode_used == "incremental" and cfg.ground_used
+    assert cfg.capture == REALISTIC and cfg.sparse_mode_used == "anchored" and cfg.ground_used
     assert not ReconConfig(capture=IDEAL).ground_used  # the ideal capture keeps its blue screen
     good = reconstruct_realization(scene, 1, ring(6), cfg)
-    assert good.images >= 4 and good.capture["kind"] == "realistic" and good.sparse_mode == "incremental"
+    assert good.images >= 4 and good.capture["kind"] == "realistic" and good.sparse_mode == "anchored"
     assert good.chamfer < 0.06 and good.chamfer_shape <= good.chamfer + 1e-3  # measured 0.034 / 0.026
     # the self-check's figure: registered centres within a few sigma (0.02 m) of the reported ones
     assert 0.0 < good.centre_residual < 0.1, good.centre_residual

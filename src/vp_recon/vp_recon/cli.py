@@ -85,6 +85,11 @@ def add_capture_arguments(p: argparse.ArgumentParser) -> None:
         p.add_argument("--" + name.replace("_", "-"), type=float, default=None,
                        help=f"capture figure, {unit} (default {getattr(REALISTIC, name):.4g}; ideal: 0)")
     p.add_argument("--capture-seed", type=int, default=None, help="seed of the capture draws (default 0)")
+    p.add_argument("--gcp-markers", type=int, default=None,
+                   help=f"ground markers laid around the plants and surveyed (default {REALISTIC.gcp_markers}; "
+                        "0: none, the drones' reported poses alone place the model; README 'Capture model')")
+    p.add_argument("--gcp-sigma", type=float, default=None,
+                   help=f"the markers' survey error, m per axis (default {REALISTIC.gcp_sigma:g})")
 
 
 def capture_from_args(args: argparse.Namespace) -> object:
@@ -92,7 +97,8 @@ def capture_from_args(args: argparse.Namespace) -> object:
     from vp_scene.capture import CaptureModel
 
     figures = {n: getattr(args, n) for n in ("hover_position_sigma", "hover_attitude_sigma",
-                                             "report_position_sigma", "report_attitude_sigma", "sensor_noise")}
+                                             "report_position_sigma", "report_attitude_sigma", "sensor_noise",
+                                             "gcp_markers", "gcp_sigma")}
     return CaptureModel.named(args.capture, seed=args.capture_seed, **figures)
 
 
@@ -119,9 +125,10 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     p.add_argument("--realizations", default=None, help="comma-separated realization indices (default: all)")
     p.add_argument("--sparse-only", action="store_true", help="score the sparse cloud (no dense stereo)")
     p.add_argument("--sparse-mode", default="auto", choices=("auto",) + MODES,
-                   help="auto (default): incremental SfM with the reported poses as priors for a realistic "
-                        "capture, known_poses for the ideal one; known_poses: triangulate with the reported "
-                        "poses; refined_poses: that, then a bundle adjustment of poses and points")
+                   help="auto (default): anchored for a realistic capture whose attitudes are good to 2 degrees, "
+                        "incremental for rougher ones, known_poses for the ideal one; anchored: triangulate at the "
+                        "reported poses, bundle-adjust and register on them; incremental: COLMAP's SfM with the "
+                        "reported centres as priors (anchored when it fails); known_poses: triangulate only")
     add_capture_arguments(p)
     p.add_argument("--matching", default="auto", choices=MATCHINGS,
                    help="image pairs SIFT matches: all of them (exhaustive), those chosen from the known poses "

@@ -36,6 +36,12 @@ COLMAP reads the model), plus ``flight.json`` (what is known of a simulated flig
 realization and capture model). Every problem of a folder is a :class:`FlightError` with one
 line naming the file.
 
+Ground control (optional, :mod:`vp_scene.ground_control`): ``DIR/markers.csv`` (``id,x,y,z[,sigma]``:
+ArUco markers of OpenCV's ``DICT_4X4_50`` surveyed on the ground, found in the images by
+:mod:`vp_recon.gcp`) or OpenDroneMap's ``DIR/gcp_list.txt`` (control points and where they were
+seen in which image); both in the poses' frame, metres. The reconstruction is then placed in
+``map`` on the control points and the reported poses together (:func:`vp_recon.gcp.register`).
+
 Images are read by :mod:`vp_scene.images` (the header checked before anything is decoded; a
 truncated or corrupt image refused). ROS-free: numpy, OpenCV, Pillow, scipy.
 """
@@ -54,16 +60,21 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
+from vp_scene.ground_control import GroundControl, GroundControlError, read_gcp_list, read_markers_csv, \
+    write_markers_csv
 from vp_scene.camera import (body_from_optical, cameras_to_poses, poses_to_cameras, principal_point_gl, roll_of,
                              world_to_camera)
 from vp_scene.images import ImageError, image_size, read_image
 
 from .pipeline import MAX_MEGAPIXELS
 
-__all__ = ["POSES_FILE", "POSES_COLUMNS", "IMAGE_SUFFIXES", "FRAME", "MAX_ROLL_DEG", "FlightError", "CapturedViews",
+__all__ = ["POSES_FILE", "MARKERS_FILE", "GCP_LIST_FILE", "POSES_COLUMNS", "IMAGE_SUFFIXES", "FRAME", "MAX_ROLL_DEG", "FlightError", "CapturedViews",
            "write_flight", "read_flight", "capture_folder", "locate_flown", "flown_views", "join_views"]
 
 POSES_FILE = "poses.csv"
+#: The ground-control files of a flight folder (module docstring).
+MARKERS_FILE = "markers.csv"
+GCP_LIST_FILE = "gcp_list.txt"
 POSES_COLUMNS = ("image", "x", "y", "z", "qx", "qy", "qz", "qw", "frame", "fx", "fy", "cx", "cy", "width", "height")
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 #: The one frame of the suite.
@@ -94,6 +105,8 @@ class CapturedViews:
         fov: the horizontal field of view, rad (None: from K).
         realization: the wind realization of a simulated flight (None: unknown, a real one).
         seconds: time it took to make them (mesh, render), when rendered.
+        control: ground control points (:class:`vp_scene.ground_control.GroundControl`) of the
+            flight, or None.
     """
 
     names: list
@@ -104,6 +117,7 @@ class CapturedViews:
     fov: Optional[float] = None
     realization: Optional[int] = None
     seconds: dict = field(default_factory=dict)
+    control: Optional[GroundControl] = None
 
     @property
     def size(self) -> tuple[int, int]:
@@ -133,6 +147,10 @@ class CapturedViews:
                 raise FlightError(f"{name}: must be RGB uint8 of {size[0]}x{size[1]}, got {a.dtype} {a.shape}")
         if self.masks is not None and len(self.masks) != n:
             raise FlightError(f"{len(self.masks)} masks for {n} images")
+        if self.control is not None:
+            unknown = sorted({o.image for o in self.control.observations} - set(self.names))
+            if unknown:
+                raise FlightError(f"ground control observed in images that are not in the flight: {unknown[:3]}")
         return self
 
 
@@ -182,6 +200,10 @@ def write_flight(views: CapturedViews, folder: PathLike, meta: Optional[dict] = 
         lines += [" ".join([str(i + 1)] + [repr(float(v)) for v in (qw, qx, qy, qz, *t[i])] + ["1", name]), ""]
     atomic("images.txt", lambda p: p.write_text("\n".join(lines) + "\n"))
     atomic("points3D.txt", lambda p: p.write_text("# 3D point list (empty: poses only)\n"))
+    if views.control is not None:
+        if views.control.observations:
+            raise FlightError("write_flight writes ArUco markers (markers.csv), not observed control points")
+        atomic(MARKERS_FILE, lambda p: write_markers_csv(views.control, p))
 
     def write_poses(p: Path) -> None:
         with open(p, "w", newline="") as f:
@@ -356,7 +378,20 @@ def read_flight(folder: PathLike, max_megapixels: float = MAX_MEGAPIXELS) -> Cap
         except (ValueError, AttributeError):
             raise FlightError(f"{d / 'flight.json'}: not a JSON object") from None
     return CapturedViews(names=list(names), images=images, reported=poses_to_cameras(poses), K=K,
-                         realization=realization).validate()
+                         realization=realization, control=_read_control(d)).validate()
+
+
+def _read_control(d: Path) -> Optional[GroundControl]:
+    """The folder's ground control (module docstring), or None; FlightError for a bad file or both."""
+    files = [f for f in (d / MARKERS_FILE, d / GCP_LIST_FILE) if f.is_file()]
+    if not files:
+        return None
+    if len(files) > 1:
+        raise FlightError(f"{d}: both {MARKERS_FILE} and {GCP_LIST_FILE}: give one kind of ground control")
+    try:
+        return read_markers_csv(files[0]) if files[0].name == MARKERS_FILE else read_gcp_list(files[0])
+    except GroundControlError as exc:
+        raise FlightError(str(exc)) from None
 
 
 def capture_folder(plan_folder: PathLike, k: int) -> Path:
@@ -432,8 +467,10 @@ def join_views(parts: Sequence[CapturedViews]) -> CapturedViews:
                               f"{p.size[0]}x{p.size[1]}, or other intrinsics) cannot be reconstructed together")
         if p.realization != first.realization:
             raise FlightError(f"capture sets of realizations {first.realization} and {p.realization}")
+        if p.control != first.control:
+            raise FlightError("capture sets of different ground control cannot be reconstructed together")
     images = [im for p in parts for im in p.images]
     masks = [m for p in parts for m in p.masks] if all(p.masks is not None for p in parts) else None
     return CapturedViews(names=[f"view_{i:03d}.png" for i in range(len(images))], images=images,
                          reported=np.concatenate([np.asarray(p.reported, np.float64).reshape(-1, 6) for p in parts]),
-                         K=first.K, masks=masks, fov=first.fov, realization=first.realization)
+                         K=first.K, masks=masks, fov=first.fov, realization=first.realization, control=first.control)

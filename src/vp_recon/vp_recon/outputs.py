@@ -271,6 +271,8 @@ def summary(result: Any, extra: Optional[dict] = None) -> dict:
             "points": int(len(r.points)), "images": int(r.images), "num_images": int(r.num_images),
             "visible_images": int(r.visible_images), "source": r.source, "sparse_points": int(r.sparse_points),
             "matching": r.matching, "matched_pairs": int(r.matched_pairs), "sparse_models": int(r.sparse_models),
+            "sparse_mode": r.sparse_mode, "sparse_fallback": r.sparse_fallback or None,
+            "control": r.control,
             "seconds": {k: float(v) for k, v in r.seconds.items()},
             **no_truth_metrics(r.images, r.mean_reprojection_error, r.mean_track_length, len(r.points), r.coverage,
                                r.centre_residual),

@@ -11,9 +11,13 @@ the capture model ``config.capture`` (:mod:`vp_scene.capture`; issue "Flights, n
    or, from :data:`MATCH_POSES_FROM` cameras up (``matching='auto'``), those
    :func:`vp_recon.pairs.select_pairs` picks from the reported poses and the planning cloud
    (all K realizations of the noisy scene: what the planner saw); then
-   ``sparse_mode='incremental'`` (the default of a realistic capture): COLMAP's incremental SfM
-   with the reported centres as pose priors, registered to ``map`` on the reported poses (centres and attitudes);
-   ``'known_poses'``: triangulation with the reported poses (an ablation),
+   ``sparse_mode='anchored'`` (the default of a realistic capture): the model anchored on the
+   reported poses (triangulated from them, bundle-adjusted, registered back on their centres and
+   attitudes); ``'incremental'``: COLMAP's incremental SfM with the reported centres as pose
+   priors, registered to ``map`` on the reported poses, the anchored model when it fails;
+   ``'known_poses'``: triangulation with the reported poses (an ablation); then, when the flight
+   has ground control (the realistic capture lays 4 markers), the model placed on the control
+   points and the reported centres together (:mod:`vp_recon.gcp`),
 4. dense: SGBM on neighbouring pairs (:mod:`vp_recon.dense`; COLMAP PatchMatch needs CUDA) with
    the poses the sparse step gives (SfM's, in ``map``),
 5. score: Chamfer distance etc. of the (dense, else sparse) cloud against realization k's true
@@ -112,6 +116,15 @@ MATCHINGS = ("auto", "exhaustive", "poses")
 #: about the same, so today's 4-6 camera plans keep exhaustive matching and their results.
 MATCH_POSES_FROM = 8
 
+#: ``sparse_mode='auto'``: reported attitudes good to this many degrees (1 sigma) anchor the model
+#: (a triangulation at poses that far off still finds its tracks with the anchored model's loose
+#: first thresholds); rougher ones leave the poses to the images (incremental SfM).
+#: Measured on Table I's seed-0 flights (2026-11-27): where both modes reconstruct, the anchored
+#: model's map and shape Chamfer are those of the incremental mapper or better (three_row circle:
+#: shape 2.09-2.89 against 3.59-5.50), and where the mapper's model fails its self-check the
+#: anchored one reconstructs (README "Capture model").
+ANCHOR_MAX_ATTITUDE_DEG = 2.0
+
 #: progress(stage, realization) after each stage of each realization; returning False cancels.
 ProgressFn = Callable[[str, int], Optional[bool]]
 #: on_realization(result) as soon as a realization is reconstructed (e.g. to publish it).
@@ -146,9 +159,13 @@ class ReconConfig:
     Attributes:
         width, height: rendered image size (paper: 2000 x 1500).
         fov: horizontal field of view, rad (the planner's, default pi/2).
-        sparse_mode: ``'known_poses'`` (triangulate with the reported poses), ``'incremental'``
-            (SfM with the reported centres as pose priors) or ``'auto'``: incremental for a
-            realistic capture, known_poses for the ideal one.
+        sparse_mode: ``'known_poses'`` (triangulate with the reported poses), ``'anchored'``
+            (the model anchored on the reported poses: triangulated from them, adjusted and
+            registered on them, :mod:`vp_recon.sparse`), ``'incremental'`` (SfM with the reported
+            centres as pose priors, the anchored model when it fails) or ``'auto'``: known_poses
+            for the ideal capture; anchored when the reported attitudes are good to
+            :data:`ANCHOR_MAX_ATTITUDE_DEG` (an RTK drone's gimbal and flight controller);
+            incremental otherwise (a rig whose attitudes are rough: the images decide).
         capture: the capture model (:mod:`vp_scene.capture`; default: an RTK multirotor).
         dense: run dense stereo (else the sparse cloud is scored).
         fscore_threshold: F-score distance threshold, metres.
@@ -206,7 +223,9 @@ class ReconConfig:
         """``sparse_mode`` with ``'auto'`` resolved by the capture."""
         if self.sparse_mode != "auto":
             return self.sparse_mode
-        return "known_poses" if self.capture.ideal else "incremental"
+        if self.capture.ideal:
+            return "known_poses"
+        return "anchored" if self.capture.report_attitude_sigma <= ANCHOR_MAX_ATTITUDE_DEG else "incremental"
 
     @property
     def ground_used(self) -> bool:
@@ -280,7 +299,8 @@ class RealizationResult(Scores):
         chamfer_shape: Chamfer distance (m) after a rigid ICP refinement onto the truth (the
             shape alone, registration error removed).
         capture: the capture model's :meth:`~vp_scene.capture.CaptureModel.to_dict`.
-        sparse_mode: the sparse step that ran (``'known_poses'`` or ``'incremental'``).
+        sparse_mode: the model the sparse step kept (``'known_poses'``, ``'incremental'`` or
+            ``'anchored'``).
         mean_track_length, mean_reprojection_error: of the sparse model (images a point is seen
             in; pixels): metrics without a ground truth (issue 20, part 4).
         coverage: :class:`vp_recon.metrics.Coverage` of the planning cloud (no truth read).
@@ -288,6 +308,10 @@ class RealizationResult(Scores):
             reported poses (parts of a plan that share no matches; :func:`vp_recon.sparse._merge_models`).
         centre_residual: incremental: RMS distance, m, of the registered cameras from the reported
             poses after the registration (the sparse step's self-check; no truth read); else NaN.
+        sparse_fallback: why the structure from motion was not kept (the sparse step then made the
+            model anchored on the reported poses, ``sparse_mode`` 'anchored'); '' otherwise.
+        control: the registration on the flight's ground control
+            (:meth:`vp_recon.gcp.Registration.to_dict`), None without control points.
         reported, K: the poses the drones reported (N, 6) and the intrinsics: with ``rendered``,
             the capture set (:meth:`captured_views`).
     """
@@ -318,6 +342,8 @@ class RealizationResult(Scores):
     coverage: object = None
     sparse_models: int = 1
     centre_residual: float = math.nan
+    sparse_fallback: str = ""
+    control: Optional[dict] = None
     reported: Optional[NDArray[np.float64]] = field(default=None, repr=False)
     K: Optional[NDArray[np.float64]] = field(default=None, repr=False)
 
@@ -466,6 +492,8 @@ class ViewsResult:
         matching, mode: the matching and sparse step that ran; t_pairs: seconds choosing pairs.
         coverage: :class:`vp_recon.metrics.Coverage` of the prior (None without a prior).
         seconds: wall time of ``sparse`` and ``dense``.
+        control: the :class:`vp_recon.gcp.Registration` on the flight's ground control (None
+            without control points).
     """
 
     points: NDArray[np.float64]
@@ -480,6 +508,7 @@ class ViewsResult:
     t_pairs: float
     coverage: object = None
     seconds: dict = field(default_factory=dict)
+    control: object = None
 
 
 def render_flight(noisy_scene: object, k: int, cameras: ArrayLike, config: Optional[ReconConfig] = None,
@@ -497,7 +526,7 @@ def render_flight(noisy_scene: object, k: int, cameras: ArrayLike, config: Optio
     plan's render gives camera i (tested), so the fleet and the render source see one flight."""
     from .flight import CapturedViews
     from .meshing import scene_meshes
-    from .render import RenderError, Renderer
+    from .render import RenderError, Renderer, marker_meshes
 
     from vp_scene.camera import check_cameras
 
@@ -522,16 +551,19 @@ def render_flight(noisy_scene: object, k: int, cameras: ArrayLike, config: Optio
     flown = [capture.fly_camera(c, k, i) for c, i in zip(cams, ids)]
     actual = np.array([a for a, _ in flown]).reshape(-1, 6)
     reported = np.array([r for _, r in flown]).reshape(-1, 6)
+    # the field's ground markers (capture.gcp_markers), around every realization's plants: one layout
+    markers, control = capture.lay_markers(noisy_scene.points)
     try:
         renderer = Renderer(cfg.width, cfg.height, cfg.fov)
-        images, masks, _ = renderer.render(meshes, actual, ground=cfg.ground_used)
+        images, masks, _ = renderer.render(meshes, actual, ground=cfg.ground_used,
+                                           markers=marker_meshes(markers, capture.gcp_size))
     except RenderError as exc:
         raise ReconError(UNKNOWN, str(exc)) from exc
     images = [capture.expose(im, k, i) for i, im in zip(ids, images)]
     seconds["render"] = time.perf_counter() - t0
     return CapturedViews(names=[f"view_{i:03d}.png" for i in ids], images=images,
                          reported=reported, K=renderer.K, masks=masks if capture.ideal else None,
-                         fov=cfg.fov, realization=k, seconds=seconds)
+                         fov=cfg.fov, realization=k, seconds=seconds, control=control)
 
 
 def reconstruct_views(views: object, config: Optional[ReconConfig] = None, workdir: Optional[PathLike] = None,
@@ -607,6 +639,14 @@ def reconstruct_views(views: object, config: Optional[ReconConfig] = None, workd
             raise ReconError(RECONSTRUCTION_FAILED, f"sparse reconstruction failed: {exc}") from exc
         except OSError as exc:
             raise ReconError(OUTPUT_NOT_WRITABLE, f"cannot write the COLMAP workspace in {wd}: {exc}") from exc
+        mode = sp.mode  # the incremental mode may have fallen back to the anchored model
+        control = None
+        if views.control is not None and mode != "known_poses" and not capture.ideal:
+            from .gcp import register
+
+            # the model placed on the ground control and the reported centres together
+            sp.points, sp.cameras, control = register(sp.points, sp.cameras, views.names, images, K, reported,
+                                                      views.control, max(capture.report_position_sigma, 0.01))
         seconds["sparse"] = time.perf_counter() - t0
         _tick(progress, "sparse", k)
 
@@ -643,7 +683,7 @@ def reconstruct_views(views: object, config: Optional[ReconConfig] = None, workd
         if prior is not None and len(points) else None
     return ViewsResult(points=points, colors=colors, source=source, sparse=sp, sparse_clean=clean, dense=dn,
                        seeing=seeing, matching=matching, mode=mode, t_pairs=t_pairs, coverage=coverage,
-                       seconds=seconds)
+                       seconds=seconds, control=control)
 
 
 def reconstruct_realization(noisy_scene: object, k: int, cameras: ArrayLike, config: Optional[ReconConfig] = None,
@@ -723,7 +763,9 @@ def reconstruct_captured(noisy_scene: object, views: object, config: Optional[Re
         rendered=views.images if cfg.keep_images else [], seconds=seconds, chamfer_shape=shape.chamfer,
         capture=cfg.capture.to_dict(), sparse_mode=vr.mode, mean_track_length=sp.mean_track_length,
         mean_reprojection_error=sp.mean_reprojection_error, coverage=vr.coverage, sparse_models=sp.models,
-        centre_residual=sp.centre_residual, reported=np.asarray(views.reported, dtype=np.float64),
+        centre_residual=sp.centre_residual, sparse_fallback=sp.fallback,
+        control=vr.control.to_dict() if vr.control is not None else None,
+        reported=np.asarray(views.reported, dtype=np.float64),
         K=np.asarray(views.K, dtype=np.float64))
 
 

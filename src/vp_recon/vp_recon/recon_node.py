@@ -100,8 +100,8 @@ PARAMS = {
     'height': Param(IMAGE_SIZE[1], 'rendered image height, pixels', (16, INT_MAX)),
     'fov': Param(math.pi / 2, 'horizontal field of view, rad (the planner\'s)', (0.0, math.pi), False,
                  'the ends are excluded'),
-    'sparse_mode': Param('auto', 'auto (incremental for a realistic capture, known_poses for the ideal one) | '
-                                 'known_poses | incremental | refined_poses'),
+    'sparse_mode': Param('auto', 'auto (anchored for a realistic capture, known_poses for the ideal one) | '
+                                 'known_poses | incremental | anchored'),
     'capture': Param('realistic', 'realistic (hover and localization errors, sensor noise) | ideal (none)'),
     'hover_position_sigma': Param(REALISTIC.hover_position_sigma, 'capture: hover error, m per axis', _M),
     'hover_attitude_sigma': Param(REALISTIC.hover_attitude_sigma, 'capture: hover error of the optical axis, deg',
@@ -109,7 +109,13 @@ PARAMS = {
     'report_position_sigma': Param(REALISTIC.report_position_sigma, 'capture: localization error, m per axis', _M),
     'report_attitude_sigma': Param(REALISTIC.report_attitude_sigma, 'capture: localization error, deg', (0.0, 10.0)),
     'sensor_noise': Param(REALISTIC.sensor_noise, 'capture: image noise std, fraction of full scale', (0.0, 0.5)),
+    'gcp_markers': Param(REALISTIC.gcp_markers, 'capture: ground markers laid around the plants and surveyed (0: '
+                                                'none, the reported poses alone place the model)', (0, 50)),
+    'gcp_sigma': Param(REALISTIC.gcp_sigma, "capture: the markers' survey error, m per axis", (0.0, 1.0), False,
+                       'above 0'),
     'capture_seed': Param(0, 'capture: seed of the draws', (0, INT_MAX)),
+    'ground_control': Param('', 'source fleet: the field\'s ground control, a markers.csv or gcp_list.txt (README "From a '
+                                'real flight"); \'\': the capture model\'s markers (the simulated drones render them)'),
     'dense': Param(True, 'CPU dense stereo (else the sparse cloud is scored)'),
     'matching': Param('auto', 'image pairs SIFT matches: auto (from the poses from 8 cameras up) | exhaustive | poses'),
     'fscore_threshold': Param(DEFAULT_FSCORE_THRESHOLD, 'F-score distance threshold, m', _M, False, '> 0'),
@@ -163,7 +169,7 @@ INFO_WAIT_S = 2.0
 
 #: The parameters of the capture model (a realistic capture's figures; ignored by the ideal one).
 CAPTURE_KEYS = ('capture', 'hover_position_sigma', 'hover_attitude_sigma', 'report_position_sigma',
-                'report_attitude_sigma', 'sensor_noise', 'capture_seed')
+                'report_attitude_sigma', 'sensor_noise', 'gcp_markers', 'gcp_sigma', 'capture_seed')
 
 
 def capture_model(values: dict) -> CaptureModel:
@@ -541,6 +547,7 @@ class ReconNode(Node):
                                                 lambda: self._plans.stopped, transport=self._param('image_transport'))
                     if views is None:
                         raise ReconCancelled('stopped while waiting for the fleet')
+                    views.control = self._ground_control(scene, config)
                     self.get_logger().info(f'capture {k}: {len(views.images)} images from the fleet '
                                            f'({sum(im.nbytes for im in views.images) / 1e6:.0f} MB) collected')
                     if located:
@@ -726,6 +733,20 @@ class FleetCaptures:
                 K=intr[0][0], realization=int(k)).validate()
         except (ValueError, FlightError) as exc:
             raise ReconError(CAPTURE_MISSING, f'capture {k} from the fleet is unusable: {exc}') from None
+
+    def _ground_control(self, scene: object, config: ReconConfig) -> object:
+        """The fleet's ground control: the ``ground_control`` file (a real field's), else the markers
+        the capture model lays around the scene's plants (what the simulated drones render), None
+        without either. ReconError CAPTURE_MISSING for a file that cannot be read."""
+        from vp_scene.ground_control import GroundControlError, read_gcp_list, read_markers_csv
+
+        path = self._param('ground_control')
+        if not path:
+            return None if config.capture.ideal else config.capture.lay_markers(scene.points)[1]
+        try:
+            return read_gcp_list(path) if Path(path).name.endswith('.txt') else read_markers_csv(path)
+        except GroundControlError as exc:
+            raise ReconError(Score.CAPTURE_MISSING, f'ground_control: {exc}') from None
 
     def now_ns(self) -> int:
         return self._ns(self._node.get_clock().now().to_msg())

@@ -15,6 +15,8 @@ Backgrounds and masks
   only the ideal capture and the tests use. A flight segments its images alone:
   :func:`plant_mask` (excess green, the crop-segmentation index) is what the reconstruction of a
   realistic capture uses. Neither mode ever reads the depth buffer.
+* ``markers``: ground-control markers (:mod:`vp_scene.ground_control`), printed squares lying
+  2 mm above the soil (:func:`marker_meshes`); the segmentation pass counts them as ground.
 
 The OpenGL platform must be chosen before pyrender (PyOpenGL) is imported: ``PYOPENGL_PLATFORM``
 is used when set, else ``egl`` is tried and, when no EGL context can be created, ``osmesa``.
@@ -34,7 +36,7 @@ from numpy.typing import ArrayLike, NDArray
 from vp_scene.camera import camera_to_world_gl, check_cameras, intrinsics, principal_point_gl
 
 __all__ = ["SKY_COLOR", "KEY_TOLERANCE", "EXG_THRESHOLD", "RenderError", "foreground_mask", "excess_green",
-           "plant_mask", "image_mask", "ground_mesh", "Renderer", "release_contexts"]
+           "plant_mask", "image_mask", "ground_mesh", "marker_meshes", "Renderer", "release_contexts"]
 
 #: Uniform background colour (pure blue: never a plant colour, corn is green / yellow / brown).
 SKY_COLOR: tuple[int, int, int] = (0, 0, 255)
@@ -167,8 +169,9 @@ class Renderer:
                                       f"{type(exc).__name__}: {exc}") from exc
             self._renderer = _CONTEXTS[key]
 
-    def _scene(self, meshes: Sequence, ground: bool) -> tuple[object, dict]:
-        """The pyrender scene, and the segmentation map of the ``ground`` mode (else empty).
+    def _scene(self, meshes: Sequence, ground: bool, markers: Sequence = ()) -> tuple[object, dict]:
+        """The pyrender scene, and the segmentation map of the ``ground`` mode (else empty);
+        ``markers``: textured meshes of the ground (:func:`marker_meshes`), segmented as ground.
 
         pyrender culls back faces in its segmentation pass whatever the flags, so that pass draws
         its own two-sided copies of the meshes (hidden in the colour pass)."""
@@ -178,6 +181,7 @@ class Renderer:
         items = [(m, (255, 255, 255)) for m in meshes]
         if ground:
             items.append((ground_mesh(meshes), (0, 0, 0)))
+        items += [(m, (0, 0, 0)) for m in markers]
         seg_map: dict = {}
         for m, seg_color in items:
             pm = pr.Mesh.from_trimesh(m, smooth=False)
@@ -193,12 +197,14 @@ class Renderer:
                 seg_map[scene.add(two_sided)] = seg_color
         return scene, seg_map
 
-    def render(self, meshes: Sequence, cameras: ArrayLike, keep_depth: bool = False, ground: bool = False
+    def render(self, meshes: Sequence, cameras: ArrayLike, keep_depth: bool = False, ground: bool = False,
+               markers: Sequence = ()
                ) -> tuple[list[NDArray[np.uint8]], list[NDArray[np.bool_]], Optional[list[NDArray[np.float32]]]]:
         """Render ``meshes`` (trimesh.Trimesh with vertex colours) from every camera (N, 6).
 
         Args:
             ground: draw a textured soil plane at z = 0 (masks from a segmentation pass).
+            markers: ground-control markers to draw (:func:`marker_meshes`; ground in the masks).
 
         Returns:
             (images: N RGB uint8 (H, W, 3), masks: N bool (H, W) plant pixels,
@@ -207,7 +213,7 @@ class Renderer:
         """
         cams = check_cameras(cameras)
         pr = self._pr
-        scene, seg_map = self._scene(meshes, ground)
+        scene, seg_map = self._scene(meshes, ground, markers)
         K = self.K
         cx, cy = principal_point_gl(K)
         cam = pr.IntrinsicsCamera(fx=K[0, 0], fy=K[1, 1], cx=cx, cy=cy, znear=0.01, zfar=1000.0)
@@ -306,3 +312,27 @@ def ground_mesh(meshes: Sequence, margin: float = 6.0, texel: float = 0.002) -> 
     material = trimesh.visual.material.SimpleMaterial(image=Image.fromarray(tex))
     visual = trimesh.visual.TextureVisuals(uv=uv, image=Image.fromarray(tex), material=material)
     return trimesh.Trimesh(vertices=corners, faces=faces, visual=visual, process=False)
+
+
+def marker_meshes(centres: ArrayLike, size: float, texels: int = 240) -> list:
+    """Ground-control markers as meshes: marker i of :data:`vp_scene.ground_control.ARUCO_DICTIONARY`
+    (its printed image, :func:`vp_scene.ground_control.marker_image`, grey on white) as a
+    ``size`` m square centred on ``centres[i]`` (M, 3), lying flat 2 mm above it (clear of the
+    soil plane's depth), its image x along world x and image y along world -y (read from above
+    as printed: a mirror image would not decode)."""
+    from PIL import Image
+
+    from vp_scene.ground_control import marker_image
+
+    out = []
+    h = 0.5 * float(size)
+    faces = np.array([[0, 1, 2], [0, 2, 3]])
+    uv = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])  # texture v up: row 0 is the top
+    for i, (x, y, z) in enumerate(np.asarray(centres, dtype=np.float64).reshape(-1, 3)):
+        corners = np.array([[x - h, y - h, z + 0.002], [x + h, y - h, z + 0.002], [x + h, y + h, z + 0.002],
+                            [x - h, y + h, z + 0.002]])
+        img = Image.fromarray(np.repeat(marker_image(i, texels)[..., None], 3, axis=2))
+        material = trimesh.visual.material.SimpleMaterial(image=img)
+        visual = trimesh.visual.TextureVisuals(uv=uv, image=img, material=material)
+        out.append(trimesh.Trimesh(vertices=corners, faces=faces, visual=visual, process=False))
+    return out

@@ -10,6 +10,12 @@ Pipeline (Schönberger & Frahm, "Structure-from-Motion Revisited", CVPR 2016):
    :func:`vp_recon.pairs.select_pairs` chooses them from the known poses),
 4. ``mode='known_poses'``: a reconstruction holding the true poses (cam_from_world =
    (R_cw, t) of :func:`vp_scene.camera.world_to_camera`), then ``triangulate_points``;
+   ``mode='anchored'``: the reconstruction anchored on the given (reported) poses
+   (:func:`_anchored_model`): points triangulated from them with loose thresholds (a reported
+   attitude is half a degree off: 9 pixels at f = 1000), a robust bundle adjustment of poses and
+   points, the model registered back on the given poses, triangulated again with COLMAP's
+   thresholds and adjusted once more. It cannot wander metres away (it starts at the reports and
+   is registered on them) and needs only matches, not a chain of registrations;
    ``mode='incremental'``: ``incremental_mapping`` (unknown poses; with ``prior_centres`` the
    reported camera centres are pose priors of the bundle adjustment, COLMAP's
    ``use_prior_position``), every model of 3 or more images registered to the world on the given
@@ -25,8 +31,13 @@ Pipeline (Schönberger & Frahm, "Structure-from-Motion Revisited", CVPR 2016):
    plants can make a model that registers every image and is 1 m off: on six_rect with all
    pairs matched, centres 0.8-2.2 m from the reported ones and two optical axes 133-161 degrees
    off, against 0.02-0.05 m and under 1 degree for the pose-chosen pairs' models). The largest
-   such model fails the reconstruction (SparseError), a smaller one is left out. The RMS over the
+   such model fails the structure from motion, a smaller one is left out. The RMS over the
    kept models is reported (``centre_residual``, a metric without a ground truth).
+6. *Choose, don't fail* (``fallback='anchored'``, the default of ``incremental``): when the
+   structure from motion fails (no model, fewer than 3 images registered, a model its poses
+   cannot place, or the self-check), the anchored model of the same matches is made instead
+   and the SfM's reason is kept (``SparseResult.fallback``); only when that fails too is the
+   sparse step a failure (SparseError with both reasons).
 
 The 3D points come back in the world frame.
 """
@@ -48,10 +59,17 @@ from .pairs import check_pairs
 
 __all__ = ["SparseError", "SparseResult", "sparse_reconstruct", "MODES", "MAX_RESIDUAL_SIGMAS"]
 
-MODES = ("known_poses", "incremental", "refined_poses")
+MODES = ("known_poses", "incremental", "anchored")
 #: Self-check (module docstring, 5): a model whose registered centres lie further than this many
 #: ``prior_sigma`` (RMS) from the poses it was aligned on is inconsistent.
 MAX_RESIDUAL_SIGMAS: float = 10.0
+#: The anchored model's first triangulation (module docstring): reprojection error (pixels) and
+#: ray angle error (degrees) a track may have at the reported poses (COLMAP's defaults: 4 and 2).
+ANCHOR_REPROJECTION_PX: float = 25.0
+ANCHOR_ANGLE_DEG: float = 8.0
+#: Rounds of adjust-register-retriangulate of the anchored model (measured: a second round adds
+#: no point, 2026-11-27, one_plant arc k=0: 3147 -> 3497 -> 3494 points).
+ANCHOR_ROUNDS: int = 2
 
 
 class SparseError(RuntimeError):
@@ -80,8 +98,13 @@ class SparseResult:
             estimated poses after the alignment, NaN rows for images not registered.
         models: the models merged (``incremental``: every model of >= 3 registered images, each
             aligned to the world on its own, :func:`_merge_models`; 1 otherwise).
-        centre_residual: ``incremental``: RMS distance, m, of the registered images' centres after
-            the alignment from the given (reported) ones (the self-check's figure); NaN otherwise.
+        centre_residual: ``incremental`` and ``anchored``: RMS distance, m, of the registered images'
+            centres after the alignment from the given (reported) ones (the self-check's figure); NaN
+            for ``known_poses``.
+        mode: the model that was kept: ``'known_poses'``, ``'incremental'`` or ``'anchored'`` (also
+            when the incremental mode fell back to it).
+        fallback: why the structure from motion was not kept (its SparseError's message); '' when
+            it was, or was not tried.
     """
 
     points: NDArray[np.float64]
@@ -97,6 +120,8 @@ class SparseResult:
     mean_reprojection_error: float = float("nan")
     models: int = 1
     centre_residual: float = float("nan")
+    mode: str = "known_poses"
+    fallback: str = ""
 
 
 def _write_pairs(pairs: Sequence[tuple[int, int]], names: Sequence[str], path: Path) -> None:
@@ -146,7 +171,8 @@ def sparse_reconstruct(images: Sequence[NDArray[np.uint8]], cameras: NDArray[np.
                        max_features: int = 8192, num_threads: int = -1, quiet: bool = True,
                        pairs: Optional[Sequence[tuple[int, int]]] = None,
                        prior_centres: Optional[NDArray[np.float64]] = None,
-                       prior_sigma: float = 0.02, sift_first_octave: int = -1) -> SparseResult:
+                       prior_sigma: float = 0.02, sift_first_octave: int = -1,
+                       fallback: Optional[str] = "anchored") -> SparseResult:
     """SIFT + matching (all pairs, or the given ones) + triangulation of the rendered ``images`` (N RGB uint8).
 
     Args:
@@ -164,6 +190,8 @@ def sparse_reconstruct(images: Sequence[NDArray[np.uint8]], cameras: NDArray[np.
             axis (a drone's reported positions), written as COLMAP pose priors and used by its
             bundle adjustment (``use_prior_position``); None: none (the alignment then uses the
             centres of ``cameras``). ``prior_sigma`` also scales the self-check (module docstring, 5).
+        fallback: incremental mode: ``'anchored'`` (default): the anchored model of the same
+            matches when the structure from motion fails (module docstring, 6); None: fail.
         sift_first_octave: SIFT's first octave: -1 (COLMAP's default) doubles the image first, 0
             starts at its own resolution (about 4x fewer pixels to filter, no sub-pixel-scale features).
 
@@ -178,7 +206,7 @@ def sparse_reconstruct(images: Sequence[NDArray[np.uint8]], cameras: NDArray[np.
         pycolmap.logging.minloglevel = 2
     try:
         return _sparse(pycolmap, images, cameras, K, Path(workdir), mode, masks, max_features, num_threads, pairs,
-                       prior_centres, prior_sigma, sift_first_octave)
+                       prior_centres, prior_sigma, sift_first_octave, fallback)
     finally:
         pycolmap.logging.minloglevel = level
 
@@ -187,9 +215,11 @@ def _sparse(pycolmap: object, images: Sequence[NDArray[np.uint8]], cameras: NDAr
             K: NDArray[np.float64], workdir: Path, mode: str, masks: Optional[Sequence[NDArray[np.bool_]]],
             max_features: int, num_threads: int, pairs: Optional[Sequence[tuple[int, int]]],
             prior_centres: Optional[NDArray[np.float64]] = None, prior_sigma: float = 0.02,
-            sift_first_octave: int = -1) -> SparseResult:
+            sift_first_octave: int = -1, fallback: Optional[str] = "anchored") -> SparseResult:
     if mode not in MODES:
         raise ValueError(f"unknown sparse mode {mode!r}; expected one of {', '.join(MODES)}")
+    if fallback not in (None, "anchored"):
+        raise ValueError(f"fallback must be 'anchored' or None, got {fallback!r}")
     cams = check_cameras(cameras)
     if len(images) != len(cams):
         raise ValueError(f"{len(images)} images for {len(cams)} cameras")
@@ -264,52 +294,170 @@ def _sparse(pycolmap: object, images: Sequence[NDArray[np.uint8]], cameras: NDAr
     options.num_threads = num_threads
     # Few views: keep points seen by only two images (COLMAP drops them by default).
     options.triangulation.ignore_two_view_tracks = False
+    anchor = cams[:, :3] if prior_centres is None else np.asarray(prior_centres, dtype=np.float64).reshape(-1, 3)
+    attitudes = world_to_camera(cams)[0]
+    max_residual = MAX_RESIDUAL_SIGMAS * max(float(prior_sigma), 1e-3)
+    why = ""
     if mode == "known_poses":
         rec = _known_pose_model(pycolmap, db_cameras, db_images, names, cams)
         rec = pycolmap.triangulate_points(rec, db_path, img_dir, out_dir, clear_points=True, options=options)
         xyz, rgb, track = _read_points(rec)
         seen = sum(1 for im in rec.images.values() if im.has_pose and im.num_points3D > 0)
-    elif mode == "refined_poses":
-        rec = _known_pose_model(pycolmap, db_cameras, db_images, names, cams)
-        rec = pycolmap.triangulate_points(rec, db_path, img_dir, out_dir, clear_points=True, options=options)
-        ba = pycolmap.BundleAdjustmentOptions()
-        ba.refine_focal_length = ba.refine_principal_point = ba.refine_extra_params = False
-        pycolmap.bundle_adjustment(rec, ba)
-        seen = sum(1 for im in rec.images.values() if im.has_pose and im.num_points3D > 0)
-        xyz, rgb, track = _read_points(rec)
-        if seen < 3:
-            raise SparseError(f"{seen} of {len(names)} images observe a triangulated point; refining their "
-                              f"poses and aligning them to the world needs 3")
-        xyz, est = _align(pycolmap, rec, names, cams[:, :3], xyz, lambda im: im.has_pose and im.num_points3D > 0)
+        model = MergedModels(xyz, rgb, track, cams.copy(), int(seen), float(rec.compute_mean_reprojection_error()),
+                             1, float("nan"))
     else:
-        options.ba_refine_focal_length = False
-        options.ba_refine_extra_params = False
-        options.mapper.abs_pose_refine_focal_length = False
-        # small textured plant, few hundred keypoints a view: relax COLMAP's defaults (100 / 30 / 10)
-        options.mapper.init_min_num_inliers = 30
-        options.mapper.abs_pose_min_num_inliers = 15
-        options.min_model_size = 3
-        if prior_centres is not None:
-            options.use_prior_position = True
-            options.use_robust_loss_on_prior_position = True
-        models = pycolmap.incremental_mapping(db_path, img_dir, out_dir, options=options)
-        if not models:
-            raise SparseError(f"incremental mapping registered no image pair: 0 of {len(names)} images "
-                              f"registered ({verified} verified pairs)")
-        anchor = cams[:, :3] if prior_centres is None else np.asarray(prior_centres, dtype=np.float64).reshape(-1, 3)
-        # every model registered on the poses given (a flight: the reported ones), attitudes included
-        xyz, rgb, track, est, seen, reprojection, n_models, residual = _merge_models(
-            pycolmap, list(models.values()), names, anchor, world_to_camera(cams)[0],
-            MAX_RESIDUAL_SIGMAS * max(float(prior_sigma), 1e-3))
+        model = None
+        if mode == "incremental":
+            try:
+                model = _incremental_model(pycolmap, db_path, img_dir, out_dir, options, names, anchor, attitudes,
+                                           prior_centres is not None, len(names), verified, max_residual)
+            except SparseError as exc:
+                if fallback is None:
+                    raise
+                why = str(exc)
+        if model is None:  # anchored, asked for or in place of a structure from motion that failed
+            try:
+                model = _anchored_model(pycolmap, db_path, img_dir, out_dir, options, db_cameras, db_images, names,
+                                        cams, anchor, attitudes, max_residual)
+            except SparseError as exc:
+                raise SparseError(f"{why}; the model anchored on the reported poses failed too: {exc}"
+                                  if why else str(exc)) from None
+            mode = "anchored"
+    xyz, rgb, track, est, seen, reprojection, n_models, residual = model
     if len(xyz) == 0:
         raise SparseError(f"no 3D point triangulated ({verified} verified image pairs, keypoints {keypoints})")
     seconds["triangulate"] = time.perf_counter() - t0
-    if mode != "incremental":
-        reprojection, n_models, residual = float(rec.compute_mean_reprojection_error()), 1, float("nan")
     return SparseResult(points=xyz, colors=rgb, registered=int(seen), keypoints=[int(k) for k in keypoints],
                         verified_pairs=verified, mean_track_length=track, pair_inliers=pair_inliers,
-                        matched_pairs=matched, seconds=seconds, cameras=cams.copy() if mode == "known_poses" else est,
-                        mean_reprojection_error=reprojection, models=n_models, centre_residual=residual)
+                        matched_pairs=matched, seconds=seconds, cameras=est,
+                        mean_reprojection_error=reprojection, models=n_models, centre_residual=residual,
+                        mode=mode, fallback=why)
+
+
+def _incremental_model(pycolmap: object, db_path: Path, img_dir: Path, out_dir: Path, options: object,
+                       names: Sequence[str], anchor: NDArray[np.float64], attitudes: NDArray[np.float64],
+                       use_priors: bool, n: int, verified: int, max_residual: float) -> "MergedModels":
+    """COLMAP's incremental structure from motion of the matched images, every model registered on
+    the given poses (:func:`_merge_models`); SparseError when it makes nothing usable."""
+    options.ba_refine_focal_length = False
+    options.ba_refine_extra_params = False
+    options.mapper.abs_pose_refine_focal_length = False
+    # small textured plant, few hundred keypoints a view: relax COLMAP's defaults (100 / 30 / 10)
+    options.mapper.init_min_num_inliers = 30
+    options.mapper.abs_pose_min_num_inliers = 15
+    options.min_model_size = 3
+    if use_priors:
+        options.use_prior_position = True
+        options.use_robust_loss_on_prior_position = True
+    models = pycolmap.incremental_mapping(db_path, img_dir, out_dir, options=options)
+    if not models:
+        raise SparseError(f"incremental mapping registered no image pair: 0 of {n} images "
+                          f"registered ({verified} verified pairs)")
+    # every model registered on the poses given (a flight: the reported ones), attitudes included
+    return _merge_models(pycolmap, list(models.values()), names, anchor, attitudes, max_residual)
+
+
+def _anchored_model(pycolmap: object, db_path: Path, img_dir: Path, out_dir: Path, options: object,
+                    db_cameras: list, db_images: dict, names: Sequence[str], cams: NDArray[np.float64],
+                    anchor: NDArray[np.float64], attitudes: NDArray[np.float64],
+                    max_residual: float) -> "MergedModels":
+    """The reconstruction anchored on the given poses (module docstring, ``mode='anchored'``).
+
+    1. the images at the given poses, tracks triangulated from the verified matches with loose
+       thresholds (:data:`ANCHOR_REPROJECTION_PX`, :data:`ANCHOR_ANGLE_DEG`);
+    2. :data:`ANCHOR_ROUNDS` times: a bundle adjustment of poses and points (Cauchy loss,
+       intrinsics fixed), the model registered back on the given poses (:func:`_register_parts`),
+       tracks triangulated again from scratch with COLMAP's thresholds;
+    3. a last adjustment and registration.
+
+    Why not COLMAP's pose-prior bundle adjuster (pycolmap 4.2 ``create_pose_prior_bundle_adjuster``):
+    its priors are positions only, and on a 4-camera arc it turned every camera 5.5-6.7 degrees
+    (measured 2026-11-27, one_plant arc k=0, 0.09 px mean reprojection error): the attitudes the
+    drones report are what pins a small plan's rotation. The plain adjustment keeps the gauge where
+    the reports put it and the registration (centres and attitudes) restores it: on the same arc
+    the cameras end 0.13-0.31 degrees and 1.5-2.1 cm from the true poses, as the incremental
+    mapper's model does. An image that observes no point is not registered (NaN row)."""
+    loose = pycolmap.IncrementalPipelineOptions(options.todict())
+    for name in ("merge_max_reproj_error", "complete_max_reproj_error"):
+        setattr(loose.triangulation, name, ANCHOR_REPROJECTION_PX)
+    loose.triangulation.create_max_angle_error = loose.triangulation.continue_max_angle_error = ANCHOR_ANGLE_DEG
+    loose.mapper.filter_max_reproj_error = ANCHOR_REPROJECTION_PX
+    ba = pycolmap.BundleAdjustmentOptions()
+    ba.refine_focal_length = ba.refine_principal_point = ba.refine_extra_params = False
+    ba.ceres.loss_function_type = pycolmap.LossFunctionType.CAUCHY
+    ba.print_summary = False
+    rec = _known_pose_model(pycolmap, db_cameras, db_images, names, cams)
+    rec = pycolmap.triangulate_points(rec, db_path, img_dir, out_dir, clear_points=True, options=loose)
+    for _ in range(ANCHOR_ROUNDS):
+        if len(rec.points3D) == 0:
+            break
+        pycolmap.bundle_adjustment(rec, ba)
+        _register_parts(pycolmap, rec, names, anchor, attitudes)
+        rec = pycolmap.triangulate_points(rec, db_path, img_dir, out_dir, clear_points=True, options=options)
+    if len(rec.points3D) == 0:
+        raise SparseError(f"no track triangulates at the reported poses: 0 of {len(names)} images registered (the "
+                          "matched images see no common point from far enough apart)")
+    pycolmap.bundle_adjustment(rec, ba)
+    _register_parts(pycolmap, rec, names, anchor, attitudes)
+    xyz, rgb, track = _read_points(rec)
+    est = np.full((len(names), 6), np.nan)
+    idx = {n: i for i, n in enumerate(names)}
+    for im in rec.images.values():
+        if im.has_pose and im.num_points3D > 0:
+            R_cw = np.asarray(im.cam_from_world().rotation.matrix())
+            est[idx[im.name]] = np.concatenate([np.asarray(im.projection_center()), R_cw[2]])
+    kept = np.isfinite(est[:, 0])
+    residual = float(np.sqrt(np.mean(np.sum((est[kept, :3] - anchor[kept]) ** 2, axis=1))))
+    if not residual <= max_residual:
+        raise SparseError(f"the anchored model's camera centres lie {residual:.2f} m (RMS) from the reported ones "
+                          f"(more than {max_residual:.2f} m)")
+    return MergedModels(xyz, rgb, track, est, int(kept.sum()), float(rec.compute_mean_reprojection_error()), 1,
+                        residual)
+
+
+def _register_parts(pycolmap: object, rec: object, names: Sequence[str], anchor: NDArray[np.float64],
+                    attitudes: NDArray[np.float64]) -> None:
+    """Register each connected part of ``rec`` (images linked by shared points; parts of a field
+    flown by parts share none and each has its own gauge in an adjustment) on its images' given
+    poses, in place: :func:`similarity_from_poses` of the images that observe a point. A part of
+    one image, or whose centres give no scale, stays where it is."""
+    idx = {n: i for i, n in enumerate(names)}
+    parent = {iid: iid for iid, im in rec.images.items() if im.has_pose and im.num_points3D > 0}
+
+    def root(a: int) -> int:
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    for p in rec.points3D.values():
+        ids = [el.image_id for el in p.track.elements if el.image_id in parent]
+        for other in ids[1:]:
+            parent[root(other)] = root(ids[0])
+    parts: dict = {}
+    for iid in parent:
+        parts.setdefault(root(iid), []).append(iid)
+    for members in parts.values():
+        if len(members) < 2:
+            continue
+        ims = [rec.images[i] for i in members]
+        model_c = np.array([np.asarray(im.projection_center()) for im in ims])
+        model_R = np.array([np.asarray(im.cam_from_world().rotation.matrix()) for im in ims])
+        which = [idx[im.name] for im in ims]
+        try:
+            M = similarity_from_poses(model_c, model_R, anchor[which], attitudes[which])
+        except SparseError:
+            continue
+        s = float(np.cbrt(np.linalg.det(M[:, :3])))
+        R, t = M[:, :3] / s, M[:, 3]
+        points = {p3 for im in ims for p3 in (pt.point3D_id for pt in im.points2D if pt.has_point3D())}
+        for pid in points:
+            rec.points3D[pid].xyz = M[:, :3] @ np.asarray(rec.points3D[pid].xyz) + t
+        for im, c, R_cw in zip(ims, model_c, model_R):
+            R_new = R_cw @ R.T
+            im.frame.rig_from_world = pycolmap.Rigid3d(pycolmap.Rotation3d(R_new),
+                                                       (-R_new @ (s * R @ c + t)).reshape(3, 1))
+
 
 
 class MergedModels(NamedTuple):

@@ -23,6 +23,16 @@ attitude 0.5 deg; reported position sigma 0.02 m, attitude 0.5 deg; sensor noise
 :data:`IDEAL` has every figure 0: the planned pose is flown and reported exactly and the image
 is the rendered one, bit for bit.
 
+Ground control (``gcp_markers``, default 4; 0: none, the drones' reports alone): that many
+ArUco markers of ``gcp_size`` m (0.3) lie on the soil around the plants
+(:func:`vp_scene.ground_control.marker_layout`), rendered into the images; the user knows their
+positions as surveyed, each ``gcp_sigma`` m (0.01: an RTK rover on a tripod) off per axis (one
+survey of the field, the same in every realization: :meth:`CaptureModel.lay_markers`). Why by
+default: a plot flown for centimetre-level 3D models is flown with ground control, and without it
+the registration is most of a small plan's error (one_plant, egp plan, realizations 0 and 2: map
+Chamfer x100 3.54 and 5.13 with the reports alone, 1.46 and 1.91 with 4 markers; shape 1.27-1.63;
+measured 2026-11-27, :mod:`vp_recon.gcp`).
+
 Every draw is seeded by ``(seed, realization k, camera i, stream)`` (numpy's SeedSequence
 entropy list), so a capture is reproducible, the same camera in another realization draws
 again, and one drone's capture does not depend on the others (:meth:`CaptureModel.fly_camera`,
@@ -47,8 +57,8 @@ __all__ = ["CAPTURES", "CaptureModel", "IDEAL", "REALISTIC", "Flight"]
 #: The capture kinds: ``realistic`` (the defaults below) and ``ideal`` (no error at all).
 CAPTURES = ("realistic", "ideal")
 
-# streams of a camera's draws (the fourth entry of the seed)
-_HOVER, _REPORT, _SENSOR = 0, 1, 2
+# streams of a camera's draws (the fourth entry of the seed); the markers' survey: (seed, 0, 0, _SURVEY)
+_HOVER, _REPORT, _SENSOR, _SURVEY = 0, 1, 2, 3
 
 
 @dataclass(frozen=True)
@@ -69,6 +79,9 @@ class CaptureModel:
         report_position_sigma, report_attitude_sigma: localization error, per axis.
         sensor_noise: std of the image noise, fraction of full scale.
         seed: seeds every draw with the realization and the camera.
+        gcp_markers: ground markers laid around the plants (0: none; at most 50).
+        gcp_sigma: the markers' survey error, m per axis (> 0).
+        gcp_size: a marker's printed side, m (its code square is half of it).
     """
 
     kind: str = "realistic"
@@ -78,6 +91,9 @@ class CaptureModel:
     report_attitude_sigma: float = 0.5
     sensor_noise: float = 2.0 / 255.0
     seed: int = 0
+    gcp_markers: int = 4
+    gcp_sigma: float = 0.01
+    gcp_size: float = 0.3
 
     _FIGURES = ("hover_position_sigma", "hover_attitude_sigma", "report_position_sigma",
                 "report_attitude_sigma", "sensor_noise")
@@ -107,6 +123,17 @@ class CaptureModel:
             raise ValueError("capture 'ideal' has no error: its figures must all be 0")
         if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
             raise ValueError(f"capture seed must be an integer >= 0, got {self.seed!r}")
+        from .ground_control import MAX_MARKERS
+
+        m = self.gcp_markers
+        if isinstance(m, bool) or not isinstance(m, (int, np.integer)) or not 0 <= m <= MAX_MARKERS:
+            raise ValueError(f"capture gcp_markers must be an integer in [0, {MAX_MARKERS}], got {m!r}")
+        if self.kind == "ideal" and m:
+            raise ValueError("capture 'ideal' has no ground markers: its poses are known exactly")
+        for name, hi in (("gcp_sigma", 1.0), ("gcp_size", 2.0)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and 0 < v <= hi):
+                raise ValueError(f"capture {name} must be a number in (0, {hi:g}] m, got {v!r}")
         return self
 
     @property
@@ -114,8 +141,26 @@ class CaptureModel:
         return self.kind == "ideal"
 
     def to_dict(self) -> dict:
-        """JSON form (recon.json, plan records): kind and every figure."""
+        """JSON form (recon.json, plan records): kind and every figure (records made before the
+        ground markers, 2026-11-27, have no ``gcp_*`` keys: their captures had none)."""
         return {k: (float(v) if k in self._FIGURES else v) for k, v in asdict(self).items()}
+
+    def lay_markers(self, points: ArrayLike) -> tuple[NDArray[np.float64], Any]:
+        """The ground markers of a field whose plants are ``points`` (..., 3) (every realization's):
+        their true centres (M, 3) (where they are rendered) and the
+        :class:`vp_scene.ground_control.GroundControl` the user has (named by marker id, the
+        surveyed centres: ``gcp_sigma`` m off per axis, one survey for every realization);
+        (0, 3) and None without markers."""
+        from .ground_control import GroundControl, marker_layout
+
+        if not self.gcp_markers:
+            return np.zeros((0, 3)), None
+        true = marker_layout(points, int(self.gcp_markers))
+        rng = np.random.default_rng([int(self.seed), 0, 0, _SURVEY])
+        surveyed = true + self.gcp_sigma * rng.standard_normal(true.shape)
+        control = GroundControl(positions={str(i): tuple(float(x) for x in p) for i, p in enumerate(surveyed)},
+                                sigma=float(self.gcp_sigma))
+        return true, control
 
     def _rng(self, k: int, i: int, stream: int) -> np.random.Generator:
         return np.random.default_rng([int(self.seed), int(k), int(i), stream])
@@ -159,6 +204,6 @@ class CaptureModel:
 
 
 #: No error at all: today's (before issue 18) reconstruction of a plan, bit for bit.
-IDEAL = CaptureModel("ideal", 0.0, 0.0, 0.0, 0.0, 0.0)
+IDEAL = CaptureModel("ideal", 0.0, 0.0, 0.0, 0.0, 0.0, gcp_markers=0)
 #: The defaults of an RTK multirotor (module docstring).
 REALISTIC = CaptureModel()
