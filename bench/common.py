@@ -204,7 +204,8 @@ def realization_entry(r) -> dict:
             'completeness': TABLE_SCALE * r.completeness, 'fscore': r.fscore, 'points': int(len(r.points)),
             'images': r.images, 'sparse_models': r.sparse_models, 'source': r.source, 'matching': r.matching,
             'matched_pairs': r.matched_pairs, 'centre_residual': float(r.centre_residual)
-            if math.isfinite(r.centre_residual) else None, 'seconds': r.seconds}
+            if math.isfinite(r.centre_residual) else None, 'sparse_mode': r.sparse_mode,
+            'sparse_fallback': r.sparse_fallback or None, 'control': r.control, 'seconds': r.seconds}
 
 
 def reconstructed(per: list) -> list:

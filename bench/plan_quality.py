@@ -431,8 +431,8 @@ def plan_record(plan: dict, rewards: dict, scenario: str, models: str) -> dict:
            **describe_cameras(np.asarray(plan['cameras']), noisy.points.reshape(-1, 3).mean(axis=0)),
            'realizations': {}}
     for k, r in sorted(plan['recon'].items()):
-        if r.get('error'):
-            rec['realizations'][k] = {'error': r['error']}
+        if r.get('error'):  # the failure and its reason (a record without one says so)
+            rec['realizations'][k] = {'error': r['error'], 'error_msg': r.get('error_msg') or 'no reason recorded'}
             continue
         rec['realizations'][k] = {
             key: (round(100 * r[key], 4) if r.get(key) is not None else None)

@@ -276,6 +276,20 @@ class ReconNode(Node):
                            dense_scale=self._param('dense_scale'), max_cameras=self._param('max_cameras'),
                            capture=capture_model({k: self._param(k) for k in CAPTURE_KEYS})).validate()
 
+    def _ground_control(self, scene: object, config: ReconConfig) -> object:
+        """The fleet's ground control: the ``ground_control`` file (a real field's), else the markers
+        the capture model lays around the scene's plants (what the simulated drones render), None
+        without either. ReconError CAPTURE_MISSING for a file that cannot be read."""
+        from vp_scene.ground_control import GroundControlError, read_gcp_list, read_markers_csv
+
+        path = self._param('ground_control')
+        if not path:
+            return None if config.capture.ideal else config.capture.lay_markers(scene.points)[1]
+        try:
+            return read_gcp_list(path) if Path(path).name.endswith('.txt') else read_markers_csv(path)
+        except GroundControlError as exc:
+            raise ReconError(Score.CAPTURE_MISSING, f'ground_control: {exc}') from None
+
     def on_shutdown(self, timeout: float) -> bool:
         """SIGINT/SIGTERM: the worker abandons its plan at the next stage; nothing to wait for.
         The plan's folder goes with it when nothing was written into it yet (issue 19, item 4:
@@ -733,20 +747,6 @@ class FleetCaptures:
                 K=intr[0][0], realization=int(k)).validate()
         except (ValueError, FlightError) as exc:
             raise ReconError(CAPTURE_MISSING, f'capture {k} from the fleet is unusable: {exc}') from None
-
-    def _ground_control(self, scene: object, config: ReconConfig) -> object:
-        """The fleet's ground control: the ``ground_control`` file (a real field's), else the markers
-        the capture model lays around the scene's plants (what the simulated drones render), None
-        without either. ReconError CAPTURE_MISSING for a file that cannot be read."""
-        from vp_scene.ground_control import GroundControlError, read_gcp_list, read_markers_csv
-
-        path = self._param('ground_control')
-        if not path:
-            return None if config.capture.ideal else config.capture.lay_markers(scene.points)[1]
-        try:
-            return read_gcp_list(path) if Path(path).name.endswith('.txt') else read_markers_csv(path)
-        except GroundControlError as exc:
-            raise ReconError(Score.CAPTURE_MISSING, f'ground_control: {exc}') from None
 
     def now_ns(self) -> int:
         return self._ns(self._node.get_clock().now().to_msg())
