@@ -66,7 +66,7 @@ view: setup
 	@$(ENV) python -m vp_recon.viewer $(RUN) --port $(PORT)
 
 bench: setup
-	@$(ENV) python bench/table1.py $(if $(MODELS),--models $(MODELS))
+	@$(ENV) python -m bench.table1 $(if $(MODELS),--models $(MODELS))
 
 clean:
 	rm -rf build install log

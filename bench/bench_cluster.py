@@ -19,10 +19,11 @@ import time
 from datetime import datetime, timezone
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import table1  # noqa: E402
-from cluster import open_client  # noqa: E402
-from common import ROOT, machine  # noqa: E402
+if not __package__:  # python bench/bench_cluster.py: as python -m bench.bench_cluster (bench/_script.py)
+    import _script  # noqa: F401
+from bench import table1  # noqa: E402
+from bench.cluster import open_client  # noqa: E402
+from bench.common import ROOT, machine  # noqa: E402
 
 
 def task_seconds(plans: dict, recons: dict) -> float:

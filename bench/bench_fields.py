@@ -38,12 +38,13 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
-from common import (ROOT, add_capture, cached, capture_of, capture_tag, chamfer_text, default_models,  # noqa: E402
-                    known_realizations, machine, models_tag, reconstruct_record, reconstructed,
-                    scene, write_json)
-from stats import describe, describe_difference, paired_difference, rank, summary  # noqa: E402
+if not __package__:  # python bench/bench_fields.py: as python -m bench.bench_fields (bench/_script.py)
+    import _script  # noqa: F401
+from bench.cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
+from bench.common import (ROOT, add_capture, cached, capture_of, capture_tag, chamfer_text, default_models,  # noqa: E402
+                          known_realizations, machine, models_tag, reconstruct_record, reconstructed,
+                          scene, write_json)
+from bench.stats import describe, describe_difference, paired_difference, rank, summary  # noqa: E402
 
 #: (field, N) cells: the issue's targets, and N = 16 on the row (planned and reconstructed).
 FIELDS = (("grid_3x3", 8), ("row_12", 12), ("row_12", 16))

@@ -45,9 +45,11 @@ from pathlib import Path
 
 import numpy as np
 
+if not __package__:  # python bench/bench_fleet_transport.py: as python -m bench.bench_fleet_transport (bench/_script.py)
+    import _script  # noqa: F401
+
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / 'results' / 'bench_fleet_transport.json'
-sys.path.insert(0, str(ROOT / 'tools'))
 SCENE = dict(scenario='one_plant', points_per_plant=2000, realizations=2, levels=5, seed=3)
 MACHINE_LOAD = 'benchmark running beside (2 cores shared): noisy'
 
@@ -163,7 +165,7 @@ class Harness:
             ex.spin_once(timeout_sec=0.05)
 
     def start(self, pkg: str, exe: str, params: dict, name: str = None):
-        from node_process import NodeProcess, node_command
+        from tools.node_process import NodeProcess, node_command
 
         proc = NodeProcess(node_command(pkg, exe, params, name=name), self.env,
                            self.logs / f'{name or exe}.log')

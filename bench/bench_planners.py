@@ -26,9 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
-from common import ROOT, SCENARIOS, VARIANTS, default_models, machine, models_tag, plan_cell, plan_path  # noqa: E402
+if not __package__:  # python bench/bench_planners.py: as python -m bench.bench_planners (bench/_script.py)
+    import _script  # noqa: F401
+from bench.cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
+from bench.common import ROOT, SCENARIOS, VARIANTS, default_models, machine, models_tag, plan_cell, plan_path  # noqa: E402
 
 DEFAULT_VARIANTS = ('egp', 'egp-random-init', 'circle', 'arc', 'sa', 'random')
 BASELINES = ('circle', 'arc', 'sa', 'random')

@@ -27,8 +27,6 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-for pkg in ("vp_scene", "vp_planner", "vp_recon"):
-    sys.path.insert(0, str(ROOT / "src" / pkg))
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 
 from vp_scene.build import build_noisy_scene  # noqa: E402

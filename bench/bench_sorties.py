@@ -34,13 +34,14 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
-from stats import rank_key  # noqa: E402
+if not __package__:  # python bench/bench_sorties.py: as python -m bench.bench_sorties (bench/_script.py)
+    import _script  # noqa: F401
+from bench.cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
+from bench.stats import rank_key  # noqa: E402
 from vp_planner.reward_models import DEFAULT_REWARD_MODEL, REWARD_MODELS  # noqa: E402
 from vp_recon.pipeline import MATCHINGS  # noqa: E402
-from common import (ROOT, add_capture, cached, capture_of, capture_tag, chamfer_text, default_models,  # noqa: E402
-                    machine, models_tag, plan_cell, plan_path, reconstruct_record, scene, write_json)
+from bench.common import (ROOT, add_capture, cached, capture_of, capture_tag, chamfer_text, default_models,  # noqa: E402
+                          machine, models_tag, plan_cell, plan_path, reconstruct_record, scene, write_json)
 
 #: scenario -> (N cameras of sortie 1, M cameras of sortie 2).
 SORTIES = {'one_plant': (4, 2), 'three_row': (6, 3), 'six_rect': (6, 3), 'grid_3x3': (8, 4)}

@@ -24,9 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import (ROOT, SCENARIOS, default_models, machine, models_tag, scene,  # noqa: E402
-                    split_realizations, write_json)
+if not __package__:  # python bench/coverage_check.py: as python -m bench.coverage_check (bench/_script.py)
+    import _script  # noqa: F401
+from bench.common import (ROOT, SCENARIOS, default_models, machine, models_tag, scene,  # noqa: E402
+                          split_realizations, write_json)
 
 
 def parse_args(argv=None) -> argparse.Namespace:

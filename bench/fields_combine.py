@@ -26,9 +26,10 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Optional
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_fields import BASELINES  # noqa: E402
-from table1_combine import combine, markdown, read_table  # noqa: E402
+if not __package__:  # python bench/fields_combine.py: as python -m bench.fields_combine (bench/_script.py)
+    import _script  # noqa: F401
+from bench.bench_fields import BASELINES  # noqa: E402
+from bench.table1_combine import combine, markdown, read_table  # noqa: E402
 
 #: what every joined file must agree on (a different value: a different experiment)
 SAME = ('resolution', 'realizations', 'models', 'evaluations_per_part', 'capture')

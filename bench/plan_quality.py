@@ -32,10 +32,11 @@ from typing import Any
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
-from common import (ROOT, SCENARIOS, add_capture, cached, capture_of, capture_tag, default_models,  # noqa: E402
-                    machine, models_tag, scene)
+if not __package__:  # python bench/plan_quality.py: as python -m bench.plan_quality (bench/_script.py)
+    import _script  # noqa: F401
+from bench.cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
+from bench.common import (ROOT, SCENARIOS, add_capture, cached, capture_of, capture_tag, default_models,  # noqa: E402
+                          machine, models_tag, scene)
 
 CACHE = ROOT / 'results' / 'cache' / 'plan_quality'
 #: what a variant's Spearman ranks against: the dense cloud's Chamfer in map (the main figure),

@@ -26,12 +26,13 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
-from common import (ROOT, SCENARIOS, cached, default_models, machine, models_tag, plan_cell,  # noqa: E402
-                    add_capture, capture_of, capture_tag, known_realizations, plan_path, reconstruct_record,
-                    scene)
-from stats import describe, describe_difference, paired_difference, rank, realization_units, summary  # noqa: E402
+if not __package__:  # python bench/table1.py: as python -m bench.table1 (bench/_script.py)
+    import _script  # noqa: F401
+from bench.cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
+from bench.common import (ROOT, SCENARIOS, cached, default_models, machine, models_tag, plan_cell,  # noqa: E402
+                          add_capture, capture_of, capture_tag, known_realizations, plan_path, reconstruct_record,
+                          scene)
+from bench.stats import describe, describe_difference, paired_difference, rank, realization_units, summary  # noqa: E402
 
 #: Table rows: label -> (planner variant of common.VARIANTS, reward model).
 ROWS = {

@@ -19,9 +19,10 @@ import sys
 from datetime import datetime, timezone
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import (ROOT, add_capture, cached, capture_of, capture_tag, chamfer_text, machine,  # noqa: E402
-                    models_tag, reconstruct_record, scene)
+if not __package__:  # python bench/table1_flights.py: as python -m bench.table1_flights (bench/_script.py)
+    import _script  # noqa: F401
+from bench.common import (ROOT, add_capture, cached, capture_of, capture_tag, chamfer_text, machine,  # noqa: E402
+                          models_tag, reconstruct_record, scene)
 
 
 def parse_args(argv=None) -> argparse.Namespace:

@@ -3,13 +3,11 @@ files it writes (the benchmark itself runs for hours; its smoke slice is in the 
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-import bench_sorties  # noqa: E402  (bench/bench_sorties.py)
+from bench import bench_sorties
 
 
 def row(**chamfer) -> dict:
@@ -86,7 +84,7 @@ def test_a_non_default_reward_is_part_of_every_cache_name(tmp_path: Path) -> Non
     """``--reward coverage-graph`` plans and reconstructs again (its own cache files for the plans
     of sortie 1, a-c, d, e and every reconstruction); the default keeps the names written before
     the option existed, and an unknown model is refused."""
-    from common import plan_path
+    from bench.common import plan_path
 
     default = bench_sorties.parse_args(["--models", ""])
     graph = bench_sorties.parse_args(["--models", "", "--reward", "coverage-graph"])
