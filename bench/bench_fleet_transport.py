@@ -47,6 +47,7 @@ import numpy as np
 
 if not __package__:  # python bench/bench_fleet_transport.py: as python -m bench.bench_fleet_transport (bench/_script.py)
     import _script  # noqa: F401
+from bench.common import provenance, write_json  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / 'results' / 'bench_fleet_transport.json'
@@ -399,18 +400,18 @@ def main() -> int:
 
     env = dict(os.environ, PYTHONUNBUFFERED='1')
     if args.mode == 'transport':
-        new = transport(args)
+        new = {**transport(args), **provenance()}
     else:
         key = {'recon': 'recon_node_memory', 'drones': 'drone_processes'}[args.mode]
         fn = recon_memory if args.mode == 'recon' else drone_processes
         new = {key: {**fn(args, env), 'machine_load': MACHINE_LOAD,
-                     'date': time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}}
+                     'date': time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime()), **provenance()}}
     out = json.loads(RESULTS.read_text()) if RESULTS.is_file() else {}
     if args.mode == 'drones':  # one record per image size
         new = {'drone_processes': {**out.get('drone_processes', {}),
                                    f'{args.width}x{args.height}': new['drone_processes']}}
     out.update(new)
-    RESULTS.write_text(json.dumps(out, indent=1) + '\n')
+    write_json(RESULTS, out, indent=1)  # a record per mode, each with its command and commit
     print(json.dumps(new, indent=1))
     return 0
 

@@ -33,7 +33,8 @@ import numpy as np
 if not __package__:  # python bench/bench_recon_speed.py: as python -m bench.bench_recon_speed (bench/_script.py)
     import _script  # noqa: F401
 from bench.stats import paired_interval  # noqa: E402
-from bench.common import ROOT, SCENARIOS, cached, default_models, machine, models_tag, plan_cell, write_json  # noqa: E402
+from bench.common import (ROOT, SCENARIOS, cached, default_models, machine, models_tag, plan_cell,  # noqa: E402
+                          write_report)
 from bench.cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
 
 #: variant -> ReconConfig fields that differ from the default (``full``).
@@ -167,7 +168,7 @@ def main() -> int:
                     c['vs_full'] = paired(cells['full']['chamfer'], c['chamfer'])
                     c['shape_vs_full'] = paired(cells['full']['chamfer_shape'], c['chamfer_shape'])
         result['scenarios'][s] = cells
-    write_json(out / 'bench_recon_speed.json', result)
+    write_report(out / 'bench_recon_speed.json', result)
     text = markdown(result)
     (out / 'bench_recon_speed.md').write_text(text)
     print(text)

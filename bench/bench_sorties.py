@@ -41,7 +41,7 @@ from bench.stats import rank_key  # noqa: E402
 from vp_planner.reward_models import DEFAULT_REWARD_MODEL, REWARD_MODELS  # noqa: E402
 from vp_recon.pipeline import MATCHINGS  # noqa: E402
 from bench.common import (ROOT, add_capture, cached, capture_of, capture_tag, chamfer_text, default_models,  # noqa: E402
-                          machine, models_tag, plan_cell, plan_path, reconstruct_record, scene, write_json)
+                          machine, models_tag, plan_cell, plan_path, reconstruct_record, scene, write_report)
 
 #: scenario -> (N cameras of sortie 1, M cameras of sortie 2).
 SORTIES = {'one_plant': (4, 2), 'three_row': (6, 3), 'six_rect': (6, 3), 'grid_3x3': (8, 4)}
@@ -254,7 +254,7 @@ def write_results(args, out: Path, rows: dict) -> None:
         lines.append(f"| {scenario} | {row['n']} + {row['m']} | {chamfer_text(row['sortie1']['chamfer'])} | "
                      + ' | '.join(cells) + f' | {verdict(row)} |')
     (out / 'bench_sorties.md').write_text('\n'.join(lines) + '\n')
-    write_json(out / 'bench_sorties.json', {'args': vars(args), 'machine': machine(), 'rows': rows})
+    write_report(out / 'bench_sorties.json', {'args': vars(args), 'machine': machine(), 'rows': rows})
 
 
 def main(argv=None) -> int:

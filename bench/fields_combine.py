@@ -20,7 +20,6 @@ Writes ``fields_combined.md`` and ``fields_combined.json`` in ``--out``.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from datetime import datetime, timezone
 from pathlib import Path
@@ -29,6 +28,7 @@ from typing import Optional
 if not __package__:  # python bench/fields_combine.py: as python -m bench.fields_combine (bench/_script.py)
     import _script  # noqa: F401
 from bench.bench_fields import BASELINES  # noqa: E402
+from bench.common import write_report  # noqa: E402
 from bench.table1_combine import combine, markdown, read_table  # noqa: E402
 
 #: what every joined file must agree on (a different value: a different experiment)
@@ -79,7 +79,7 @@ def main(argv=None) -> int:
                f'{meta["realizations"]} wind realizations, egp {meta["evaluations_per_part"]} evaluations a part, '
                f'plants {meta["models"]}; columns FIELD:N.')
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / 'fields_combined.json').write_text(json.dumps(table, indent=2))
+    write_report(args.out / 'fields_combined.json', table)
     (args.out / 'fields_combined.md').write_text(markdown(table, meta, args.tables, 'Fields', setting))
     print(f'wrote {args.out / "fields_combined.md"}')
     return 0

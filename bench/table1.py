@@ -31,7 +31,7 @@ if not __package__:  # python bench/table1.py: as python -m bench.table1 (bench/
 from bench.cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
 from bench.common import (ROOT, SCENARIOS, cached, default_models, machine, models_tag, plan_cell,  # noqa: E402
                           add_capture, capture_of, capture_tag, known_realizations, plan_path, reconstruct_record,
-                          scene)
+                          scene, write_report)
 from bench.stats import describe, describe_difference, paired_difference, rank, realization_units, summary  # noqa: E402
 
 #: Table rows: label -> (planner variant of common.VARIANTS, reward model).
@@ -298,7 +298,7 @@ def write_results(args, out: Path, plans, recons) -> None:
         lines.append('| ' + ' | '.join(cells) + ' |')
     out.mkdir(parents=True, exist_ok=True)
     (out / 'table1.md').write_text('\n'.join(lines) + '\n')
-    (out / 'table1.json').write_text(json.dumps(table, indent=2))
+    write_report(out / 'table1.json', table)
 
     fig, axes = plt.subplots(1, len(args.scenarios), figsize=(5 * len(args.scenarios), 4), squeeze=False)
     for ax, scenario in zip(axes[0], args.scenarios):
