@@ -12,7 +12,9 @@ while planning its cells again gives the same cameras. Two checks:
   plan reproduces, the largest camera difference, the table's reward and today's, and the commit
   and date of the check (a later check of a cell replaces the earlier one). ``python -m bench.docs``
   marks a table stale in docs/results.md while any of its checked plans does not reproduce.
-  An egp plan takes 10-60 s: run it beside other work with ``nice`` and ``OMP_NUM_THREADS=1``.
+  An egp plan takes 10-60 s: run it beside other work with ``nice`` and ``OMP_NUM_THREADS=1``, and
+  with ``--out`` outside the checkout (the file is tracked: writing it would mark the commit of the
+  later cells ``-dirty``), then copy it in.
 - ``python -m bench.reference_plans --pins`` writes ``tests/data/reference_plans.json``: the
   cameras of :data:`PINS`, small plans (seconds each); ``--verify-pins`` plans them again and
   compares them bit for bit (``np.array_equal``), one JSON line a pin, exit 1 when one moved:
@@ -32,7 +34,7 @@ import tempfile
 import time
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Optional
+from typing import Iterator, Optional
 
 import numpy as np
 
@@ -89,12 +91,11 @@ def compare(reference, now) -> dict:
             'max_abs_diff': float(np.max(np.abs(a - b))) if same_shape and a.size else None}
 
 
-def check_table(path: Path, scenarios=None, rows=None, log=print) -> dict:
-    """cell -> check record of the seed-0 plans of one Table I file (cells without cameras, or
-    whose plants are not on this machine, are left out, with a line saying so)."""
+def check_table(path: Path, scenarios=None, rows=None, log=print) -> Iterator[tuple[str, dict]]:
+    """(cell, check record) of the seed-0 plans of one Table I file, one cell at a time (cells
+    without cameras, or whose plants are not on this machine, are left out, with a line saying so)."""
     table = json.loads(path.read_text())
     models = models_folder(table.get('models', ''))
-    out = {}
     for name, cell in table.get('cells', {}).items():
         scenario, row = name.split('/', 1)
         if (scenarios and scenario not in scenarios) or (rows and row not in rows) or not cell.get('cameras'):
@@ -111,8 +112,7 @@ def check_table(path: Path, scenarios=None, rows=None, log=print) -> dict:
                'torch_cpu_capability': cpu_capability()}
         log(f'{path}: {name}: {"reproduces" if rec["reproduces"] else "DIFFERS"} (reward {rec["reward_table"]} '
             f'-> {rec["reward_now"]}, max |d camera| {rec["max_abs_diff"]}, {rec["seconds"]} s)')
-        out[name] = rec
-    return out
+        yield name, rec
 
 
 def load(path: Path = RESULTS) -> dict:
@@ -197,7 +197,7 @@ def main(argv=None) -> int:
     for path in args.tables:
         key = str(path.resolve().relative_to(ROOT)) if path.resolve().is_relative_to(ROOT) else str(path)
         entry = checks['tables'].setdefault(key, {'cells': {}})
-        for name, rec in check_table(path, args.scenarios, args.rows).items():
+        for name, rec in check_table(path, args.scenarios, args.rows):
             entry['cells'][name] = rec
             write_json(args.out, {**checks, **provenance()}, indent=1)  # after every cell: a long run keeps its progress
     return 0

@@ -14,7 +14,7 @@ import pytest
 from bench import docs, reference_plans
 from bench.common import ROOT, git_commit, write_json, write_report
 
-RESULTS = sorted((ROOT / "results").rglob("*.json"))
+RESULTS = sorted(p for p in (ROOT / "results").rglob("*.json") if "cache" not in p.relative_to(ROOT).parts)
 
 
 def _strict(text: str):
