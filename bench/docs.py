@@ -249,8 +249,8 @@ def sorties_section(rel: str, title: str) -> str:
     lines = [f'## {title}', '',
              f'Plants {Path(str(a.get("models"))).name or "procedural"}, egp {a.get("evals")} evaluations, seed '
              f'{a.get("seed")}, {a.get("realizations")} realizations, {a.get("width")} x {a.get("height")}, capture '
-             f'{a.get("capture")}, matching {a.get("matching")}, reward {a.get("reward")}. Chamfer x100 after sortie 2, '
-             f'{STD}. a: one sortie of N + M (egp); b: sortie 2 egp ignoring sortie 1; c: circle / arc of M; d: egp '
+             f'{a.get("capture")}, matching {a.get("matching")}, reward {a.get("reward") or "coverage (default)"}. '
+             f'Chamfer x100 after sortie 2, {STD}. a: one sortie of N + M (egp); b: sortie 2 egp ignoring sortie 1; c: circle / arc of M; d: egp '
              'given the flown cameras; e: egp given the flown cameras and their reconstruction. Verdict: the target '
              'is that e beats b and both c and comes within 5 % of a.', '']
     lines += table(['scenario', 'N + M', 'sortie 1'] + list(CASES) + ['verdict'], body)
@@ -505,26 +505,26 @@ IDEAL = [
     ('Fields, ideal capture', 'results/ideal/bench_fields.json', fields_section),
     ('Plan-quality study, ideal capture', 'results/ideal/plan_quality.json', plan_quality_section),
 ]
-#: superseded runs: (title, file, renderer, what supersedes it); docs/history.md tells their story
+#: superseded runs: (title, file, renderer, what became of it); docs/history.md tells their story
 SUPERSEDED = [
     ('Fields, realistic capture, 2 realizations (2026-11-25)', 'results/bench_fields.json', fields_section,
-     'the fields with 3 seeds x 5 realizations'),
+     'Superseded by the fields with 3 seeds x 5 realizations.'),
     ('Fields, grid rows rerun with every SfM model registered', 'results/rerun/fields_merged_models_grid/bench_fields.json',
-     fields_section, 'the fields with 3 seeds x 5 realizations'),
+     fields_section, 'Superseded by the fields with 3 seeds x 5 realizations.'),
     ('Fields, row rows rerun with every SfM model registered', 'results/rerun/fields_merged_models_row/bench_fields.json',
-     fields_section, 'the fields with 3 seeds x 5 realizations'),
+     fields_section, 'Superseded by the fields with 3 seeds x 5 realizations.'),
     ('Table I plans flown over the blue screen', 'results/flights_blue_screen/table1_flights.json', flights_section,
-     'Table I under the realistic capture (over the textured soil)'),
+     'Superseded by Table I under the realistic capture (over the textured soil).'),
     ('Second sortie, three_row and six_rect with every SfM model registered',
-     'results/rerun/sorties_merged_models/bench_sorties.json', sorties_section, 'the second sortie at a later commit'),
+     'results/rerun/sorties_merged_models/bench_sorties.json', sorties_section, 'Superseded by the second sortie at a later commit.'),
     ('Second sortie, exhaustive matching', 'results/rerun/sorties_exhaustive/bench_sorties.json', sorties_section,
-     'the second sortie with pose-chosen pairs'),
+     'Superseded by the second sortie with pose-chosen pairs (the default).'),
     ('Second sortie, one_plant under coverage-graph', 'results/rerun/sorties_graph/bench_sorties.json', sorties_section,
-     'not rerun at the later commit'),
+     'The only run under coverage-graph; not rerun at the commit of the current second sortie.'),
     ('Second sortie, grid_3x3', 'results/rerun/sorties_grid_3x3/bench_sorties.json', sorties_section,
-     'its records, reused, are part of the second sortie above'),
+     'Its records, at the same code, were reused by the current second sortie.'),
     ('Planners, one_plant under coverage, rerun', 'results/rerun/bench_planners_one_plant_coverage.json',
-     planners_section, 'a reproduction of the planners table'),
+     planners_section, 'A reproduction of the planners table\'s one_plant rows under coverage.'),
 ]
 
 
@@ -551,7 +551,7 @@ def render() -> str:
     for title, rel, fn, by in SUPERSEDED:
         text = fn(rel, title)
         first, rest = text.split('\n', 1)
-        body.append(f'{first}\n\nSuperseded by {by}.\n{rest}')
+        body.append(f'{first}\n\n{by}\n{rest}')
     return '\n'.join(head) + '\n\n' + '\n'.join(body).rstrip() + '\n'
 
 
