@@ -250,8 +250,8 @@ def sorties_section(rel: str, title: str) -> str:
              f'Plants {Path(str(a.get("models"))).name or "procedural"}, egp {a.get("evals")} evaluations, seed '
              f'{a.get("seed")}, {a.get("realizations")} realizations, {a.get("width")} x {a.get("height")}, capture '
              f'{a.get("capture")}, matching {a.get("matching")}, reward {a.get("reward") or "coverage (default)"}. '
-             f'Chamfer x100 after sortie 2, {STD}. a: one sortie of N + M (egp); b: sortie 2 egp ignoring sortie 1; c: circle / arc of M; d: egp '
-             'given the flown cameras; e: egp given the flown cameras and their reconstruction. Verdict: the target '
+             f'Chamfer x100 after sortie 2, {STD}. a: one sortie of N + M (egp); b: sortie 2 egp ignoring sortie 1; '
+             'c: circle / arc of M; d: egp given the flown cameras; e: egp given the flown cameras and their reconstruction. Verdict: the target '
              'is that e beats b and both c and comes within 5 % of a.', '']
     lines += table(['scenario', 'N + M', 'sortie 1'] + list(CASES) + ['verdict'], body)
     return '\n'.join(lines) + '\n\n' + source(rel, data) + '\n'
