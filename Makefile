@@ -38,9 +38,9 @@ PORT     ?= 8080
 
 ENV := . .venv/bin/activate && . install/setup.bash &&
 
-.PHONY: help setup test run plan recon score view bench clean
+.PHONY: help setup test run plan recon score view bench docs clean
 help:
-	@echo "make setup | test | run | plan | recon | score | view | bench | clean   (see README.md)"
+	@echo "make setup | test | run | plan | recon | score | view | bench | docs | clean   (see README.md)"
 
 setup:
 	@tools/setup.sh
@@ -70,7 +70,11 @@ view: setup
 	@$(ENV) python -m vp_recon.viewer $(RUN) --port $(PORT)
 
 bench: setup
-	@$(ENV) python bench/table1.py $(if $(MODELS),--models $(MODELS))
+	@$(ENV) python -m bench.table1 $(if $(MODELS),--models $(MODELS))
+
+# docs/results.md from the result files under results/ (README "Development"); never edited by hand
+docs: setup
+	@$(ENV) python -m bench.docs
 
 clean:
 	rm -rf build install log

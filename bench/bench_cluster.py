@@ -19,10 +19,11 @@ import time
 from datetime import datetime, timezone
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import table1  # noqa: E402
-from cluster import open_client  # noqa: E402
-from common import ROOT, machine  # noqa: E402
+if not __package__:  # python bench/bench_cluster.py: as python -m bench.bench_cluster (bench/_script.py)
+    import _script  # noqa: F401
+from bench import table1  # noqa: E402
+from bench.cluster import open_client  # noqa: E402
+from bench.common import ROOT, machine, write_report  # noqa: E402
 
 
 def task_seconds(plans: dict, recons: dict) -> float:
@@ -107,7 +108,7 @@ def main(argv=None) -> int:
               'from one process history to another, also in one process, see the README).']
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / 'bench_cluster.json').write_text(json.dumps(report, indent=1))
+    write_report(out / 'bench_cluster.json', report)
     (out / 'bench_cluster.md').write_text('\n'.join(lines) + '\n')
     print('\n'.join(lines))
     return 0 if report['same_plans'] else 1

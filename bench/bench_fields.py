@@ -37,12 +37,13 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
-from common import (ROOT, VARIANTS, add_capture, baselines, cached, capture_of, capture_tag,  # noqa: E402
-                    chamfer_text, default_models, known_realizations, machine, models_tag, reconstruct_record,
-                    reconstructed, scene, variant_request, variants_of, write_json)
-from stats import describe, describe_difference, paired_difference, rank, summary  # noqa: E402
+if not __package__:  # python bench/bench_fields.py: as python -m bench.bench_fields (bench/_script.py)
+    import _script  # noqa: F401
+from bench.cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
+from bench.common import (ROOT, VARIANTS, add_capture, baselines, cached, capture_of, capture_tag,  # noqa: E402
+                          chamfer_text, default_models, known_realizations, machine, models_tag, reconstruct_record,
+                          reconstructed, scene, variant_request, variants_of, write_json, write_report)
+from bench.stats import describe, describe_difference, paired_difference, rank, summary  # noqa: E402
 
 #: (field, N) cells: the issue's targets, and N = 16 on the row (planned and reconstructed).
 FIELDS = (("grid_3x3", 8), ("row_12", 12), ("row_12", 16))
@@ -350,7 +351,7 @@ def write_results(args, out: Path, cells, plans, recons, subsampling) -> None:
                          f"{v['ms_per_plan']:.1f} |")
     out.mkdir(parents=True, exist_ok=True)
     (out / "bench_fields.md").write_text("\n".join(lines) + "\n")
-    (out / "bench_fields.json").write_text(json.dumps(result, indent=1))
+    write_report(out / "bench_fields.json", result)
     print("\n".join(lines))
     print(f"wrote {out / 'bench_fields.md'} and {out / 'bench_fields.json'}")
 

@@ -45,9 +45,12 @@ from pathlib import Path
 
 import numpy as np
 
+if not __package__:  # python bench/bench_fleet_transport.py: as python -m bench.bench_fleet_transport (bench/_script.py)
+    import _script  # noqa: F401
+from bench.common import provenance, write_json  # noqa: E402
+
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / 'results' / 'bench_fleet_transport.json'
-sys.path.insert(0, str(ROOT / 'tools'))
 SCENE = dict(scenario='one_plant', points_per_plant=2000, realizations=2, levels=5, seed=3)
 MACHINE_LOAD = 'benchmark running beside (2 cores shared): noisy'
 
@@ -163,7 +166,7 @@ class Harness:
             ex.spin_once(timeout_sec=0.05)
 
     def start(self, pkg: str, exe: str, params: dict, name: str = None):
-        from node_process import NodeProcess, node_command
+        from tools.node_process import NodeProcess, node_command
 
         proc = NodeProcess(node_command(pkg, exe, params, name=name), self.env,
                            self.logs / f'{name or exe}.log')
@@ -399,18 +402,18 @@ def main() -> int:
 
     env = dict(os.environ, PYTHONUNBUFFERED='1')
     if args.mode == 'transport':
-        new = transport(args)
+        new = {**transport(args), **provenance()}
     else:
         key = {'recon': 'recon_node_memory', 'drones': 'drone_processes'}[args.mode]
         fn = recon_memory if args.mode == 'recon' else drone_processes
         new = {key: {**fn(args, env), 'machine_load': MACHINE_LOAD,
-                     'date': time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}}
+                     'date': time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime()), **provenance()}}
     out = json.loads(RESULTS.read_text()) if RESULTS.is_file() else {}
     if args.mode == 'drones':  # one record per image size
         new = {'drone_processes': {**out.get('drone_processes', {}),
                                    f'{args.width}x{args.height}': new['drone_processes']}}
     out.update(new)
-    RESULTS.write_text(json.dumps(out, indent=1) + '\n')
+    write_json(RESULTS, out, indent=1)  # a record per mode, each with its command and commit
     print(json.dumps(new, indent=1))
     return 0
 

@@ -25,10 +25,10 @@ from pathlib import Path
 
 import numpy as np
 
-BENCH = Path(__file__).resolve().parent
-sys.path.insert(0, str(BENCH))
-from stats import paired_interval  # noqa: E402
-from common import ROOT, machine, write_json  # noqa: E402
+if not __package__:  # python bench/bench_make_run.py: as python -m bench.bench_make_run (bench/_script.py)
+    import _script  # noqa: F401
+from bench.stats import paired_interval  # noqa: E402
+from bench.common import ROOT, machine, write_report  # noqa: E402
 
 #: variant -> tools/run_suite.py reconstruction options
 VARIANTS = {
@@ -110,7 +110,7 @@ def main() -> int:
     result = {'machine': machine(), 'date': time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime()), 'target_s': 120.0,
               'variants': runs}
     out = Path(args.out)
-    write_json(out / 'bench_make_run.json', result)
+    write_report(out / 'bench_make_run.json', result)
     text = markdown(result)
     (out / 'bench_make_run.md').write_text(text)
     print(text)

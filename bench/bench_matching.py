@@ -30,11 +30,11 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-for _p in ("bench", "src/vp_scene", "src/vp_planner", "src/vp_recon"):
-    sys.path.insert(0, str(ROOT / _p))
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 
-from common import default_models, machine  # noqa: E402
+if not __package__:  # python bench/bench_matching.py: as python -m bench.bench_matching (bench/_script.py)
+    import _script  # noqa: F401
+from bench.common import default_models, machine, write_report  # noqa: E402
 from vp_planner.patterns import ring  # noqa: E402
 from vp_recon.meshing import scene_meshes  # noqa: E402
 from vp_recon.pairs import in_view, pair_geometry, sample_points  # noqa: E402
@@ -142,10 +142,7 @@ def main() -> int:
     if out["threshold"]:
         print("\nthreshold (arc on one side, full pipeline, 1000x750)\n%s" % table(out["threshold"]))
     path = Path(args.out)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(out, indent=1))
-    tmp.replace(path)
+    write_report(path, out)
     print(f"-> {path}")
     return 0
 

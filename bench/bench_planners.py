@@ -19,17 +19,17 @@ Writes ``results/bench_planners.json`` and ``results/bench_planners.md``.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
-from common import (ROOT, SCENARIOS, VARIANTS, baselines, default_models, machine, models_tag, plan_cell,  # noqa: E402
-                    plan_path, variants_of)
+if not __package__:  # python bench/bench_planners.py: as python -m bench.bench_planners (bench/_script.py)
+    import _script  # noqa: F401
+from bench.cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
+from bench.common import (ROOT, SCENARIOS, VARIANTS, baselines, default_models, machine, models_tag,  # noqa: E402
+                          plan_cell, plan_path, variants_of, write_report)
 
 
 def main(argv=None) -> int:
@@ -102,7 +102,7 @@ def main(argv=None) -> int:
                 verdict.append(f'{scenario}: egp {"above every baseline" if not beaten else "not above " + ", ".join(beaten)}')
             lines += [f'Acceptance (egp mean above {", ".join(baselines(args.variants))}): ' + '; '.join(verdict), '']
     out.mkdir(parents=True, exist_ok=True)
-    (out / 'bench_planners.json').write_text(json.dumps(report, indent=1))
+    write_report(out / 'bench_planners.json', report)
     (out / 'bench_planners.md').write_text('\n'.join(lines) + '\n')
     print('\n'.join(lines))
     print(f'({time.time() - t0:.0f} s) wrote {out / "bench_planners.json"}, {out / "bench_planners.md"}')

@@ -27,10 +27,11 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-for pkg in ("vp_scene", "vp_planner", "vp_recon"):
-    sys.path.insert(0, str(ROOT / "src" / pkg))
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 
+if not __package__:  # python bench/bench_recon.py: as python -m bench.bench_recon (bench/_script.py)
+    import _script  # noqa: F401
+from bench.common import write_report  # noqa: E402
 from vp_scene.build import build_noisy_scene  # noqa: E402
 from vp_scene.capture import IDEAL, REALISTIC  # noqa: E402
 
@@ -133,9 +134,7 @@ def main() -> int:
     out["scenarios"] = scen
     text = json.dumps(out, indent=1)
     print(text)
-    path = Path(a.out)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(text + "\n")
+    write_report(Path(a.out), out)
     return 0
 
 

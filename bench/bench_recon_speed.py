@@ -30,11 +30,12 @@ from pathlib import Path
 
 import numpy as np
 
-BENCH = Path(__file__).resolve().parent
-sys.path.insert(0, str(BENCH))
-from stats import paired_interval  # noqa: E402
-from common import ROOT, SCENARIOS, cached, default_models, machine, models_tag, plan_cell, write_json  # noqa: E402
-from cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
+if not __package__:  # python bench/bench_recon_speed.py: as python -m bench.bench_recon_speed (bench/_script.py)
+    import _script  # noqa: F401
+from bench.stats import paired_interval  # noqa: E402
+from bench.common import (ROOT, SCENARIOS, cached, default_models, machine, models_tag, plan_cell,  # noqa: E402
+                          write_report)
+from bench.cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
 
 #: variant -> ReconConfig fields that differ from the default (``full``).
 VARIANTS = {
@@ -55,7 +56,7 @@ def recon_path(cache: Path, scenario: str, variant: str, k: int, args) -> Path:
 
 def recon_cell(cache: Path, out: Path, scenario: str, variant: str, k: int, cameras: list, args) -> dict:
     """Realization ``k`` of ``scenario`` seen by ``cameras``, reconstructed under ``variant``; cached."""
-    from common import reconstruct_record, scene
+    from bench.common import reconstruct_record, scene
     from vp_recon.pipeline import ReconConfig
 
     path = recon_path(cache, scenario, variant, k, args)
@@ -169,7 +170,7 @@ def main() -> int:
                     c['vs_full'] = paired(cells['full']['chamfer'], c['chamfer'])
                     c['shape_vs_full'] = paired(cells['full']['chamfer_shape'], c['chamfer_shape'])
         result['scenarios'][s] = cells
-    write_json(out / 'bench_recon_speed.json', result)
+    write_report(out / 'bench_recon_speed.json', result)
     text = markdown(result)
     (out / 'bench_recon_speed.md').write_text(text)
     print(text)

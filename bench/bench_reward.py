@@ -21,6 +21,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
+if not __package__:  # python bench/bench_reward.py: as python -m bench.bench_reward (bench/_script.py)
+    import _script  # noqa: F401
+from bench.common import write_report  # noqa: E402
 from vp_planner.reward import noisy_reward, prepare_points
 from vp_planner.reward_models import make_reward
 from vp_planner.space import ViewSpace
@@ -109,8 +112,7 @@ def main() -> int:
                                     "batch_ms_per_plan": round(many / min(args.batch, 200) * 1e3, 3)}
     json.dump(result, sys.stdout, indent=1)
     print()
-    (ROOT / "results").mkdir(exist_ok=True)
-    (ROOT / "results" / "bench_reward.json").write_text(json.dumps(result, indent=1))
+    write_report(ROOT / "results" / "bench_reward.json", result)
     return 0
 
 

@@ -34,15 +34,16 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
-from stats import rank_key  # noqa: E402
+if not __package__:  # python bench/bench_sorties.py: as python -m bench.bench_sorties (bench/_script.py)
+    import _script  # noqa: F401
+from bench.cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
+from bench.stats import rank_key  # noqa: E402
 from vp_planner.reward_models import (DEFAULT_RECONSTRUCTED_WEIGHT, DEFAULT_REWARD_MODEL, DEFAULT_TAU,  # noqa: E402
                                       REWARD_MODELS)
 from vp_recon.pipeline import MATCHINGS  # noqa: E402
-from common import (ROOT, add_capture, baselines, cached, capture_of, capture_tag, chamfer_text,  # noqa: E402
-                    default_models, machine, models_tag, plan_cell, plan_path, reconstruct_record, scene,
-                    variant_request, variants_of, write_json)
+from bench.common import (ROOT, add_capture, baselines, cached, capture_of, capture_tag, chamfer_text,  # noqa: E402
+                          default_models, machine, models_tag, plan_cell, plan_path, reconstruct_record, scene,
+                          variant_request, variants_of, write_report)
 
 #: scenario -> (N cameras of sortie 1, M cameras of sortie 2).
 SORTIES = {'one_plant': (4, 2), 'three_row': (6, 3), 'six_rect': (6, 3), 'grid_3x3': (8, 4)}
@@ -263,7 +264,7 @@ def write_results(args, out: Path, rows: dict) -> None:
         lines.append(f"| {scenario} | {row['n']} + {row['m']} | {chamfer_text(row['sortie1']['chamfer'])} | "
                      + ' | '.join(cells) + f' | {verdict(row)} |')
     (out / 'bench_sorties.md').write_text('\n'.join(lines) + '\n')
-    write_json(out / 'bench_sorties.json', {'args': vars(args), 'machine': machine(), 'rows': rows})
+    write_report(out / 'bench_sorties.json', {'args': vars(args), 'machine': machine(), 'rows': rows})
 
 
 def main(argv=None) -> int:

@@ -31,9 +31,10 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from browser import CHROMIUM, headless_chromium, wait_page, wait_text  # noqa: E402
-from common import ROOT, machine, write_json  # noqa: E402
+if not __package__:  # python bench/bench_viewer.py: as python -m bench.bench_viewer (bench/_script.py)
+    import _script  # noqa: F401
+from bench.browser import CHROMIUM, headless_chromium, wait_page, wait_text  # noqa: E402
+from bench.common import ROOT, machine, write_report  # noqa: E402
 
 #: Counts requestAnimationFrame callbacks for ``seconds`` and returns the intervals (ms).
 FRAME_PROBE = """
@@ -151,7 +152,7 @@ def main(argv=None) -> int:
               'scene_points': int(len(data[0])), 'cameras': args.cameras, 'reconstruction_points': args.points,
               'failed': failed, 'runs': runs}
     out = Path(args.out)
-    write_json(out / 'bench_viewer.json', result)
+    write_report(out / 'bench_viewer.json', result)
     lines = [f'# Viewer under load, measured {stamp} ({machine()})', '',
              f'{args.cameras} frustums, scene {len(data[0])} points (6 plants x K realizations), reconstruction '
              f'{args.points} points; headless chromium with software WebGL (no GPU: a lower bound). '

@@ -17,8 +17,8 @@ a plain JSON record, usually through ``common.cached``) and hands it to :func:`r
 OMP/MKL/OPENBLAS thread counts of 1 (Dask's ``distributed.nanny.pre-spawn-environ``, set here
 explicitly, plus torch's own count through :class:`OneThread`), so N workers never oversubscribe
 N cores. A worker of a remote cluster must import the suite (``install/setup.bash``) and this
-folder (``PYTHONPATH=<repo>/bench``); the client writes every record into its own results
-cache (workers need not share its disk; a reconstruction's clouds and images stay on the
+package (``PYTHONPATH=<repo>``, the repository root); the client writes every record into its
+own results cache (workers need not share its disk; a reconstruction's clouds and images stay on the
 worker that made them), see the README, "Running the benchmarks on a cluster".
 """
 from __future__ import annotations
@@ -32,7 +32,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Hashable, Iterator, Optional
 
-BENCH = Path(__file__).resolve().parent
+from bench.common import ROOT, write_json
+from vp_scene.cluster import ONE_THREAD_ENV, OneThread  # noqa: F401  (the suite's one home of the engine)
+from vp_scene.cluster import TlsFiles, add_tls_args, check_cluster_args
+from vp_scene.cluster import open_client as _open_client
+
+
 @dataclass
 class Task:
     """One unit of a benchmark: ``fn(*args)`` on a worker, its record under ``key``.
@@ -55,16 +60,10 @@ def add_cluster_args(ap: argparse.ArgumentParser) -> None:
     add_tls_args(ap)
 
 
-sys.path.insert(0, str(BENCH))
-from common import write_json  # noqa: E402
-from vp_scene.cluster import ONE_THREAD_ENV, OneThread  # noqa: E402,F401  (the suite's one home of the engine)
-from vp_scene.cluster import TlsFiles, add_tls_args, check_cluster_args  # noqa: E402
-from vp_scene.cluster import open_client as _open_client  # noqa: E402
-
-
 def open_client(scheduler: Optional[str] = None, workers: int = 1, quiet: bool = False, tls: TlsFiles = TlsFiles()):
-    """:func:`vp_scene.cluster.open_client` whose local workers also import this folder."""
-    return _open_client(scheduler, workers, quiet, pythonpath=(str(BENCH),), tls=tls)
+    """:func:`vp_scene.cluster.open_client` whose local workers also import the ``bench`` package
+    (the repository root on their ``PYTHONPATH``)."""
+    return _open_client(scheduler, workers, quiet, pythonpath=(str(ROOT),), tls=tls)
 
 
 def cluster_client(args: argparse.Namespace, quiet: bool = False):

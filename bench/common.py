@@ -5,6 +5,8 @@ import json
 import math
 import os
 import platform
+import subprocess
+import sys
 import threading
 from dataclasses import dataclass
 from pathlib import Path
@@ -41,13 +43,65 @@ def cached(path: Path, compute: Callable[[], Any]) -> Any:
     return value
 
 
-def write_json(path: Path, value: Any) -> None:
+def json_safe(value: Any) -> Any:
+    """``value`` with every non-finite float (NaN, +-inf: a mean of nothing, a std of one value, an
+    interval of one pair) as None: JSON has no NaN (RFC 8259), and a ``NaN`` literal is a file that
+    strict readers refuse. Readers take None as "no value" (``bench.stats``)."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    return value
+
+
+def write_json(path: Path, value: Any, indent: Optional[int] = None) -> None:
     """Write ``value`` to ``path`` atomically (a temporary file per writer, then ``os.replace``:
-    several cluster workers and the client write the cache concurrently)."""
+    several cluster workers and the client write the cache concurrently), non-finite floats as
+    null (:func:`json_safe`; ``allow_nan=False``: no NaN literal ever reaches a file). The one
+    place the benchmarks write JSON (records through it, reports through :func:`write_report`)."""
+    text = json.dumps(json_safe(value), indent=indent, allow_nan=False)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f'.{path.name}.{os.getpid()}.{threading.get_ident()}.tmp')
-    tmp.write_text(json.dumps(value))
+    tmp.write_text(text + ('\n' if indent is not None else ''))
     os.replace(tmp, path)
+
+
+def git_commit() -> Optional[str]:
+    """The commit the working tree is at (12 hex digits), ``-dirty`` when tracked files differ
+    from it; None outside a git checkout."""
+    def git(*args: str) -> str:
+        return subprocess.run(['git', *args], cwd=ROOT, capture_output=True, text=True, timeout=30,
+                              check=True).stdout.strip()
+    try:
+        head = git('rev-parse', '--short=12', 'HEAD')
+        dirty = git('status', '--porcelain', '--untracked-files=no')
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return head + ('-dirty' if dirty else '')
+
+
+def cpu_capability() -> Optional[str]:
+    """torch's CPU kernels in this process (``bench.pin_cpu_kernels``), None before torch is imported."""
+    torch = sys.modules.get('torch')
+    return torch.backends.cpu.get_cpu_capability() if torch is not None else None
+
+
+def provenance() -> dict:
+    """``command`` (the argv of this run, as ``python -m bench.<name> ...`` for a benchmark),
+    ``commit`` (:func:`git_commit`) and ``torch_cpu_capability`` (:func:`cpu_capability`): what
+    docs/results.md prints under every table."""
+    argv = list(sys.argv)
+    script = Path(argv[0]) if argv else Path()
+    if script.suffix == '.py' and script.resolve().parent == ROOT / 'bench':
+        argv = ['python', '-m', f'bench.{script.stem}'] + argv[1:]
+    return {'command': argv, 'commit': git_commit(), 'torch_cpu_capability': cpu_capability()}
+
+
+def write_report(path: Path, value: dict, indent: int = 1) -> None:
+    """A benchmark's result file (``results/...json``): ``value`` with its :func:`provenance`."""
+    write_json(path, {**value, **provenance()}, indent)
 
 
 _SCENES: dict = {}
@@ -152,7 +206,8 @@ def plan_cell(cache: Path, scenario: str, variant: str, seed: int, evals: int = 
         res = plan_views(request, noisy.points)
         return {'cameras': np.asarray(res.cameras).tolist(), 'reward': float(res.reward), 'reward_model': reward,
                 'trace': [float(x) for x in res.trace], 'seconds': float(res.seconds),
-                'ensemble_weights': res.ensemble_weights, 'initial_best': res.initial_best, 'steps': res.steps}
+                'ensemble_weights': res.ensemble_weights, 'initial_best': res.initial_best, 'steps': res.steps,
+                'cpu_capability': cpu_capability()}
     return cached(path, compute)
 
 

@@ -24,9 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import (ROOT, SCENARIOS, default_models, machine, models_tag, scene,  # noqa: E402
-                    split_realizations, write_json)
+if not __package__:  # python bench/coverage_check.py: as python -m bench.coverage_check (bench/_script.py)
+    import _script  # noqa: F401
+from bench.common import (ROOT, SCENARIOS, default_models, machine, models_tag, scene,  # noqa: E402
+                          split_realizations, write_report)
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -108,7 +109,8 @@ def run(args) -> dict:
     return out
 
 
-def write_results(out_dir: Path, result: dict) -> None:
+def markdown(result: dict) -> str:
+    """The check's table (of a result as :func:`run` returns it, or as its JSON holds it)."""
     def rho(x):
         return '-' if x is None else f'{x:.3f}'
 
@@ -122,8 +124,12 @@ def write_results(out_dir: Path, result: dict) -> None:
     for s, c in result['counts'].items():
         lines.append(f"| {s} | {c['plans']} | {c['units']} | {c['failed'] + c['missing_cloud']} | {c['failed_plans']} | "
                      f"{rho(result['spearman_units'][s])} | {rho(result['spearman_plans'][s])} |")
-    (out_dir / 'coverage_check.md').write_text('\n'.join(lines) + '\n')
-    write_json(out_dir / 'coverage_check.json', result)
+    return '\n'.join(lines) + '\n'
+
+
+def write_results(out_dir: Path, result: dict) -> None:
+    (out_dir / 'coverage_check.md').write_text(markdown(result))
+    write_report(out_dir / 'coverage_check.json', result)
 
 
 def main(argv=None) -> int:

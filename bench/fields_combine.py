@@ -20,15 +20,16 @@ Writes ``fields_combined.md`` and ``fields_combined.json`` in ``--out``.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Optional
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_fields import BASELINES  # noqa: E402
-from table1_combine import combine, markdown, read_table  # noqa: E402
+if not __package__:  # python bench/fields_combine.py: as python -m bench.fields_combine (bench/_script.py)
+    import _script  # noqa: F401
+from bench.bench_fields import BASELINES  # noqa: E402
+from bench.common import write_report  # noqa: E402
+from bench.table1_combine import combine, markdown, read_table  # noqa: E402
 
 #: what every joined file must agree on (a different value: a different experiment)
 SAME = ('resolution', 'realizations', 'models', 'evaluations_per_part', 'capture')
@@ -78,7 +79,7 @@ def main(argv=None) -> int:
                f'{meta["realizations"]} wind realizations, egp {meta["evaluations_per_part"]} evaluations a part, '
                f'plants {meta["models"]}; columns FIELD:N.')
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / 'fields_combined.json').write_text(json.dumps(table, indent=2))
+    write_report(args.out / 'fields_combined.json', table)
     (args.out / 'fields_combined.md').write_text(markdown(table, meta, args.tables, 'Fields', setting))
     print(f'wrote {args.out / "fields_combined.md"}')
     return 0

@@ -32,10 +32,11 @@ from typing import Any
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
-from common import (ROOT, SCENARIOS, add_capture, cached, capture_of, capture_tag, default_models,  # noqa: E402
-                    machine, models_tag, scene, variant_request)
+if not __package__:  # python bench/plan_quality.py: as python -m bench.plan_quality (bench/_script.py)
+    import _script  # noqa: F401
+from bench.cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
+from bench.common import (ROOT, SCENARIOS, add_capture, cached, capture_of, capture_tag, default_models,  # noqa: E402
+                          machine, models_tag, scene, variant_request, write_report)
 
 CACHE = ROOT / 'results' / 'cache' / 'plan_quality'
 #: what a variant's Spearman ranks against: the dense cloud's Chamfer in map (the main figure),
@@ -417,7 +418,7 @@ def analyze(args) -> dict:
         result['split_seed'] = args.split_seed
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / 'plan_quality.json').write_text(json.dumps(result, indent=1))
+    write_report(out / 'plan_quality.json', result)
     plot(out / 'plan_quality.png', per_plan, main_v, specs)
     print_table(result)
     return result
@@ -505,7 +506,7 @@ def check_from_records(args) -> dict:
         print(f'{s}: {result["counts"][s]}')
         for m in rewards:
             print(f'  {m:32s} design {halves["design"][m]:+.3f}   check {halves["check"][m]:+.3f}')
-    path.write_text(json.dumps(result, indent=1))
+    write_report(path, result)
     return result
 
 

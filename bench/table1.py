@@ -26,12 +26,13 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
-from common import (ROOT, SCENARIOS, VARIANTS, cached, default_models, machine, models_tag, plan_cell,  # noqa: E402
-                    add_capture, capture_of, capture_tag, known_realizations, plan_path, reconstruct_record,
-                    scene)
-from stats import describe, describe_difference, paired_difference, rank, realization_units, summary  # noqa: E402
+if not __package__:  # python bench/table1.py: as python -m bench.table1 (bench/_script.py)
+    import _script  # noqa: F401
+from bench.cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
+from bench.common import (ROOT, SCENARIOS, VARIANTS, cached, default_models, machine, models_tag,  # noqa: E402
+                          plan_cell, add_capture, capture_of, capture_tag, known_realizations, plan_path,
+                          reconstruct_record, scene, write_report)
+from bench.stats import describe, describe_difference, paired_difference, rank, realization_units, summary  # noqa: E402
 
 #: Table rows: label -> (planner variant of common.VARIANTS, reward model).
 ROWS = {
@@ -299,7 +300,7 @@ def write_results(args, out: Path, plans, recons) -> None:
         lines.append('| ' + ' | '.join(cells) + ' |')
     out.mkdir(parents=True, exist_ok=True)
     (out / 'table1.md').write_text('\n'.join(lines) + '\n')
-    (out / 'table1.json').write_text(json.dumps(table, indent=2))
+    write_report(out / 'table1.json', table)
 
     fig, axes = plt.subplots(1, len(args.scenarios), figsize=(5 * len(args.scenarios), 4), squeeze=False)
     for ax, scenario in zip(axes[0], args.scenarios):

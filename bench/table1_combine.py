@@ -28,10 +28,11 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Optional
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import SCENARIOS  # noqa: E402
-from stats import describe, describe_difference, paired_difference, rank, realization_units, summary  # noqa: E402
-from table1 import BASELINES  # noqa: E402
+if not __package__:  # python bench/table1_combine.py: as python -m bench.table1_combine (bench/_script.py)
+    import _script  # noqa: F401
+from bench.common import SCENARIOS, write_report  # noqa: E402
+from bench.stats import describe, describe_difference, paired_difference, rank, realization_units, summary  # noqa: E402
+from bench.table1 import BASELINES  # noqa: E402
 
 #: what every joined file must agree on (a different value: a different experiment)
 SAME = ('capture', 'resolution', 'evaluations', 'models')
@@ -162,7 +163,7 @@ def main(argv=None) -> int:
     table = {'date': datetime.now(timezone.utc).strftime('%Y-%m-%d'), **meta,
              'inputs': [str(p) for p in args.tables], **combine(cells)}
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / 'table1_combined.json').write_text(json.dumps(table, indent=2))
+    write_report(args.out / 'table1_combined.json', table)
     (args.out / 'table1_combined.md').write_text(markdown(table, meta, args.tables))
     print(f'wrote {args.out / "table1_combined.md"}')
     return 0

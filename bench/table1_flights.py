@@ -19,9 +19,10 @@ import sys
 from datetime import datetime, timezone
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import (ROOT, add_capture, cached, capture_of, capture_tag, chamfer_text, machine,  # noqa: E402
-                    models_tag, reconstruct_record, scene)
+if not __package__:  # python bench/table1_flights.py: as python -m bench.table1_flights (bench/_script.py)
+    import _script  # noqa: F401
+from bench.common import (ROOT, add_capture, cached, capture_of, capture_tag, chamfer_text, machine,  # noqa: E402
+                          models_tag, reconstruct_record, scene, write_report)
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -99,7 +100,7 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     result = {'date': stamp, 'machine': machine(), 'capture': capture.to_dict(), 'failed': failed,
               'realizations': args.realizations, 'resolution': [args.width, args.height], 'cells': cells}
-    (out / 'table1_flights.json').write_text(json.dumps(result, indent=1))
+    write_report(out / 'table1_flights.json', result)
     (out / 'table1_flights.md').write_text('\n'.join(lines) + '\n')
     print('\n'.join(lines))
     return 0

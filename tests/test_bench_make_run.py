@@ -2,13 +2,10 @@
 paired difference uses only the realizations both runs scored."""
 from __future__ import annotations
 
-import sys
-from pathlib import Path
 
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-import bench_make_run as bmr  # noqa: E402  (bench/bench_make_run.py)
+from bench import bench_make_run as bmr
 
 
 def test_failed_runs_are_rows_and_pairs_skip_missing_realizations() -> None:

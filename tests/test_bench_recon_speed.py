@@ -3,13 +3,10 @@ never dropped, and the paired difference to the default settings uses only the r
 reconstructed."""
 from __future__ import annotations
 
-import sys
-from pathlib import Path
 
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-import bench_recon_speed as brs  # noqa: E402  (bench/bench_recon_speed.py)
+from bench import bench_recon_speed as brs
 
 
 def _record(chamfer, sparse=10.0, dense=20.0):

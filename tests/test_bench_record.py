@@ -4,22 +4,21 @@ for more realizations reuses the cached ones instead of recomputing them."""
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-import common  # noqa: E402  (bench/common.py)
+from bench import common
 
 
 def _result(k: int) -> SimpleNamespace:
     r = SimpleNamespace(realization=k, chamfer=0.01 * (k + 1), chamfer_shape=0.005 * (k + 1), accuracy=0.004,
                         completeness=0.006, fscore=0.7, points=np.full((5, 3), float(k)),
                         colors=np.zeros((5, 3), np.uint8), images=4, sparse_models=1, source="dense",
-                        matching="exhaustive", matched_pairs=6, centre_residual=0.03,
+                        matching="exhaustive", matched_pairs=6, centre_residual=0.03, sparse_mode="anchored",
+                        sparse_fallback="", control=None,
                         seconds={"render": 1.0, "sparse": 2.0}, rendered=[])
     return SimpleNamespace(realizations=[r])
 
@@ -117,7 +116,7 @@ def test_without_clouds_an_entry_whose_cloud_is_gone_is_reused(tmp_path) -> None
 def _fields_report(args, capture: dict) -> dict:
     """A bench_fields.json of one realization: grid_3x3 N=8 with a good egp, a failed circle plan
     (and its stand-in reconstruction record), and an arc reconstructed under another capture."""
-    import bench_fields
+    from bench import bench_fields
 
     plan = {"cameras": [[0.0, 2.0, 1.5, 0.0, 0.0, 0.0]] * 8, "reward": 0.5, "reward_model": "coverage",
             "evaluations": 100, "seconds": 1.0, "parts": 2, "initial_best": 0.4}
@@ -139,7 +138,7 @@ def test_a_fields_run_on_a_fresh_clone_resumes_from_the_committed_report(tmp_pat
     """The cache is git-ignored; bench_fields.json is committed. A run into the report's folder with
     one more realization writes the report's records where that run cached them and reconstructs
     only the new realization; failures, other captures and other settings are not carried over."""
-    import bench_fields
+    from bench import bench_fields
 
     calls, _ = fake_pipeline
     out = tmp_path / "fields_seed1"

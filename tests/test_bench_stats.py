@@ -2,15 +2,12 @@
 from __future__ import annotations
 
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy import stats as sps
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-from stats import paired_difference, rank, summary  # noqa: E402  (bench/stats.py)
+from bench.stats import paired_difference, rank, summary
 
 
 def test_summary_is_sample_std_with_n_and_counts_failures():
@@ -46,7 +43,7 @@ def test_paired_difference_t_interval_matches_scipy_and_counts_failures():
 def test_table1_shape_table_counts_a_failed_plan() -> None:
     """Table I's shape/registration table: sample statistics of chamfer_shape over the
     realizations, the images registered, and a failed plan counted (never dropped)."""
-    import table1
+    from bench import table1
 
     args = table1.parse_args(["--models", "", "--scenarios", "one_plant", "--rows", "circle", "egp", "--seeds", "1",
                               "--realizations", "2"])
@@ -63,7 +60,7 @@ def test_table1_shape_table_counts_a_failed_plan() -> None:
 def test_table1_reconstructs_a_slice_of_seeds(tmp_path) -> None:
     """--recon-first skips the seeds a table already has: only seeds 1 and 2 get a reconstruction
     task; a slice with no seed is refused before any work."""
-    import table1
+    from bench import table1
 
     base = ["--models", "", "--scenarios", "one_plant", "--rows", "arc", "--seeds", "3", "--recon-seeds", "3"]
     args = table1.parse_args(base + ["--recon-first", "1"])
@@ -76,7 +73,7 @@ def test_table1_reconstructs_a_slice_of_seeds(tmp_path) -> None:
 
 
 def test_a_row_with_no_success_reads_failed_not_nan():
-    from stats import describe, describe_difference
+    from bench.stats import describe, describe_difference
 
     assert describe(summary({0: None, 1: None})) == "failed (n=0, 2 failed)"
     # one value has no sample std: no '+- nan'

@@ -21,11 +21,8 @@ from pathlib import Path
 import cloudpickle
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / "bench"))
-import cluster  # noqa: E402  (bench/cluster.py)
-import table1  # noqa: E402  (bench/table1.py)
-from bench_cluster import numbers_text as _without_times  # noqa: E402
+from bench import cluster, table1
+from bench.bench_cluster import numbers_text as _without_times
 
 # The workers cannot import this test module: ship its task functions by value.
 cloudpickle.register_pickle_by_value(sys.modules[__name__])

@@ -13,18 +13,16 @@ from pathlib import Path
 
 import pytest
 
+from test_across_hosts import lab  # noqa: F401  (the fixture: namespaces, bridge, teardown; tests/ is on sys.path)
+from test_cluster import _in_process, _slice_args, _without_times
+
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / "bench"))
-sys.path.insert(0, str(REPO / "tests"))
-from test_across_hosts import lab  # noqa: E402,F401  (the fixture: namespaces, bridge, teardown)
-from test_cluster import _in_process, _slice_args, _without_times  # noqa: E402
 
 PORT = 8786
 CLIENT = """
-import json, sys
-sys.path.insert(0, {bench!r})
-import table1
-from cluster import open_client
+import json
+from bench import table1
+from bench.cluster import open_client
 args = table1.parse_args({argv!r})
 with open_client(args.scheduler, quiet=True) as client:
     client.wait_for_workers(2, timeout=180)  # both hosts' workers, bounded
@@ -41,7 +39,7 @@ def test_table1_slice_on_a_scheduler_and_two_workers_in_namespaces(lab, tmp_path
 
     env = dict(os.environ, PYOPENGL_PLATFORM="egl", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1",
                OPENBLAS_NUM_THREADS="1", DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT="30s",
-               PYTHONPATH=os.pathsep.join([str(REPO / "bench"), os.environ.get("PYTHONPATH", "")]))
+               PYTHONPATH=os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]))
     env.pop("DASK_SCHEDULER_ADDRESS", None)
     sched = f"tcp://{lab.addr['scene']}:{PORT}"
     dask = str(Path(sys.executable).with_name("dask"))
@@ -54,7 +52,7 @@ def test_table1_slice_on_a_scheduler_and_two_workers_in_namespaces(lab, tmp_path
     argv = ["--models", "", "--scenarios", "one_plant", "--rows", "circle", "arc", "--seeds", "1", "--evals", "4",
             "--init", "2", "--width", "1000", "--height", "750", "--realizations", "1", "--threads", "1", "--capture", "ideal",
             "--scheduler", sched, "--out", str(tmp_path / "client")]
-    code = CLIENT.format(bench=str(REPO / "bench"), argv=argv, out=str(out))
+    code = CLIENT.format(argv=argv, out=str(out))
     res = subprocess.run(["ip", "netns", "exec", lab.ns["scene"], sys.executable, "-c", code], env=env,
                          capture_output=True, text=True, timeout=480)
     assert res.returncode == 0, res.stderr[-3000:]
@@ -64,9 +62,8 @@ def test_table1_slice_on_a_scheduler_and_two_workers_in_namespaces(lab, tmp_path
 
 
 KILL_CLIENT = """
-import json, os, signal, sys, threading, time
-sys.path.insert(0, {bench!r})
-import cluster
+import json, os, signal, threading, time
+from bench import cluster
 
 def slow_square(x):
     import os, time
@@ -101,7 +98,7 @@ def test_a_worker_killed_in_its_namespace_loses_no_task(lab, tmp_path):  # noqa:
     """Issue 22, item 2: the worker of one host SIGKILLed mid-run (no nanny to restart it): the
     scheduler reruns its tasks on the other host's worker; every task has its result."""
     env = dict(os.environ, OMP_NUM_THREADS="1", DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT="30s",
-               PYTHONPATH=os.pathsep.join([str(REPO / "bench"), os.environ.get("PYTHONPATH", "")]))
+               PYTHONPATH=os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]))
     env.pop("DASK_SCHEDULER_ADDRESS", None)
     sched = f"tcp://{lab.addr['scene']}:{PORT}"
     dask = str(Path(sys.executable).with_name("dask"))
@@ -111,7 +108,7 @@ def test_a_worker_killed_in_its_namespace_loses_no_task(lab, tmp_path):  # noqa:
         lab.start(host, "worker", [dask, "worker", sched, "--host", lab.addr[host], "--nthreads", "1",
                                    "--no-nanny", "--no-dashboard", "--name", host], env)
     out = tmp_path / "kill.json"
-    code = KILL_CLIENT.format(bench=str(REPO / "bench"), sched=sched, victim_addr=lab.addr["recon"], out=str(out))
+    code = KILL_CLIENT.format(sched=sched, victim_addr=lab.addr["recon"], out=str(out))
     res = subprocess.run(["ip", "netns", "exec", lab.ns["scene"], sys.executable, "-c", code], env=env,
                          capture_output=True, text=True, timeout=420)
     assert res.returncode == 0, res.stderr[-3000:]

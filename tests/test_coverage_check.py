@@ -3,15 +3,13 @@ ranked against their Chamfer; failures counted, the largest realization count of
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-import coverage_check  # noqa: E402  (bench/coverage_check.py)
-from common import scene  # noqa: E402
+from bench import coverage_check
+from bench.common import scene
 
 
 def _record(results: Path, stem: str, clouds: list, chamfers: list) -> None:

@@ -4,14 +4,13 @@ the best baseline on the seeds both have, and files that measured something else
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 import pytest
 
+from bench import fields_combine
+
 BENCH = Path(__file__).resolve().parents[1] / "bench"
-sys.path.insert(0, str(BENCH))
-import fields_combine  # noqa: E402  (bench/fields_combine.py)
 
 
 def _recon(chamfers):

@@ -3,14 +3,11 @@
 from __future__ import annotations
 
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-from plan_quality import realization_agreement, spearman_halves, split_halves, study_counts  # noqa: E402
+from bench.plan_quality import realization_agreement, spearman_halves, split_halves, study_counts
 
 
 def _plans() -> list[dict]:
@@ -51,7 +48,7 @@ def test_check_reads_the_main_variant_of_the_capture(tmp_path):
     (realistic, soil) by default, the ideal one with --capture ideal; another is a named error."""
     import json
 
-    import plan_quality
+    from bench import plan_quality
 
     args = plan_quality.parse_args(["--scenarios", "one_plant", "--out", str(tmp_path)])
     if not plan_quality.plans_path("one_plant", args.models).exists():

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import pytest
 
+from bench import table1_combine
+
 BENCH = Path(__file__).resolve().parents[1] / "bench"
-sys.path.insert(0, str(BENCH))
-import table1_combine  # noqa: E402  (bench/table1_combine.py)
 
 CAPTURE = {"kind": "realistic", "seed": 0}
 

@@ -15,10 +15,8 @@ import http.server
 import os
 import re
 import socket
-import sys
 import threading
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -26,8 +24,7 @@ from geometry_msgs.msg import PoseArray
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-from browser import CHROMIUM, headless_chromium, page_text, wait_page, wait_text  # noqa: E402  (bench/browser.py)
+from bench.browser import CHROMIUM, headless_chromium, page_text, wait_page, wait_text
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 

@@ -1,0 +1,31 @@
+"""The benchmarks (``python -m bench.<name> --help``; README "Development", results in docs/results.md).
+
+A package: the benchmarks import each other as ``bench.common``, ``bench.stats``, ... and the
+tests import them so too (pytest.ini puts the repository root on ``sys.path``). Run them from
+the repository root as ``python -m bench.table1 ...``; ``python bench/table1.py ...`` (the form
+the recorded commands of older results use) runs the same code (``bench/_script.py``).
+Dask workers import them from the repository root (``bench.cluster.open_client`` gives the local
+workers that path; remote workers need ``PYTHONPATH=<repo>``).
+
+A benchmark run as a program plans with torch's AVX2 kernels (:func:`pin_cpu_kernels`).
+"""
+import os
+import sys
+
+#: torch's CPU kernels of the benchmarks' plans (``ATEN_CPU_CAPABILITY``)
+CPU_CAPABILITY = 'avx2'
+
+
+def pin_cpu_kernels() -> None:
+    """Plan with torch's AVX2 kernels unless ``ATEN_CPU_CAPABILITY`` says otherwise (it must be set
+    before torch is imported; Dask's local workers inherit it). torch picks its vector kernels by
+    CPU, and a BO run follows the last bit of its sums: Table I's one_plant egp plan (reward
+    0.8573) comes out again bit for bit under AVX2 and as another plan (0.8600) under AVX512, the
+    same code on the same machine (issue 39, item 6). Every x86-64 CPU of the last decade has AVX2;
+    MKL, torch's BLAS, still picks its own code path by CPU. The suite's nodes and CLIs keep
+    torch's own choice."""
+    os.environ.setdefault('ATEN_CPU_CAPABILITY', CPU_CAPABILITY)
+
+
+if sys.argv[:1] == ['-m']:  # python -m bench.<name>: the package is imported while argv[0] is '-m'
+    pin_cpu_kernels()
