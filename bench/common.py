@@ -227,9 +227,10 @@ def capture_of(args):
 
 def capture_tag(capture) -> str:
     """Cache-name suffix of a capture: '' for the ideal one (the records before the capture model
-    were ideal and keep their names), '-realistic-soil' (+ a digest of non-default figures) else:
-    a flight is reconstructed over the textured ground with masks from its images alone (the
-    records of the blue-screen flights before that were '-realistic' and are not reused)."""
+    were ideal and keep their names), '-realistic-anchored' (+ a digest of non-default figures)
+    else: a flight over the textured ground, masks from its images alone, the model anchored on the
+    reported poses and placed on the ground markers (issue 40). The records of earlier flights
+    ('-realistic': blue screen; '-realistic-soil': incremental SfM, no markers) are not reused."""
     import hashlib
 
     from vp_scene.capture import REALISTIC
@@ -237,8 +238,8 @@ def capture_tag(capture) -> str:
     if capture.ideal:
         return ''
     if capture == REALISTIC:
-        return '-realistic-soil'
-    return '-realistic-soil-' + hashlib.sha1(json.dumps(capture.to_dict(), sort_keys=True).encode()).hexdigest()[:8]
+        return '-realistic-anchored'
+    return '-realistic-anchored-' + hashlib.sha1(json.dumps(capture.to_dict(), sort_keys=True).encode()).hexdigest()[:8]
 
 
 def chamfer_text(record: dict) -> str:
