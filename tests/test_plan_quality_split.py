@@ -61,7 +61,7 @@ def test_check_reads_the_main_variant_of_the_capture(tmp_path):
         records.append({"id": p["id"], "reward": {"coverage": -chamfer, "paper": float(rng.uniform())},
                         "realizations": {"0": {"error": "RECONSTRUCTION_FAILED"} if i == 0 else {"chamfer": chamfer}}})
     variant = f"{plan_quality.variant_name(args)}/dense"
-    assert variant == "2000x1500-realistic-soil/dense"
+    assert variant == "2000x1500-realistic-anchored/dense"
     study = {"variants": {variant: {"per_plan": {"one_plant": records}}}}
     (tmp_path / "plan_quality.json").write_text(json.dumps(study))
     result = plan_quality.check_from_records(args)
