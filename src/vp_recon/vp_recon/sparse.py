@@ -391,13 +391,13 @@ def _anchored_model(pycolmap: object, db_path: Path, img_dir: Path, out_dir: Pat
     for _ in range(ANCHOR_ROUNDS):
         if len(rec.points3D) == 0:
             break
-        pycolmap.bundle_adjustment(rec, ba)
+        _adjust(pycolmap, rec, ba)
         _register_parts(pycolmap, rec, names, anchor, attitudes)
         rec = pycolmap.triangulate_points(rec, db_path, img_dir, out_dir, clear_points=True, options=options)
     if len(rec.points3D) == 0:
         raise SparseError(f"no track triangulates at the reported poses: 0 of {len(names)} images registered (the "
                           "matched images see no common point from far enough apart)")
-    pycolmap.bundle_adjustment(rec, ba)
+    _adjust(pycolmap, rec, ba)
     _register_parts(pycolmap, rec, names, anchor, attitudes)
     xyz, rgb, track = _read_points(rec)
     est = np.full((len(names), 6), np.nan)
@@ -413,6 +413,17 @@ def _anchored_model(pycolmap: object, db_path: Path, img_dir: Path, out_dir: Pat
                           f"(more than {max_residual:.2f} m)")
     return MergedModels(xyz, rgb, track, est, int(kept.sum()), float(rec.compute_mean_reprojection_error()), 1,
                         residual)
+
+
+def _adjust(pycolmap: object, rec: object, options: object) -> None:
+    """``pycolmap.bundle_adjustment`` with COLMAP's log level kept: the call sets glog's
+    ``minloglevel`` to 0 (pycolmap 4.2.1, measured: 2 before, 0 after), and every later call of the
+    reconstruction then printed its INFO lines (60 for one anchored model)."""
+    level = pycolmap.logging.minloglevel
+    try:
+        pycolmap.bundle_adjustment(rec, options)
+    finally:
+        pycolmap.logging.minloglevel = level
 
 
 def _register_parts(pycolmap: object, rec: object, names: Sequence[str], anchor: NDArray[np.float64],
