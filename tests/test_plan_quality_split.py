@@ -96,3 +96,16 @@ def test_realization_agreement_is_the_noise_ceiling_of_the_score():
     partial = _two_realizations([0.01, 0.02, 0.03], [0.01, 0.02, 0.03])
     del partial[1]["recon"]["1"]
     assert realization_agreement(partial) is None
+
+
+def test_the_study_counts_each_distinct_plan_once() -> None:
+    """Issue 42: egp-073/074/075 and gp-076 returned structured-000's plan on one_plant (an optimizer
+    can return a plan of its initial design); a plan counted four times weighs its rank four times.
+    The study keeps the first of equal plans and names the ones it drops."""
+    from bench import plan_quality
+
+    plans = [{"id": "structured-000", "cameras": [[0.0, 1.0, 2.0, 0.0, -1.0, -1.0]] * 2},
+             {"id": "egp-073", "cameras": [[0.0, 1.0, 2.0, 0.0, -1.0, -1.0]] * 2},
+             {"id": "arc-001", "cameras": [[1.0, 1.0, 2.0, 0.0, -1.0, -1.0]] * 2}]
+    kept, dropped = plan_quality.distinct_plans(plans)
+    assert [p["id"] for p in kept] == ["structured-000", "arc-001"] and dropped == {"egp-073": "structured-000"}
