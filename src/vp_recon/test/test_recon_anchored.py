@@ -156,3 +156,7 @@ def test_marker_layout_and_control_files(tmp_path) -> None:
         read_gcp_list(tmp_path / "gcp_list.txt")
     with pytest.raises(ValueError, match="gcp_markers"):
         CaptureModel(gcp_markers=51).validate()
+    # a long plot gets more than the 4: neighbours at most gcp_spacing apart along its edge
+    row = np.array([[-4.0, -0.5, 0.0], [4.0, 0.5, 1.5]])  # 8.7 x 1.7 m with the margins: 20.8 m of edge
+    assert REALISTIC.marker_count(row) == 6 and REALISTIC.marker_count(pts) == 4
+    assert len(REALISTIC.lay_markers(row)[1].positions) == 6 and CaptureModel(gcp_markers=0).marker_count(row) == 0

@@ -23,9 +23,11 @@ attitude 0.5 deg; reported position sigma 0.02 m, attitude 0.5 deg; sensor noise
 :data:`IDEAL` has every figure 0: the planned pose is flown and reported exactly and the image
 is the rendered one, bit for bit.
 
-Ground control (``gcp_markers``, default 4; 0: none, the drones' reports alone): that many
-ArUco markers of ``gcp_size`` m (0.3) lie on the soil around the plants
-(:func:`vp_scene.ground_control.marker_layout`), rendered into the images; the user knows their
+Ground control (``gcp_markers``, default 4; 0: none, the drones' reports alone): ArUco markers
+of ``gcp_size`` m (0.3) lie on the soil around the plants, at least ``gcp_markers`` and more along
+a long plot's edge so that neighbours are at most ``gcp_spacing`` m (3.5) apart, as a surveyor
+spaces them (:meth:`CaptureModel.marker_count`; the paper's three scenes get 4, grid_3x3 5, row_12
+7), rendered into the images (:func:`vp_scene.ground_control.marker_layout`); the user knows their
 positions as surveyed, each ``gcp_sigma`` m (0.01: an RTK rover on a tripod) off per axis (one
 survey of the field, the same in every realization: :meth:`CaptureModel.lay_markers`). Why by
 default: a plot flown for centimetre-level 3D models is flown with ground control, and without it
@@ -79,9 +81,11 @@ class CaptureModel:
         report_position_sigma, report_attitude_sigma: localization error, per axis.
         sensor_noise: std of the image noise, fraction of full scale.
         seed: seeds every draw with the realization and the camera.
-        gcp_markers: ground markers laid around the plants (0: none; at most 50).
+        gcp_markers: the fewest ground markers laid around the plants (0: none; at most 50).
         gcp_sigma: the markers' survey error, m per axis (> 0).
         gcp_size: a marker's printed side, m (its code square is half of it).
+        gcp_spacing: the most metres between neighbouring markers along the plot's edge (more
+            markers than ``gcp_markers`` on a long plot).
     """
 
     kind: str = "realistic"
@@ -94,6 +98,7 @@ class CaptureModel:
     gcp_markers: int = 4
     gcp_sigma: float = 0.01
     gcp_size: float = 0.3
+    gcp_spacing: float = 3.5
 
     _FIGURES = ("hover_position_sigma", "hover_attitude_sigma", "report_position_sigma",
                 "report_attitude_sigma", "sensor_noise")
@@ -130,7 +135,7 @@ class CaptureModel:
             raise ValueError(f"capture gcp_markers must be an integer in [0, {MAX_MARKERS}], got {m!r}")
         if self.kind == "ideal" and m:
             raise ValueError("capture 'ideal' has no ground markers: its poses are known exactly")
-        for name, hi in (("gcp_sigma", 1.0), ("gcp_size", 2.0)):
+        for name, hi in (("gcp_sigma", 1.0), ("gcp_size", 2.0), ("gcp_spacing", 100.0)):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and 0 < v <= hi):
                 raise ValueError(f"capture {name} must be a number in (0, {hi:g}] m, got {v!r}")
@@ -145,6 +150,18 @@ class CaptureModel:
         ground markers, 2026-11-27, have no ``gcp_*`` keys: their captures had none)."""
         return {k: (float(v) if k in self._FIGURES else v) for k, v in asdict(self).items()}
 
+    def marker_count(self, points: ArrayLike) -> int:
+        """How many markers a field of ``points`` gets: ``gcp_markers``, or more when its edge (the
+        x-y box grown by :data:`~vp_scene.ground_control.MARKER_MARGIN`) is long, ceil(perimeter /
+        ``gcp_spacing``), at most 50."""
+        from .ground_control import MARKER_MARGIN, MAX_MARKERS
+
+        if not self.gcp_markers:
+            return 0
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        w, h = p[:, :2].max(axis=0) - p[:, :2].min(axis=0) + 2 * MARKER_MARGIN
+        return int(min(MAX_MARKERS, max(self.gcp_markers, math.ceil(2 * (w + h) / self.gcp_spacing - 1e-9))))
+
     def lay_markers(self, points: ArrayLike) -> tuple[NDArray[np.float64], Any]:
         """The ground markers of a field whose plants are ``points`` (..., 3) (every realization's):
         their true centres (M, 3) (where they are rendered) and the
@@ -155,7 +172,7 @@ class CaptureModel:
 
         if not self.gcp_markers:
             return np.zeros((0, 3)), None
-        true = marker_layout(points, int(self.gcp_markers))
+        true = marker_layout(points, self.marker_count(points))
         rng = np.random.default_rng([int(self.seed), 0, 0, _SURVEY])
         surveyed = true + self.gcp_sigma * rng.standard_normal(true.shape)
         control = GroundControl(positions={str(i): tuple(float(x) for x in p) for i, p in enumerate(surveyed)},

@@ -27,12 +27,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Union
+from typing import Optional, Union
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["ARUCO_DICTIONARY", "MAX_MARKERS", "GroundControl", "GcpObservation", "GroundControlError",
+__all__ = ["ARUCO_DICTIONARY", "MAX_MARKERS", "MARKER_MARGIN", "GroundControl", "GcpObservation", "GroundControlError",
            "marker_layout", "marker_image", "read_markers_csv", "read_gcp_list", "write_markers_csv"]
 
 #: The ArUco dictionary of the markers (OpenCV ``cv2.aruco.DICT_4X4_50``: 50 markers of 4 x 4
@@ -40,6 +40,8 @@ __all__ = ["ARUCO_DICTIONARY", "MAX_MARKERS", "GroundControl", "GcpObservation",
 ARUCO_DICTIONARY = "DICT_4X4_50"
 #: The most markers a capture lays out (the dictionary's size).
 MAX_MARKERS = 50
+#: m between the plants' x-y box and the rectangle the markers lie on (clear of the leaves).
+MARKER_MARGIN = 0.35
 
 
 class GroundControlError(ValueError):
@@ -76,13 +78,14 @@ class GroundControl:
                 raise GroundControlError(f"control point {name!r} needs a finite (x, y, z), got {p.tolist()}")
 
 
-def marker_layout(points: ArrayLike, count: int, margin: float = 0.35) -> NDArray[np.float64]:
+def marker_layout(points: ArrayLike, count: int, margin: Optional[float] = None) -> NDArray[np.float64]:
     """``count`` marker centres (count, 3) on the ground (z = 0) around ``points`` (the plants,
     (..., 3), m), on the rectangle of their x-y box grown by ``margin`` m: its corners first
     (diagonal ones first: 2 markers span the plot), then any more evenly spaced along its edges. A
     surveyor lays markers where no plant hides them, as far apart as the plot allows."""
     if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or not 0 <= count <= MAX_MARKERS:
         raise ValueError(f"count must be an integer in [0, {MAX_MARKERS}], got {count!r}")
+    margin = MARKER_MARGIN if margin is None else margin
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     lo, hi = p[:, :2].min(axis=0) - margin, p[:, :2].max(axis=0) + margin
     corners = [(lo[0], lo[1]), (hi[0], hi[1]), (hi[0], lo[1]), (lo[0], hi[1])]
