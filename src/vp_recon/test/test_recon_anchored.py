@@ -13,7 +13,7 @@ from vp_scene.ground_control import GroundControl, GroundControlError, marker_la
     read_markers_csv, write_markers_csv
 
 from vp_recon import sparse as sparse_mod
-from vp_recon.gcp import register, triangulate, weighted_similarity
+from vp_recon.gcp import register
 from vp_recon.pipeline import ReconConfig, reconstruct_captured, render_flight
 from vp_recon.render import image_mask
 from vp_recon.sparse import SparseError, sparse_reconstruct
@@ -88,7 +88,7 @@ def test_ground_markers_are_found_and_place_the_model(scene, flown) -> None:
     sparse_cfg = ReconConfig(width=1600, height=1200, num_threads=1, dense=False)  # the sparse cloud: quicker
     with_gcp = reconstruct_captured(scene, views, sparse_cfg)
     ctl = with_gcp.control
-    assert ctl["applied"] and ctl["used"] >= 3 and ctl["control_residual"] < 0.05, ctl
+    assert ctl["applied"] and ctl["used"] >= 3 and ctl["reprojection_px"] < 3.0, ctl
     no_cfg = ReconConfig(width=1600, height=1200, num_threads=1, dense=False, capture=CaptureModel(gcp_markers=0))
     without = reconstruct_captured(scene, render_flight(scene, 1, arc(), no_cfg), no_cfg)
     assert without.control is None
@@ -97,31 +97,43 @@ def test_ground_markers_are_found_and_place_the_model(scene, flown) -> None:
                                           without.chamfer_shape)
 
 
-def test_triangulate_and_weighted_similarity_are_exact_on_exact_data() -> None:
-    rng = np.random.default_rng(0)
-    cams = arc(5)
-    from vp_scene.camera import intrinsics, world_to_camera
+def test_register_recovers_a_model_displaced_from_map_from_single_views() -> None:
+    """A model off map by a known similarity (1 % of scale, 0.5 degree, 3 cm): markers each seen in
+    ONE image only (a circle of cameras 90 degrees apart), exact pixels, reported centres 2 cm off:
+    the registration brings the points back to map within millimetres (40 -> 5 mm), where triangulating the
+    markers first could place none."""
+    from scipy.spatial.transform import Rotation
 
-    K = intrinsics(1000, 750, math.pi / 2)
-    X = np.array([[0.3, -0.2, 0.0], [-0.4, 0.1, 0.0], [0.1, 0.5, 0.0]])
-    R, _ = world_to_camera(cams)
-    obs = []
+    from vp_scene.camera import intrinsics, world_to_camera
     from vp_scene.ground_control import GcpObservation
 
-    for i in range(len(cams)):
-        for j, p in enumerate(X):
-            y = R[i] @ (p - cams[i, :3])
-            u, v = (K @ (y / y[2]))[:2]
-            obs.append(GcpObservation(name=str(j), image=f"im{i}", u=float(u), v=float(v)))
-    found = triangulate(obs, [f"im{i}" for i in range(len(cams))], cams, K)
-    assert sorted(found) == ["0", "1", "2"]
-    np.testing.assert_allclose(np.array([found[str(j)] for j in range(3)]), X, atol=1e-9)
-    src = rng.normal(size=(8, 3))
-    s, Rt = 1.03, np.linalg.qr(rng.normal(size=(3, 3)))[0]
-    Rt *= np.sign(np.linalg.det(Rt))
-    t = np.array([0.1, -0.2, 0.05])
-    s2, R2, t2 = weighted_similarity(src, src @ (s * Rt).T + t, rng.uniform(0.5, 2.0, 8))
-    assert abs(s2 - s) < 1e-9 and np.allclose(R2, Rt) and np.allclose(t2, t)
+    rng = np.random.default_rng(3)
+    az = np.radians([0.0, 90.0, 180.0, 270.0])
+    c = np.stack([1.8 * np.cos(az), 1.8 * np.sin(az), np.full(4, 1.6)], axis=1)
+    truth_cams = np.concatenate([c, np.array([0.0, 0.0, 0.3]) - c], axis=1)
+    markers = np.array([[1.1, 0.0, 0.0], [0.0, 1.1, 0.0], [-1.1, 0.0, 0.0], [0.0, -1.1, 0.0]])
+    K = intrinsics(1000, 750, math.pi / 2)
+    R, _ = world_to_camera(truth_cams)
+    obs = []
+    for i in range(4):  # camera i sees marker i alone
+        y = R[i] @ (markers[i] - c[i])
+        u, v = (K @ (y / y[2]))[:2]
+        obs.append(GcpObservation(name=str(i), image=f"im{i}", u=float(u), v=float(v)))
+    plant = rng.normal(scale=0.2, size=(200, 3)) + [0.0, 0.0, 0.6]
+    s, Rm, t = 1.01, Rotation.from_rotvec(np.radians([0.3, -0.2, 0.3])).as_matrix(), np.array([0.03, -0.02, 0.01])
+    off = lambda x: x @ (s * Rm).T + t  # noqa: E731  (map -> the displaced model)
+    model_cams = truth_cams.copy()
+    model_cams[:, :3] = off(c)
+    model_cams[:, 3:] = truth_cams[:, 3:] @ Rm.T
+    reported = truth_cams.copy()
+    reported[:, :3] += rng.normal(scale=0.02, size=(4, 3))
+    control = GroundControl(positions={str(i): tuple(m) for i, m in enumerate(markers)}, sigma=0.001,
+                            observations=tuple(obs))
+    pts, cams, reg = register(off(plant), model_cams, [f"im{i}" for i in range(4)], [], K, reported, control, 0.02)
+    assert reg.applied and (reg.used, reg.observations) == (4, 4) and reg.reprojection_px < 2.0, reg
+    before = np.linalg.norm(off(plant) - plant, axis=1).mean()
+    after = np.linalg.norm(pts - plant, axis=1).mean()
+    assert before > 0.02 and after < 0.008, (before, after)  # measured 0.040 -> 0.0052 (the 2 cm reports pull)
 
 
 def test_register_leaves_the_model_when_too_few_control_points_are_seen() -> None:
