@@ -81,7 +81,7 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 def field_budget(field: str, n: int, models: str) -> tuple[int, int]:
     """(parts egp plans by, its total evaluations) on this field."""
-    from vp_planner.optimizers import total_evaluations
+    from vp_planner.request import total_evaluations
     from vp_planner.parts import auto_parts
 
     noisy, _ = scene(field, models)
@@ -218,6 +218,7 @@ def subsampling_cell(cache: Path, field: str, n: int, plans: dict, args) -> dict
     from scipy.stats import spearmanr
 
     from vp_planner.reward_models import CoverageParams, make_reward
+    from vp_planner.designs import random_plans, structured_plans
     from vp_planner.space import ViewSpace
 
     path = subsampling_path(cache, field, n, args)
@@ -227,7 +228,7 @@ def subsampling_cell(cache: Path, field: str, n: int, plans: dict, args) -> dict
         noisy, _ = scene(field, args.models)
         R = noisy.points
         space = ViewSpace(R, n)
-        U = np.concatenate([space.structured(20), space.sample(50, np.random.default_rng(args.seed))])
+        U = np.concatenate([structured_plans(space, 20), random_plans(space, 50, np.random.default_rng(args.seed))])
         cams = np.concatenate([space.decode(U), np.array([p["cameras"] for p in plans.values()
                                                           if len(p["cameras"]) == n])])
         out = {"plans": int(len(cams)), "points_per_realization": int(R.shape[1]), "sizes": {}}

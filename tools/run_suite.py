@@ -353,7 +353,7 @@ def thinned_cloud(msg, voxel: float = RECONSTRUCTION_VOXEL):
     its frame (:func:`vp_recon.dense.voxel_downsample`)."""
     import numpy as np
     from vp_recon.dense import voxel_downsample
-    from vp_scene.messages import numpy_to_pointcloud2, pointcloud2_to_numpy
+    from vp_scene.cloud import numpy_to_pointcloud2, pointcloud2_to_numpy
 
     points, colors, _ = pointcloud2_to_numpy(msg)
     colors = np.zeros((len(points), 3), np.uint8) if colors is None else colors

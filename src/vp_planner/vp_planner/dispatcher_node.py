@@ -47,7 +47,8 @@ from vp_planner.feasibility import Feasibility
 from vp_planner.fleet import (ASSIGNMENTS, ORIENTATIONS, AssignmentError, FleetTransform, assign, goal_orientations,
                               plan_problems)
 from vp_scene.camera import poses_to_cameras
-from vp_scene.messages import POSE_TYPES, drone_topic, msgs_to_poses, point_msg, pose_msg, position_of, realizations_from_cloud
+from vp_scene.cloud import realizations_from_cloud
+from vp_scene.messages import POSE_TYPES, drone_topic, msgs_to_poses, point_msg, pose_msg, position_of
 from vp_scene.node_runtime import NewestWins, Param, declare_typed, refuse_bad_changes, run_node, typed_values
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,

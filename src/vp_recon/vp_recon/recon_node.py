@@ -73,10 +73,10 @@ from vp_recon.pipeline import (CAPTURE_MISSING, MAX_CAMERAS, STAGES, ReconCancel
                                reconstruct_captured, reconstruct_plan, worker_call, worker_result)
 from vp_scene.capture import IDEAL, REALISTIC, CaptureModel
 from vp_scene.camera import IMAGE_SIZE, poses_to_cameras
+from vp_scene.cloud import numpy_to_pointcloud2, realizations_from_cloud
 from vp_scene.messages import (aggregate_score, camera_info_intrinsics, compressed_image_array, drone_topic,
-                               error_score, image_array,
-                               numpy_to_pointcloud2, plan_key, pose_array, pose_array_to_cameras, realization_score,
-                               realizations_from_cloud, scene_of_description, score_msg)
+                               error_score, image_array, plan_key, pose_array, pose_array_to_cameras, realization_score,
+                               scene_of_description, score_msg)
 from vp_scene.node_runtime import (INT_MAX, NewestWins, Param, declare_typed, parameter_value, refuse_bad_changes,
                                    run_node, typed_values)
 

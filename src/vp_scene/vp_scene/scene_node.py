@@ -31,7 +31,8 @@ from sensor_msgs.msg import PointCloud2
 from vp_interfaces.msg import SceneDescription
 
 from .build import build_noisy_scene
-from .messages import numpy_to_pointcloud2, scene_description_msg
+from .cloud import numpy_to_pointcloud2
+from .messages import scene_description_msg
 from .node_runtime import INT_MAX, Param, declare_typed, run_node, typed_values
 from .wind import NoisyScene
 
