@@ -186,7 +186,9 @@ def recon_path(scenario: str, models: str, plan: dict, k: int, args) -> Path:
 
 
 def recon_cell(scenario: str, models: str, plan: dict, k: int, args) -> dict:
-    from vp_recon.pipeline import ReconConfig, ReconError, reconstruct_realization
+    from vp_recon.config import ReconConfig
+    from vp_recon.errors import ReconError
+    from vp_recon.pipeline import reconstruct_realization
 
     path = recon_path(scenario, models, plan, k, args)
 
