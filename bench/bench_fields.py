@@ -81,8 +81,8 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 def field_budget(field: str, n: int, models: str) -> tuple[int, int]:
     """(parts egp plans by, its total evaluations) on this field."""
-    from vp_planner.optimizers import total_evaluations
     from vp_planner.parts import auto_parts
+    from vp_planner.request import total_evaluations
 
     noisy, _ = scene(field, models)
     parts = auto_parts(noisy.points, n)
@@ -136,7 +136,7 @@ def recon_tag(field: str, n: int, label: str, args) -> str:
 
 def recon_cell(cache: Path, out: Path, field: str, n: int, label: str, plan: dict, args) -> dict:
     """Reconstruct a plan on the first ``args.realizations`` wind realizations (cached)."""
-    from vp_recon.pipeline import ReconConfig
+    from vp_recon.config import ReconConfig
 
     tag = recon_tag(field, n, label, args)
 
@@ -217,6 +217,7 @@ def subsampling_cell(cache: Path, field: str, n: int, plans: dict, args) -> dict
     from dataclasses import replace
     from scipy.stats import spearmanr
 
+    from vp_planner.designs import random_plans, structured_plans
     from vp_planner.reward_models import CoverageParams, make_reward
     from vp_planner.space import ViewSpace
 
@@ -227,7 +228,7 @@ def subsampling_cell(cache: Path, field: str, n: int, plans: dict, args) -> dict
         noisy, _ = scene(field, args.models)
         R = noisy.points
         space = ViewSpace(R, n)
-        U = np.concatenate([space.structured(20), space.sample(50, np.random.default_rng(args.seed))])
+        U = np.concatenate([structured_plans(space, 20), random_plans(space, 50, np.random.default_rng(args.seed))])
         cams = np.concatenate([space.decode(U), np.array([p["cameras"] for p in plans.values()
                                                           if len(p["cameras"]) == n])])
         out = {"plans": int(len(cams)), "points_per_realization": int(R.shape[1]), "sizes": {}}

@@ -301,7 +301,7 @@ def drone_processes(args, env: dict) -> dict:
         cams = ring(args.drones)
         t_start = time.monotonic()
         scene = h.start('vp_scene', 'scene', SCENE)
-        sims = [h.start('vp_planner', 'sim_drone', {'drone': d, 'x': float(c[0]), 'y': float(c[1]),
+        sims = [h.start('vp_scene', 'sim_drone', {'drone': d, 'x': float(c[0]), 'y': float(c[1]),
                                                     'z': float(c[2]), 'camera': True, 'capture': 'ideal',
                                                     'width': args.width, 'height': args.height},
                         name=f'sim_{d}') for d, c in zip(drones, cams)]

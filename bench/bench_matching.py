@@ -7,7 +7,7 @@
   and once with ``matching='poses'`` (:func:`vp_recon.pairs.select_pairs`);
 * threshold: the same row seen by an arc of N cameras 30 degrees apart on one side of it (N in
   ``--sweep``), full pipeline at 1000 x 750: where pose-based pairs start to pay
-  (``vp_recon.pipeline.MATCH_POSES_FROM``).
+  (``vp_recon.config.MATCH_POSES_FROM``).
 
 Per run: seconds choosing the pairs, extracting, matching, of the whole sparse stage and the
 whole realization; pairs matched and verified (and how many verified pairs are over 90 degrees
@@ -36,9 +36,12 @@ if not __package__:  # python bench/bench_matching.py: as python -m bench.bench_
     import _script  # noqa: F401
 from bench.common import default_models, machine, write_report  # noqa: E402
 from vp_planner.patterns import ring  # noqa: E402
-from vp_recon.meshing import scene_meshes  # noqa: E402
+from vp_scene.meshing import scene_meshes  # noqa: E402
 from vp_recon.pairs import in_view, pair_geometry, sample_points  # noqa: E402
-from vp_recon.pipeline import STAGES, ReconConfig, ReconError, reconstruct_realization  # noqa: E402
+from vp_recon.config import ReconConfig  # noqa: E402
+from vp_recon.errors import ReconError  # noqa: E402
+from vp_recon.pipeline import reconstruct_realization  # noqa: E402
+from vp_recon.progress import STAGES  # noqa: E402
 from vp_scene.build import build_noisy_scene  # noqa: E402
 from vp_scene.camera import CameraModel  # noqa: E402
 

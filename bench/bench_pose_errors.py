@@ -62,7 +62,7 @@ def tag(scenario: str, method: str, position: float, attitude: float, markers: i
 def recon_cell(cache: Path, out: Path, scenario: str, method: str, cameras: list, position: float,
                attitude: float, markers: int, k: int, args) -> dict:
     """Realization ``k`` of the plan flown with these reported-pose errors and markers (cached)."""
-    from vp_recon.pipeline import ReconConfig
+    from vp_recon.config import ReconConfig
 
     name = tag(scenario, method, position, attitude, markers, k, args)
 

@@ -37,9 +37,11 @@ from vp_scene.capture import IDEAL, REALISTIC  # noqa: E402
 
 from vp_planner.optimizers import plan_views  # noqa: E402
 from vp_planner.request import PlanRequest  # noqa: E402
-from vp_recon.meshing import scene_meshes  # noqa: E402
-from vp_recon.pipeline import ReconConfig, ReconError, reconstruct_plan  # noqa: E402
-from vp_recon.render import Renderer  # noqa: E402
+from vp_recon.config import ReconConfig  # noqa: E402
+from vp_recon.errors import ReconError  # noqa: E402
+from vp_recon.pipeline import reconstruct_plan  # noqa: E402
+from vp_scene.meshing import scene_meshes  # noqa: E402
+from vp_scene.render import Renderer  # noqa: E402
 
 SCENARIO_CAMERAS = {"one_plant": 4, "three_row": 6, "six_rect": 6}
 

@@ -57,7 +57,7 @@ def recon_path(cache: Path, scenario: str, variant: str, k: int, args) -> Path:
 def recon_cell(cache: Path, out: Path, scenario: str, variant: str, k: int, cameras: list, args) -> dict:
     """Realization ``k`` of ``scenario`` seen by ``cameras``, reconstructed under ``variant``; cached."""
     from bench.common import reconstruct_record, scene
-    from vp_recon.pipeline import ReconConfig
+    from vp_recon.config import ReconConfig
 
     path = recon_path(cache, scenario, variant, k, args)
 

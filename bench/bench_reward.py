@@ -24,6 +24,7 @@ import torch
 if not __package__:  # python bench/bench_reward.py: as python -m bench.bench_reward (bench/_script.py)
     import _script  # noqa: F401
 from bench.common import write_report  # noqa: E402
+from vp_planner.designs import random_plans
 from vp_planner.reward import noisy_reward, prepare_points
 from vp_planner.reward_models import make_reward
 from vp_planner.space import ViewSpace
@@ -81,7 +82,7 @@ def main() -> int:
     torch.set_num_threads(args.threads)
     R, source = scene(args.points, args.realizations)
     space = ViewSpace(R, args.cameras)
-    plans = space.decode(space.sample(args.batch, np.random.default_rng(1)))
+    plans = space.decode(random_plans(space, args.batch, np.random.default_rng(1)))
     result = {
         "points": args.points, "realizations": args.realizations, "cameras": args.cameras,
         "batch": args.batch, "source": source, "torch": torch.__version__,

@@ -40,7 +40,7 @@ from bench.cluster import Task, add_cluster_args, cluster_client, run_tasks  # n
 from bench.stats import rank_key  # noqa: E402
 from vp_planner.reward_models import (DEFAULT_RECONSTRUCTED_WEIGHT, DEFAULT_REWARD_MODEL, DEFAULT_TAU,  # noqa: E402
                                       REWARD_MODELS)
-from vp_recon.pipeline import MATCHINGS  # noqa: E402
+from vp_recon.config import MATCHINGS  # noqa: E402
 from bench.common import (ROOT, add_capture, baselines, cached, capture_of, capture_tag, chamfer_text,  # noqa: E402
                           default_models, machine, models_tag, plan_cell, plan_path, reconstruct_record, scene,
                           variant_request, variants_of, write_report)
@@ -74,7 +74,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument('--tau', type=float, default=DEFAULT_TAU)
     ap.add_argument('--reconstructed-weight', type=float, default=DEFAULT_RECONSTRUCTED_WEIGHT)
     ap.add_argument('--matching', default='auto', choices=MATCHINGS,
-                    help="image pairs SIFT compares (vp_recon.pipeline.matching_method; 'auto': the pose-chosen "
+                    help="image pairs SIFT compares (vp_recon.config.matching_method; 'auto': the pose-chosen "
                          "pairs from 8 images up, 'exhaustive': all of them)")
     ap.add_argument('--reward', default=DEFAULT_REWARD_MODEL, choices=sorted(REWARD_MODELS),
                     help='reward model of every plan (default: the planner\'s, %(default)s); a non-default one '
@@ -115,7 +115,7 @@ def sortie2_path(cache: Path, scenario: str, m: int, args, with_reconstruction: 
 
 def recon_cell(cache: Path, out: Path, scenario: str, name: str, cameras, args) -> dict:
     """Reconstruct cameras (all of both sorties) in the first ``--realizations`` realizations; cached."""
-    from vp_recon.pipeline import ReconConfig
+    from vp_recon.config import ReconConfig
 
     tag = recon_tag(scenario, name, args)
 

@@ -283,8 +283,9 @@ def reconstruct_record(noisy, cameras, config, folder: Path, realizations=None, 
     seeded by its index alone; COLMAP's run-to-run spread, about 0.5 % of the Chamfer, is all a
     recomputation would change).
     """
+    from vp_recon.errors import ReconError
     from vp_recon.outputs import contact_sheet, write_image, write_ply
-    from vp_recon.pipeline import ReconError, reconstruct_plan
+    from vp_recon.pipeline import reconstruct_plan
 
     capture = {'capture': config.capture.kind, 'capture_params': config.capture.to_dict(),
                'sparse_mode': config.sparse_mode_used}

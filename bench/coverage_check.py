@@ -69,7 +69,7 @@ def spearman(x: list, y: list) -> float | None:
 
 def run(args) -> dict:
     from vp_recon.metrics import coverage_of_prior
-    from vp_recon.pipeline import Prior
+    from vp_recon.results import Prior
     from vp_scene.ply import load_points
 
     results = Path(args.results)

@@ -89,6 +89,7 @@ def _space(scenario: str, models: str):
 
 def plan_families(scenario: str, models: str) -> list[dict]:
     """The study's plans: [{id, family, params, cameras}], feasible only, deterministic."""
+    from vp_planner.designs import random_plans, structured_plans
     from vp_planner.optimizers import plan_views
     from vp_planner.patterns import arc, cap, ring
 
@@ -107,7 +108,7 @@ def plan_families(scenario: str, models: str) -> list[dict]:
                           'cameras': cams.tolist()})
 
     # structured caps: the planner's own initial plans, then caps over elevation x spread x distance
-    for i, U in enumerate(space.structured(max_plans=8)):
+    for i, U in enumerate(structured_plans(space, max_plans=8)):
         add('structured', {'index': i}, space.decode(U))
     half = float(np.max(ext.half))
     rng = np.random.default_rng(11)
@@ -137,7 +138,7 @@ def plan_families(scenario: str, models: str) -> list[dict]:
             arc(centre[:2], target, dd * math.cos(el), centre[2] + dd * math.sin(el), N, math.radians(30.0),
                 math.radians(200.0)))
     # random feasible plans of the planner's space
-    for U in space.sample(14, np.random.default_rng(5)):
+    for U in random_plans(space, 14, np.random.default_rng(5)):
         add('random', {}, space.decode(U))
     # optimizer outputs (100 evaluations) of variants of common.VARIANTS: the paper reward's, then plans
     # optimized for coverage (a reward that can be gamed would show up here as high reward, poor reconstruction)
@@ -201,7 +202,9 @@ def recon_path(scenario: str, models: str, plan: dict, k: int, args) -> Path:
 
 
 def recon_cell(scenario: str, models: str, plan: dict, k: int, args) -> dict:
-    from vp_recon.pipeline import ReconConfig, ReconError, reconstruct_realization
+    from vp_recon.config import ReconConfig
+    from vp_recon.errors import ReconError
+    from vp_recon.pipeline import reconstruct_realization
 
     path = recon_path(scenario, models, plan, k, args)
 

@@ -90,7 +90,7 @@ def recon_tag(scenario: str, row: str, args, seed: int = 0) -> str:
 
 def recon_cell(cache: Path, out: Path, scenario: str, row: str, plan: dict, args, seed: int = 0) -> dict:
     """Reconstruct one plan in every wind realization (cached); Chamfer etc. x100 as Table I."""
-    from vp_recon.pipeline import ReconConfig
+    from vp_recon.config import ReconConfig
 
     tag = recon_tag(scenario, row, args, seed)
 

@@ -44,7 +44,7 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 
 def main(argv=None) -> int:
-    from vp_recon.pipeline import ReconConfig
+    from vp_recon.config import ReconConfig
 
     args = parse_args(argv)
     table = json.loads(Path(args.table).read_text())

@@ -266,7 +266,7 @@ def test_scene_planner_recon_and_dispatcher_on_three_hosts(lab, ros_env, tmp_pat
     planner = lab.node("planner", "vp_planner", "planner", {"autostart": True, "method": "circle", "num_cameras": 2,
                                                             "evaluations": 6, "num_threads": 1}, env)
     dispatcher = lab.node("recon", "vp_planner", "dispatcher", {"drones": drones, "scene_timeout": 60.0}, env)
-    sims = [lab.node("scene", "vp_planner", "sim_drone", {"drone": d, "x": float(k), "y": -4.0, "speed": 5.0}, env,
+    sims = [lab.node("scene", "vp_scene", "sim_drone", {"drone": d, "x": float(k), "y": -4.0, "speed": 5.0}, env,
                      name=f"sim_{d}") for k, d in enumerate(drones)]
     everyone = (listener, talker, scene, planner, dispatcher, *sims)
 
@@ -401,7 +401,7 @@ def test_a_capture_set_crosses_hosts(lab, ros_env, tmp_path, capsys) -> None:
     drones = ["d0", "d1", "d2"]
     size = dict(width=2000, height=1500)
     scene = lab.node("scene", "vp_scene", "scene", SCENE, env)
-    sims = [lab.node("scene", "vp_planner", "sim_drone", {"drone": d, "x": float(k), "y": -3.0, "speed": 5.0,
+    sims = [lab.node("scene", "vp_scene", "sim_drone", {"drone": d, "x": float(k), "y": -3.0, "speed": 5.0,
                                                           "camera": True, "capture": "ideal", **size}, env,
                      name=f"sim_{d}") for k, d in enumerate(drones)]
     recon = lab.node("recon", "vp_recon", "recon", {"source": "fleet", **size, "capture": "ideal",

@@ -28,6 +28,7 @@ def fake_pipeline(monkeypatch):
     """vp_recon.pipeline.reconstruct_plan replaced by one that fails realizations in ``failing``
     and records which realizations it was asked for."""
     from vp_recon import pipeline
+    from vp_recon.errors import RECONSTRUCTION_FAILED, ReconError
 
     calls, failing = [], set()
 
@@ -35,7 +36,7 @@ def fake_pipeline(monkeypatch):
         (k,) = realizations
         calls.append(k)
         if k in failing:
-            raise pipeline.ReconError(pipeline.RECONSTRUCTION_FAILED, f"realization {k}: registered 1 of 4 images")
+            raise ReconError(RECONSTRUCTION_FAILED, f"realization {k}: registered 1 of 4 images")
         return _result(k)
 
     monkeypatch.setattr(pipeline, "reconstruct_plan", reconstruct_plan)
@@ -43,7 +44,7 @@ def fake_pipeline(monkeypatch):
 
 
 def _record(folder: Path, ks, known=None) -> dict:
-    from vp_recon.pipeline import ReconConfig
+    from vp_recon.config import ReconConfig
 
     noisy = SimpleNamespace(points=np.zeros((5, 10, 3)))
     return common.reconstruct_record(noisy, np.zeros((4, 6)), ReconConfig(), folder, ks, known)

@@ -183,7 +183,9 @@ def test_recon_on_a_cluster_fails_with_the_first_failing_realization(tmp_path, m
     named as in one process, and the cluster is closed afterwards."""
     import numpy as np
 
-    from vp_recon.pipeline import NOTHING_VISIBLE, ReconConfig, ReconError, reconstruct_plan
+    from vp_recon.config import ReconConfig
+    from vp_recon.errors import NOTHING_VISIBLE, ReconError
+    from vp_recon.pipeline import reconstruct_plan
     from vp_scene.build import build_noisy_scene
 
     monkeypatch.setenv("PYOPENGL_PLATFORM", "egl")

@@ -1,4 +1,4 @@
-"""The real ``vp_planner dispatcher`` node with simulated drones (``vp_planner sim_drone``, one
+"""The real ``vp_planner dispatcher`` node with simulated drones (``vp_scene sim_drone``, one
 process per drone) and the real scene node, over DDS.
 
 The test publishes plans on /camera_plan (as the planner does, latched, frame ``map``) and
@@ -95,7 +95,7 @@ class Fleet:
 
 
 def start_drones(start_node, env, starts: dict, **params) -> dict:
-    return {d: start_node("vp_planner", "sim_drone", {"drone": d, "x": float(p[0]), "y": float(p[1]),
+    return {d: start_node("vp_scene", "sim_drone", {"drone": d, "x": float(p[0]), "y": float(p[1]),
                                                       "z": float(p[2]), **params}, env,
                           args=("--ros-args", "-r", f"__node:=sim_{d}"))
             for d, p in starts.items()}

@@ -130,7 +130,7 @@ def test_the_reconstruction_goes_to_the_planner_thinned() -> None:
     """A first sortie's cloud (millions of points in a field) goes into the second goal as the
     mean of every occupied 5 mm voxel, in its frame."""
     import run_suite
-    from vp_scene.messages import numpy_to_pointcloud2, pointcloud2_to_numpy
+    from vp_scene.cloud import numpy_to_pointcloud2, pointcloud2_to_numpy
 
     rng = np.random.default_rng(0)
     points = np.concatenate([rng.uniform(0.0, 0.004, (500, 3)), rng.uniform(1.0, 1.004, (500, 3))])
@@ -337,7 +337,7 @@ def test_make_runs_sift_octave_follows_the_image_width() -> None:
 def test_the_script_offers_every_method_of_the_planner() -> None:
     """run_suite offers the registry's methods (vp_planner.methods, torch-free), as the planner does."""
     import run_suite
-    from vp_planner.optimizers import METHODS
+    from vp_planner.methods import METHODS
 
     assert tuple(run_suite.METHODS) == tuple(METHODS)
     assert run_suite.parse_args(["--method", "lawnmower"]).method == "lawnmower"

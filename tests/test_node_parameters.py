@@ -85,7 +85,7 @@ DESCRIBED = {
         "hover_attitude_sigma": (DOUBLE, 0.0, 10.0, False), "max_realizations": (INT, 0, INT64_MAX, False),
         "max_cameras": (INT, 2, INT64_MAX, False)},
         ("sensor_noise", 0.9), None),
-    "sim_drone": ("vp_planner", "sim_drone", {"drone": "d0"}, {
+    "sim_drone": ("vp_scene", "sim_drone", {"drone": "d0"}, {
         "speed": (DOUBLE, 0.0, math.inf, True), "drone": (None, None, None, True)},
         None, ("speed", 3.0)),
 }

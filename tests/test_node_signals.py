@@ -19,7 +19,7 @@ NODES = {
     "planner": ("vp_planner", "planner", {}),
     "recon": ("vp_recon", "recon", {}),
     "dispatcher": ("vp_planner", "dispatcher", {"drones": ["d1", "d2"]}),
-    "sim_drone": ("vp_planner", "sim_drone", {"drone": "d1"}),
+    "sim_drone": ("vp_scene", "sim_drone", {"drone": "d1"}),
     "recorder": ("vp_recon", "recorder", {}),  # output: in the test's tmp_path (below)
 }
 

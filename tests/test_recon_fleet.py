@@ -15,7 +15,8 @@ from sensor_msgs.msg import Image
 from vp_interfaces.msg import FleetAssignment, SceneDescription
 from vp_interfaces.msg import ReconstructionScore as Score
 
-from vp_recon.pipeline import ReconConfig, reconstruct_realization
+from vp_recon.config import ReconConfig
+from vp_recon.pipeline import reconstruct_realization
 from vp_recon.recon_node import SCORES  # transient local: a score sent before the match is not lost
 from vp_scene.camera import cameras_to_poses, look_at
 from vp_scene.capture import IDEAL
@@ -44,7 +45,7 @@ def fly(cams: np.ndarray, drones: list, recon_params: dict, ros_env, start_node,
     recon = start_node("vp_recon", "recon", {**SIZE, "capture": "ideal", "source": "fleet", "num_threads": 1,
                                              "output_folder": str(tmp_path / "out"), **recon_params}, ros_env)
     for d, c in zip(drones, cams):
-        start_node("vp_planner", "sim_drone", {"drone": d, "x": float(c[0]), "y": float(c[1]), "z": float(c[2]),
+        start_node("vp_scene", "sim_drone", {"drone": d, "x": float(c[0]), "y": float(c[1]), "z": float(c[2]),
                                                "camera": True, "capture": "ideal", **SIZE}, ros_env,
                    args=("--ros-args", "-r", f"__node:=sim_{d}"))
     client = ros_node(ros_env)
@@ -110,7 +111,7 @@ def test_the_fleet_captures_keep_arrays_and_a_bounded_number_per_drone(ros_env, 
     that takes it), and a drone's captures beyond CAPTURES_KEPT drop the oldest with a log line."""
     import threading
 
-    from vp_recon.recon_node import CAPTURES_KEPT, FleetCaptures
+    from vp_recon.fleet_captures import CAPTURES_KEPT, FleetCaptures
 
     client = ros_node(ros_env)
     fleet = FleetCaptures(client.node, threading.Condition())

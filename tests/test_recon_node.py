@@ -233,7 +233,7 @@ def test_a_plan_of_more_than_max_cameras_is_refused_at_once_and_the_node_serves_
     agg = aggregate(scores)[2]
     assert agg.error_code == Score.NONE and agg.num_images == 6, agg.error_msg
     assert recon.alive()
-    from vp_recon.pipeline import MAX_CAMERAS
+    from vp_recon.config import MAX_CAMERAS
     from vp_recon.recon_node import PARAMS
 
     assert PARAMS["max_cameras"][0] == MAX_CAMERAS == 256  # one default: the node's, the CLI's, the library's

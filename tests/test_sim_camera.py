@@ -1,5 +1,5 @@
 """Simulated drones take pictures (issue 20, part 1): the real scene node and a real
-``vp_planner sim_drone`` with ``camera:=true`` over DDS; the test plays the dispatcher
+``vp_scene sim_drone`` with ``camera:=true`` over DDS; the test plays the dispatcher
 (/fleet/assignment, the goal) and the capture trigger (/fleet/capture). Every wait has a deadline.
 """
 from __future__ import annotations
@@ -13,7 +13,8 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 from vp_interfaces.msg import CaptureTrigger, DroneAssignment, FleetAssignment, SceneDescription
 
-from vp_recon.pipeline import ReconConfig, render_flight
+from vp_recon.config import ReconConfig
+from vp_recon.pipeline import render_flight
 from vp_scene.camera import cameras_to_poses, look_at
 from vp_scene.capture import CaptureModel
 from vp_scene.messages import (camera_info_intrinsics, compressed_image_array, image_array, pose_array, pose_msg,
@@ -31,7 +32,7 @@ def test_a_settled_drone_publishes_the_image_its_camera_of_the_plan_gets(ros_env
     cams = look_at(np.array([[1.6, 0.0, 1.2], [0.0, 1.6, 1.2], [-1.2, 1.0, 1.3]]), np.tile([0.0, 0.0, 0.9], (3, 1)))
     goal = cameras_to_poses(cams[2])
     start_node("vp_scene", "scene", SCENE, ros_env)
-    drone = start_node("vp_planner", "sim_drone", {"drone": "d0", "x": float(goal[0]), "y": float(goal[1]),
+    drone = start_node("vp_scene", "sim_drone", {"drone": "d0", "x": float(goal[0]), "y": float(goal[1]),
                                                     "z": float(goal[2]), "camera": True, "width": 320,
                                                     "height": 240}, ros_env)
     client = ros_node(ros_env)

@@ -5,7 +5,7 @@ Starts the three nodes as separate processes (real ROS 2 nodes, DDS on loopback 
 and streams their logs, asks the planner for a plan through the ``/plan_views`` action (with a
 progress bar from its feedback), waits for the recon node's aggregate score on
 ``/reconstruction/score`` and writes ``<out>/summary.json``. With ``--drones N`` it also starts
-the dispatcher with drones d0..d<N-1> and N simulated drones (``vp_planner sim_drone``, on a
+the dispatcher with drones d0..d<N-1> and N simulated drones (``vp_scene sim_drone``, on a
 launch row 5 m south of the plot) and prints which drone goes where (``/fleet/assignment``);
 the drones then photograph the plan and the recon node reconstructs their images
 (``--source fleet``, the default with drones; ``--source render``: it renders the plan itself).
@@ -172,7 +172,7 @@ def prepare_out(out: Path) -> Optional[Path]:
     (:data:`EARLIER_OUTPUT`: ``make run`` twice) is first renamed to ``<out>-<the time it was last
     written>`` (returned; nothing is deleted); a folder of other files is refused with
     FileExistsError (the run's files would mix with them, and a later run would move them aside)."""
-    from vp_recon.outputs import move_aside
+    from vp_scene.folders import move_aside
 
     moved = None
     if out.is_dir() and any(out.iterdir()):
@@ -353,7 +353,7 @@ def thinned_cloud(msg, voxel: float = RECONSTRUCTION_VOXEL):
     its frame (:func:`vp_recon.dense.voxel_downsample`)."""
     import numpy as np
     from vp_recon.dense import voxel_downsample
-    from vp_scene.messages import numpy_to_pointcloud2, pointcloud2_to_numpy
+    from vp_scene.cloud import numpy_to_pointcloud2, pointcloud2_to_numpy
 
     points, colors, _ = pointcloud2_to_numpy(msg)
     colors = np.zeros((len(points), 3), np.uint8) if colors is None else colors
@@ -507,7 +507,7 @@ def run(args: argparse.Namespace) -> int:
             for name, (x, y, z) in zip(drones, launch_row(args.drones)):
                 camera = {'camera': True, 'width': args.width, 'height': args.height, 'capture': args.capture} \
                     if args.source == 'fleet' else {}
-                nodes.append(start_node(f'sim_{name}', 'vp_planner', 'sim_drone', {
+                nodes.append(start_node(f'sim_{name}', 'vp_scene', 'sim_drone', {
                     'drone': name, 'x': x, 'y': y, 'z': z, **camera}, {**env, 'OMP_NUM_THREADS': '1'}, out))
         mission = Mission(args)
 

@@ -20,7 +20,6 @@ setup(
         'console_scripts': [
             'planner = vp_planner.node_entry:planner',
             'dispatcher = vp_planner.node_entry:dispatcher',
-            'sim_drone = vp_planner.node_entry:sim_drone',
             'plan = vp_planner.cli:main',
         ],
     },

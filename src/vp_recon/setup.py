@@ -14,7 +14,7 @@ setup(
     zip_safe=True,
     maintainer='vp-suite maintainers',
     maintainer_email='maintainers@vp-suite.invalid',
-    description='Render planned views, reconstruct with COLMAP (CPU) and score with the Chamfer distance; the recon node.',
+    description='Reconstruct the images of a flight (rendered by the simulated drones of vp_scene, or real) with COLMAP (CPU) and score with the Chamfer distance; the recon, recorder and viewer nodes.',
     license='Apache-2.0',
     entry_points={
         'console_scripts': [

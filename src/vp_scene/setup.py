@@ -14,11 +14,12 @@ setup(
     zip_safe=True,
     maintainer='vp-suite maintainers',
     maintainer_email='maintainers@vp-suite.invalid',
-    description='Noisy corn-field scenes: plant models (Corn50 PLY or procedural), scenarios, wind noise, and the scene node.',
+    description='The simulated world: corn-field scenes (Corn50 PLY or procedural plants, layouts, wind noise), the capture model, rendering and the simulated drones, with the scene and sim_drone nodes; and what every package shares (camera geometry, plan files, ROS message conversions, node runtime).',
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
             'scene = vp_scene.node_entry:scene',
+            'sim_drone = vp_scene.node_entry:sim_drone',
         ],
     },
 )

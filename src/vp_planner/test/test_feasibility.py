@@ -20,7 +20,7 @@ DISPATCHER_WITHOUT_TORCH = textwrap.dedent("""
     import numpy as np
     import rclpy
     import vp_planner.dispatcher_node as dn
-    import vp_planner.sim_drone_node  # noqa: F401
+    import vp_scene.sim_drone_node  # noqa: F401
     from vp_planner.fleet import plan_problems
     rclpy.init(args=['--ros-args', '-p', 'drones:=[d1, d2]'])
     node = dn.DispatcherNode()

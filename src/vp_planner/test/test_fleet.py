@@ -10,7 +10,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from vp_planner.fleet import (AssignmentError, FleetTransform, assign, bottleneck_assignment, distance_matrix,
-                              fly_toward, goal_orientations, min_total_assignment, plan_problems)
+                              goal_orientations, min_total_assignment, plan_problems)
 from vp_planner.space import ViewSpace
 from vp_scene.camera import OPTICAL_IN_BODY, cameras_to_poses, look_at, rotation_matrix
 
@@ -164,9 +164,3 @@ def test_plan_problems_agree_with_the_view_space(realizations) -> None:
     for _ in range(40):
         cams = look_at(rng.uniform([-1.5, -1.5, 0.0], [1.5, 1.5, 2.5], (3, 3)), np.tile([0.0, 0.0, 1.0], (3, 1)))
         assert (plan_problems(cams, realizations) == []) == bool(space.feasible(cams))
-
-
-def test_fly_toward() -> None:
-    p = fly_toward([0.0, 0.0, 0.0], [3.0, 4.0, 0.0], speed=2.0, dt=0.5)
-    np.testing.assert_allclose(p, [0.6, 0.8, 0.0])
-    np.testing.assert_array_equal(fly_toward([2.9, 3.9, 0.0], [3.0, 4.0, 0.0], 2.0, 0.5), [3.0, 4.0, 0.0])

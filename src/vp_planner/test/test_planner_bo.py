@@ -6,7 +6,8 @@ import math
 import pytest
 import torch
 
-from vp_planner.bo import MODEL_NAMES, ensemble_weights, optimize
+from vp_planner.bo import optimize
+from vp_planner.gp import MODEL_NAMES, ensemble_weights
 
 
 def test_ensemble_weights_log_space_and_prior() -> None:

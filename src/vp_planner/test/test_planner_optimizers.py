@@ -7,21 +7,12 @@ import time
 import numpy as np
 import pytest
 
-from vp_planner.optimizers import (
-    MAX_CAMERAS,
-    METHODS,
-    InvalidBudgetError,
-    InvalidNumCamerasError,
-    InvalidSceneError,
-    NoFeasiblePlanError,
-    UnknownMethodError,
-    check_memory,
-    estimate_memory,
-    plan_views,
-)
-from vp_planner.request import PlanRequest
+from vp_planner.methods import METHODS
+from vp_planner.optimizers import InvalidSceneError, plan_views
+from vp_planner.request import (MAX_CAMERAS, InvalidBudgetError, InvalidNumCamerasError, PlanRequest, UnknownMethodError,
+                                check_memory, estimate_memory)
 from vp_planner.reward_models import make_reward
-from vp_planner.space import ViewSpace
+from vp_planner.space import NoFeasiblePlanError, ViewSpace
 
 
 def check_result(res, method: str, realizations: np.ndarray, n: int, evaluations: int) -> None:
@@ -194,8 +185,8 @@ def test_evaluation_budget_is_bounded_before_anything_is_allocated(realizations:
     (circle, sa and random had no bound; egp asked torch for 192 GB). Each method has a
     documented bound, and a run the memory cannot hold is refused too, both before the space
     or any record is allocated."""
-    from vp_planner.optimizers import (MAX_EVALUATIONS, BudgetTooLargeError, check_budget_memory,
-                                       estimate_run_memory)
+    from vp_planner.methods import MAX_EVALUATIONS
+    from vp_planner.request import BudgetTooLargeError, check_budget_memory, estimate_run_memory
 
     assert set(MAX_EVALUATIONS) == set(METHODS)
     assert MAX_EVALUATIONS["egp"] == MAX_EVALUATIONS["gp"] == 1000

@@ -124,7 +124,8 @@ def test_each_default_lives_in_one_place() -> None:
     the dispatcher, the search space, the feasibility rules and the drones read them."""
     import inspect
 
-    from vp_planner import cli, dispatcher_node, fleet, planner_node, sim_drone_node
+    from vp_planner import cli, dispatcher_node, fleet, planner_node
+    from vp_scene import sim_drone_node
     from vp_planner.feasibility import Feasibility, FeasibilityRules
     from vp_planner.request import DEFAULTS, FLAT
     from vp_planner.space import ViewSpace

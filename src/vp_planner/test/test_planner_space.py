@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import torch
 
+from vp_planner.designs import random_plans, structured_plans
 from vp_planner.reward import noisy_reward
 from vp_planner.reward_models import make_reward
 from vp_planner.objective import Objective
@@ -67,7 +68,7 @@ def test_random_plans_mostly_feasible_and_see_the_plant(space4: ViewSpace, reali
 
 
 def test_feasible_detects_violations(space4: ViewSpace) -> None:
-    U = space4.sample(5, np.random.default_rng(3))
+    U = random_plans(space4, 5, np.random.default_rng(3))
     cams = space4.decode(U)
     assert space4.feasible(cams).all() and space4.feasible(U).all()
     assert space4.feasible(torch.as_tensor(U)).dtype == torch.bool
@@ -90,17 +91,17 @@ def test_feasible_detects_violations(space4: ViewSpace) -> None:
 
 def test_sample_and_structured(space4: ViewSpace, realizations: np.ndarray) -> None:
     rng = np.random.default_rng(4)
-    U = space4.sample(30, rng)
+    U = random_plans(space4, 30, rng)
     assert U.shape == (30, 24) and space4.feasible(U).all()
     assert np.all((U >= 0) & (U <= 1))
-    S = space4.structured()
+    S = structured_plans(space4)
     assert len(S) >= 4 and space4.feasible(S).all()
     rs = noisy_reward(space4.decode(S), realizations)
     rr = noisy_reward(space4.decode(U), realizations)
     assert np.median(rs) > np.median(rr)
     crowded = ViewSpace(realizations, 4, min_separation=100.0)
     with pytest.raises(NoFeasiblePlanError, match="feasible"):
-        crowded.sample(3, rng, max_tries=3)
+        random_plans(crowded, 3, rng, max_tries=3)
 
 
 def test_objective_records_and_cancels(space4: ViewSpace, realizations: np.ndarray) -> None:
@@ -111,7 +112,7 @@ def test_objective_records_and_cancels(space4: ViewSpace, realizations: np.ndarr
         return done < 6
 
     obj = Objective(space4, total=8, callback=cb)
-    U = space4.sample(3, np.random.default_rng(5))
+    U = random_plans(space4, 3, np.random.default_rng(5))
     infeasible = U[:1].copy()
     infeasible[0, 6:12] = infeasible[0, 0:6]  # two cameras at the same place
     assert not space4.feasible(infeasible).any()

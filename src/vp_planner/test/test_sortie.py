@@ -126,9 +126,9 @@ def test_bad_fixed_cameras_are_refused(realizations, fixed, text) -> None:
 
 def test_fixed_cameras_beyond_the_memory_are_refused(realizations, monkeypatch) -> None:
     plan_views(PlanRequest.of("random", 2, evaluations=2, fixed_cameras=[ring_camera(0)]), realizations)
-    need = optimizers.estimate_memory(2 + 50, realizations.shape[0], realizations.shape[1], "coverage")
+    need = request.estimate_memory(2 + 50, realizations.shape[0], realizations.shape[1], "coverage")
     monkeypatch.setattr(request, "available_memory", lambda: int(need))  # the plan alone fits
-    optimizers.check_memory(2, realizations.shape, "coverage")
+    request.check_memory(2, realizations.shape, "coverage")
     with pytest.raises(InvalidFixedCamerasError, match="memory|GiB"):
         plan_views(PlanRequest.of("random", 2, evaluations=2, fixed_cameras=np.tile(ring_camera(0), (50, 1))),
                    realizations)

@@ -14,6 +14,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
+from .designs import random_plans
 from .objective import Objective
 from .request import PlanRequest
 from .space import NoFeasiblePlanError, ViewSpace
@@ -168,7 +169,7 @@ def plan_random(space: ViewSpace, obj: Objective, evaluations: int, rng: np.rand
     step = batch_size(space)
     while done < evaluations:
         n = min(step, evaluations - done)
-        U = space.sample(n, rng, should_stop=obj.should_stop)
+        U = random_plans(space, n, rng, should_stop=obj.should_stop)
         obj(U)
         done += n
 

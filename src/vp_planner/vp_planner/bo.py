@@ -38,8 +38,7 @@ from .gp import (MODEL_NAMES, SINGLE_MODEL_NAME, draw_model, ensemble_weights, f
                  lengthscales, log_evidence, make_model, set_hypers)
 from .trust_region import TrustRegion
 
-__all__ = ["MODEL_NAMES", "SINGLE_MODEL_NAME", "MODES", "BOSettings", "BOResult", "StepRecord",
-           "NoFeasiblePointError", "optimize", "ensemble_weights"]
+__all__ = ["MODES", "BOSettings", "BOResult", "StepRecord", "NoFeasiblePointError", "optimize"]
 
 Objective = Callable[[Tensor], Tensor]
 Feasible = Callable[[Tensor], Tensor]

@@ -12,6 +12,7 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 
+from .designs import random_plans, structured_plans
 from .methods import BY_NAME
 from .objective import Objective
 from .request import PlanRequest
@@ -24,10 +25,10 @@ def initial_design(space: ViewSpace, n: int, rng: np.random.Generator, structure
                    should_stop: Optional[StopCheck] = None) -> NDArray[np.float64]:
     """n initial plans U (n, 6N): up to ``structured`` structured plans, then random feasible ones
     (PlanningCancelled as soon as ``should_stop()`` is True)."""
-    S = space.structured(max_plans=max(0, min(structured, n))) if structured > 0 else np.zeros((0, space.dim))
+    S = structured_plans(space, max_plans=max(0, min(structured, n))) if structured > 0 else np.zeros((0, space.dim))
     S = S[:n]
     try:
-        rest = space.sample(n - len(S), rng, should_stop=should_stop) if n > len(S) else np.zeros((0, space.dim))
+        rest = random_plans(space, n - len(S), rng, should_stop=should_stop) if n > len(S) else np.zeros((0, space.dim))
     except NoFeasiblePlanError as exc:
         # The range egp/gp serve (issue 19, item 4; README "Planner node"): their space is a
         # shell about the scene, and random plans in it keep min_separation only up to a few

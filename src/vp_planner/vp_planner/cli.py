@@ -255,8 +255,8 @@ def request_of(args: argparse.Namespace) -> "PlanRequest":
 
 def plan(args: argparse.Namespace) -> dict:
     """Plan views; write OUT/plan.json and OUT/noisy_points.npy; return the plan dict."""
-    from vp_recon.outputs import ResultFolder
     from vp_scene.camera import cameras_to_poses
+    from vp_scene.folders import ResultFolder
     from vp_scene.planfile import write_plan
 
     from .methods import BY_NAME

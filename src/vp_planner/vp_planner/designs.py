@@ -1,8 +1,9 @@
 """Plans of a :class:`~vp_planner.space.ViewSpace` drawn or built without optimizing: uniformly random
 feasible plans (:func:`random_plans`, the ``random`` baseline and the random part of the BO
 initial design) and structured plans (:func:`structured_plans`: caps, rings and arcs about the
-scene, the structured part of the initial design). ``ViewSpace.sample`` and
-``ViewSpace.structured`` call these.
+scene, the structured part of the initial design). Both are functions of the space (this module
+imports :mod:`vp_planner.space`, the space knows nothing of its designs); the directions of the
+caps go through :func:`vp_scene.camera.direction` and :func:`vp_scene.camera.azimuth_elevation`.
 """
 from __future__ import annotations
 
@@ -11,6 +12,8 @@ from typing import Any, Optional
 
 import numpy as np
 from numpy.typing import NDArray
+
+from vp_scene.camera import azimuth_elevation, direction
 
 from .space import NoFeasiblePlanError, PlanningCancelled, StopCheck, ViewSpace
 
@@ -75,7 +78,7 @@ def structured_plans(space: ViewSpace, max_plans: int = 20) -> NDArray[np.float6
     def caps(variants) -> list:
         out = []
         for el_deg, az_deg, u_dist, spread in variants:
-            centre_dir = np.array(_dir_from_angles(math.radians(az_deg), math.radians(el_deg)))
+            centre_dir = direction(math.radians(az_deg), math.radians(el_deg))
             ring = N if N <= 4 else N - 1
             rho = spread * tm / 2.0
             dirs = [centre_dir] if N > 4 else []
@@ -107,11 +110,7 @@ def structured_plans(space: ViewSpace, max_plans: int = 20) -> NDArray[np.float6
     return U[space.feasible(U)]
 
 
-def _dir_from_angles(phi: float, eps: float) -> tuple[float, float, float]:
-    return (math.cos(eps) * math.cos(phi), math.cos(eps) * math.sin(phi), math.sin(eps))
-
 def _u_from_dir(space: ViewSpace, d: NDArray[np.float64]) -> tuple[float, float]:
-    phi = math.atan2(d[1], d[0]) % (2 * math.pi)
-    eps = math.asin(max(-1.0, min(1.0, d[2] / np.linalg.norm(d))))
-    u_el = (eps - space.elevation_lo) / (space.elevation_hi - space.elevation_lo)
-    return (phi / (2 * math.pi), float(min(1.0, max(0.0, u_el))))
+    phi, eps = azimuth_elevation(d)
+    u_el = (float(eps) - space.elevation_lo) / (space.elevation_hi - space.elevation_lo)
+    return ((float(phi) % (2 * math.pi)) / (2 * math.pi), float(min(1.0, max(0.0, u_el))))

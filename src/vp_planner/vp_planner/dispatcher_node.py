@@ -39,7 +39,7 @@ from typing import Optional
 import numpy as np
 from geometry_msgs.msg import PoseArray, PoseStamped
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import PointCloud2
 
 from vp_interfaces.msg import DroneAssignment, FleetAssignment
@@ -47,11 +47,10 @@ from vp_planner.feasibility import Feasibility
 from vp_planner.fleet import (ASSIGNMENTS, ORIENTATIONS, AssignmentError, FleetTransform, assign, goal_orientations,
                               plan_problems)
 from vp_scene.camera import poses_to_cameras
-from vp_scene.messages import POSE_TYPES, drone_topic, msgs_to_poses, point_msg, pose_msg, position_of, realizations_from_cloud
-from vp_scene.node_runtime import NewestWins, Param, declare_typed, refuse_bad_changes, run_node, typed_values
+from vp_scene.cloud import realizations_from_cloud
+from vp_scene.messages import POSE_TYPES, drone_topic, msgs_to_poses, point_msg, pose_msg, position_of
+from vp_scene.node_runtime import LATCHED, NewestWins, Param, declare_typed, refuse_bad_changes, run_node, typed_values
 
-LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
 Msg = FleetAssignment
 
 #: The node's parameters (:class:`vp_scene.node_runtime.Param`); those that make topics are

@@ -71,7 +71,6 @@ __all__ = [
     "assign",
     "goal_orientations",
     "plan_problems",
-    "fly_toward",
 ]
 
 #: Assignment objectives: total travel, or the longest single flight.
@@ -282,15 +281,3 @@ def plan_problems(cameras: ArrayLike, realizations: Optional[ArrayLike], min_sta
 
 def _fmt(p: Sequence[float]) -> str:
     return "(" + ", ".join(f"{float(x):+.2f}" for x in p) + ")"
-
-
-def fly_toward(position: ArrayLike, goal: ArrayLike, speed: float, dt: float) -> NDArray[np.float64]:
-    """One step of a simulated drone: ``speed * dt`` metres straight toward ``goal``, arriving
-    exactly when the goal is nearer than that."""
-    p, g = np.asarray(position, dtype=np.float64), np.asarray(goal, dtype=np.float64)
-    step = max(0.0, float(speed) * float(dt))
-    gap = g - p
-    dist = float(np.linalg.norm(gap))
-    if dist <= step:
-        return g.copy()
-    return p + gap * (step / dist)

@@ -8,7 +8,3 @@ def planner() -> int:
 
 def dispatcher() -> int:
     return start("vp_planner.dispatcher_node")
-
-
-def sim_drone() -> int:
-    return start("vp_planner.sim_drone_node")

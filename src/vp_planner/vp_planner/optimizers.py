@@ -5,7 +5,9 @@ validation and its checks against the scene and the memory), :mod:`vp_planner.ba
 arc, sa, random, lawnmower), :mod:`vp_planner.bo_planning` (egp, gp, by parts); this module
 builds the space and the objective of a request, hands them to the method's entry of the
 registry (:class:`vp_planner.methods.Method`, which knows the room that plans it) and returns a
-:class:`PlanResult` (the names of the other rooms that callers use are re-exported here).
+:class:`PlanResult`. The names of the other rooms are imported from their own module (no
+re-exports here): the request, its errors and checks from :mod:`vp_planner.request`, the methods
+and their bounds from :mod:`vp_planner.methods`, the space's errors from :mod:`vp_planner.space`.
 
 Methods (all maximize the noisy reward r~ of eq. 7 with the same evaluation budget E, report
 the best-so-far reward after every evaluation, and return the best *feasible* plan):
@@ -40,25 +42,25 @@ The initial design of egp/gp is ``initial_evaluations`` plans: a few structured 
 feasible plans (``structured_init`` sets how many structured ones; 0 gives the paper's purely
 random initial design).
 
-Size of a plan: 2 <= N <= :data:`MAX_CAMERAS`. Memory does not limit N by itself: both reward
+Size of a plan: 2 <= N <= :data:`vp_planner.request.MAX_CAMERAS`. Memory does not limit N by itself: both reward
 models and the feasibility check work in chunks of a fixed number of elements (the paper
 reward's pair term included), so one evaluation needs O(N^2) small arrays (pair indices, one
 accumulator per pair) plus the coverage model's per-camera terms, N x K x min(P, 3000) elements
-(:func:`estimate_memory`; a plan that would not fit in the memory available is refused before
+(:func:`vp_planner.request.estimate_memory`; a plan that would not fit in the memory available is refused before
 anything is allocated). What limits N is time and feasibility: one evaluation costs O(N^2 K P)
 (N = 100 on 5 x 4000 points: about 1e8 pair-point terms, a second or two on one core), the
 BO methods work in 6N dimensions, and random feasible plans (min_separation between every pair)
 become rare beyond a few dozen cameras. Hence the bound of 100 cameras, far above the paper's
 N <= 6; a run is cancellable throughout (``should_stop``), the feasible-plan search included.
 
-Size of a budget: 1 <= evaluations <= :data:`MAX_EVALUATIONS` [method] (:mod:`vp_planner.methods`,
+Size of a budget: 1 <= evaluations <= :data:`vp_planner.methods.MAX_EVALUATIONS` [method] (:mod:`vp_planner.methods`,
 the registry of the methods): 1000 for egp/gp (the
 paper uses 100-200; a GP's fit costs O(n^3) time and O(n^2) memory in the n evaluations made,
 four of them for egp, so 1000 is already hours of fitting) and 100000 for the baselines (each
 evaluation is recorded: a few hundred bytes plus 150 bytes a camera). Planning by parts
-multiplies the budget (:func:`total_evaluations`). Beyond the bound, or when
-:func:`estimate_run_memory` of the run exceeds 80 % of the memory available, the request is
-refused before anything is allocated (:class:`BudgetTooLargeError`; the planner node's
+multiplies the budget (:func:`vp_planner.request.total_evaluations`). Beyond the bound, or when
+:func:`vp_planner.request.estimate_run_memory` of the run exceeds 80 % of the memory available, the request is
+refused before anything is allocated (:class:`vp_planner.request.BudgetTooLargeError`; the planner node's
 ``BUDGET_TOO_LARGE``). Before this bound a goal of 4e9 evaluations grew the planner to 20 GB
 until the kernel killed it.
 """
@@ -72,53 +74,16 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 
-from .baselines import sa_candidates
-from .bo_planning import initial_design
-from .methods import BY_NAME, MAX_EVALUATIONS, METHODS
-from .request import (MAX_CAMERAS, BudgetTooLargeError, InvalidBudgetError, InvalidFixedCamerasError,
-                      InvalidNumCamerasError, InvalidReconstructionError, InvalidRequestError, PlanRequest,
-                      UnknownMethodError, UnknownRewardModelError, available_memory, check_budget_memory,
-                      check_lawnmower, check_memory, check_parts, check_reconstruction, check_reconstruction_memory,
-                      check_sortie_weighting, estimate_memory, estimate_run_memory, total_evaluations)
-from .reward_models import DEFAULT_REWARD_MODEL
+from .feasibility import check_realizations
+from .methods import BY_NAME
 from .objective import Objective
-from .space import (
-    Callback,
-    NoFeasiblePlanError,
-    PlanningCancelled,
-    StopCheck,
-    ViewSpace,
-    check_realizations,
-)
+from .request import (InvalidFixedCamerasError, InvalidReconstructionError, PlanRequest, check_budget_memory,
+                      check_memory, check_parts, check_reconstruction, check_reconstruction_memory,
+                      check_sortie_weighting, total_evaluations)
+from .reward_models import DEFAULT_REWARD_MODEL
+from .space import Callback, NoFeasiblePlanError, PlanningCancelled, StopCheck, ViewSpace
 
-__all__ = [
-    "METHODS",
-    "MAX_CAMERAS",
-    "PlanRequest",
-    "PlanResult",
-    "plan_views",
-    "check_lawnmower",
-    "estimate_memory",
-    "check_memory",
-    "InvalidNumCamerasError",
-    "UnknownMethodError",
-    "InvalidBudgetError",
-    "BudgetTooLargeError",
-    "MAX_EVALUATIONS",
-    "estimate_run_memory",
-    "InvalidSceneError",
-    "InvalidFixedCamerasError",
-    "InvalidReconstructionError",
-    "InvalidRequestError",
-    "UnknownRewardModelError",
-    "sortie_weights",
-    "NoFeasiblePlanError",
-    "check_budget_memory",
-    "available_memory",
-    "total_evaluations",
-    "initial_design",
-    "sa_candidates",
-]
+__all__ = ["PlanResult", "plan_views", "InvalidSceneError", "sortie_weights"]
 
 
 class InvalidSceneError(ValueError):
@@ -221,8 +186,8 @@ def plan_views(request: PlanRequest, realizations: Any, callback: Optional[Callb
     Raises:
         TypeError when ``request`` is not a PlanRequest; InvalidSceneError (a ValueError) for bad
         realizations; InvalidNumCamerasError for a plan the memory cannot hold
-        (:func:`check_memory`) or more parts than pairs of cameras; BudgetTooLargeError for a run
-        the memory cannot hold (:func:`check_budget_memory`); InvalidFixedCamerasError,
+        (:func:`vp_planner.request.check_memory`) or more parts than pairs of cameras; BudgetTooLargeError for a run
+        the memory cannot hold (:func:`vp_planner.request.check_budget_memory`); InvalidFixedCamerasError,
         InvalidReconstructionError when the cameras already flown or the reconstruction do not fit
         in memory (nothing planned); NoFeasiblePlanError (ValueError) when no feasible plan was
         found.

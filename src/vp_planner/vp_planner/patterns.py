@@ -13,15 +13,9 @@ from typing import Optional
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from vp_scene.camera import CameraModel, look_at
+from vp_scene.camera import CameraModel, direction, look_at
 
-__all__ = ["ring", "arc", "cap", "direction", "footprint", "lawnmower"]
-
-
-def direction(azimuth: float, elevation: float) -> NDArray[np.float64]:
-    """Unit vector (3,) at ``azimuth`` (rad from +x, counter-clockwise) and ``elevation`` (rad up)."""
-    ce = math.cos(elevation)
-    return np.array([ce * math.cos(azimuth), ce * math.sin(azimuth), math.sin(elevation)])
+__all__ = ["ring", "arc", "cap", "footprint", "lawnmower"]
 
 
 def ring(centre_xy: ArrayLike, target: ArrayLike, radius: ArrayLike, height: ArrayLike, n: int,

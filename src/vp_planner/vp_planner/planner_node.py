@@ -34,26 +34,24 @@ from geometry_msgs.msg import PoseArray
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
 from visualization_msgs.msg import MarkerArray
 
 from vp_interfaces.action import PlanViews
 from vp_interfaces.msg import CameraPlan
 from vp_planner.gp import MODEL_NAMES
-from vp_planner.optimizers import InvalidSceneError, NoFeasiblePlanError, PlanResult, plan_views
 from vp_planner.methods import MAX_EVALUATIONS, METHODS
+from vp_planner.optimizers import InvalidSceneError, PlanResult, plan_views
 from vp_planner.request import (BO_MODES, DEFAULTS, FLAT, MAX_CAMERAS, BudgetTooLargeError, InvalidBudgetError,
                                 InvalidFixedCamerasError, InvalidNumCamerasError, InvalidReconstructionError,
                                 PlanRequest, UnknownMethodError, UnknownRewardModelError, check_fields)
 from vp_planner.reward_models import REWARD_MODELS
-from vp_scene.messages import (cameras_to_pose_array, camera_plan_msg, frustum_markers, pose_array_to_cameras,
-                               pointcloud2_to_numpy, realizations_from_cloud)
-from vp_scene.node_runtime import (INT_MAX, Param, declare_typed, parameter_value, refuse_bad_changes, run_node,
-                                   typed_values)
+from vp_planner.space import NoFeasiblePlanError
+from vp_scene.cloud import pointcloud2_to_numpy, realizations_from_cloud
+from vp_scene.messages import cameras_to_pose_array, camera_plan_msg, frustum_markers, pose_array_to_cameras
+from vp_scene.node_runtime import (INT_MAX, LATCHED, Param, declare_typed, parameter_value, refuse_bad_changes,
+                                   run_node, typed_values)
 
-LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 #: The library's refusals and the action's error codes (the first class a refusal is an instance of).
 ERROR_CODES = (

@@ -1,7 +1,7 @@
 """The continuous search space of camera plans: its encoding, feasibility and reward binding.
 
-Random and structured plans of the space: :mod:`vp_planner.designs`; the objective the
-optimizers maximize on it: :mod:`vp_planner.objective`.
+Random and structured plans of the space: :mod:`vp_planner.designs` (which imports this module,
+never the other way); the objective the optimizers maximize on it: :mod:`vp_planner.objective`.
 
 Why a shell-and-target parameterization
 ---------------------------------------
@@ -53,7 +53,7 @@ import torch
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from vp_scene.camera import IMAGE_SIZE, CameraModel
+from vp_scene.camera import IMAGE_SIZE, CameraModel, azimuth_elevation, direction
 
 from .feasibility import Feasibility, FeasibilityRules, check_minima, check_realizations
 from .reward import DEFAULT_FOV, DEFAULT_THETA_MATCH
@@ -64,7 +64,6 @@ __all__ = [
     "ViewSpace",
     "PlanningCancelled",
     "NoFeasiblePlanError",
-    "check_realizations",
 ]
 
 #: ``callback(done, total, best, weights) -> bool`` after every evaluation (False: stop).
@@ -212,10 +211,9 @@ class ViewSpace:
         return self.rules.tree
 
     def directions(self, u_az: NDArray, u_el: NDArray) -> NDArray[np.float64]:
-        phi = 2.0 * math.pi * u_az
-        eps = self.elevation_lo + (self.elevation_hi - self.elevation_lo) * u_el
-        ce = np.cos(eps)
-        return np.stack([ce * np.cos(phi), ce * np.sin(phi), np.sin(eps)], axis=-1)
+        """Unit directions (..., 3) from the scene's centre at azimuth 2 pi u_az and elevation
+        eps_lo + (eps_hi - eps_lo) u_el (:func:`vp_scene.camera.direction`)."""
+        return direction(2.0 * math.pi * u_az, self.elevation_lo + (self.elevation_hi - self.elevation_lo) * u_el)
 
     def exit_distance(self, d: NDArray[np.float64]) -> NDArray[np.float64]:
         """t_exit(d) = min_a (h_a + s) / |d_a|: where the ray o + t d leaves the grown box."""
@@ -276,8 +274,8 @@ class ViewSpace:
         rel = c - self.origin
         dist = np.linalg.norm(rel, axis=-1)
         d = rel / np.maximum(dist, 1e-12)[..., None]
-        u_az = np.mod(np.arctan2(d[..., 1], d[..., 0]) / (2 * math.pi), 1.0)
-        eps = np.arcsin(np.clip(d[..., 2], -1.0, 1.0))
+        phi, eps = azimuth_elevation(d)
+        u_az = np.mod(phi / (2 * math.pi), 1.0)
         u_el = np.clip((eps - self.elevation_lo) / (self.elevation_hi - self.elevation_lo), 0.0, 1.0)
         d_used = self.directions(u_az, u_el)
         u_dist = np.clip((dist - self.exit_distance(d_used)) / self.shell_depth, 0.0, 1.0)
@@ -332,17 +330,3 @@ class ViewSpace:
 
     def _feasible_cameras(self, cams: NDArray[np.float64]) -> NDArray[np.bool_]:
         return self.rules(cams)
-
-    # ------------------------------------------------------------------ designs (vp_planner.designs)
-    def sample(self, n: int, rng: Any = None, max_tries: int = 1000,
-               should_stop: Optional[StopCheck] = None) -> NDArray[np.float64]:
-        """n feasible plans U (n, 6N) drawn uniformly from the cube (:func:`vp_planner.designs.random_plans`)."""
-        from .designs import random_plans
-
-        return random_plans(self, n, rng, max_tries, should_stop)
-
-    def structured(self, max_plans: int = 20) -> NDArray[np.float64]:
-        """Up to ``max_plans`` structured plans U (M, 6N) (:func:`vp_planner.designs.structured_plans`)."""
-        from .designs import structured_plans
-
-        return structured_plans(self, max_plans)

@@ -13,9 +13,10 @@ from vp_scene.ground_control import GroundControl, GroundControlError, marker_la
     read_markers_csv, write_markers_csv
 
 from vp_recon import sparse as sparse_mod
+from vp_recon.config import ReconConfig
 from vp_recon.gcp import register
-from vp_recon.pipeline import ReconConfig, reconstruct_captured, render_flight
-from vp_recon.render import image_mask
+from vp_recon.pipeline import reconstruct_captured, render_flight
+from vp_recon.segment import image_mask
 from vp_recon.sparse import SparseError, sparse_reconstruct
 
 

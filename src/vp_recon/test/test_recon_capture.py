@@ -11,7 +11,9 @@ import pytest
 
 from vp_scene.capture import IDEAL, REALISTIC
 
-from vp_recon.pipeline import RECONSTRUCTION_FAILED, ReconConfig, ReconError, reconstruct_realization
+from vp_recon.config import ReconConfig
+from vp_recon.errors import RECONSTRUCTION_FAILED, ReconError
+from vp_recon.pipeline import reconstruct_realization
 
 
 @pytest.fixture(scope="module")
@@ -84,7 +86,7 @@ def test_parts_that_share_no_matches_are_each_registered_to_map(scene, tmp_path)
     only: COLMAP's mapper makes one model per part, and each is placed in map on its own reported
     poses. Before, only the largest model was kept: 4 of 8 images registered and one side lost."""
     from vp_recon.pipeline import render_flight
-    from vp_recon.render import image_mask
+    from vp_recon.segment import image_mask
     from vp_recon.sparse import sparse_reconstruct
 
     cfg = ReconConfig(width=2000, height=1500, num_threads=1)  # 1000 x 750: too few points a side

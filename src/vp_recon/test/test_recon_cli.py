@@ -133,7 +133,7 @@ def test_cli_refuses_a_plan_of_more_cameras_than_max_cameras(tmp_path: Path, cap
             err = capsys.readouterr().err
             assert ei.value.code == 2 and match in err and err.count("\n") == 1, err
     assert not out.exists()
-    from vp_recon.pipeline import MAX_CAMERAS, MAX_MEGAPIXELS
+    from vp_recon.config import MAX_CAMERAS, MAX_MEGAPIXELS
 
     assert (MAX_CAMERAS, MAX_MEGAPIXELS) == (256, 768)
 

@@ -15,9 +15,11 @@ import pytest
 from vp_scene.capture import IDEAL
 
 from vp_recon.cli import main
+from vp_recon.config import ReconConfig
 from vp_recon.flight import POSES_FILE, CapturedViews, FlightError, read_flight, write_flight
 from vp_recon.metrics import coverage_of_prior
-from vp_recon.pipeline import Prior, ReconConfig, reconstruct_views, render_flight
+from vp_recon.pipeline import reconstruct_views, render_flight
+from vp_recon.results import Prior
 
 SCENE = {"scenario": "one_plant", "models": None, "seed": 0, "points_per_plant": 2000, "plant_spacing": 0.6,
          "row_spacing": 0.76, "levels": 10, "realizations": 2, "wind_variance": 0.002, "wind_direction": 0.0}
@@ -100,7 +102,7 @@ def test_a_drone_rendering_its_own_camera_sees_what_the_plan_render_gives_it(sce
     np.testing.assert_array_equal(one.reported[0], full.reported[4])
     other = render_flight(scene, 1, cams[[4]], cfg, indices=[0])  # another index: other draws
     assert not np.array_equal(other.reported[0], one.reported[0])
-    from vp_recon.pipeline import ReconError
+    from vp_recon.errors import ReconError
 
     with pytest.raises(ReconError, match="indices"):
         render_flight(scene, 1, cams[:2], cfg, indices=[3, 3])

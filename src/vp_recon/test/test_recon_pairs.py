@@ -141,8 +141,8 @@ def test_check_pairs() -> None:
 @pytest.fixture(scope="module")
 def renders(noisy_scene):
     """4 real renders (640 x 480) of the plant from a ring 30 degrees apart."""
-    from vp_recon.meshing import scene_meshes
-    from vp_recon.render import Renderer
+    from vp_scene.meshing import scene_meshes
+    from vp_scene.render import Renderer
 
     a = np.deg2rad(30.0 * np.arange(4))
     c = np.stack([1.4 * np.cos(a), 1.4 * np.sin(a), np.full(4, 1.2)], axis=1)

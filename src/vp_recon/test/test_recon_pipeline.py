@@ -6,9 +6,12 @@ import pytest
 
 from vp_scene.capture import IDEAL
 
-from vp_recon.meshing import scene_meshes
-from vp_recon.pipeline import (EMPTY_PLAN, NO_SCENE, NOTHING_VISIBLE, OUTPUT_NOT_WRITABLE, RECONSTRUCTION_FAILED,
-                               ReconCancelled, ReconConfig, ReconError, reconstruct_plan, reconstruct_realization)
+from vp_recon.config import ReconConfig
+from vp_scene.meshing import scene_meshes
+from vp_recon.errors import (EMPTY_PLAN, NO_SCENE, NOTHING_VISIBLE, OUTPUT_NOT_WRITABLE, RECONSTRUCTION_FAILED,
+                             ReconError)
+from vp_recon.pipeline import reconstruct_plan, reconstruct_realization
+from vp_recon.progress import ReconCancelled
 
 # These tests check the plumbing on small images under the ideal capture (exact poses, as before
 # issue 18); the realistic capture is tested at the paper's resolution in test_recon_capture.py.
@@ -72,8 +75,8 @@ def test_sparse_only(noisy_scene) -> None:
 def test_auto_matching_uses_the_poses_from_eight_cameras(noisy_scene) -> None:
     """8 cameras 20 degrees apart: 'auto' matches only the pairs select_pairs picks from the
     poses and realization 0's true points, not all 28."""
+    from vp_recon.config import MATCH_POSES_FROM, matching_method
     from vp_recon.pairs import select_pairs
-    from vp_recon.pipeline import MATCH_POSES_FROM, matching_method
     from vp_scene.camera import CameraModel
 
     assert MATCH_POSES_FROM == 8 and matching_method("auto", 7) == "exhaustive"

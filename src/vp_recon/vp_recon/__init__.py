@@ -1,9 +1,13 @@
-"""vp_recon: render planned views, reconstruct them and score the reconstruction (paper Sec. V-B).
+"""vp_recon: reconstruct a flight's images and score the reconstruction (paper Sec. V-B).
 
 ROS-free modules (import cost is paid per module, nothing heavy is imported here):
-:mod:`vp_recon.render` (camera model, pyrender), :mod:`vp_recon.meshing` (plant meshes per wind
-realization), :mod:`vp_recon.sparse` (pycolmap SIFT + triangulation), :mod:`vp_recon.dense`
-(SGBM stereo on the CPU), :mod:`vp_recon.metrics` (Chamfer, F-score), :mod:`vp_recon.pipeline`
-(ReconConfig, reconstruct_realization, reconstruct_plan, error codes), :mod:`vp_recon.outputs`
-(PLY, contact sheet, recon.json) and :mod:`vp_recon.cli`. :mod:`vp_recon.recon_node` is the ROS 2 node.
+:mod:`vp_recon.config` (ReconConfig and its caps), :mod:`vp_recon.errors` (the error codes,
+ReconError, the input checks), :mod:`vp_recon.results` (what a reconstruction gives),
+:mod:`vp_recon.progress` (stages, cancel), :mod:`vp_recon.pipeline` (render_flight,
+reconstruct_views, reconstruct_plan), :mod:`vp_recon.tasks` (Dask tasks), :mod:`vp_recon.segment`
+(plant masks), :mod:`vp_recon.sparse` (pycolmap SIFT + triangulation), :mod:`vp_recon.dense` (SGBM
+stereo on the CPU), :mod:`vp_recon.metrics` (Chamfer, F-score), :mod:`vp_recon.outputs` (PLY,
+contact sheet, recon.json) and :mod:`vp_recon.cli`. The rendering of a plan is the simulated
+world's (:mod:`vp_scene.render`, :mod:`vp_scene.sim_drone`). :mod:`vp_recon.recon_node` (with
+:mod:`vp_recon.fleet_captures`) is the ROS 2 node.
 """

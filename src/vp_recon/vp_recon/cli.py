@@ -103,7 +103,7 @@ def capture_from_args(args: argparse.Namespace) -> object:
 
 
 def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
-    from .pipeline import MATCH_POSES_FROM, MATCHINGS, MAX_CAMERAS, MAX_MEGAPIXELS, ReconConfig
+    from .config import MATCH_POSES_FROM, MATCHINGS, MAX_CAMERAS, MAX_MEGAPIXELS, ReconConfig
     from .sparse import MODES
 
     p = _Parser(prog=PROG, description="Render, reconstruct (COLMAP on CPU + SGBM) and score a view plan.")
@@ -209,8 +209,9 @@ def run(args: argparse.Namespace) -> dict:
     from vp_scene.build import build_noisy_scene
     from vp_scene.planfile import PlanFileError, load_plan
 
-    from .outputs import ResultFolder
-    from .pipeline import MAX_CAMERAS, ReconConfig, ReconError, check_plan_size, ensure_writable_dir, validate_cameras
+    from vp_scene.folders import ResultFolder
+    from .config import MAX_CAMERAS, ReconConfig
+    from .errors import ReconError, check_plan_size, ensure_writable_dir, validate_cameras
 
     result_dir = ResultFolder(args.out, RESULT, PROG, args.overwrite).check()
     try:
@@ -247,7 +248,8 @@ def _reconstruct_plan(args: argparse.Namespace, result_dir: Any, plan: Any, nois
                       ks: Optional[list]) -> dict:
     """:func:`run` once the inputs are checked: the reconstruction into ``result_dir``'s stage."""
     from .outputs import contact_sheet, summary, uncovered_image, write_image, write_json, write_ply
-    from .pipeline import STAGES, reconstruct_plan
+    from .pipeline import reconstruct_plan
+    from .progress import STAGES
 
     out = result_dir.stage
     K = noisy.points.shape[0]
@@ -313,8 +315,8 @@ def _record_failure(result_dir: Any, info: dict, exc: Exception) -> Exception:
     failure only reported. Any other exception is returned as it is, nothing recorded."""
     from vp_scene.cluster import SchedulerLost
 
+    from .errors import UNKNOWN, ReconError
     from .outputs import write_json
-    from .pipeline import UNKNOWN, ReconError
 
     if isinstance(exc, SchedulerLost):
         exc = ReconError(UNKNOWN, str(exc))
@@ -345,10 +347,14 @@ def _prior_scene(path: str) -> object:
 
 def run_images(args: argparse.Namespace) -> dict:
     """Reconstruct a flight folder (``--images``); returns the recon.json dict (also written)."""
+    from vp_scene.folders import ResultFolder
+    from .config import MAX_MEGAPIXELS, ReconConfig
+    from .errors import ensure_writable_dir
     from .flight import FlightError, read_flight
     from .metrics import chamfer, chamfer_after_icp
-    from .outputs import ResultFolder, contact_sheet, no_truth_metrics, uncovered_image, write_image, write_json, write_ply
-    from .pipeline import MAX_MEGAPIXELS, Prior, ReconConfig, ensure_writable_dir, reconstruct_views
+    from .outputs import contact_sheet, no_truth_metrics, uncovered_image, write_image, write_json, write_ply
+    from .pipeline import reconstruct_views
+    from .results import Prior
 
     result_dir = ResultFolder(args.out, RESULT, PROG, args.overwrite).check()
     try:  # every input checked before OUT is made: nothing half-written
@@ -414,7 +420,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         os.environ.setdefault("LP_NUM_THREADS", str(args.threads))
     import pycolmap  # noqa: F401  (first: it installs glog's SIGTERM handler, replaced below)
 
-    from .pipeline import EMPTY_PLAN, NO_SCENE, OUTPUT_NOT_WRITABLE, PLAN_TOO_LARGE, ReconError
+    from .errors import EMPTY_PLAN, NO_SCENE, OUTPUT_NOT_WRITABLE, PLAN_TOO_LARGE, ReconError
 
     signal.signal(signal.SIGTERM, _terminate)  # SIGTERM ends the run as Ctrl-C does: exit 130
     try:

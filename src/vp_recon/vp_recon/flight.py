@@ -66,7 +66,7 @@ from vp_scene.camera import (body_from_optical, cameras_to_poses, poses_to_camer
                              world_to_camera)
 from vp_scene.images import ImageError, image_size, read_image
 
-from .pipeline import MAX_MEGAPIXELS
+from .config import MAX_MEGAPIXELS
 
 __all__ = ["POSES_FILE", "MARKERS_FILE", "GCP_LIST_FILE", "POSES_COLUMNS", "IMAGE_SUFFIXES", "FRAME", "MAX_ROLL_DEG", "FlightError", "CapturedViews",
            "write_flight", "read_flight", "capture_folder", "locate_flown", "flown_views", "join_views"]
@@ -314,7 +314,7 @@ def read_flight(folder: PathLike, max_megapixels: float = MAX_MEGAPIXELS) -> Cap
     pose, an image without a pose, duplicate names, intrinsics that differ, or fewer than 2
     images. Every image's header is read before any is decoded: an image of more than
     :data:`vp_scene.images.MAX_IMAGE_PIXELS` pixels, or images of more than ``max_megapixels``
-    together (:data:`vp_recon.pipeline.MAX_MEGAPIXELS`: memory), are refused before decoding."""
+    together (:data:`vp_recon.config.MAX_MEGAPIXELS`: memory), are refused before decoding."""
     d = Path(folder)
     if not d.is_dir():
         raise FlightError(f"{d}: not a folder")

@@ -48,7 +48,7 @@ class EmptyCloudError(ValueError):
 class Scores:
     """The scores of a reconstruction against its truth (:func:`chamfer`): Chamfer = accuracy +
     completeness, metres; fscore, precision and recall unitless in [0, 1]. The fields every
-    score record shares (:class:`CloudScore`, :class:`vp_recon.pipeline.RealizationResult`)."""
+    score record shares (:class:`CloudScore`, :class:`vp_recon.results.RealizationResult`)."""
 
     chamfer: float
     accuracy: float

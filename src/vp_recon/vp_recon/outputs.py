@@ -1,17 +1,14 @@
-"""Writers: coloured PLY clouds, a contact sheet of views, the recon.json summary, run folders.
+"""Writers: coloured PLY clouds, a contact sheet of views, the recon.json summary (folders:
+:mod:`vp_scene.folders`).
 
 recon.json reports distances x 100 (metres x 100, as paper Table I); the library's results are
 in metres and are scaled here, in :func:`summary`, only.
 """
 from __future__ import annotations
 
-import fnmatch
 import json
 import math
 import os
-import shutil
-import tempfile
-import time
 from pathlib import Path
 from typing import Any, Optional, Sequence, Union
 
@@ -19,8 +16,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["TABLE_SCALE", "write_ply", "new_run_folder", "remove_if_empty", "OutputExists", "ResultFolder",
-           "move_aside", "contact_sheet", "write_image", "summary", "write_json",
+__all__ = ["TABLE_SCALE", "write_ply", "contact_sheet", "write_image", "summary", "write_json",
            "no_truth_metrics", "uncovered_image"]
 
 #: Table I reports distances in metres x 100.
@@ -50,138 +46,6 @@ def write_ply(path: PathLike, points: NDArray[np.float64], colors: Optional[NDAr
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_bytes(data)
     tmp.replace(path)
-
-
-def new_run_folder(root: PathLike, prefix: str = "plan", now: Optional[float] = None) -> Path:
-    """A new, empty folder ``root/<prefix>-<YYYYmmdd-HHMMSS>`` for one plan's outputs, never one
-    that exists: a second plan in the same second gets ``-2``, then ``-3``, ... (the folder is
-    created here, atomically, so two callers cannot get the same one). OSError when ``root``
-    cannot hold it."""
-    root = Path(root)
-    root.mkdir(parents=True, exist_ok=True)
-    stamp = time.strftime("%Y%m%d-%H%M%S", time.localtime(now))
-    for n in range(1, 10000):
-        folder = root / (f"{prefix}-{stamp}" if n == 1 else f"{prefix}-{stamp}-{n}")
-        try:
-            folder.mkdir()
-        except FileExistsError:
-            continue
-        return folder
-    raise FileExistsError(f"no free {prefix}-{stamp}-<n> folder in {root}")
-
-
-def remove_if_empty(folder: Optional[PathLike]) -> bool:
-    """Remove ``folder`` when it holds no file (empty sub-folders are removed with it); True when
-    it is gone. Only ``os.rmdir`` is used, which never deletes a file: a file written meanwhile
-    by another thread keeps the folder (and is never lost)."""
-    if folder is None or not Path(folder).is_dir():
-        return folder is not None
-    for parent, _dirs, _files in sorted(os.walk(folder), key=lambda t: -len(Path(t[0]).parts)):
-        try:
-            os.rmdir(parent)
-        except OSError:
-            return False
-    return True
-
-
-class OutputExists(FileExistsError):
-    """An output folder that already holds the result a command would write there (the CLIs: one
-    line, exit 2, the hint ``--overwrite``)."""
-
-
-class ResultFolder:
-    """A command's result in the folder ``out``, written where it cannot mix with an earlier one.
-
-    ``names`` (fnmatch patterns) are the entries of the command's result (e.g. ``recon.json``,
-    ``recon_*.ply``); other entries of ``out`` (the plan beside its reconstruction) are never
-    touched. :meth:`check` refuses an ``out`` that holds an earlier result (any entry named so:
-    :class:`OutputExists`) unless ``overwrite``. The command writes into :attr:`stage`, a hidden
-    folder ``out/.partial-<tool>-<random>``; :meth:`commit` moves the earlier result's entries
-    into a hidden folder, the new ones into ``out``, then deletes the earlier ones: ``out`` holds
-    one result or the other, never a mix. Leaving a ``with`` block without a commit (an error, an
-    interrupt) removes the stage, and ``out`` when it did not exist before and is empty. A run
-    killed with SIGKILL leaves its stage (hidden; a later run ignores it).
-    """
-
-    def __init__(self, out: PathLike, names: Sequence[str], tool: str, overwrite: bool = False) -> None:
-        self.out = Path(out)
-        self.names = tuple(names)
-        self.tool = tool
-        self.overwrite = bool(overwrite)
-        self._made = not os.path.lexists(self.out)  # removed again when nothing is committed
-        self._stage: Optional[Path] = None
-        self.committed = False
-
-    def _named(self, name: str) -> bool:
-        return any(fnmatch.fnmatchcase(name, n) for n in self.names)
-
-    def earlier(self) -> list[str]:
-        """The entries of an earlier result in ``out``, sorted (none: ``[]``)."""
-        if not self.out.is_dir():
-            return []
-        return sorted(p.name for p in self.out.iterdir() if self._named(p.name))
-
-    def check(self) -> "ResultFolder":
-        """OutputExists when ``out`` holds an earlier result and ``overwrite`` is not set."""
-        found = self.earlier()
-        if found and not self.overwrite:
-            shown = ", ".join(found[:3]) + (", ..." if len(found) > 3 else "")
-            raise OutputExists(f"{self.out} already holds a result ({shown}): give --overwrite to replace it "
-                               "when this run succeeds, or another --out")
-        return self
-
-    @property
-    def stage(self) -> Path:
-        """The folder the command writes into (made, with ``out``, on first use; OSError when it
-        cannot be)."""
-        if self._stage is None:
-            self.out.mkdir(parents=True, exist_ok=True)
-            self._stage = Path(tempfile.mkdtemp(prefix=f".partial-{self.tool}-", dir=self.out))
-        return self._stage
-
-    def commit(self) -> Path:
-        """Move the staged result into ``out``, replacing an earlier one as a whole; ``out``."""
-        stage = self.stage
-        new = sorted(stage.iterdir())
-        stray = [p.name for p in new if not self._named(p.name)]
-        if stray:  # a bug of the command: it could replace a file that is not its own
-            raise ValueError(f"{', '.join(stray)} in {stage} is not part of a {self.tool} result")
-        old = self.earlier()
-        trash = Path(tempfile.mkdtemp(prefix=f".replaced-{self.tool}-", dir=self.out)) if old else None
-        for name in old:
-            os.replace(self.out / name, trash / name)
-        for p in new:
-            os.replace(p, self.out / p.name)
-        stage.rmdir()
-        self._stage, self.committed = None, True
-        if trash is not None:
-            shutil.rmtree(trash, ignore_errors=True)
-        return self.out
-
-    def discard(self) -> None:
-        """Remove the stage (what was written so far), and ``out`` when this made it and it is empty."""
-        if self._stage is not None:
-            shutil.rmtree(self._stage, ignore_errors=True)
-            self._stage = None
-        if self._made:
-            remove_if_empty(self.out)
-
-    def __enter__(self) -> "ResultFolder":
-        return self
-
-    def __exit__(self, *_exc) -> None:
-        if not self.committed:
-            self.discard()
-
-
-def move_aside(folder: PathLike) -> Path:
-    """Rename ``folder`` to a new sibling ``<name>-<YYYYmmdd-HHMMSS>[-n]`` stamped with the time
-    of its newest entry (when its run last wrote); the new path. Nothing is deleted."""
-    folder = Path(folder)
-    times = [p.stat().st_mtime for p in folder.iterdir()] or [folder.stat().st_mtime]
-    target = new_run_folder(folder.parent, prefix=folder.name, now=max(times))
-    os.replace(folder, target)  # over the empty folder just made for it (atomic: no other can take it)
-    return target
 
 
 def contact_sheet(images: Sequence[NDArray[np.uint8]], thumb_width: int = 480, columns: int = 0,
@@ -260,7 +124,7 @@ def uncovered_image(prior: NDArray[np.float64], coverage: Any, size: int = 600,
 
 
 def summary(result: Any, extra: Optional[dict] = None) -> dict:
-    """The recon.json dict of a :class:`vp_recon.pipeline.PlanReconResult` (distances x 100)."""
+    """The recon.json dict of a :class:`vp_recon.results.PlanReconResult` (distances x 100)."""
     s = TABLE_SCALE
     per = []
     for r in result.realizations:

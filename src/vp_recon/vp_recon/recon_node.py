@@ -52,7 +52,6 @@ from __future__ import annotations
 import contextlib
 import math
 import os
-import threading
 import time
 from collections import OrderedDict
 from pathlib import Path
@@ -65,23 +64,25 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
 
 from vp_interfaces.msg import CameraPlan, ReconstructionScore, SceneDescription
+from vp_recon.config import MAX_CAMERAS, ReconConfig
+from vp_recon.errors import ReconError, check_plan_size, ensure_writable_dir
+from vp_recon.fleet_captures import IMAGE_TRANSPORTS, FleetCaptures
 from vp_recon.flight import FlightError, flown_views, join_views, locate_flown, write_flight
 from vp_recon.metrics import DEFAULT_FSCORE_THRESHOLD
-from vp_recon.outputs import contact_sheet, new_run_folder, remove_if_empty, write_image, write_ply
-from vp_recon.pipeline import (CAPTURE_MISSING, MAX_CAMERAS, STAGES, ReconCancelled, ReconConfig, ReconError,
-                               RealizationResult, check_plan_size, ensure_writable_dir, plan_result,
-                               reconstruct_captured, reconstruct_plan, worker_call, worker_result)
+from vp_recon.outputs import contact_sheet, write_image, write_ply
+from vp_recon.pipeline import reconstruct_captured, reconstruct_plan
+from vp_recon.progress import STAGES, ReconCancelled
+from vp_recon.results import RealizationResult, plan_result
+from vp_recon.tasks import worker_call, worker_result
+from vp_scene.camera import IMAGE_SIZE
 from vp_scene.capture import IDEAL, REALISTIC, CaptureModel
-from vp_scene.camera import IMAGE_SIZE, poses_to_cameras
-from vp_scene.messages import (aggregate_score, camera_info_intrinsics, compressed_image_array, drone_topic,
-                               error_score, image_array,
-                               numpy_to_pointcloud2, plan_key, pose_array, pose_array_to_cameras, realization_score,
-                               realizations_from_cloud, scene_of_description, score_msg)
-from vp_scene.node_runtime import (INT_MAX, NewestWins, Param, declare_typed, parameter_value, refuse_bad_changes,
-                                   run_node, typed_values)
+from vp_scene.cloud import numpy_to_pointcloud2, realizations_from_cloud
+from vp_scene.folders import new_run_folder, remove_if_empty
+from vp_scene.messages import (aggregate_score, error_score, plan_key, pose_array_to_cameras, realization_score,
+                               scene_of_description, score_msg)
+from vp_scene.node_runtime import (INT_MAX, LATCHED, NewestWins, Param, declare_typed, parameter_value,
+                                   refuse_bad_changes, run_node, typed_values)
 
-LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
 Score = ReconstructionScore
 #: /reconstruction/score keeps the last SCORE_HISTORY scores for a late subscriber that asks for
 #: them (transient local): a plan's scores outlast the moment they were sent, and an immediate
@@ -153,15 +154,10 @@ PARAMS = {
                      (1, INT_MAX)),
 }
 
-#: image_transport -> the image topic under camera_topic (the image_transport convention).
-IMAGE_TRANSPORTS = {'raw': 'image_raw', 'compressed': 'image_raw/compressed'}
 #: /camera_plan/info messages remembered to find the one of a plan.
 _INFO_MEMORY = 16
 #: earlier fleet plans whose capture sets a second sortie may read back (locate_flown)
 _FLOWN_MEMORY = 16
-#: captures (stamps) kept per drone until a capture set takes them; beyond, the oldest is dropped
-#: with a log line (memory: a 2000 x 1500 image is 9 MB; a drone that sends unasked would grow it).
-CAPTURES_KEPT = 2
 #: s a plan waits for its /camera_plan/info (its reward, a second sortie's cameras already flown);
 #: a plan without one (another planner) is reconstructed as it is after that.
 INFO_WAIT_S = 2.0
@@ -515,7 +511,7 @@ class ReconNode(Node):
     def _from_fleet(self, plan: PoseArray, scene: object, config: ReconConfig, K: int, run_dir: Path,
                     progress, on_realization, client: object = None, located: Optional[list] = None) -> object:
         """Source fleet: for each realization k, one capture set of the plan from the drones
-        (:class:`FleetCaptures`), reconstructed on the library path of every capture set
+        (:class:`vp_recon.fleet_captures.FleetCaptures`), reconstructed on the library path of every capture set
         (:func:`vp_recon.pipeline.reconstruct_captured`); the first that fails stops the plan.
         With a Dask ``client`` each capture set is reconstructed on the cluster as soon as it is
         collected (one thread a task), while the drones take the next: the results are the
@@ -599,157 +595,6 @@ class ReconNode(Node):
     def destroy_node(self) -> None:
         self._plans.stop()
         super().destroy_node()
-
-
-class FleetCaptures:
-    """The drones' capture sets (source fleet; README "From a real flight").
-
-    ``/fleet/assignment`` says which drone holds which pose of a plan; for each drone named there
-    the node subscribes ``{camera_topic}/image_raw`` (sensor_msgs/Image; with ``image_transport``
-    compressed ``image_raw/compressed``, sensor_msgs/CompressedImage), ``camera_info`` and
-    ``pose`` (the reported PoseStamped). Every message received is kept by its stamp until a
-    capture set takes it (nothing received is lost, also what arrives while a set is being
-    reconstructed); a capture older than the trigger asking for it belongs to an older plan or
-    realization and is ignored with a log line.
-
-    Memory (issue 20, part 5): an image is converted to its array as it arrives (a view of the
-    message's buffer, which is then the only copy), and at most :data:`CAPTURES_KEPT` captures
-    are kept per drone (the oldest beyond is dropped with a log line): a capture set of N images
-    costs the node about N images' bytes, not three times that (measured in
-    results/bench_fleet_transport.json, ``recon_node_memory``)."""
-
-    def __init__(self, node: Node, lock: threading.Condition) -> None:
-        from vp_interfaces.msg import CaptureTrigger, FleetAssignment
-
-        self._node, self._lock = node, lock
-        self._assignments: OrderedDict = OrderedDict()  # plan stamp key -> FleetAssignment
-        self._got: dict = {}  # drone -> {stamp ns: {kind: msg}}
-        self._subscribed: set = set()
-        self._topic = ''
-        self._trigger = node.create_publisher(CaptureTrigger, '/fleet/capture', LATCHED)
-        self._trigger_type = CaptureTrigger
-        node.create_subscription(FleetAssignment, '/fleet/assignment', self._on_assignment, LATCHED)
-
-    @staticmethod
-    def _ns(stamp) -> int:
-        return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
-
-    def _on_assignment(self, msg) -> None:
-        with self._lock:
-            self._assignments[self._ns(msg.plan_stamp)] = msg
-            while len(self._assignments) > _INFO_MEMORY:
-                self._assignments.popitem(last=False)
-            self._lock.notify_all()
-
-    def _subscribe(self, drone: str, topic: str, transport: str = 'raw') -> None:
-        """Subscribe the drone's image (``image_raw`` or ``image_raw/compressed``, by
-        ``transport``), ``camera_info`` and ``pose`` under ``topic``, once per topic name."""
-        from geometry_msgs.msg import PoseStamped
-        from sensor_msgs.msg import CameraInfo, CompressedImage, Image
-
-        base = drone_topic(topic, drone)
-        image = ('compressed', CompressedImage) if transport == 'compressed' else ('image', Image)
-        for kind, t, name in ((*image, IMAGE_TRANSPORTS[transport]), ('info', CameraInfo, 'camera_info'),
-                              ('pose', PoseStamped, 'pose')):
-            if f'{base}/{name}' in self._subscribed:
-                continue
-            self._subscribed.add(f'{base}/{name}')
-            self._node.create_subscription(t, f'{base}/{name}', lambda m, d=drone, k=kind: self._on(d, k, m), LATCHED)
-            self._node.get_logger().info(f'subscribed {base}/{name}')
-
-    def _on(self, drone: str, kind: str, msg) -> None:
-        stamp = self._ns(msg.header.stamp)
-        if kind in ('image', 'compressed'):  # kept as the array: the message itself is let go
-            try:  # raw: a view of msg.data; compressed: decoded, one image at a time as they come
-                msg = image_array(msg) if kind == 'image' else compressed_image_array(msg)
-            except ValueError as exc:
-                msg = exc  # reported when a capture set takes it
-            kind = 'image'
-        with self._lock:
-            got = self._got.setdefault(drone, {})
-            got.setdefault(stamp, {})[kind] = msg
-            dropped = sorted(got)[:-CAPTURES_KEPT]
-            for t in dropped:
-                del got[t]
-            self._lock.notify_all()
-        for t in dropped:
-            self._node.get_logger().warning(f'capture of {drone} stamped {t} ns dropped: {CAPTURES_KEPT} newer '
-                                            'ones are waiting for a capture set (memory)')
-
-    def capture(self, plan_stamp, num_poses: int, k: int, timeout: float, topic: str, stopped,
-                transport: str = 'raw') -> object:
-        """The capture set of realization ``k`` of the plan: trigger, then one image, camera_info
-        and pose with one stamp (not older than the trigger) from every drone of the plan's
-        assignment, as :class:`vp_recon.flight.CapturedViews` in pose order; None when
-        ``stopped()``. ReconError CAPTURE_MISSING naming the drones that sent nothing."""
-        from .flight import CapturedViews, FlightError
-
-        key = self._ns(plan_stamp)
-        deadline = time.monotonic() + timeout
-        with self._lock:
-            self._lock.wait_for(lambda: key in self._assignments or stopped(), timeout=timeout)
-            fleet = self._assignments.get(key)
-        if stopped():
-            return None
-        if fleet is None:
-            raise ReconError(CAPTURE_MISSING, f'no /fleet/assignment for the plan within capture_timeout {timeout:g} s')
-        if fleet.error_code or len(fleet.entries) != num_poses:
-            raise ReconError(CAPTURE_MISSING, f'the dispatcher sent no drone to {num_poses - len(fleet.entries)} of '
-                                              f'the {num_poses} poses: {fleet.error_msg or "no assignment"}')
-        entries = sorted(fleet.entries, key=lambda e: e.pose_index)
-        drones = [e.drone for e in entries]
-        for d in drones:
-            self._subscribe(d, topic, transport)
-        asked = self.now_ns()
-        trigger = self._trigger_type(realization=int(k), plan_stamp=plan_stamp)
-        trigger.header.frame_id = fleet.header.frame_id
-        trigger.header.stamp = self._node.get_clock().now().to_msg()
-        self._trigger.publish(trigger)
-        self._node.get_logger().info(f'capture {k} of the plan asked of {", ".join(drones)}')
-
-        def complete(d: str):
-            sets = [(t, m) for t, m in self._got.get(d, {}).items() if t >= asked and len(m) == 3]
-            return min(sets)[1] if sets else None
-
-        with self._lock:
-            self._lock.wait_for(lambda: stopped() or all(complete(d) for d in drones),
-                                timeout=max(0.0, deadline - time.monotonic()))
-            if stopped():
-                return None
-            sets = {d: complete(d) for d in drones}
-            for d in drones:  # older captures: another plan or realization's
-                for t in [t for t in self._got.get(d, {}) if t < asked]:
-                    self._node.get_logger().info(f'capture of {d} stamped {t} ns is older than capture {k} '
-                                                 'of this plan: ignored')
-                    del self._got[d][t]
-                for t in [t for t, m in self._got.get(d, {}).items() if sets[d] is m]:
-                    del self._got[d][t]  # taken
-        missing = [d for d in drones if sets[d] is None]
-        if missing:
-            raise ReconError(CAPTURE_MISSING, f'no capture from drone(s) {", ".join(missing)} within capture_timeout '
-                                              f'{timeout:g} s (capture {k})')
-        try:
-            intr = [camera_info_intrinsics(sets[d]['info']) for d in drones]
-            if any(not np.allclose(a[0], intr[0][0]) or a[1:] != intr[0][1:] for a in intr):
-                raise ValueError('the drones\' cameras differ (one camera model per flight)')
-            bad = [(d, sets[d]['image']) for d in drones if isinstance(sets[d]['image'], Exception)]
-            if bad:
-                raise ValueError(f'the image of {bad[0][0]}: {bad[0][1]}')
-            for d, (_, w, h) in zip(drones, intr):  # K is the camera_info's size's: another size is another camera
-                im = sets[d]['image']
-                if (im.shape[1], im.shape[0]) != (w, h):
-                    raise ValueError(f'the image of {d} is {im.shape[1]}x{im.shape[0]} pixels, its camera_info '
-                                     f'says {w}x{h}')
-            return CapturedViews(
-                names=[f'view_{e.pose_index:03d}.png' for e in entries],
-                images=[sets[d]['image'] for d in drones],
-                reported=poses_to_cameras(np.array([pose_array(sets[d]['pose'].pose) for d in drones])),
-                K=intr[0][0], realization=int(k)).validate()
-        except (ValueError, FlightError) as exc:
-            raise ReconError(CAPTURE_MISSING, f'capture {k} from the fleet is unusable: {exc}') from None
-
-    def now_ns(self) -> int:
-        return self._ns(self._node.get_clock().now().to_msg())
 
 
 def main(args=None) -> int:

@@ -20,14 +20,12 @@ import fnmatch
 from geometry_msgs.msg import PoseArray, PoseStamped
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
 from vp_interfaces.msg import FleetAssignment
 
 from vp_recon.viewer import PlanViewer, ViewerError, show_message
-from vp_scene.node_runtime import INT_MAX, Param, declare_typed, run_node, typed_values
+from vp_scene.node_runtime import INT_MAX, LATCHED, Param, declare_typed, run_node, typed_values
 
-LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 POSE_TYPES = {'geometry_msgs/msg/PoseStamped': PoseStamped, 'nav_msgs/msg/Odometry': Odometry}
 
 #: The node's parameters (:class:`vp_scene.node_runtime.Param`): all read once, at start (read_only).

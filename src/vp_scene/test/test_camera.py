@@ -179,3 +179,23 @@ def test_poses_expressed_in_a_turned_and_shifted_frame() -> None:
     np.testing.assert_allclose(poses_to_cameras(out)[0, 3:], [1.0, 0.0, 0.0], atol=1e-12)
     assert out[0, 6] >= 0
     assert express_poses(np.zeros((0, 7)), turn, origin).shape == (0, 7)
+
+
+def test_direction_and_its_inverse_have_one_home() -> None:
+    """Issue 39, item 3: azimuth/elevation -> direction was written 3 times (space, patterns,
+    designs) and its inverse twice; vp_scene.camera holds both, vectorized, and they invert."""
+    from vp_scene.camera import azimuth_elevation, direction
+
+    np.testing.assert_allclose(direction(0.0, 0.0), [1.0, 0.0, 0.0])
+    np.testing.assert_allclose(direction(math.pi / 2, 0.0), [0.0, 1.0, 0.0], atol=1e-15)
+    np.testing.assert_allclose(direction(1.0, math.pi / 2), [0.0, 0.0, 1.0], atol=1e-15)
+    rng = np.random.default_rng(0)
+    az, el = rng.uniform(-math.pi, math.pi, (4, 5)), rng.uniform(-1.5, 1.5, (4, 5))
+    d = direction(az, el)
+    assert d.shape == (4, 5, 3)
+    np.testing.assert_allclose(np.linalg.norm(d, axis=-1), 1.0)
+    back_az, back_el = azimuth_elevation(3.0 * d)  # any length
+    np.testing.assert_allclose(back_az, az, atol=1e-12)
+    np.testing.assert_allclose(back_el, el, atol=1e-12)
+    a, e = azimuth_elevation([0.0, -2.0, 0.0])
+    assert a == -math.pi / 2 and e == 0.0

@@ -1,7 +1,7 @@
 """The suite's ROS message conversions: one home, called by every node and tool (the science
 modules never see a message).
 
-* clouds: numpy <-> ``sensor_msgs/PointCloud2`` (the codec is :mod:`vp_scene.cloud`, re-exported);
+* clouds: numpy <-> ``sensor_msgs/PointCloud2`` live in their own module, :mod:`vp_scene.cloud`;
 * poses: (N, 7) ``[x, y, z, qx, qy, qz, qw]`` <-> ``geometry_msgs/Pose`` lists, one pose
   <-> ``Pose``, a position (3,) <-> ``geometry_msgs/Point``;
 * plans: cameras (N, 6) ``[c, v]`` <-> ``geometry_msgs/PoseArray`` (the body convention of
@@ -38,10 +38,8 @@ from visualization_msgs.msg import Marker, MarkerArray
 from vp_interfaces.msg import CameraPlan, PlantPlacement, ReconstructionScore, SceneDescription
 
 from .camera import cameras_to_poses, poses_to_cameras, rotation_matrix, tan_half_fov
-from .cloud import numpy_to_pointcloud2, pack_rgb, pointcloud2_to_numpy, realizations_from_cloud, unpack_rgb
 
 __all__ = [
-    "numpy_to_pointcloud2", "pointcloud2_to_numpy", "realizations_from_cloud", "pack_rgb", "unpack_rgb",
     "point_msg", "point_array", "pose_msg", "pose_array", "poses_to_msgs", "msgs_to_poses", "position_of",
     "cameras_to_pose_array", "pose_array_to_cameras", "camera_plan_msg", "plan_key", "frustum_markers",
     "scene_description_msg", "placements_of", "scene_of_description", "POSE_TYPES", "drone_topic", "pose_report",

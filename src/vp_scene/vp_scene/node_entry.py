@@ -57,3 +57,7 @@ def start(module: str, preload: tuple = ()) -> int:
 
 def scene() -> int:
     return start("vp_scene.scene_node")
+
+
+def sim_drone() -> int:
+    return start("vp_scene.sim_drone_node")

@@ -56,9 +56,15 @@ import time
 import traceback
 from typing import Any, Callable, NamedTuple, Optional
 
-__all__ = ["SHUTDOWN_DEADLINE", "EXIT_OK", "EXIT_CRASHED", "EXIT_BAD_PARAMETERS", "INT_MAX", "Param", "coerce",
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+__all__ = ["SHUTDOWN_DEADLINE", "EXIT_OK", "EXIT_CRASHED", "EXIT_BAD_PARAMETERS", "INT_MAX", "LATCHED", "Param", "coerce",
            "declare_typed", "descriptor", "typed_values", "parameter_value", "refuse_bad_changes", "NewestWins",
            "run_node"]
+
+#: The QoS of the suite's latched topics (scene, plans, fleet assignment and captures): reliable,
+#: TRANSIENT_LOCAL, depth 1: a subscriber that joins late still gets the last message.
+LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 #: Seconds from the first SIGINT/SIGTERM to the end of the process, at most.
 SHUTDOWN_DEADLINE = 5.0

@@ -26,17 +26,15 @@ import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
 from vp_interfaces.msg import SceneDescription
 
 from .build import build_noisy_scene
-from .messages import numpy_to_pointcloud2, scene_description_msg
-from .node_runtime import INT_MAX, Param, declare_typed, run_node, typed_values
+from .cloud import numpy_to_pointcloud2
+from .messages import scene_description_msg
+from .node_runtime import INT_MAX, LATCHED, Param, declare_typed, run_node, typed_values
 from .wind import NoisyScene
 
-LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 DEFAULTS: dict[str, Any] = {
     "scenario": "one_plant",

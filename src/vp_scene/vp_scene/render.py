@@ -1,4 +1,4 @@
-"""Headless rendering of a plan's views with pyrender (camera geometry: :mod:`vp_scene.camera`).
+"""Headless rendering of the simulated world with pyrender (camera geometry: :mod:`vp_scene.camera`).
 
 :class:`Renderer` draws vertex-coloured triangle meshes without lighting (pyrender's FLAT flag,
 double-sided materials) through the pinhole cameras of :mod:`vp_scene.camera` (intrinsics from
@@ -13,8 +13,8 @@ Backgrounds and masks
   plants; :meth:`Renderer.render` returns the mask of a second, segmentation pass
   (``RenderFlags.SEG``: plant meshes white, ground black), which knows the scene: an oracle that
   only the ideal capture and the tests use. A flight segments its images alone:
-  :func:`plant_mask` (excess green, the crop-segmentation index) is what the reconstruction of a
-  realistic capture uses. Neither mode ever reads the depth buffer.
+  :func:`vp_recon.segment.plant_mask` (excess green, the crop-segmentation index) is what the
+  reconstruction of a realistic capture uses. Neither mode ever reads the depth buffer.
 * ``markers``: ground-control markers (:mod:`vp_scene.ground_control`), printed squares lying
   2 mm above the soil (:func:`marker_meshes`); the segmentation pass counts them as ground.
 
@@ -35,22 +35,13 @@ from numpy.typing import ArrayLike, NDArray
 
 from vp_scene.camera import camera_to_world_gl, check_cameras, intrinsics, principal_point_gl
 
-__all__ = ["SKY_COLOR", "KEY_TOLERANCE", "EXG_THRESHOLD", "RenderError", "foreground_mask", "excess_green",
-           "plant_mask", "image_mask", "ground_mesh", "marker_meshes", "Renderer", "release_contexts"]
+__all__ = ["SKY_COLOR", "KEY_TOLERANCE", "RenderError", "foreground_mask", "ground_mesh", "marker_meshes", "Renderer",
+           "release_contexts"]
 
 #: Uniform background colour (pure blue: never a plant colour, corn is green / yellow / brown).
 SKY_COLOR: tuple[int, int, int] = (0, 0, 255)
 #: A pixel whose RGB Euclidean distance to the sky colour is at most this is background.
 KEY_TOLERANCE: float = 60.0
-
-
-#: Excess-green threshold of :func:`plant_mask`. Measured (IoU against the segmentation pass, 8
-#: ring views + 1 top view at 640 x 480, sensor noise 2/255, one procedural plant and one Corn50
-#: plant on the soil texture) for 0.03-0.06 with 3x3 opening + closing: 0.04 is the best common
-#: choice (mean IoU 0.878 procedural, 0.888 Corn50; 0.05: 0.879 / 0.859; 0.06: 0.879 / 0.777,
-#: Corn50's yellowish leaves drop out). Otsu's threshold on ExG, ExGR or CIVE gave IoU 0.15-0.17:
-#: the soil's own spread (straw strokes, ExG about 0.08) splits the histogram, not the plant.
-EXG_THRESHOLD: float = 0.04
 
 
 class RenderError(RuntimeError):
@@ -62,33 +53,6 @@ def foreground_mask(image: NDArray[np.uint8], sky: Sequence[int] = SKY_COLOR,
     """Colour-key mask (H, W) of an RGB image: True where the colour is not the sky's."""
     d = image[..., :3].astype(np.int32) - np.asarray(sky, dtype=np.int32)
     return np.einsum("...i,...i->...", d, d) > tolerance * tolerance
-
-
-def excess_green(image: NDArray[np.uint8]) -> NDArray[np.float64]:
-    """ExG = 2g - r - b on chromatic coordinates r = R / (R + G + B) etc. (Woebbecke et al. 1995;
-    the crop-segmentation index Meyer & Neto 2008 compare ExGR and CIVE with), in [-1, 2].
-    A black pixel (R + G + B = 0) has ExG 0."""
-    x = np.asarray(image)[..., :3].astype(np.float64)
-    s = x.sum(axis=-1)
-    s = np.where(s > 0, s, 1.0)
-    return (2.0 * x[..., 1] - x[..., 0] - x[..., 2]) / s
-
-
-def plant_mask(image: NDArray[np.uint8], threshold: float = EXG_THRESHOLD) -> NDArray[np.bool_]:
-    """Plant pixels of an RGB image of plants on soil, from the image alone: ExG > ``threshold``
-    (:func:`excess_green`), then a 3x3 morphological opening (specks of soil) and closing (holes
-    in leaves; OpenCV's morphology)."""
-    import cv2
-
-    raw = (excess_green(image) > threshold).astype(np.uint8)
-    k = np.ones((3, 3), np.uint8)
-    return cv2.morphologyEx(cv2.morphologyEx(raw, cv2.MORPH_OPEN, k), cv2.MORPH_CLOSE, k) > 0
-
-
-def image_mask(image: NDArray[np.uint8], ground: bool) -> NDArray[np.bool_]:
-    """The plant mask a flight can compute from its image alone: :func:`plant_mask` over soil
-    (``ground``), the colour key :func:`foreground_mask` over the blue sky."""
-    return plant_mask(image) if ground else foreground_mask(image)
 
 
 _pyrender = None

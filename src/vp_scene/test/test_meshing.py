@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from vp_recon import meshing
+from vp_scene import meshing
 from vp_scene.plants import PlantModel
 
 

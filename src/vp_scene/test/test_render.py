@@ -1,4 +1,4 @@
-"""Camera convention of vp_recon.render: projection matches what pyrender draws."""
+"""Camera convention of vp_scene.render: projection matches what pyrender draws."""
 from __future__ import annotations
 
 import math
@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from vp_recon.render import SKY_COLOR, Renderer, foreground_mask
 from vp_scene.camera import check_cameras, intrinsics, project, rotation_matrix, world_to_camera
+from vp_scene.render import SKY_COLOR, Renderer, foreground_mask
 
 W, H = 320, 240
 
@@ -109,31 +109,3 @@ def test_check_cameras_errors() -> None:
         check_cameras([[0, 0, 1, 0, 0, 0]])
     with pytest.raises(ValueError, match="NaN"):
         check_cameras([[0, 0, np.nan, 1, 0, 0]])
-
-
-@pytest.mark.parametrize("corn50", [False, True])
-def test_plant_mask_from_the_image_alone_matches_the_segmentation_pass(corn50) -> None:
-    """A flight's mask (excess green on the noisy image over soil) against the segmentation pass
-    (the oracle that knows the scene): IoU at least 0.8 on average and 0.7 in every view."""
-    from pathlib import Path
-
-    from vp_recon.meshing import scene_meshes
-    from vp_recon.render import Renderer, image_mask
-    from vp_scene.build import build_noisy_scene
-    from vp_scene.capture import REALISTIC
-
-    corn = Path(__file__).resolve().parents[3].parent / "shared" / "data" / "corn50"
-    if corn50 and not corn.is_dir():
-        pytest.skip(f"Corn50 is not at {corn}")
-    ns, _ = build_noisy_scene("one_plant", models=str(corn) if corn50 else None, seed=0, points_per_plant=3000,
-                              realizations=1)
-    a = np.deg2rad(45.0 * np.arange(8))
-    c = np.stack([1.4 * np.cos(a), 1.4 * np.sin(a), np.full(8, 1.2)], axis=1)
-    cams = np.concatenate([np.concatenate([c, [0.0, 0.0, 0.9] - c], axis=1), [[0.3, 0.2, 2.8, -0.3, -0.2, -1.9]]])
-    images, oracle, _ = Renderer(640, 480).render(scene_meshes(ns, 0, None), cams, ground=True)
-    iou = []
-    for i, (img, m) in enumerate(zip(images, oracle)):
-        p = image_mask(REALISTIC.expose(img, 0, i), ground=True)
-        assert m.sum() > 1000, f"view {i} sees too little plant to judge a mask"
-        iou.append((p & m).sum() / max((p | m).sum(), 1))
-    assert np.mean(iou) > 0.8 and min(iou) > 0.7, iou

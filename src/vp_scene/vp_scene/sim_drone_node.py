@@ -4,7 +4,7 @@ publishes its pose (the tests, ``make run`` and the cross-host test run one proc
 Subscribes ``goal_topic`` (geometry_msgs/PoseStamped, reliable, TRANSIENT_LOCAL: a goal
 published before the drone started still reaches it) and publishes ``pose_topic``
 (geometry_msgs/PoseStamped, or nav_msgs/Odometry with ``pose_type:=odometry``) ``rate`` times a
-second, in ``frame_id``: its position (:func:`vp_planner.fleet.fly_toward`, exactly the goal on
+second, in ``frame_id``: its position (:func:`vp_scene.sim_drone.fly_toward`, exactly the goal on
 arrival) and the goal's orientation (identity before the first goal). A goal in another frame
 is ignored with a log line. Signals, exit codes and parameter types follow
 :mod:`vp_scene.node_runtime`.
@@ -14,7 +14,7 @@ With ``camera:=true`` the drone also takes pictures (issue 20, part 1): on a
 gives it pose i, once it has settled at that assignment's goal (not at an earlier plan's: a
 trigger can arrive before the new goal), it flies camera i of the plan under the
 capture model (``capture``: realistic | ideal, seeded by ``capture_seed``, realization and i:
-:func:`vp_recon.pipeline.render_flight` with ``indices=[i]``, so its image and reported pose are
+:func:`vp_scene.sim_drone.photograph` with ``indices=[i]``, so its image and reported pose are
 exactly those the recon node's render source gives camera i), renders the scene of
 ``/scene/description`` at the trigger's wind realization from its actual pose and publishes,
 all with one stamp,
@@ -35,19 +35,16 @@ import time
 import numpy as np
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
-from vp_planner.fleet import fly_toward
-from vp_scene.camera import IMAGE_SIZE
-from vp_scene.messages import (POSE_TYPES, camera_info_msg, compressed_image_msg, drone_topic, image_msg, pose_array,
-                               pose_report, scene_of_description)
-from vp_scene.node_runtime import Param, declare_typed, run_node, typed_values
+from .camera import IMAGE_SIZE
+from .messages import (POSE_TYPES, camera_info_msg, compressed_image_msg, drone_topic, image_msg, pose_array, pose_report,
+                       scene_of_description)
+from .node_runtime import LATCHED, Param, declare_typed, run_node, typed_values
+from .sim_drone import fly_toward, photograph
 
-LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 #: how far (m, per axis) from its assigned goal a drone may hover and still take that plan's picture
-#: (it arrives exactly: :func:`vp_planner.fleet.fly_toward`)
+#: (it arrives exactly: :func:`vp_scene.sim_drone.fly_toward`)
 GOAL_TOLERANCE_M = 1e-6
 
 #: The node's parameters (:class:`vp_scene.node_runtime.Param`): all read once, at start (read_only).
@@ -185,18 +182,17 @@ class _Camera:
             self._node.get_logger().error(f'capture failed: {type(exc).__name__}: {exc}')
 
     def _capture(self, trigger, i: int, pose: np.ndarray) -> None:
-        from vp_recon.pipeline import ReconConfig, render_flight
-        from vp_scene.camera import cameras_to_poses, poses_to_cameras
-        from vp_scene.capture import CaptureModel
+        from .camera import cameras_to_poses, poses_to_cameras
+        from .capture import CaptureModel
 
         v = self._v
         if self._description is None:
             raise ValueError('no /scene/description yet: nothing to photograph')
         if self._scene is None:
             self._scene = scene_of_description(self._description)
-        config = ReconConfig(width=v['width'], height=v['height'], fov=v['fov'], num_threads=1,
-                             capture=CaptureModel.named(v['capture'], seed=v['capture_seed']))
-        views = render_flight(self._scene, int(trigger.realization), poses_to_cameras(pose)[None], config, indices=[i])
+        capture = CaptureModel.named(v['capture'], seed=v['capture_seed'])
+        views = photograph(self._scene, int(trigger.realization), poses_to_cameras(pose)[None], capture, v['width'],
+                           v['height'], v['fov'], indices=[i])
         stamp = self._node.get_clock().now().to_msg()
         optical = f'{v["drone"]}/camera_optical'
         image = views.images[0]

@@ -1,4 +1,4 @@
-"""vp_recon.outputs: run folders are never shared; the PLY writer is the library's."""
+"""vp_scene.folders: run folders are never shared."""
 from __future__ import annotations
 
 import time
@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from vp_recon.outputs import new_run_folder
+from vp_scene.folders import new_run_folder
 
 
 def test_two_plans_in_the_same_second_get_two_folders(tmp_path: Path) -> None:

@@ -1,0 +1,181 @@
+"""The reconstruction's settings: :class:`ReconConfig` (image size, capture model, sparse and dense
+steps, matching) and its caps (:data:`MAX_CAMERAS`, :data:`MAX_MEGAPIXELS`), with the rules that
+resolve its ``'auto'`` choices (:func:`matching_method`, ``ReconConfig.sparse_mode_used``)."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+from vp_scene.camera import IMAGE_SIZE
+from vp_scene.capture import CaptureModel, REALISTIC
+from vp_scene.sim_drone import ground_under
+
+from .metrics import DEFAULT_FSCORE_THRESHOLD
+
+__all__ = ["MAX_CAMERAS", "MAX_MEGAPIXELS", "MATCHINGS", "MATCH_POSES_FROM", "ANCHOR_MAX_ATTITUDE_DEG", "ReconConfig",
+           "matching_method"]
+
+#: The most cameras a plan may have (a second sortie's flown cameras included): ``ReconConfig.
+#: max_cameras``, the recon node's parameter ``max_cameras`` and ``--max-cameras`` of ``make
+#: recon``; a larger plan is refused with PLAN_TOO_LARGE before anything is rendered. Every image
+#: of a realization is held at once: measured peak RSS of ``python -m vp_recon.cli --plan`` (one
+#: realization, 2000 x 1500, realistic capture, one_plant) 1.56 GB with 8 cameras, 2.12 GB with
+#: 32, about 23 MB a camera (a 200-camera plan took 5.8 GB), so 256 cameras need about 7.3 GB.
+#: The planner plans at most 100 cameras a sortie; 256 hold 16 drones over 16 sorties.
+MAX_CAMERAS = 256
+#: The most megapixels the images of a flight folder may have together (``--images``,
+#: ``--max-megapixels``), read from their headers before any is decoded: a folder's memory is
+#: its pixels (about 7.7 MB a megapixel, as above), whatever their number. The memory of
+#: MAX_CAMERAS cameras of 2000 x 1500: hundreds of images of a few megapixels, 64 of 12 MP.
+MAX_MEGAPIXELS = MAX_CAMERAS * 2000 * 1500 // 1_000_000
+
+#: ``ReconConfig.matching``: which image pairs SIFT matching compares (see :func:`matching_method`).
+MATCHINGS = ("auto", "exhaustive", "poses")
+#: ``'auto'`` matches pairs chosen from the poses from this many cameras up, all pairs below.
+#: Measured (bench/bench_matching.py, three Corn50 plants in a row): from 8 cameras on exhaustive
+#: matching verifies false pairs over 90 degrees apart (2 of 7 at 8 cameras, 16-25 at 12) that
+#: then become dense stereo partners (dense 5x slower, Chamfer worse); at 4-6 cameras both give
+#: about the same, so today's 4-6 camera plans keep exhaustive matching and their results.
+MATCH_POSES_FROM = 8
+
+#: ``sparse_mode='auto'``: reported attitudes good to this many degrees (1 sigma) anchor the model
+#: (a triangulation at poses that far off still finds its tracks with the anchored model's loose
+#: first thresholds); rougher ones leave the poses to the images (incremental SfM).
+#: Measured on Table I's seed-0 flights (2026-11-27): where both modes reconstruct, the anchored
+#: model's map and shape Chamfer are those of the incremental mapper or better (three_row circle:
+#: shape 2.09-2.89 against 3.59-5.50), and where the mapper's model fails its self-check the
+#: anchored one reconstructs (README "Capture model").
+ANCHOR_MAX_ATTITUDE_DEG = 2.0
+
+
+@dataclass
+class ReconConfig:
+    """Reconstruction settings.
+
+    Attributes:
+        width, height: rendered image size (paper: 2000 x 1500).
+        fov: horizontal field of view, rad (the planner's, default pi/2).
+        sparse_mode: ``'known_poses'`` (triangulate with the reported poses), ``'anchored'``
+            (the model anchored on the reported poses: triangulated from them, adjusted and
+            registered on them, :mod:`vp_recon.sparse`), ``'incremental'`` (SfM with the reported
+            centres as pose priors, the anchored model when it fails) or ``'auto'``: known_poses
+            for the ideal capture; anchored when the reported attitudes are good to
+            :data:`ANCHOR_MAX_ATTITUDE_DEG` (an RTK drone's gimbal and flight controller);
+            incremental otherwise (a rig whose attitudes are rough: the images decide).
+        capture: the capture model (:mod:`vp_scene.capture`; default: an RTK multirotor).
+        dense: run dense stereo (else the sparse cloud is scored).
+        fscore_threshold: F-score distance threshold, metres.
+        mesh_cache: folder of cached Poisson meshes for point-cloud plant models (None: default).
+        keep_workdir: keep the COLMAP workspace (images, database) under ``out_dir/work``.
+        keep_images: keep the rendered images in the result (first realization only in
+            :func:`reconstruct_plan`).
+        voxel: voxel edge for downsampling the dense cloud, metres (0: none).
+        crop_margin: margin around the scene's bounding box (union of all realizations), metres.
+        neighbours: dense stereo partners per camera.
+        sift_masks: restrict SIFT to the (dilated) foreground masks.
+        min_foreground: pixels of plant an image needs to count as seeing the plant.
+        max_features: SIFT features per image.
+        sift_first_octave: SIFT's first octave (-1, COLMAP's default: the image doubled first; 0:
+            its own resolution, about 4x less work).
+        dense_scale: the dense step's stereo pairs are matched on the views resized by this factor
+            (0 < s <= 1; :func:`vp_recon.dense.scaled_views`; SGM's cost about s^3).
+        ground: render a textured soil plane under the plants (True) or a blue screen (False);
+            None (default): soil for a realistic capture, the blue screen for the ideal one.
+            A realistic capture's masks come from its images alone (excess green on soil,
+            colour key on the sky); the ideal capture's from the renderer (see
+            :mod:`vp_scene.render`).
+        num_threads: threads of COLMAP and OpenCV (0: all cores).
+        matching: ``'exhaustive'`` (all image pairs), ``'poses'`` (the pairs
+            :func:`vp_recon.pairs.select_pairs` picks from the known poses and scene) or
+            ``'auto'``: poses from :data:`MATCH_POSES_FROM` cameras up, exhaustive below.
+        max_cameras: a plan of more cameras is refused (PLAN_TOO_LARGE, :func:`check_plan_size`).
+    """
+
+    width: int = IMAGE_SIZE[0]
+    height: int = IMAGE_SIZE[1]
+    fov: float = math.pi / 2
+    sparse_mode: str = "auto"
+    dense: bool = True
+    fscore_threshold: float = DEFAULT_FSCORE_THRESHOLD
+    mesh_cache: Optional[str] = None
+    keep_workdir: bool = False
+    keep_images: bool = True
+    voxel: float = 0.002
+    crop_margin: float = 0.05
+    neighbours: int = 2
+    sift_masks: bool = False
+    min_foreground: int = 50
+    max_features: int = 8192
+    sift_first_octave: int = -1
+    dense_scale: float = 1.0
+    ground: Optional[bool] = None
+    num_threads: int = 0
+    matching: str = "auto"
+    capture: CaptureModel = REALISTIC
+    max_cameras: int = MAX_CAMERAS
+
+    @property
+    def sparse_mode_used(self) -> str:
+        """``sparse_mode`` with ``'auto'`` resolved by the capture."""
+        if self.sparse_mode != "auto":
+            return self.sparse_mode
+        if self.capture.ideal:
+            return "known_poses"
+        return "anchored" if self.capture.report_attitude_sigma <= ANCHOR_MAX_ATTITUDE_DEG else "incremental"
+
+    @property
+    def ground_used(self) -> bool:
+        """``ground`` with ``None`` resolved by the capture (soil for a flight)."""
+        return ground_under(self.capture, self.ground)
+
+    def validate(self) -> "ReconConfig":
+        """Raise ValueError naming the first bad field; return self."""
+        from .sparse import MODES
+
+        for name in ("width", "height"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 16:
+                raise ValueError(f"{name} must be an integer >= 16 pixels, got {v!r}")
+        if not (isinstance(self.fov, (int, float)) and 0 < self.fov < math.pi):
+            raise ValueError(f"fov must be in (0, pi) rad, got {self.fov!r}")
+        if self.sparse_mode not in ("auto",) + MODES:
+            raise ValueError(f"sparse_mode must be one of auto, {', '.join(MODES)}, got {self.sparse_mode!r}")
+        if not isinstance(self.capture, CaptureModel):
+            raise ValueError(f"capture must be a vp_scene.capture.CaptureModel, got {self.capture!r}")
+        self.capture.validate()
+        if self.ground is not None and not isinstance(self.ground, (bool, np.bool_)):
+            raise ValueError(f"ground must be True, False or None (by the capture), got {self.ground!r}")
+        if self.matching not in MATCHINGS:
+            raise ValueError(f"matching must be one of {', '.join(MATCHINGS)}, got {self.matching!r}")
+        if not (math.isfinite(self.fscore_threshold) and self.fscore_threshold > 0):
+            raise ValueError(f"fscore_threshold must be > 0 metres, got {self.fscore_threshold!r}")
+        if not (math.isfinite(self.voxel) and self.voxel >= 0):
+            raise ValueError(f"voxel must be >= 0 metres, got {self.voxel!r}")
+        if not (math.isfinite(self.crop_margin) and self.crop_margin >= 0):
+            raise ValueError(f"crop_margin must be >= 0 metres, got {self.crop_margin!r}")
+        if isinstance(self.num_threads, bool) or not isinstance(self.num_threads, (int, np.integer)) \
+                or self.num_threads < 0:
+            raise ValueError(f"num_threads must be an integer >= 0 (0: all cores), got {self.num_threads!r}")
+        if int(self.neighbours) < 1 or int(self.min_foreground) < 1 or int(self.max_features) < 16:
+            raise ValueError("neighbours and min_foreground must be >= 1, max_features >= 16")
+        if isinstance(self.sift_first_octave, bool) or self.sift_first_octave not in (-1, 0, 1):
+            raise ValueError(f"sift_first_octave must be -1, 0 or 1, got {self.sift_first_octave!r}")
+        if not (isinstance(self.dense_scale, (int, float)) and 0 < self.dense_scale <= 1):
+            raise ValueError(f"dense_scale must be in (0, 1], got {self.dense_scale!r}")
+        if isinstance(self.max_cameras, bool) or not isinstance(self.max_cameras, (int, np.integer)) \
+                or self.max_cameras < 2:
+            raise ValueError(f"max_cameras must be an integer >= 2, got {self.max_cameras!r}")
+        return self
+
+
+def matching_method(matching: str, num_cameras: int) -> str:
+    """The matching that runs: ``'poses'`` or ``'exhaustive'`` as asked; ``'auto'``: ``'poses'``
+    when ``num_cameras >= MATCH_POSES_FROM``, else ``'exhaustive'``."""
+    if matching not in MATCHINGS:
+        raise ValueError(f"matching must be one of {', '.join(MATCHINGS)}, got {matching!r}")
+    if matching == "auto":
+        return "poses" if num_cameras >= MATCH_POSES_FROM else "exhaustive"
+    return matching
