@@ -141,6 +141,13 @@ def test_realizations_on_a_local_dask_cluster(recon_system) -> None:
     per = [s for s in scores if s.realization != Score.AGGREGATE]
     assert sorted(s.realization for s in per) == [0, 1] and agg.realizations == 2
     assert "realizations in parallel on Dask (local" in recon.output()
+    # the local cluster is the node's for its life (started with the node, while a planner plans):
+    # a second plan runs on the same scheduler instead of starting a cluster of its own
+    pub.publish(pose_array(ring(), stamp=2))
+    assert client.spin_until(lambda: len(aggregate(scores)) >= 2, TIMEOUT), recon.output()[-4000:]
+    assert aggregate(scores)[1].error_code == Score.NONE, aggregate(scores)[1].error_msg
+    used = re.findall(r"realizations in parallel on Dask \(local: (\S+),", recon.output())
+    assert len(used) == 2 and used[0] == used[1], used
     assert recon.poll() is None, recon.output()[-2000:]
 
 

@@ -77,6 +77,7 @@ from vp_recon.tasks import worker_call, worker_result
 from vp_scene.camera import IMAGE_SIZE
 from vp_scene.capture import IDEAL, REALISTIC, CaptureModel
 from vp_scene.cloud import numpy_to_pointcloud2, realizations_from_cloud
+from vp_scene.cluster import KeptLocalCluster
 from vp_scene.folders import new_run_folder, remove_if_empty
 from vp_scene.messages import (aggregate_score, error_score, plan_key, pose_array_to_cameras, realization_score,
                                scene_of_description, score_msg)
@@ -254,6 +255,9 @@ class ReconNode(Node):
         self.create_subscription(CameraPlan, '/camera_plan/info', self._on_info, LATCHED)
         self.create_subscription(PoseArray, '/camera_plan', self._on_plan, LATCHED)
         self._fleet = FleetCaptures(self, self._lock)
+        self._local = KeptLocalCluster()  # scheduler 'local': one cluster for the node's life
+        if self._param('scheduler') == 'local':
+            self._local.warm(self._param('workers'))  # started while the planner plans
         self._plans.start()
         self.get_logger().info(
             f'recon ready ({self._param("width")}x{self._param("height")}, output {self._param("output_folder")}): '
@@ -294,6 +298,9 @@ class ReconNode(Node):
             self._plans.stop()
             run_dir = self._run_dir
         remove_if_empty(run_dir)
+        import threading  # the kept local cluster: closed in the background, its workers end with the node anyway
+
+        threading.Thread(target=self._local.close, name='dask-close', daemon=True).start()
         return True
 
     # ---------------------------------------------------------------- inputs
@@ -463,9 +470,12 @@ class ReconNode(Node):
                 if self._param('scheduler'):
                     from vp_scene.cluster import dashboard, open_client
 
-                    tls = cluster_tls({k: self._param(k) for k in TLS_KEYS})
-                    client = stack.enter_context(open_client(self._param('scheduler'), self._param('workers'),
-                                                             quiet=True, tls=tls))
+                    if self._param('scheduler') == 'local':  # kept for the node's life
+                        client = self._local.get(self._param('workers'))
+                    else:
+                        tls = cluster_tls({k: self._param(k) for k in TLS_KEYS})
+                        client = stack.enter_context(open_client(self._param('scheduler'), self._param('workers'),
+                                                                 quiet=True, tls=tls))
                     self.get_logger().info(f'realizations in parallel on Dask ({self._param("scheduler")}: '
                                            f'{client.scheduler.address}, dashboard {dashboard(client)})')
                 if self._param('source') == 'fleet':

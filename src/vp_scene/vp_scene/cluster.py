@@ -34,7 +34,7 @@ import sys
 from dataclasses import dataclass
 from typing import Iterator, Optional, Sequence
 
-__all__ = ["LOCAL_HOST", "ONE_THREAD_ENV", "OneThread", "SchedulerLost", "TlsFiles", "add_tls_args",
+__all__ = ["LOCAL_HOST", "ONE_THREAD_ENV", "OneThread", "KeptLocalCluster", "SchedulerLost", "TlsFiles", "add_tls_args",
            "check_cluster_args", "client_security", "dashboard", "open_client"]
 
 #: The only interface the local cluster listens on (scheduler, nannies, workers, dashboard).
@@ -232,3 +232,61 @@ def open_client(scheduler: Optional[str] = None, workers: int = 1, quiet: bool =
             address = getattr(client.scheduler, 'address', None) or scheduler
             raise SchedulerLost(f'lost the Dask scheduler {address} ({type(exc).__name__}); the work on it '
                                 'was cancelled') from None
+
+
+class KeptLocalCluster:
+    """A local cluster kept open for a node's life (the recon node's ``scheduler: local``).
+
+    Starting a local cluster costs seconds (the worker processes import the suite and torch):
+    measured 8 s between a plan's arrival and its first capture request in a ``make run`` on a
+    loaded machine, every plan. :meth:`warm` opens it in the background as the node starts (while
+    the planner plans), :meth:`get` hands out the open client (opening it, or a new one when the
+    worker count changed or the cluster died, under a lock), :meth:`close` ends it. Remote
+    schedulers are the user's: they stay per plan (:func:`open_client`)."""
+
+    def __init__(self) -> None:
+        import threading
+
+        self._lock = threading.Lock()
+        self._stack: Optional[contextlib.ExitStack] = None
+        self._client = None
+        self._workers = 0
+
+    def warm(self, workers: int) -> None:
+        """Open the cluster in a daemon thread (a failure there is met again, and reported, by :meth:`get`)."""
+        import threading
+
+        def run() -> None:
+            try:
+                self.get(workers)
+            except Exception:  # noqa: BLE001 - get() raises it where a plan can report it
+                pass
+
+        threading.Thread(target=run, name='dask-warm', daemon=True).start()
+
+    def get(self, workers: int):
+        """The open client of a local cluster of ``workers`` one-thread workers (OSError as
+        :func:`open_client` when it cannot start)."""
+        with self._lock:
+            alive = self._client is not None and getattr(self._client, 'status', '') == 'running'
+            if alive and self._workers == workers:
+                return self._client
+            self._close()
+            stack = contextlib.ExitStack()
+            try:
+                self._client = stack.enter_context(open_client('local', workers, quiet=True))
+            except BaseException:
+                stack.close()
+                raise
+            self._stack, self._workers = stack, workers
+            return self._client
+
+    def _close(self) -> None:
+        stack, self._stack, self._client = self._stack, None, None
+        if stack is not None:
+            stack.close()
+
+    def close(self) -> None:
+        """Close the cluster (its workers end with this process anyway)."""
+        with self._lock:
+            self._close()
