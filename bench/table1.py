@@ -206,7 +206,8 @@ def capture_text(args) -> str:
         return 'ideal (the planned poses flown and known exactly, noise-free renders, blue screen)'
     return (f'{capture.kind}: flown with hover and localization errors and sensor noise '
             f'({json.dumps(capture.to_dict())}), over the textured soil with plant masks from the images alone, '
-            'COLMAP SfM with the reported centres as pose priors, registered to map on them')
+            'the model anchored on the reported poses (COLMAP triangulation and bundle adjustment, registered on '
+            'them)' + (', placed on the ground markers and the reported centres' if capture.gcp_markers else ''))
 
 
 def shape_lines(args, recons: dict, table: dict) -> list[str]:
