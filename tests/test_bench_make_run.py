@@ -18,6 +18,11 @@ def test_failed_runs_are_rows_and_pairs_skip_missing_realizations() -> None:
     failed = {"options": bmr.VARIANTS["sift0"], "wall": 12.0, "returncode": 2, "error": ["x"]}
     text = bmr.markdown({"machine": "m", "date": "d", "target_s": 120.0,
                          "variants": {"benchmarks": ok, "make-run": fast, "sift0": failed}})
-    assert "| benchmarks | `--sift-first-octave -1 --dense-scale 1.0` | 190.0 | 3.00 | - | 1.40 | - |" in text
-    assert "| make-run | `--sift-first-octave 0 --dense-scale 0.7` | 108.0 | 3.10 | +0.10" in text
-    assert "| sift0 | `--sift-first-octave 0 --dense-scale 1.0` | 12.0 | failed (exit 2) |" in text
+    assert "| benchmarks | `--sift-first-octave -1 --dense-scale 1.0` | 190.0 | - | 3.00 | - | - | 1.40 | - |" in text
+    assert "| make-run | `--sift-first-octave 0 --dense-scale 0.7` | 108.0 | - | 3.10 | - | +0.10" in text
+    assert "| sift0 | `--sift-first-octave 0 --dense-scale 1.0` | 12.0 | - | failed (exit 2) |" in text
+    # issue 40's bar: the realizations' std / mean, and the load the run saw
+    ok2 = {**ok, "cv": 0.11, "load_average_1min": 3.4}
+    text = bmr.markdown({"machine": "m", "date": "d", "target_s": 60.0, "variants": {"make-run": ok2}})
+    assert "| make-run | `--sift-first-octave -1 --dense-scale 1.0` | 190.0 | 3.4 | 3.00 | 0.11 | - | 1.40 | - |" in text
+    assert "Target: 60 s and Chamfer std / mean" in text
