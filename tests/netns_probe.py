@@ -36,6 +36,11 @@ from std_msgs.msg import Header
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 STREAM = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+# the heartbeat keeps 30 s of beats (10 Hz): the writer resends what the link-down held back only
+# while it is still in its history, and Fast DDS's reader learns of the gap from the writer's next
+# HEARTBEAT (every 3 s by default). With depth 10 (1 s) the beats of a 5 s outage had left the
+# history by then in one CI run of 43, and none arrived afterwards.
+BEAT = QoSProfile(depth=300, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 
 
 def emit(ev: str, **fields) -> None:
@@ -82,7 +87,7 @@ def listen(node, args) -> None:
     if not args.latched_only:
         node.create_subscription(ReconstructionScore, "/reconstruction/score", on_score, 10)
         node.create_subscription(PointCloud2, "/probe/cloud", on_cloud, STREAM)
-        node.create_subscription(Header, "/probe/beat", on_beat, STREAM)
+        node.create_subscription(Header, "/probe/beat", on_beat, BEAT)
     emit("ready")
     end = time.monotonic() + args.seconds
     while time.monotonic() < end:
@@ -93,7 +98,7 @@ def talk(node, args) -> None:
     from vp_scene.cloud import numpy_to_pointcloud2
 
     created = time.monotonic()
-    beats = node.create_publisher(Header, "/probe/beat", STREAM)
+    beats = node.create_publisher(Header, "/probe/beat", BEAT)
     clouds = node.create_publisher(PointCloud2, "/probe/cloud", STREAM)
     rng = np.random.default_rng(0)
     cloud = numpy_to_pointcloud2(rng.uniform(-1, 1, (args.points, 3)),
