@@ -15,7 +15,9 @@ the capture model ``config.capture`` (:mod:`vp_scene.capture`; issue "Flights, n
    ``sparse_mode='anchored'`` (the default of a realistic capture): the model anchored on the
    reported poses (triangulated from them, bundle-adjusted, registered back on their centres and
    attitudes); ``'incremental'``: COLMAP's incremental SfM with the reported centres as pose
-   priors, registered to ``map`` on the reported poses, the anchored model when it fails;
+   priors, registered to ``map`` on the reported poses (centres and attitudes weighted by the
+   capture's sigmas), the anchored model when it fails (not when the reported attitudes are
+   rougher than :data:`vp_recon.config.ANCHOR_MAX_ATTITUDE_DEG`: the SfM's failure is then the step's);
    ``'known_poses'``: triangulation with the reported poses (an ablation); then, when the flight
    has ground control (the realistic capture lays 4 markers), the model placed on the control
    points and the reported centres together (:mod:`vp_recon.gcp`),
@@ -60,7 +62,9 @@ from typing import Optional, Sequence, Union
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .config import ReconConfig, matching_method
+from vp_scene.camera import as_poses
+
+from .config import ANCHOR_MAX_ATTITUDE_DEG, ReconConfig, matching_method
 from .errors import EMPTY_PLAN, NO_SCENE, NOTHING_VISIBLE, OUTPUT_NOT_WRITABLE, RECONSTRUCTION_FAILED, UNKNOWN, \
     ReconError, check_plan_size, check_scene, validate_cameras
 from .errors import ensure_writable_dir
@@ -191,7 +195,12 @@ def reconstruct_views(views: object, config: Optional[ReconConfig] = None, workd
                                     masks=masks if cfg.sift_masks else None, max_features=cfg.max_features,
                                     num_threads=cfg.num_threads or -1, pairs=pairs, prior_centres=priors,
                                     prior_sigma=max(capture.report_position_sigma, 0.01),
-                                    sift_first_octave=cfg.sift_first_octave)
+                                    sift_first_octave=cfg.sift_first_octave,
+                                    attitude_sigma=None if capture.ideal else capture.report_attitude_sigma,
+                                    # the anchored model triangulates at the reported attitudes: no fallback
+                                    # when they are rough (it would "register" every image at poses 20 deg off)
+                                    fallback="anchored" if capture.report_attitude_sigma <= ANCHOR_MAX_ATTITUDE_DEG
+                                    else None)
         except SparseError as exc:
             raise ReconError(RECONSTRUCTION_FAILED, f"sparse reconstruction failed: {exc}") from exc
         except OSError as exc:
@@ -211,7 +220,7 @@ def reconstruct_views(views: object, config: Optional[ReconConfig] = None, workd
         # the poses the sparse step knows: the reported ones, or SfM's (in map) where registered
         # (ideal: the planned poses whatever the mode, as before the capture model)
         geo = reported if capture.ideal or mode == "known_poses" else \
-            np.where(np.isfinite(sp.cameras), sp.cameras, reported)
+            np.where(np.isfinite(sp.cameras), sp.cameras, as_poses(reported))
         if prior is not None:
             box = crop_box(prior.points, cfg.crop_margin)
             keep = crop_to_box(sp.points, box[0], box[1])
