@@ -203,15 +203,20 @@ def test_a_flight_of_rolled_cameras_reconstructs_where_the_plant_is(noisy_scene,
 
 def test_rough_attitudes_leave_a_failed_structure_from_motion_failed(rolled_flight, tmp_path: Path,
                                                                     monkeypatch) -> None:
-    """When COLMAP's SfM fails, the model anchored on the reported poses takes its place only when
-    the reported attitudes are good (2 degrees): with a 30-degree attitude sigma the anchored
-    model would triangulate at attitudes that far off and 'register' every image (the dev scan's
-    10 views: 10 of 10, 8 points kept); the SfM's failure is the reconstruction's instead."""
+    """Reported attitudes rougher than 2 degrees are weighed against the centres by their sigma
+    (the registration gets (position, attitude) sigmas; good ones alone give its rotation, as
+    before), and when COLMAP's SfM fails, the model anchored on the reported poses takes its place
+    only when they are good: with a 30-degree sigma it would triangulate at attitudes that far off
+    and 'register' every image (the dev scan's 10 views: 10 of 10, 8 points kept); the SfM's
+    failure is the reconstruction's instead."""
     from vp_recon import sparse as sparse_mod
     from vp_recon.errors import RECONSTRUCTION_FAILED, ReconError
     from vp_recon.sparse import SparseError
 
+    weights = []
+
     def two_of_six(*args, **kwargs):
+        weights.append(args[-1])  # the registration's sigmas: (position m, attitude rad) or None
         raise SparseError("incremental mapping registered 2 of 6 images in its largest model")
 
     monkeypatch.setattr(sparse_mod, "_incremental_model", two_of_six)
@@ -227,6 +232,7 @@ def test_rough_attitudes_leave_a_failed_structure_from_motion_failed(rolled_flig
         else:
             sp = reconstruct_views(views, cfg, tmp_path / "good").sparse
             assert sp.mode == "anchored" and "2 of 6" in sp.fallback and sp.registered == 6
+    assert weights[0] == pytest.approx((0.02, math.radians(30.0))) and weights[1] is None
 
 
 def test_a_rough_attitude_prior_registers_on_the_centres() -> None:
