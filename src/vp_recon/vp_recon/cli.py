@@ -399,7 +399,9 @@ def run_images(args: argparse.Namespace) -> dict:
         sp = vr.sparse
         data = {**info, **no_truth_metrics(sp.registered, sp.mean_reprojection_error, sp.mean_track_length,
                                            len(vr.points), vr.coverage, sp.centre_residual),
-                "cloud": vr.source, "chamfer_mean": None}
+                "cloud": vr.source, "chamfer_mean": None, "sparse_points": len(sp.points), "sparse_models": sp.models,
+                "sparse_mode": sp.mode, "sparse_fallback": sp.fallback,  # the model kept (incremental may fall back)
+                "seconds": {k: round(float(v), 3) for k, v in {**views.seconds, **vr.seconds}.items()}}
         if vr.coverage is not None:
             write_image(out / "uncovered.png", uncovered_image(noisy.points, vr.coverage))
         if truth is not None:

@@ -36,7 +36,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from vp_scene.camera import check_cameras, project_with, world_to_camera
+from vp_scene.camera import check_poses, project_with, world_to_camera
 
 __all__ = ["DenseResult", "neighbour_pairs", "overlap_pairs", "dense_reconstruct", "scaled_views", "voxel_downsample",
            "silhouette_filter", "crop_to_box"]
@@ -61,7 +61,7 @@ def neighbour_pairs(cameras: NDArray[np.float64], center: NDArray[np.float64], n
     The angle between cameras i, j is acos(a_i . a_j) with a = (c - center) / |c - center|;
     pairs outside [min_angle, max_angle] are skipped (no baseline / nothing in common).
     """
-    cams = check_cameras(cameras)
+    cams = check_poses(cameras)
     a = cams[:, :3] - np.asarray(center, dtype=np.float64)
     n = np.linalg.norm(a, axis=1, keepdims=True)
     a = a / np.where(n > 0, n, 1.0)
@@ -284,7 +284,7 @@ def dense_reconstruct(images: Sequence[NDArray[np.uint8]], masks: Sequence[NDArr
 
     Args:
         images, masks: N RGB uint8 views and their foreground masks.
-        cameras: (N, 6) cameras; K: 3x3 calibration (OpenCV pixel convention).
+        cameras: (N, 7) camera poses (roll kept) or (N, 6) [c, v]; K: 3x3 calibration (OpenCV pixel convention).
         box: (2, 3) crop box.
         guide: (G, 3) points bounding the depth (disparity) search, e.g. the sparse cloud (as
             COLMAP bounds PatchMatch depths with the sparse points); points outside ``box`` are
@@ -302,7 +302,7 @@ def dense_reconstruct(images: Sequence[NDArray[np.uint8]], masks: Sequence[NDArr
     """
     if not (isinstance(scale, (int, float)) and 0 < scale <= 1):
         raise ValueError(f"scale must be in (0, 1], got {scale!r}")
-    cams = check_cameras(cameras)
+    cams = check_poses(cameras)
     if len(images) != len(cams) or len(masks) != len(cams):
         raise ValueError(f"{len(images)} images and {len(masks)} masks for {len(cams)} cameras")
     box = np.asarray(box, dtype=np.float64).reshape(2, 3)

@@ -14,7 +14,6 @@ from rclpy.node import Node
 
 from vp_recon.errors import CAPTURE_MISSING, ReconError
 from vp_recon.flight import CapturedViews, FlightError
-from vp_scene.camera import poses_to_cameras
 from vp_scene.messages import camera_info_intrinsics, compressed_image_array, drone_topic, image_array, pose_array
 from vp_scene.node_runtime import LATCHED
 
@@ -169,7 +168,7 @@ class FleetCaptures:
             return CapturedViews(
                 names=[f'view_{e.pose_index:03d}.png' for e in entries],
                 images=[sets[d]['image'] for d in drones],
-                reported=poses_to_cameras(np.array([pose_array(sets[d]['pose'].pose) for d in drones])),
+                reported=np.array([pose_array(sets[d]['pose'].pose) for d in drones]),  # any attitude, roll kept
                 K=intr[0][0], realization=int(k)).validate()
         except (ValueError, FlightError) as exc:
             raise ReconError(CAPTURE_MISSING, f'capture {k} from the fleet is unusable: {exc}') from None

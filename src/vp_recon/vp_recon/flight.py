@@ -1,4 +1,4 @@
-"""A capture set (images + the poses the drones reported + one pinhole camera) and its folder.
+"""A capture set (images + the poses the cameras reported + one pinhole camera) and its folder.
 
 :class:`CapturedViews` is what a flight hands to the reconstruction
 (:func:`vp_recon.pipeline.reconstruct_views`), whether it was rendered from a plan
@@ -11,30 +11,33 @@ A folder ``DIR`` holds the images (PNG or JPEG, RGB, one camera for all) and a p
 
 ``DIR/poses.csv`` (first choice), a header line then one row per image::
 
-    image,x,y,z,qx,qy,qz,qw,frame,fx,fy,cx,cy,width,height
+    image,x,y,z,qx,qy,qz,qw,frame,fx,fy,cx,cy,width,height[,k1,k2,p1,p2,k3]
     view_000.png,1.4,0.0,1.2,0.0,0.12,0.0,0.99,map,1000.0,1000.0,999.5,749.5,2000,1500
 
 * ``image``: the file name in DIR (no folders, unique);
 * ``x y z``: the camera centre in ``frame``, metres; ``qx qy qz qw``: the camera's attitude as
   a ``geometry_msgs/Pose`` of the suite (the REP-103 *body* frame: x along the optical axis,
-  y left, z up; :mod:`vp_scene.camera`), so a drone's reported ``PoseStamped`` goes in as is;
+  y left, z up; :mod:`vp_scene.camera`), any attitude (a roll about the optical axis is kept),
+  so a drone's reported ``PoseStamped`` goes in as is;
 * ``frame``: ``map`` (the suite's frame; anything else is refused);
 * ``fx fy cx cy``: pinhole intrinsics in pixels, OpenCV / ``sensor_msgs/CameraInfo`` convention
-  (pixel centres at integers: cx = (width - 1) / 2 for a centred principal point), no
-  distortion (undistort first); ``width height``: the image size, which must match the file.
+  (pixel centres at integers: cx = (width - 1) / 2 for a centred principal point);
+  ``width height``: the image size, which must match the file;
+* optional, after them and in any order, the lens distortion :data:`DISTORTION_COLUMNS` (OpenCV's
+  and CameraInfo's ``plumb_bob`` k1, k2, p1, p2, k3; a column left out is 0).
 
 ``DIR/cameras.txt`` + ``DIR/images.txt`` (COLMAP's text model, the interchange format of
-photogrammetry tools; read when there is no poses.csv): cameras of model ``PINHOLE`` or
-``SIMPLE_PINHOLE`` (COLMAP's pixel convention: centres at +0.5), image poses as COLMAP's
+photogrammetry tools; read when there is no poses.csv): cameras of the models
+:data:`COLMAP_MODELS` (COLMAP's pixel convention: centres at +0.5), image poses as COLMAP's
 ``cam_from_world`` (QW QX QY QZ TX TY TZ, optical frame), in ``map``.
 
-The suite's cameras have no roll (a gimbal levels them, :mod:`vp_scene.camera`): a pose with
-more than :data:`MAX_ROLL_DEG` of roll about its optical axis is refused (a camera looking
-straight down has the convention's yaw: its image x axis along world -y).
-:func:`write_flight` writes both files (and an empty ``points3D.txt``, so that
-COLMAP reads the model), plus ``flight.json`` (what is known of a simulated flight: its wind
-realization and capture model). Every problem of a folder is a :class:`FlightError` with one
-line naming the file.
+Distortion: the images of a camera with distortion are undistorted once, as they are read, to a
+pinhole camera (COLMAP's undistorter, ``pycolmap.undistort_camera`` / ``undistort_image``: no
+blank pixels, the image size may change by a few pixels); everything after works on pinhole
+images. :func:`write_flight` writes both files (pinhole: what it writes is undistorted; and an
+empty ``points3D.txt``, so that COLMAP reads the model), plus ``flight.json`` (what is known of
+a simulated flight: its wind realization and capture model). Every problem of a folder is a
+:class:`FlightError` with one line naming the file.
 
 Ground control (optional, :mod:`vp_scene.ground_control`): ``DIR/markers.csv`` (``id,x,y,z[,sigma]``:
 ArUco markers of OpenCV's ``DICT_4X4_50`` surveyed on the ground, found in the images by
@@ -51,6 +54,7 @@ import csv
 import json
 import math
 import os
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Optional, Sequence, Union
@@ -62,28 +66,33 @@ from scipy.spatial.transform import Rotation
 
 from vp_scene.ground_control import GroundControl, GroundControlError, read_gcp_list, read_markers_csv, \
     write_markers_csv
-from vp_scene.camera import (body_from_optical, cameras_to_poses, poses_to_cameras, principal_point_gl, roll_of,
-                             world_to_camera)
+from vp_scene.camera import as_poses, body_from_optical, principal_point_gl, world_to_camera
 from vp_scene.images import ImageError, image_size, read_image
 
 from .config import MAX_MEGAPIXELS
 
-__all__ = ["POSES_FILE", "MARKERS_FILE", "GCP_LIST_FILE", "POSES_COLUMNS", "IMAGE_SUFFIXES", "FRAME", "MAX_ROLL_DEG", "FlightError", "CapturedViews",
-           "write_flight", "read_flight", "capture_folder", "locate_flown", "flown_views", "join_views"]
+__all__ = ["POSES_FILE", "MARKERS_FILE", "GCP_LIST_FILE", "POSES_COLUMNS", "DISTORTION_COLUMNS", "COLMAP_MODELS",
+           "IMAGE_SUFFIXES", "FRAME", "FlightError", "CapturedViews", "write_flight", "write_poses_csv", "read_flight",
+           "capture_folder", "locate_flown", "flown_views", "join_views"]
 
 POSES_FILE = "poses.csv"
 #: The ground-control files of a flight folder (module docstring).
 MARKERS_FILE = "markers.csv"
 GCP_LIST_FILE = "gcp_list.txt"
 POSES_COLUMNS = ("image", "x", "y", "z", "qx", "qy", "qz", "qw", "frame", "fx", "fy", "cx", "cy", "width", "height")
+#: Optional columns of poses.csv after :data:`POSES_COLUMNS`: OpenCV's (and CameraInfo plumb_bob's) distortion.
+DISTORTION_COLUMNS = ("k1", "k2", "p1", "p2", "k3")
+#: COLMAP camera models read from cameras.txt and their parameters (COLMAP's order; the radial
+#: and OpenCV ones are OpenCV's distortion model with some coefficients 0, and undistorted).
+COLMAP_MODELS = {"SIMPLE_PINHOLE": ("f", "cx", "cy"), "PINHOLE": ("fx", "fy", "cx", "cy"),
+                 "SIMPLE_RADIAL": ("f", "cx", "cy", "k1"), "RADIAL": ("f", "cx", "cy", "k1", "k2"),
+                 "OPENCV": ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2"),
+                 "FULL_OPENCV": ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")}
+#: OpenCV's distortion coefficients, in its order, that a camera may have (the rational model's).
+_OPENCV_COEFFS = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 #: The one frame of the suite.
 FRAME = "map"
-#: degrees: a pose with more roll about its optical axis is refused. The suite's cameras are
-#: levelled (no roll, :mod:`vp_scene.camera`) and the registration to ``map`` uses the reported
-#: attitudes: a roll dropped silently would turn the whole reconstruction by it. A gimbal holds
-#: about 0.01 degree; 2 degrees leaves room for a drone's attitude estimate.
-MAX_ROLL_DEG = 2.0
 
 PathLike = Union[str, os.PathLike]
 
@@ -94,12 +103,15 @@ class FlightError(ValueError):
 
 @dataclass
 class CapturedViews:
-    """N images of one pinhole camera with the poses the drones reported.
+    """N images of one pinhole camera with the poses the cameras reported.
 
     Attributes:
         names: N unique image file names.
         images: N RGB uint8 (H, W, 3), all of one size.
-        reported: (N, 6) reported cameras [c, v] in ``map`` (:mod:`vp_scene.camera`).
+        reported: the reported poses in ``map``: (N, 7) (x, y, z, qx, qy, qz, qw), any attitude,
+            or (N, 6) levelled cameras [c, v] (a plan flown in simulation; kept as given, so that
+            its geometry is bit for bit the plan's: :func:`vp_scene.camera.as_poses` gives their
+            poses). Every consumer takes either (:mod:`vp_scene.camera`).
         K: 3x3 intrinsics, OpenCV pixel convention.
         masks: N plant masks (H, W) bool, or None: from the images (the reconstruction's choice).
         fov: the horizontal field of view, rad (None: from K).
@@ -138,8 +150,9 @@ class CapturedViews:
         if len(self.names) != n or len(set(self.names)) != n:
             raise FlightError(f"{n} images need {n} unique names, got {list(self.names)}")
         rep = np.asarray(self.reported, dtype=np.float64)
-        if rep.shape != (n, 6) or not np.all(np.isfinite(rep)):
-            raise FlightError(f"reported poses must be {n} finite [c, v] rows, got shape {rep.shape}")
+        if rep.shape not in ((n, 6), (n, 7)) or not np.all(np.isfinite(rep)):
+            raise FlightError(f"reported poses must be {n} finite poses (x, y, z, qx, qy, qz, qw) or [c, v] rows, "
+                              f"got shape {rep.shape}")
         size = self.size
         for name, im in zip(self.names, self.images):
             a = np.asarray(im)
@@ -154,9 +167,71 @@ class CapturedViews:
         return self
 
 
-def _intrinsics_row(K: NDArray[np.float64], width: int, height: int) -> list:
-    return [repr(float(K[0, 0])), repr(float(K[1, 1])), repr(float(K[0, 2])), repr(float(K[1, 2])),
-            str(int(width)), str(int(height))]
+@dataclass(frozen=True)
+class _Camera:
+    """A flight's camera as read: OpenCV pinhole intrinsics (pixel centres at integers), the image
+    size and OpenCV's distortion coefficients :data:`_OPENCV_COEFFS` (all 0: a pinhole camera)."""
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    width: float
+    height: float
+    dist: tuple = (0.0,) * len(_OPENCV_COEFFS)
+
+    @property
+    def K(self) -> NDArray[np.float64]:
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    @property
+    def distorted(self) -> bool:
+        return any(self.dist)
+
+    def colmap(self, pycolmap: object) -> object:
+        """The camera as COLMAP's OPENCV (FULL_OPENCV when k3..k6 are used): OpenCV's model,
+        COLMAP's pixel convention (centres at +0.5)."""
+        full = any(self.dist[4:])
+        return pycolmap.Camera(model="FULL_OPENCV" if full else "OPENCV", width=int(self.width),
+                               height=int(self.height), params=[self.fx, self.fy, self.cx + 0.5, self.cy + 0.5, *self.dist[:8 if full else 4]])
+
+
+def _undistorter(cam: _Camera) -> tuple[object, _Camera]:
+    """(undistort(image) -> image, the pinhole camera of the undistorted images) of a camera with
+    distortion: COLMAP's undistorter (no blank pixels; the size may change by a few pixels), the
+    one COLMAP applies before its dense stereo, so that the rest of the suite stays pinhole."""
+    import pycolmap
+
+    options = pycolmap.UndistortCameraOptions()
+    source = cam.colmap(pycolmap)
+    pin = pycolmap.undistort_camera(options, source)
+    fx, fy, cx, cy = (float(v) for v in pin.params)
+
+    def undistort(image: NDArray[np.uint8]) -> NDArray[np.uint8]:
+        out, _ = pycolmap.undistort_image(options, pycolmap.Bitmap.from_array(np.ascontiguousarray(image)), source)
+        return np.ascontiguousarray(out.to_array()[..., :3], dtype=np.uint8)
+
+    return undistort, _Camera(fx, fy, cx - 0.5, cy - 0.5, int(pin.width), int(pin.height))
+
+
+def write_poses_csv(path: PathLike, names: Sequence[str], poses: ArrayLike, K: ArrayLike, size: tuple[int, int],
+                    distortion: Optional[Sequence[float]] = None) -> None:
+    """``poses.csv`` (module docstring) of the images ``names`` taken from ``poses`` (N, 7) (or
+    levelled cameras (N, 6)) by one camera: pinhole ``K`` (OpenCV convention) at ``size`` (width,
+    height) and, when given, its distortion ``(k1, k2, p1, p2, k3)`` (the optional columns)."""
+    P = as_poses(np.asarray(poses, dtype=np.float64).reshape(len(names), -1))
+    K = np.asarray(K, dtype=np.float64)
+    extra = [] if distortion is None else [repr(float(v)) for v in distortion]
+    if len(extra) not in (0, len(DISTORTION_COLUMNS)):
+        raise ValueError(f"distortion must be the {len(DISTORTION_COLUMNS)} numbers {DISTORTION_COLUMNS}, "
+                         f"got {distortion!r}")
+    intr = [repr(float(K[0, 0])), repr(float(K[1, 1])), repr(float(K[0, 2])), repr(float(K[1, 2])),
+            str(int(size[0])), str(int(size[1]))]
+    with open(path, "w", newline="") as f:
+        wr = csv.writer(f)
+        wr.writerow(POSES_COLUMNS + (DISTORTION_COLUMNS if extra else ()))
+        for name, pose in zip(names, P):
+            wr.writerow([name] + [repr(float(v)) for v in pose] + [FRAME] + intr + extra)
 
 
 def write_flight(views: CapturedViews, folder: PathLike, meta: Optional[dict] = None) -> Path:
@@ -185,7 +260,6 @@ def write_flight(views: CapturedViews, folder: PathLike, meta: Optional[dict] = 
             tmp.write_bytes(buf.tobytes())
 
         atomic(name, write_image)
-    poses = cameras_to_poses(views.reported)
     R, t = world_to_camera(views.reported)
     cx, cy = principal_point_gl(K)
     meta = {**(meta or {}), "realization": views.realization, "frame": FRAME, "images": list(views.names)}
@@ -204,15 +278,7 @@ def write_flight(views: CapturedViews, folder: PathLike, meta: Optional[dict] = 
         if views.control.observations:
             raise FlightError("write_flight writes ArUco markers (markers.csv), not observed control points")
         atomic(MARKERS_FILE, lambda p: write_markers_csv(views.control, p))
-
-    def write_poses(p: Path) -> None:
-        with open(p, "w", newline="") as f:
-            wr = csv.writer(f)
-            wr.writerow(POSES_COLUMNS)
-            for name, pose in zip(views.names, poses):
-                wr.writerow([name] + [repr(float(v)) for v in pose] + [FRAME] + _intrinsics_row(K, w, h))
-
-    atomic(POSES_FILE, write_poses)
+    atomic(POSES_FILE, lambda p: write_poses_csv(p, views.names, views.reported, K, (w, h)))
     return out
 
 
@@ -229,41 +295,55 @@ def _number(text: str, where: str, what: str) -> float:
 
 
 def _read_poses_csv(path: Path) -> tuple[list, NDArray[np.float64], list]:
-    """(names, poses (N, 7), intrinsics rows [fx, fy, cx, cy, w, h]) of poses.csv."""
-    names, poses, intr = [], [], []
+    """(names, poses (N, 7), cameras (:class:`_Camera`)) of poses.csv."""
+    names, poses, cams = [], [], []
     try:
         with open(path, newline="") as f:
             rows = list(csv.reader(f))
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise FlightError(f"{path}: cannot read: {exc}") from None
-    if not rows or [c.strip() for c in rows[0]] != list(POSES_COLUMNS):
-        raise FlightError(f"{path}: the first line must be the header {','.join(POSES_COLUMNS)}")
+    header = [c.strip() for c in rows[0]] if rows else []
+    extra = header[len(POSES_COLUMNS):]
+    if header[:len(POSES_COLUMNS)] != list(POSES_COLUMNS) or len(set(extra)) != len(extra) \
+            or not set(extra) <= set(DISTORTION_COLUMNS):
+        raise FlightError(f"{path}: the first line must be the header {','.join(POSES_COLUMNS)}, then optionally "
+                          f"any of the distortion columns {','.join(DISTORTION_COLUMNS)}")
+    columns = tuple(header)
     for line, row in enumerate(rows[1:], start=2):
         if not row or not "".join(row).strip():
             continue
         where = f"{path} line {line}"
-        if len(row) != len(POSES_COLUMNS):
-            raise FlightError(f"{where}: {len(row)} columns, expected {len(POSES_COLUMNS)} ({','.join(POSES_COLUMNS)})")
+        if len(row) != len(columns):
+            raise FlightError(f"{where}: {len(row)} columns, expected {len(columns)} ({','.join(columns)})")
         row = [c.strip() for c in row]
         name = row[0]
         if not name or Path(name).name != name:
             raise FlightError(f"{where}: image {name!r} must be a file name in the folder")
         if name in names:
             raise FlightError(f"{where}: duplicate image name {name}")
-        pose = [_number(v, f"{where} ({name})", c) for v, c in zip(row[1:8], POSES_COLUMNS[1:8])]
+        pose = [_number(v, f"{where} ({name})", c) for v, c in zip(row[1:8], columns[1:8])]
         if row[8] != FRAME:
             raise FlightError(f"{where} ({name}): frame {row[8]!r}; poses must be in {FRAME!r}")
-        k = [_number(v, f"{where} ({name})", c) for v, c in zip(row[9:], POSES_COLUMNS[9:])]
+        k = [_number(v, f"{where} ({name})", c) for v, c in zip(row[9:], columns[9:])]
         if np.linalg.norm(pose[3:]) < 1e-9:
             raise FlightError(f"{where} ({name}): the quaternion is zero")
+        given = dict(zip(columns[15:], k[6:]))
         names.append(name)
         poses.append(pose)
-        intr.append(k)
-    return names, np.array(poses, dtype=np.float64).reshape(-1, 7), intr
+        cams.append(_Camera(*k[:6], dist=tuple(given.get(c, 0.0) for c in _OPENCV_COEFFS)))
+    return names, np.array(poses, dtype=np.float64).reshape(-1, 7), cams
+
+
+def _colmap_camera(model: str, w: float, h: float, p: list) -> _Camera:
+    """A COLMAP camera (:data:`COLMAP_MODELS`; centres at +0.5) as OpenCV's."""
+    named = dict(zip(COLMAP_MODELS[model], p))
+    fx, fy = (named["f"], named["f"]) if "f" in named else (named["fx"], named["fy"])
+    return _Camera(fx, fy, named["cx"] - 0.5, named["cy"] - 0.5, w, h,
+                   dist=tuple(named.get(c, 0.0) for c in _OPENCV_COEFFS))
 
 
 def _read_colmap_text(folder: Path) -> tuple[list, NDArray[np.float64], list]:
-    """(names, poses (N, 7) in the suite's body convention, intrinsics rows) of COLMAP's text model."""
+    """(names, poses (N, 7) in the suite's body convention, cameras) of COLMAP's text model."""
     cams: dict = {}
     path = folder / "cameras.txt"
     for line, text in enumerate(path.read_text(errors="replace").splitlines(), start=1):
@@ -271,17 +351,17 @@ def _read_colmap_text(folder: Path) -> tuple[list, NDArray[np.float64], list]:
         if not f or f[0].startswith("#"):
             continue
         where = f"{path} line {line}"
-        if len(f) < 5 or f[1] not in ("PINHOLE", "SIMPLE_PINHOLE"):
-            raise FlightError(f"{where}: only PINHOLE and SIMPLE_PINHOLE cameras (no distortion) are read, "
-                              f"got {' '.join(f[:2])!r}")
+        if len(f) < 5 or f[1] not in COLMAP_MODELS:
+            raise FlightError(f"{where}: camera model {' '.join(f[1:2])!r} is not read; the models read are "
+                              f"{', '.join(COLMAP_MODELS)}")
         w, h = (_number(v, where, "size") for v in f[2:4])
         p = [_number(v, where, "parameter") for v in f[4:]]
-        if len(p) != (4 if f[1] == "PINHOLE" else 3):
-            raise FlightError(f"{where}: {f[1]} has {4 if f[1] == 'PINHOLE' else 3} parameters, got {len(p)}")
-        fx, fy, cx, cy = p if f[1] == "PINHOLE" else (p[0], p[0], p[1], p[2])
-        cams[f[0]] = [fx, fy, cx - 0.5, cy - 0.5, w, h]  # COLMAP's pixel centres at +0.5 -> OpenCV's
+        if len(p) != len(COLMAP_MODELS[f[1]]):
+            raise FlightError(f"{where}: {f[1]} has {len(COLMAP_MODELS[f[1]])} parameters "
+                              f"({' '.join(COLMAP_MODELS[f[1]])}), got {len(p)}")
+        cams[f[0]] = _colmap_camera(f[1], w, h, p)
     path = folder / "images.txt"
-    names, poses, intr = [], [], []
+    names, poses, used = [], [], []
     data = [(n, t) for n, t in enumerate(path.read_text(errors="replace").splitlines(), start=1)
             if t.strip() and not t.lstrip().startswith("#")]
     # two lines an image (the second, its 2D points, may be empty and then was dropped above)
@@ -304,8 +384,8 @@ def _read_colmap_text(folder: Path) -> tuple[list, NDArray[np.float64], list]:
         c = -R_cw.T @ np.array([tx, ty, tz])
         poses.append(np.concatenate([c, body_from_optical(R_cw)]))
         names.append(name)
-        intr.append(cams[f[8]])
-    return names, np.array(poses, dtype=np.float64).reshape(-1, 7), intr
+        used.append(cams[f[8]])
+    return names, np.array(poses, dtype=np.float64).reshape(-1, 7), used
 
 
 def read_flight(folder: PathLike, max_megapixels: float = MAX_MEGAPIXELS) -> CapturedViews:
@@ -314,15 +394,17 @@ def read_flight(folder: PathLike, max_megapixels: float = MAX_MEGAPIXELS) -> Cap
     pose, an image without a pose, duplicate names, intrinsics that differ, or fewer than 2
     images. Every image's header is read before any is decoded: an image of more than
     :data:`vp_scene.images.MAX_IMAGE_PIXELS` pixels, or images of more than ``max_megapixels``
-    together (:data:`vp_recon.config.MAX_MEGAPIXELS`: memory), are refused before decoding."""
+    together (:data:`vp_recon.config.MAX_MEGAPIXELS`: memory; undistorted images counted at
+    their undistorted size), are refused before decoding. A camera with distortion is
+    undistorted as its images are read (module docstring; ``seconds['undistort']``)."""
     d = Path(folder)
     if not d.is_dir():
         raise FlightError(f"{d}: not a folder")
     if (d / POSES_FILE).is_file():
-        names, poses, intr = _read_poses_csv(d / POSES_FILE)
+        names, poses, cams = _read_poses_csv(d / POSES_FILE)
         source = d / POSES_FILE
     elif (d / "cameras.txt").is_file() and (d / "images.txt").is_file():
-        names, poses, intr = _read_colmap_text(d)
+        names, poses, cams = _read_colmap_text(d)
         source = d / "images.txt"
     else:
         raise FlightError(f"{d}: no {POSES_FILE} (or COLMAP cameras.txt + images.txt) with the poses")
@@ -332,17 +414,13 @@ def read_flight(folder: PathLike, max_megapixels: float = MAX_MEGAPIXELS) -> Cap
         raise FlightError(f"{d / unposed[0]}: no pose in {source.name} (missing pose)")
     if len(names) < 2:
         raise FlightError(f"{source}: {len(names)} image(s); a reconstruction needs at least 2")
-    roll = np.degrees(roll_of(poses))
-    if len(roll) and np.max(np.abs(roll)) > MAX_ROLL_DEG:
-        i = int(np.argmax(np.abs(roll)))
-        raise FlightError(f"{source} ({names[i]}): roll of {roll[i]:.1f} deg about the optical axis; the suite's "
-                          f"cameras are levelled (at most {MAX_ROLL_DEG:g} deg, README 'From a real flight')")
-    if any(k != intr[0] for k in intr):
-        i = next(i for i, k in enumerate(intr) if k != intr[0])
+    if any(k != cams[0] for k in cams):
+        i = next(i for i, k in enumerate(cams) if k != cams[0])
         raise FlightError(f"{source} ({names[i]}): intrinsics differ from {names[0]}'s (one camera per flight)")
-    fx, fy, cx, cy, w, h = intr[0]
-    if not (fx > 0 and fy > 0 and w >= 16 and h >= 16 and w == int(w) and h == int(h)):
-        raise FlightError(f"{source}: bad intrinsics fx {fx} fy {fy} size {w}x{h}")
+    cam = cams[0]
+    w, h = cam.width, cam.height
+    if not (cam.fx > 0 and cam.fy > 0 and w >= 16 and h >= 16 and w == int(w) and h == int(h)):
+        raise FlightError(f"{source}: bad intrinsics fx {cam.fx} fy {cam.fy} size {w}x{h}")
     pixels = 0
     for name in names:  # the headers first: nothing is decoded of a folder that is refused
         path = d / name
@@ -356,10 +434,17 @@ def read_flight(folder: PathLike, max_megapixels: float = MAX_MEGAPIXELS) -> Cap
         except ImageError as exc:
             raise FlightError(str(exc)) from None
         pixels += iw * ih
+    undistort, pinhole = None, cam
+    if cam.distorted and pixels <= max_megapixels * 1e6:
+        try:
+            undistort, pinhole = _undistorter(cam)
+        except (ValueError, RuntimeError) as exc:
+            raise FlightError(f"{source}: cannot undistort the camera (distortion {cam.dist}): {exc}") from None
+        pixels = max(pixels, len(names) * pinhole.width * pinhole.height)
     if pixels > max_megapixels * 1e6:
         raise FlightError(f"{d}: its {len(names)} images have {pixels / 1e6:.4g} megapixels; at most "
                           f"{max_megapixels:g} are reconstructed at once (--max-megapixels; memory)")
-    images = []
+    images, seconds = [], 0.0
     for name in names:
         path = d / name
         try:
@@ -369,16 +454,19 @@ def read_flight(folder: PathLike, max_megapixels: float = MAX_MEGAPIXELS) -> Cap
         if (im.shape[1], im.shape[0]) != (int(w), int(h)):
             raise FlightError(f"{path}: {im.shape[1]}x{im.shape[0]} pixels, but {source.name} gives "
                               f"{int(w)}x{int(h)}")
+        if undistort is not None:
+            t0 = time.perf_counter()
+            im = undistort(im)
+            seconds += time.perf_counter() - t0
         images.append(im)
-    K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
     realization = None
     if (d / "flight.json").is_file():
         try:
             realization = json.loads((d / "flight.json").read_text()).get("realization")
         except (ValueError, AttributeError):
             raise FlightError(f"{d / 'flight.json'}: not a JSON object") from None
-    return CapturedViews(names=list(names), images=images, reported=poses_to_cameras(poses), K=K,
-                         realization=realization, control=_read_control(d)).validate()
+    return CapturedViews(names=list(names), images=images, reported=poses, K=pinhole.K, realization=realization,
+                         control=_read_control(d), seconds={"undistort": seconds} if undistort else {}).validate()
 
 
 def _read_control(d: Path) -> Optional[GroundControl]:
@@ -450,6 +538,15 @@ def flown_views(located: Sequence[tuple[Path, int]], k: int) -> CapturedViews:
     return join_views(single)
 
 
+def _joined_poses(parts: Sequence[ArrayLike]) -> NDArray[np.float64]:
+    """The reported poses of several capture sets, one after the other: as given when all are
+    [c, v] rows or all poses, else all as poses."""
+    arrays = [np.asarray(p, dtype=np.float64) for p in parts]
+    if len({a.shape[1] for a in arrays}) > 1:
+        arrays = [as_poses(a) for a in arrays]
+    return np.concatenate(arrays)
+
+
 def join_views(parts: Sequence[CapturedViews]) -> CapturedViews:
     """One capture set of several (the sorties of a flight, in order): images renamed
     ``view_000.png``... in that order; masks kept only when every part has them.
@@ -472,5 +569,5 @@ def join_views(parts: Sequence[CapturedViews]) -> CapturedViews:
     images = [im for p in parts for im in p.images]
     masks = [m for p in parts for m in p.masks] if all(p.masks is not None for p in parts) else None
     return CapturedViews(names=[f"view_{i:03d}.png" for i in range(len(images))], images=images,
-                         reported=np.concatenate([np.asarray(p.reported, np.float64).reshape(-1, 6) for p in parts]),
+                         reported=_joined_poses([p.reported for p in parts]),
                          K=first.K, masks=masks, fov=first.fov, realization=first.realization, control=first.control)

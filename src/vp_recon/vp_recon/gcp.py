@@ -33,7 +33,7 @@ from typing import Optional, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from vp_scene.camera import world_to_camera
+from vp_scene.camera import as_poses, world_to_camera
 from vp_scene.ground_control import ARUCO_DICTIONARY, GcpObservation, GroundControl
 
 __all__ = ["DETECTION_SIGMA_PX", "Registration", "detect_markers", "register"]
@@ -106,7 +106,7 @@ def register(points: NDArray[np.float64], cameras: NDArray[np.float64], names: S
              images: Sequence[NDArray[np.uint8]], K: NDArray[np.float64], reported: NDArray[np.float64],
              control: GroundControl, camera_sigma: float) -> tuple[NDArray[np.float64], NDArray[np.float64],
                                                                    Registration]:
-    """The model (``points`` (P, 3), ``cameras`` (N, 6) with NaN rows for images not registered,
+    """The model (``points`` (P, 3), ``cameras`` (N, 7) poses with NaN rows for images not registered,
     already in ``map`` from the reported poses) placed on the control points and the reported
     centres together (module docstring): (points, cameras, :class:`Registration`). Observations
     are ``control.observations`` when given, else the ArUco markers found in ``images``."""
@@ -151,7 +151,11 @@ def register(points: NDArray[np.float64], cameras: NDArray[np.float64], names: S
     moved = points @ (s * R).T + t
     out = cams.copy()
     out[ok, :3] = model_c @ (s * R).T + t
-    out[ok, 3:] = cams[ok, 3:] @ R.T
+    if out.shape[1] == 7:  # a pose: its attitude turned by R (roll kept)
+        turned = (Rotation.from_matrix(R) * Rotation.from_quat(cams[ok, 3:])).as_quat()
+        out[ok] = as_poses(np.hstack([out[ok, :3], turned]))
+    else:
+        out[ok, 3:] = cams[ok, 3:] @ R.T
     centre = points.mean(axis=0) if len(points) else world.mean(axis=0)
     r = residuals(fit.x)
     reg.applied, reg.scale = True, s

@@ -4,7 +4,8 @@ Exhaustive matching compares all N (N - 1) / 2 image pairs. In a field planned w
 more) cameras most pairs see different plants or look at the same plant from too far apart for
 SIFT to match (stack notes: at 2000 x 1500, 83% of the pairs 30-45 degrees apart matched, 50% at
 45-60, few beyond). The poses are known, and so is the scene the renderer draws, so the pairs that
-can match are known before any image is read. The rule, for cameras ``[c, v]`` (docs/CONTRACTS.md)
+can match are known before any image is read. The rule, for cameras (the poses reported, any
+attitude, or levelled ``[c, v]``, :mod:`vp_scene.camera`)
 and the scene points {X}:
 
 1. *Sample*: at most ``max_points`` points, evenly strided through the array (deterministic; a
@@ -51,7 +52,7 @@ from typing import Iterable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from vp_scene.camera import CameraModel, check_cameras, project
+from vp_scene.camera import CameraModel, check_poses, project
 
 __all__ = ["DEFAULT_MAX_ANGLE", "DEFAULT_MIN_PARTNERS", "sample_points", "in_view", "pair_geometry",
            "select_pairs", "check_pairs"]
@@ -122,7 +123,7 @@ def select_pairs(cameras: ArrayLike, points: ArrayLike, model: CameraModel, *,
     """The image pairs (i, j), i < j, sorted, that are worth matching (rules 1-6 of the module docstring).
 
     Args:
-        cameras: (N, 6) ``[c, v]``.
+        cameras: (N, 7) poses (roll kept) or (N, 6) ``[c, v]``.
         points: (P, 3) the scene the images show (e.g. a wind realization's true points).
         model: image size and field of view of every camera.
         max_angle, min_angle: window of the median triangulation angle a_ij, rad.
@@ -134,7 +135,7 @@ def select_pairs(cameras: ArrayLike, points: ArrayLike, model: CameraModel, *,
     Raises:
         ValueError: malformed cameras or points, or a parameter out of range.
     """
-    cams = check_cameras(cameras)
+    cams = check_poses(cameras)
     pts = _check_points(points)
     if not (0.0 <= min_angle <= max_angle <= math.pi):
         raise ValueError(f"need 0 <= min_angle <= max_angle <= pi rad, got {min_angle!r}, {max_angle!r}")

@@ -59,8 +59,8 @@ class RealizationResult(Scores):
             model anchored on the reported poses, ``sparse_mode`` 'anchored'); '' otherwise.
         control: the registration on the flight's ground control
             (:meth:`vp_recon.gcp.Registration.to_dict`), None without control points.
-        reported, K: the poses the drones reported (N, 6) and the intrinsics: with ``rendered``,
-            the capture set (:meth:`captured_views`).
+        reported, K: the poses the drones reported ((N, 6) [c, v] or (N, 7) poses) and the
+            intrinsics: with ``rendered``, the capture set (:meth:`captured_views`).
     """
 
     realization: int

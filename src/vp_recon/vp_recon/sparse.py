@@ -20,8 +20,9 @@ Pipeline (Schönberger & Frahm, "Structure-from-Motion Revisited", CVPR 2016):
    reported camera centres are pose priors of the bundle adjustment, COLMAP's
    ``use_prior_position``), every model of 3 or more images registered to the world on the given
    poses (the reported ones of a flight; never the true ones there) by
-   :func:`similarity_from_poses`: the rotation from the images' attitudes, scale and translation
-   from their centres. Parts of a plan that share no matches become separate models, each placed
+   :func:`similarity_from_poses`: the rotation from the images' attitudes and centres, each
+   weighted by how well it is known (``prior_sigma``, ``attitude_sigma``: a rig whose attitudes
+   are known only roughly is registered on its centres), scale and translation from the centres. Parts of a plan that share no matches become separate models, each placed
    on its own poses (:func:`_merge_models`); before, only the largest was kept, and a field
    planned by parts lost every part but one. The centres alone (Umeyama 1991) left a 4-camera Corn50 arc 27 cm x100
    Chamfer off in map (shape 9.1); with the attitudes 3.9 (shape 1.3).
@@ -43,6 +44,7 @@ The 3D points come back in the world frame.
 """
 from __future__ import annotations
 
+import math
 import shutil
 import time
 from dataclasses import dataclass, field
@@ -53,7 +55,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from vp_scene.camera import check_cameras, principal_point_gl, world_to_camera
+from vp_scene.camera import as_poses, body_from_optical, check_poses, principal_point_gl, world_to_camera
 
 from .pairs import check_pairs
 
@@ -93,9 +95,10 @@ class SparseResult:
         pair_inliers: verified inlier matches per image pair (i, j), i < j (indices of ``images``).
         matched_pairs: image pairs handed to the matcher (N (N - 1) / 2 when exhaustive).
         seconds: wall time of ``extract``, ``match`` and ``triangulate`` (the model, either mode).
-        cameras: (N, 6) the cameras of the model in the world frame ([c, v], roll dropped): the
-            given ones in ``known_poses`` mode; in ``incremental`` mode the registered images'
-            estimated poses after the alignment, NaN rows for images not registered.
+        cameras: (N, 7) the poses (x, y, z, qx, qy, qz, qw, :mod:`vp_scene.camera`) of the model's
+            cameras in the world frame, roll kept: the given ones in ``known_poses`` mode; else
+            the registered images' estimated poses after the alignment, NaN rows for images not
+            registered.
         models: the models merged (``incremental``: every model of >= 3 registered images, each
             aligned to the world on its own, :func:`_merge_models`; 1 otherwise).
         centre_residual: ``incremental`` and ``anchored``: RMS distance, m, of the registered images'
@@ -172,12 +175,14 @@ def sparse_reconstruct(images: Sequence[NDArray[np.uint8]], cameras: NDArray[np.
                        pairs: Optional[Sequence[tuple[int, int]]] = None,
                        prior_centres: Optional[NDArray[np.float64]] = None,
                        prior_sigma: float = 0.02, sift_first_octave: int = -1,
-                       fallback: Optional[str] = "anchored") -> SparseResult:
+                       fallback: Optional[str] = "anchored",
+                       attitude_sigma: Optional[float] = None) -> SparseResult:
     """SIFT + matching (all pairs, or the given ones) + triangulation of the rendered ``images`` (N RGB uint8).
 
     Args:
         images: N rendered RGB images, all of the same size.
-        cameras: (N, 6) the cameras that took them ([c, v], docs/CONTRACTS.md).
+        cameras: (N, 7) the poses of the cameras that took them (the reported ones; any attitude)
+            or (N, 6) levelled cameras [c, v] (:mod:`vp_scene.camera`).
         K: 3x3 calibration in the OpenCV pixel convention (:func:`vp_scene.camera.intrinsics`).
         workdir: scratch folder (images, masks, database.db, sparse/); created when missing.
         mode: ``'known_poses'`` (triangulate with the true poses) or ``'incremental'`` (SfM).
@@ -192,6 +197,9 @@ def sparse_reconstruct(images: Sequence[NDArray[np.uint8]], cameras: NDArray[np.
             centres of ``cameras``). ``prior_sigma`` also scales the self-check (module docstring, 5).
         fallback: incremental mode: ``'anchored'`` (default): the anchored model of the same
             matches when the structure from motion fails (module docstring, 6); None: fail.
+        attitude_sigma: degrees per axis to which the attitudes of ``cameras`` are known: the
+            registration on them weighs them against the centres (known to ``prior_sigma``,
+            :func:`similarity_from_poses`); None: the attitudes alone give its rotation.
         sift_first_octave: SIFT's first octave: -1 (COLMAP's default) doubles the image first, 0
             starts at its own resolution (about 4x fewer pixels to filter, no sub-pixel-scale features).
 
@@ -206,7 +214,7 @@ def sparse_reconstruct(images: Sequence[NDArray[np.uint8]], cameras: NDArray[np.
         pycolmap.logging.minloglevel = 2
     try:
         return _sparse(pycolmap, images, cameras, K, Path(workdir), mode, masks, max_features, num_threads, pairs,
-                       prior_centres, prior_sigma, sift_first_octave, fallback)
+                       prior_centres, prior_sigma, sift_first_octave, fallback, attitude_sigma)
     finally:
         pycolmap.logging.minloglevel = level
 
@@ -215,12 +223,13 @@ def _sparse(pycolmap: object, images: Sequence[NDArray[np.uint8]], cameras: NDAr
             K: NDArray[np.float64], workdir: Path, mode: str, masks: Optional[Sequence[NDArray[np.bool_]]],
             max_features: int, num_threads: int, pairs: Optional[Sequence[tuple[int, int]]],
             prior_centres: Optional[NDArray[np.float64]] = None, prior_sigma: float = 0.02,
-            sift_first_octave: int = -1, fallback: Optional[str] = "anchored") -> SparseResult:
+            sift_first_octave: int = -1, fallback: Optional[str] = "anchored",
+            attitude_sigma: Optional[float] = None) -> SparseResult:
     if mode not in MODES:
         raise ValueError(f"unknown sparse mode {mode!r}; expected one of {', '.join(MODES)}")
     if fallback not in (None, "anchored"):
         raise ValueError(f"fallback must be 'anchored' or None, got {fallback!r}")
-    cams = check_cameras(cameras)
+    cams = check_poses(cameras)
     if len(images) != len(cams):
         raise ValueError(f"{len(images)} images for {len(cams)} cameras")
     if len(images) < 2:
@@ -297,20 +306,23 @@ def _sparse(pycolmap: object, images: Sequence[NDArray[np.uint8]], cameras: NDAr
     anchor = cams[:, :3] if prior_centres is None else np.asarray(prior_centres, dtype=np.float64).reshape(-1, 3)
     attitudes = world_to_camera(cams)[0]
     max_residual = MAX_RESIDUAL_SIGMAS * max(float(prior_sigma), 1e-3)
+    # the registration's weights: position m, attitude rad (floors: an exact report is still a measurement)
+    sigmas = None if attitude_sigma is None else (max(float(prior_sigma), 1e-3),
+                                                  np.radians(max(float(attitude_sigma), 0.01)))
     why = ""
     if mode == "known_poses":
         rec = _known_pose_model(pycolmap, db_cameras, db_images, names, cams)
         rec = pycolmap.triangulate_points(rec, db_path, img_dir, out_dir, clear_points=True, options=options)
         xyz, rgb, track = _read_points(rec)
         seen = sum(1 for im in rec.images.values() if im.has_pose and im.num_points3D > 0)
-        model = MergedModels(xyz, rgb, track, cams.copy(), int(seen), float(rec.compute_mean_reprojection_error()),
+        model = MergedModels(xyz, rgb, track, as_poses(cams), int(seen), float(rec.compute_mean_reprojection_error()),
                              1, float("nan"))
     else:
         model = None
         if mode == "incremental":
             try:
                 model = _incremental_model(pycolmap, db_path, img_dir, out_dir, options, names, anchor, attitudes,
-                                           prior_centres is not None, len(names), verified, max_residual)
+                                           prior_centres is not None, len(names), verified, max_residual, sigmas)
             except SparseError as exc:
                 if fallback is None:
                     raise
@@ -318,7 +330,7 @@ def _sparse(pycolmap: object, images: Sequence[NDArray[np.uint8]], cameras: NDAr
         if model is None:  # anchored, asked for or in place of a structure from motion that failed
             try:
                 model = _anchored_model(pycolmap, db_path, img_dir, out_dir, options, db_cameras, db_images, names,
-                                        cams, anchor, attitudes, max_residual)
+                                        cams, anchor, attitudes, max_residual, sigmas)
             except SparseError as exc:
                 raise SparseError(f"{why}; the model anchored on the reported poses failed too: {exc}"
                                   if why else str(exc)) from None
@@ -336,7 +348,8 @@ def _sparse(pycolmap: object, images: Sequence[NDArray[np.uint8]], cameras: NDAr
 
 def _incremental_model(pycolmap: object, db_path: Path, img_dir: Path, out_dir: Path, options: object,
                        names: Sequence[str], anchor: NDArray[np.float64], attitudes: NDArray[np.float64],
-                       use_priors: bool, n: int, verified: int, max_residual: float) -> "MergedModels":
+                       use_priors: bool, n: int, verified: int, max_residual: float,
+                       sigmas: Optional[tuple] = None) -> "MergedModels":
     """COLMAP's incremental structure from motion of the matched images, every model registered on
     the given poses (:func:`_merge_models`); SparseError when it makes nothing usable."""
     options.ba_refine_focal_length = False
@@ -354,13 +367,13 @@ def _incremental_model(pycolmap: object, db_path: Path, img_dir: Path, out_dir: 
         raise SparseError(f"incremental mapping registered no image pair: 0 of {n} images "
                           f"registered ({verified} verified pairs)")
     # every model registered on the poses given (a flight: the reported ones), attitudes included
-    return _merge_models(pycolmap, list(models.values()), names, anchor, attitudes, max_residual)
+    return _merge_models(pycolmap, list(models.values()), names, anchor, attitudes, max_residual, sigmas)
 
 
 def _anchored_model(pycolmap: object, db_path: Path, img_dir: Path, out_dir: Path, options: object,
                     db_cameras: list, db_images: dict, names: Sequence[str], cams: NDArray[np.float64],
                     anchor: NDArray[np.float64], attitudes: NDArray[np.float64],
-                    max_residual: float) -> "MergedModels":
+                    max_residual: float, sigmas: Optional[tuple] = None) -> "MergedModels":
     """The reconstruction anchored on the given poses (module docstring, ``mode='anchored'``).
 
     1. the images at the given poses, tracks triangulated from the verified matches with loose
@@ -392,20 +405,20 @@ def _anchored_model(pycolmap: object, db_path: Path, img_dir: Path, out_dir: Pat
         if len(rec.points3D) == 0:
             break
         _adjust(pycolmap, rec, ba)
-        _register_parts(pycolmap, rec, names, anchor, attitudes)
+        _register_parts(pycolmap, rec, names, anchor, attitudes, sigmas)
         rec = pycolmap.triangulate_points(rec, db_path, img_dir, out_dir, clear_points=True, options=options)
     if len(rec.points3D) == 0:
         raise SparseError(f"no track triangulates at the reported poses: 0 of {len(names)} images registered (the "
                           "matched images see no common point from far enough apart)")
     _adjust(pycolmap, rec, ba)
-    _register_parts(pycolmap, rec, names, anchor, attitudes)
+    _register_parts(pycolmap, rec, names, anchor, attitudes, sigmas)
     xyz, rgb, track = _read_points(rec)
-    est = np.full((len(names), 6), np.nan)
+    est = np.full((len(names), 7), np.nan)
     idx = {n: i for i, n in enumerate(names)}
     for im in rec.images.values():
         if im.has_pose and im.num_points3D > 0:
             R_cw = np.asarray(im.cam_from_world().rotation.matrix())
-            est[idx[im.name]] = np.concatenate([np.asarray(im.projection_center()), R_cw[2]])
+            est[idx[im.name]] = np.concatenate([np.asarray(im.projection_center()), body_from_optical(R_cw)])
     kept = np.isfinite(est[:, 0])
     residual = float(np.sqrt(np.mean(np.sum((est[kept, :3] - anchor[kept]) ** 2, axis=1))))
     if not residual <= max_residual:
@@ -427,7 +440,7 @@ def _adjust(pycolmap: object, rec: object, options: object) -> None:
 
 
 def _register_parts(pycolmap: object, rec: object, names: Sequence[str], anchor: NDArray[np.float64],
-                    attitudes: NDArray[np.float64]) -> None:
+                    attitudes: NDArray[np.float64], sigmas: Optional[tuple] = None) -> None:
     """Register each connected part of ``rec`` (images linked by shared points; parts of a field
     flown by parts share none and each has its own gauge in an adjustment) on its images' given
     poses, in place: :func:`similarity_from_poses` of the images that observe a point. A part of
@@ -456,7 +469,7 @@ def _register_parts(pycolmap: object, rec: object, names: Sequence[str], anchor:
         model_R = np.array([np.asarray(im.cam_from_world().rotation.matrix()) for im in ims])
         which = [idx[im.name] for im in ims]
         try:
-            M = similarity_from_poses(model_c, model_R, anchor[which], attitudes[which])
+            M = similarity_from_poses(model_c, model_R, anchor[which], attitudes[which], sigmas)
         except SparseError:
             continue
         s = float(np.cbrt(np.linalg.det(M[:, :3])))
@@ -474,7 +487,7 @@ def _register_parts(pycolmap: object, rec: object, names: Sequence[str], anchor:
 class MergedModels(NamedTuple):
     """What :func:`_merge_models` makes of the mapper's models: points (P, 3) in the world and
     their colours, mean track length and mean reprojection error (point-weighted over the
-    models), the (N, 6) camera estimates (NaN rows: not registered), the images registered, the
+    models), the (N, 7) camera poses (NaN rows: not registered), the images registered, the
     number of models merged and the RMS centre residual (m) of their images."""
 
     points: NDArray[np.float64]
@@ -488,7 +501,8 @@ class MergedModels(NamedTuple):
 
 
 def _merge_models(pycolmap: object, models: list, names: Sequence[str], anchor: NDArray[np.float64],
-                  attitudes: NDArray[np.float64], max_residual: float = float("inf")) -> MergedModels:
+                  attitudes: NDArray[np.float64], max_residual: float = float("inf"),
+                  sigmas: Optional[tuple] = None) -> MergedModels:
     """Every model COLMAP's incremental mapper made, each registered to the world on its own
     images' given poses (:func:`_align`), as one cloud.
 
@@ -509,12 +523,12 @@ def _merge_models(pycolmap: object, models: list, names: Sequence[str], anchor: 
     if not usable:
         raise SparseError(f"incremental mapping registered {models[0].num_reg_images()} of {len(names)} images "
                           f"in its largest model; aligning to the world needs 3")
-    est = np.full((len(names), 6), np.nan)
+    est = np.full((len(names), 7), np.nan)
     xyz, rgb, tracks, errors = [], [], [], []
     for rank, rec in enumerate(usable):
         p, c, track = _read_points(rec)
         try:
-            p, e = _align(pycolmap, rec, names, anchor, p, lambda im: im.has_pose, attitudes)
+            p, e = _align(pycolmap, rec, names, anchor, p, lambda im: im.has_pose, attitudes, sigmas)
             mine = np.isfinite(e[:, 0])
             rms = float(np.sqrt(np.mean(np.sum((e[mine, :3] - anchor[mine]) ** 2, axis=1))))
             if not rms <= max_residual:
@@ -556,7 +570,8 @@ def _known_pose_model(pycolmap: object, db_cameras: list, db_images: dict, names
 
 
 def similarity_from_poses(model_centres: NDArray[np.float64], model_R_cw: NDArray[np.float64],
-                          centres: NDArray[np.float64], R_cw: NDArray[np.float64]) -> NDArray[np.float64]:
+                          centres: NDArray[np.float64], R_cw: NDArray[np.float64],
+                          sigmas: Optional[tuple] = None) -> NDArray[np.float64]:
     """The similarity x_world = s R x_model + t (3 x 4 matrix [sR | t]) of a model whose images'
     centres and attitudes (cam_from_world rotations) are known in the world, to a drone's accuracy.
 
@@ -568,16 +583,35 @@ def similarity_from_poses(model_centres: NDArray[np.float64], model_R_cw: NDArra
     sigma / spread (2 cm over the 1 m of a 4-camera plan: about 1 degree, worse for a tight arc),
     each reported attitude to 0.5 degree and independently. Degenerate: all centres at one point
     (no scale): SparseError.
+
+    ``sigmas`` = (position m, attitude rad), per axis, of the reported poses: the rotation is
+    then the most likely one given both, R maximizing tr(R^T A) with A = sum_i R_i / sigma_a^2 +
+    2 s sum_i c'_i c'_model,i^T / sigma_p^2 (the log-likelihood of Gaussian centre errors and of
+    small attitude errors, whose chordal distance |R - R_i|_F^2 is twice the squared angle; an
+    orthogonal Procrustes solved by SVD, alternated with s three times). A small attitude sigma
+    gives the attitudes' chordal mean above; a large one, a rig that reports its attitude only
+    roughly (a camera mount 20 degrees off), Umeyama's rotation of the centres; between, both
+    count (collinear centres leave the turn about their line to the attitudes).
     """
     from scipy.spatial.transform import Rotation
 
     per = np.einsum("nji,njk->nik", R_cw, model_R_cw)  # R_cw^T R_cw_model for every image
-    R = Rotation.from_matrix(per).mean().as_matrix()
     m = model_centres - model_centres.mean(axis=0)
     w = centres - centres.mean(axis=0)
     spread = float((m * m).sum())
     if spread <= 1e-12:
         raise SparseError("the registered images share one centre: the model's scale is unknown")
+    if sigmas is None:
+        R = Rotation.from_matrix(per).mean().as_matrix()
+    else:
+        sigma_p, sigma_a = (float(x) for x in sigmas)
+        scale = math.sqrt(float((w * w).sum()) / spread)  # |s| from the spreads, before any rotation
+        for _ in range(3):
+            U, _s, Vt = np.linalg.svd(per.sum(axis=0) / sigma_a ** 2 + 2.0 * scale * (w.T @ m) / sigma_p ** 2)
+            R = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt)) or 1.0]) @ Vt
+            scale = float(((m @ R.T) * w).sum()) / spread
+            if not scale > 0:
+                break
     scale = float(((m @ R.T) * w).sum()) / spread
     if not scale > 0:
         raise SparseError("cannot align the reconstruction to the camera poses (negative scale)")
@@ -587,12 +621,13 @@ def similarity_from_poses(model_centres: NDArray[np.float64], model_R_cw: NDArra
 
 def _align(pycolmap: object, rec: object, names: Sequence[str], anchor: NDArray[np.float64],
            xyz: NDArray[np.float64], use: object,
-           attitudes: Optional[NDArray[np.float64]] = None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+           attitudes: Optional[NDArray[np.float64]] = None,
+           sigmas: Optional[tuple] = None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """The model's points and cameras in the world: the similarity that takes the images
     ``use(image)`` accepts to their ``anchor`` centres: with ``attitudes`` (N, 3, 3) (their
-    cam_from_world rotations in the world) :func:`similarity_from_poses`, else the one of the
-    centres alone (Umeyama). Cameras as [c, v] (v: the optical axis; a roll of the model is
-    dropped), NaN rows for the other images."""
+    cam_from_world rotations in the world) :func:`similarity_from_poses` (weighted by
+    ``sigmas``), else the one of the centres alone (Umeyama). Cameras as poses (N, 7), roll
+    kept, NaN rows for the other images."""
     idx = {n: i for i, n in enumerate(names)}
     src, tgt, reg = [], [], []
     for im in rec.images.values():
@@ -603,18 +638,18 @@ def _align(pycolmap: object, rec: object, names: Sequence[str], anchor: NDArray[
     if attitudes is not None:
         model_R = np.array([np.asarray(im.cam_from_world().rotation.matrix()) for im in reg])
         M = similarity_from_poses(np.array(src), model_R, np.array(tgt),
-                                  np.asarray(attitudes)[[idx[im.name] for im in reg]])
+                                  np.asarray(attitudes)[[idx[im.name] for im in reg]], sigmas)
     else:
         sim = pycolmap.estimate_sim3d(np.array(src), np.array(tgt))
         if sim is None:
             raise SparseError("cannot align the reconstruction to the camera positions")
         M = np.asarray(sim.matrix())
     rot = M[:, :3] / np.cbrt(np.linalg.det(M[:, :3]))  # the similarity's rotation
-    est = np.full((len(names), 6), np.nan)
+    est = np.full((len(names), 7), np.nan)
     for im, c in zip(reg, src):
         R_cw = np.asarray(im.cam_from_world().rotation.matrix())
         est[idx[im.name], :3] = M[:, :3] @ c + M[:, 3]
-        est[idx[im.name], 3:] = rot @ R_cw[2]  # the optical axis z_o in the world
+        est[idx[im.name], 3:] = body_from_optical(R_cw @ rot.T)  # x_world = rot x_model: R_cw,world = R_cw rot^T
     return xyz @ M[:, :3].T + M[:, 3], est
 
 

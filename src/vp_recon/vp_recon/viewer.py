@@ -10,8 +10,8 @@ machine), is refused with 403 before anything is sent (:func:`_guarded_serve`):
 
 * ``/scene``: the noisy scene cloud, one wind realization at a time (GUI "realization");
 * ``/plan/cam_<i>``: one frustum per camera, placed and shaped by :mod:`vp_scene.camera` (the
-  REP-103 optical frame, z forward, is viser's OpenCV frustum frame), coloured by the drone that
-  flies it (grey when no fleet assigned it);
+  REP-103 optical frame, z forward, is viser's OpenCV frustum frame; a pose's roll is drawn),
+  coloured by the drone that flies it (grey when no fleet assigned it);
 * ``/drones/<name>``: each drone where it last reported;
 * ``/reconstruction``: the reconstructed points of the shown realization, coloured by their distance to
   the truth (the scene cloud of that realization; without it, all realizations: the prior), blue
@@ -45,7 +45,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
-from vp_scene.camera import CameraModel, world_to_camera
+from vp_scene.camera import CameraModel, check_poses, world_to_camera
 
 __all__ = ["PlanViewer", "ViewerError", "frustum_poses", "distance_colors", "load_run", "replay_recording", "show_message", "main"]
 
@@ -63,8 +63,9 @@ class ViewerError(RuntimeError):
 
 
 def frustum_poses(cameras: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(wxyz (M, 4), positions (M, 3)) of the optical frames of cameras (M, 6), for viser's frustums."""
-    cams = np.asarray(cameras, dtype=np.float64).reshape(-1, 6)
+    """(wxyz (M, 4), positions (M, 3)) of the optical frames of cameras (M, 6) [c, v] or poses
+    (M, 7) (roll kept), for viser's frustums."""
+    cams = check_poses(cameras) if np.size(cameras) else np.zeros((0, 7))
     R_cw, _t = world_to_camera(cams)
     xyzw = Rotation.from_matrix(np.swapaxes(R_cw, -1, -2)).as_quat().reshape(-1, 4)
     return xyzw[:, [3, 0, 1, 2]], cams[:, :3].copy()
@@ -154,7 +155,7 @@ class PlanViewer:
         self.frustums: list = []
         self.drones: Dict[str, object] = {}
         self._lock = threading.RLock()  # the GUI's callbacks run in viser's thread, updates in the caller's
-        self._cameras = np.zeros((0, 6))
+        self._cameras = np.zeros((0, 7))
         self._assigned = {}
         gui = self.server.gui
         self.realization = gui.add_dropdown("realization", ("0",), initial_value="0")
@@ -191,8 +192,8 @@ class PlanViewer:
         self._redraw_clouds()
 
     def show_plan(self, cameras: np.ndarray) -> None:
-        """One frustum per camera (M, 6), grey until :meth:`assign` names their drones."""
-        self._cameras = np.asarray(cameras, dtype=np.float64).reshape(-1, 6)
+        """One frustum per camera (M, 6) [c, v] or pose (M, 7), grey until :meth:`assign` names their drones."""
+        self._cameras = check_poses(cameras) if np.size(cameras) else np.zeros((0, 7))
         self._assigned: Dict[int, str] = {}
         self._draw_plan()
 
@@ -346,13 +347,12 @@ _ORDER = ("/scene/noisy_points", "/camera_plan", "/fleet/assignment", "/reconstr
 def show_message(viewer: PlanViewer, topic: str, msg) -> bool:
     """Show one message of the run (a ROS message, or one decoded from MCAP: same fields) on
     ``viewer``; False for a topic the viewer does not draw. One home for the live node and replay."""
-    from vp_scene.camera import poses_to_cameras
     from vp_scene.cloud import pointcloud2_to_numpy
 
     if topic == "/scene/noisy_points":
         viewer.show_scene(*pointcloud2_to_numpy(msg))
     elif topic == "/camera_plan":
-        viewer.show_plan(poses_to_cameras(_poses(msg)) if len(msg.poses) else np.zeros((0, 6)))
+        viewer.show_plan(_poses(msg))  # poses: a camera's roll is drawn
     elif topic == "/fleet/assignment":
         if getattr(msg, "error_code", 0) == 0:
             viewer.assign({int(e.pose_index): e.drone for e in msg.entries})

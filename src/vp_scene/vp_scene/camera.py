@@ -15,6 +15,14 @@ viewing direction v, **the optical axis** (v need not be unit). Its *body frame*
 for a vertical v (e_z x x_b = 0), y_b = world +y. As a ``geometry_msgs/Pose`` (x, y, z, qx, qy,
 qz, qw) the quaternion is the rotation R = [x_b y_b z_b] from the body frame to ``map`` (qw >=
 0): the REP-103 body convention, so RViz's PoseArray arrows point where each camera looks.
+
+Plans are levelled cameras [c, v]; what a camera *reported* is a **pose** (..., 7) = (x, y, z,
+qx, qy, qz, qw) of that body frame with any attitude: a real camera is never exactly level (a
+rig's mount, a drone without a roll gimbal), and its roll about the optical axis (:func:`roll_of`)
+is kept. Everything downstream of a reported pose (captured views, reconstruction, registration,
+image pairs, dense stereo, ground control, the viewer, poses.csv) takes poses; the functions of
+this module that take a camera take either, the last axis deciding (6: [c, v], levelled; 7: a
+pose, roll kept), and :func:`as_poses` turns a plan into the levelled poses it stands for.
 The REP-103 *optical* frame (z forward, x right, y down), the one image pipelines use, is the
 body frame turned by the fixed rotation between ``camera_link`` and ``camera_optical_frame``,
 :data:`OPTICAL_IN_BODY` (quaternion x, y, z, w = -0.5, 0.5, -0.5, 0.5): x_o = -y_b, y_o = -z_b,
@@ -72,6 +80,8 @@ __all__ = [
     "tan_half_fov",
     "optical_axes",
     "check_cameras",
+    "as_poses",
+    "check_poses",
 ]
 
 #: Quaternion (x, y, z, w) of the optical frame (z forward, x right, y down) in the body frame.
@@ -93,6 +103,49 @@ def check_cameras(cameras: ArrayLike) -> NDArray[np.float64]:
     if np.any(np.linalg.norm(cams[:, 3:], axis=1) <= 0):
         raise ValueError("a camera has a zero viewing direction")
     return cams
+
+
+def as_poses(cameras: ArrayLike) -> NDArray[np.float64]:
+    """Poses (..., 7) of cameras (..., 6) [c, v] (levelled: :func:`cameras_to_poses`) or of poses
+    (..., 7) (the quaternion normalized, qw >= 0; roll kept). ValueError for another shape, a
+    zero viewing direction or a zero quaternion."""
+    a = np.asarray(cameras, dtype=np.float64)
+    if a.shape[-1:] == (6,):
+        return cameras_to_poses(a)
+    if a.shape[-1:] != (7,):
+        raise ValueError(f"cameras must have shape (..., 6) = [c, v] or poses (..., 7) = (x, y, z, qx, qy, qz, qw), "
+                         f"got {a.shape}")
+    n = np.linalg.norm(a[..., 3:], axis=-1, keepdims=True)
+    if not np.all(np.isfinite(a)) or np.any(n <= 0):
+        raise ValueError("poses must be finite with non-zero quaternions")
+    return np.concatenate([a[..., :3], _canonical(a[..., 3:] / n)], axis=-1)
+
+
+def check_poses(cameras: ArrayLike) -> NDArray[np.float64]:
+    """Cameras (N, 6) [c, v] or poses (N, 7) as a float64 array of that shape, checked (finite, a
+    non-zero viewing direction or quaternion) but not converted: a plan's [c, v] rows stay as
+    they are (their geometry bit for bit; :func:`as_poses` gives their poses). ValueError
+    naming the problem otherwise (the pose-aware twin of :func:`check_cameras`)."""
+    a = np.asarray(cameras, dtype=np.float64)
+    if a.ndim == 1 and a.size in (6, 7):
+        a = a[None]
+    if a.ndim != 2 or a.shape[1] not in (6, 7):
+        raise ValueError(f"cameras must have shape (N, 6) = [c, v] or (N, 7) = poses, got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError("cameras contain NaN or infinite values")
+    as_poses(a)  # the checks of a viewing direction or quaternion
+    return a
+
+
+def _body_axes(camera: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(centres (..., 3), body-to-world rotations (..., 3, 3)) of cameras (..., 6) (levelled) or
+    poses (..., 7) (roll kept)."""
+    cam = np.asarray(camera, dtype=np.float64)
+    if cam.shape[-1:] == (6,):
+        return cam[..., :3], rotation_matrix(cam[..., 3:])
+    if cam.shape[-1:] == (7,):
+        return cam[..., :3], _rotations(cam[..., 3:])
+    raise ValueError(f"camera must have shape (..., 6) = [c, v] or (..., 7) = a pose, got {cam.shape}")
 
 
 def rotation_matrix(v: ArrayLike) -> NDArray[np.float64]:
@@ -299,27 +352,24 @@ def principal_point_gl(K: ArrayLike) -> tuple[float, float]:
 
 
 def world_to_camera(camera6: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """(R_cw (..., 3, 3), t (..., 3)): X_o = R_cw X_w + t in the optical (OpenCV / COLMAP) frame.
+    """(R_cw (..., 3, 3), t (..., 3)): X_o = R_cw X_w + t in the optical (OpenCV / COLMAP) frame,
+    of cameras (..., 6) [c, v] (levelled) or poses (..., 7) (roll kept).
 
     R_cw has rows x_o = -y_b, y_o = -z_b, z_o = x_b; t = -R_cw c.
     """
-    cam = np.asarray(camera6, dtype=np.float64)
-    if cam.shape[-1] != 6:
-        raise ValueError(f"camera must have shape (..., 6), got {cam.shape}")
-    R_bw = rotation_matrix(cam[..., 3:])
+    c, R_bw = _body_axes(camera6)
     R_wc = np.stack([-R_bw[..., :, 1], -R_bw[..., :, 2], R_bw[..., :, 0]], axis=-1)
     R_cw = np.swapaxes(R_wc, -1, -2)
-    t = -np.einsum("...ij,...j->...i", R_cw, cam[..., :3])
+    t = -np.einsum("...ij,...j->...i", R_cw, c)
     return R_cw, t
 
 
 def camera_to_world_gl(camera6: ArrayLike) -> NDArray[np.float64]:
-    """4x4 OpenGL camera-to-world pose (x right, y up, z backward) of one camera, for pyrender."""
-    cam = np.asarray(camera6, dtype=np.float64)
-    R_bw = rotation_matrix(cam[3:])
+    """4x4 OpenGL camera-to-world pose (x right, y up, z backward) of one camera [c, v] or pose, for pyrender."""
+    c, R_bw = _body_axes(np.asarray(camera6, dtype=np.float64).reshape(-1))
     T = np.eye(4)
     T[:3, :3] = np.stack([-R_bw[:, 1], R_bw[:, 2], -R_bw[:, 0]], axis=-1)
-    T[:3, 3] = cam[:3]
+    T[:3, 3] = c
     return T
 
 

@@ -78,7 +78,9 @@ class CaptureModel:
     Attributes:
         kind: ``'realistic'`` or ``'ideal'`` (every figure must then be 0).
         hover_position_sigma, hover_attitude_sigma: hover error, per axis.
-        report_position_sigma, report_attitude_sigma: localization error, per axis.
+        report_position_sigma, report_attitude_sigma: localization error, per axis (for a real
+            flight: how well its reported poses are known; a rig whose attitude is known only
+            roughly, a camera mount 20 degrees off, has a large attitude sigma, up to 180).
         sensor_noise: std of the image noise, fraction of full scale.
         seed: seeds every draw with the realization and the camera.
         gcp_markers: the fewest ground markers laid around the plants (0: none; at most 50).
@@ -120,8 +122,10 @@ class CaptureModel:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
                 raise ValueError(f"capture {name} must be a finite number >= 0, got {v!r}")
-        if self.hover_attitude_sigma > 10 or self.report_attitude_sigma > 10:
-            raise ValueError("capture attitude sigmas must be at most 10 degrees")
+        if self.hover_attitude_sigma > 10:
+            raise ValueError("capture hover_attitude_sigma must be at most 10 degrees")
+        if self.report_attitude_sigma > 180:  # a rig that reports its attitude only roughly: up to unknown
+            raise ValueError("capture report_attitude_sigma must be at most 180 degrees")
         if self.sensor_noise > 0.5:
             raise ValueError(f"capture sensor_noise must be at most 0.5 of full scale, got {self.sensor_noise!r}")
         if self.kind == "ideal" and any(getattr(self, n) for n in self._FIGURES):
