@@ -69,7 +69,7 @@ from vp_scene.images import ImageError, image_size, read_image
 from .pipeline import MAX_MEGAPIXELS
 
 __all__ = ["POSES_FILE", "MARKERS_FILE", "GCP_LIST_FILE", "POSES_COLUMNS", "IMAGE_SUFFIXES", "FRAME", "MAX_ROLL_DEG", "FlightError", "CapturedViews",
-           "write_flight", "read_flight", "capture_folder", "locate_flown", "flown_views", "join_views"]
+           "write_flight", "read_flight", "read_poses", "capture_folder", "locate_flown", "flown_views", "join_views"]
 
 POSES_FILE = "poses.csv"
 #: The ground-control files of a flight folder (module docstring).
@@ -474,3 +474,23 @@ def join_views(parts: Sequence[CapturedViews]) -> CapturedViews:
     return CapturedViews(names=[f"view_{i:03d}.png" for i in range(len(images))], images=images,
                          reported=np.concatenate([np.asarray(p.reported, np.float64).reshape(-1, 6) for p in parts]),
                          K=first.K, masks=masks, fov=first.fov, realization=first.realization, control=first.control)
+
+
+def read_poses(folder: PathLike) -> tuple[list, NDArray[np.float64], NDArray[np.float64], tuple[int, int]]:
+    """The poses of a flight folder without its images: (names, poses (N, 7) as the suite's
+    ``geometry_msgs/Pose`` x y z qx qy qz qw, K, (width, height)), from poses.csv or COLMAP's
+    text model (module docstring); FlightError naming the file. A planner choosing among a
+    folder's views (:mod:`vp_planner.candidates`) needs no pixel of them."""
+    d = Path(folder)
+    if not d.is_dir():
+        raise FlightError(f"{d}: not a folder")
+    if (d / POSES_FILE).is_file():
+        names, poses, intr = _read_poses_csv(d / POSES_FILE)
+    elif (d / "cameras.txt").is_file() and (d / "images.txt").is_file():
+        names, poses, intr = _read_colmap_text(d)
+    else:
+        raise FlightError(f"{d}: no {POSES_FILE} (or COLMAP cameras.txt + images.txt) with the poses")
+    if not names:
+        raise FlightError(f"{d}: no image has a pose")
+    fx, fy, cx, cy, w, h = intr[0]
+    return list(names), poses, np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]]), (int(w), int(h))

@@ -193,6 +193,9 @@ class ReconConfig:
             :func:`vp_recon.pairs.select_pairs` picks from the known poses and scene) or
             ``'auto'``: poses from :data:`MATCH_POSES_FROM` cameras up, exhaustive below.
         max_cameras: a plan of more cameras is refused (PLAN_TOO_LARGE, :func:`check_plan_size`).
+        mask: how a flight's images are segmented over soil (:data:`vp_recon.masks.MASK_METHODS`):
+            ``'auto'`` (excess green for a green plant, else the background model), ``'exg'`` or
+            ``'background'`` (:mod:`vp_recon.masks`); the blue screen keeps its colour key.
     """
 
     width: int = IMAGE_SIZE[0]
@@ -217,6 +220,7 @@ class ReconConfig:
     matching: str = "auto"
     capture: CaptureModel = REALISTIC
     max_cameras: int = MAX_CAMERAS
+    mask: str = "auto"
 
     @property
     def sparse_mode_used(self) -> str:
@@ -266,6 +270,10 @@ class ReconConfig:
             raise ValueError(f"sift_first_octave must be -1, 0 or 1, got {self.sift_first_octave!r}")
         if not (isinstance(self.dense_scale, (int, float)) and 0 < self.dense_scale <= 1):
             raise ValueError(f"dense_scale must be in (0, 1], got {self.dense_scale!r}")
+        from .masks import MASK_METHODS
+
+        if self.mask not in MASK_METHODS:
+            raise ValueError(f"mask must be one of {', '.join(MASK_METHODS)}, got {self.mask!r}")
         if isinstance(self.max_cameras, bool) or not isinstance(self.max_cameras, (int, np.integer)) \
                 or self.max_cameras < 2:
             raise ValueError(f"max_cameras must be an integer >= 2, got {self.max_cameras!r}")
@@ -312,6 +320,8 @@ class RealizationResult(Scores):
             model anchored on the reported poses, ``sparse_mode`` 'anchored'); '' otherwise.
         control: the registration on the flight's ground control
             (:meth:`vp_recon.gcp.Registration.to_dict`), None without control points.
+        mask: how the images were segmented (:meth:`vp_recon.masks.MaskChoice.to_dict`; None:
+            the renderer's masks or the blue screen's colour key).
         reported, K: the poses the drones reported (N, 6) and the intrinsics: with ``rendered``,
             the capture set (:meth:`captured_views`).
     """
@@ -344,6 +354,7 @@ class RealizationResult(Scores):
     centre_residual: float = math.nan
     sparse_fallback: str = ""
     control: Optional[dict] = None
+    mask: Optional[dict] = None
     reported: Optional[NDArray[np.float64]] = field(default=None, repr=False)
     K: Optional[NDArray[np.float64]] = field(default=None, repr=False)
 
@@ -494,6 +505,8 @@ class ViewsResult:
         seconds: wall time of ``sparse`` and ``dense``.
         control: the :class:`vp_recon.gcp.Registration` on the flight's ground control (None
             without control points).
+        mask: the :class:`vp_recon.masks.MaskChoice` of a flight segmented over soil (None: the
+            renderer's masks or the blue screen's colour key).
     """
 
     points: NDArray[np.float64]
@@ -509,6 +522,7 @@ class ViewsResult:
     coverage: object = None
     seconds: dict = field(default_factory=dict)
     control: object = None
+    mask: object = None
 
 
 def render_flight(noisy_scene: object, k: int, cameras: ArrayLike, config: Optional[ReconConfig] = None,
@@ -572,8 +586,9 @@ def reconstruct_views(views: object, config: Optional[ReconConfig] = None, workd
     """Reconstruct a capture set (:class:`vp_recon.flight.CapturedViews`: images, reported poses,
     one pinhole camera): the one path of rendered plans, flight folders and the fleet.
 
-    Masks: ``views.masks`` when given (the ideal capture's renderer masks), else from each image
-    alone (:func:`vp_recon.render.image_mask`, by ``config.ground_used``). Sparse step
+    Masks: ``views.masks`` when given (the ideal capture's renderer masks), else from the images
+    alone: over soil by ``config.mask`` (:func:`vp_recon.masks.flight_masks`; the background model
+    learns outside the prior's box projected), the blue screen's colour key otherwise. Sparse step
     ``config.sparse_mode_used`` with the reported centres as pose priors (incremental, unless the
     capture is ideal); the sparse cloud is cropped to the prior's box (+ ``crop_margin``; without
     a prior: the box of its points on plant pixels) and silhouette-filtered, then dense stereo.
@@ -592,7 +607,8 @@ def reconstruct_views(views: object, config: Optional[ReconConfig] = None, workd
     from .dense import crop_to_box, dense_reconstruct, silhouette_filter
     from .metrics import coverage_of_prior
     from .pairs import select_pairs
-    from .render import image_mask
+    from .masks import flight_masks
+    from .render import foreground_mask
     from .sparse import SparseError, sparse_reconstruct
 
     cfg = (config or ReconConfig()).validate()
@@ -600,7 +616,14 @@ def reconstruct_views(views: object, config: Optional[ReconConfig] = None, workd
     views.validate()
     images, reported, K = views.images, views.reported, views.K
     n = len(images)
-    masks = views.masks if views.masks is not None else [image_mask(im, cfg.ground_used) for im in images]
+    mask_choice = None
+    if views.masks is not None:
+        masks = views.masks
+    elif not cfg.ground_used:
+        masks = [foreground_mask(im) for im in images]
+    else:
+        masks, mask_choice = flight_masks(images, cfg.mask, reported, K,
+                                          None if prior is None else crop_box(prior.points, cfg.crop_margin))
     fg = np.array([int(m.sum()) for m in masks])
     seeing = np.flatnonzero(fg >= cfg.min_foreground)
     if len(seeing) == 0:
@@ -683,7 +706,7 @@ def reconstruct_views(views: object, config: Optional[ReconConfig] = None, workd
         if prior is not None and len(points) else None
     return ViewsResult(points=points, colors=colors, source=source, sparse=sp, sparse_clean=clean, dense=dn,
                        seeing=seeing, matching=matching, mode=mode, t_pairs=t_pairs, coverage=coverage,
-                       seconds=seconds, control=control)
+                       seconds=seconds, control=control, mask=mask_choice)
 
 
 def reconstruct_realization(noisy_scene: object, k: int, cameras: ArrayLike, config: Optional[ReconConfig] = None,
@@ -765,6 +788,7 @@ def reconstruct_captured(noisy_scene: object, views: object, config: Optional[Re
         mean_reprojection_error=sp.mean_reprojection_error, coverage=vr.coverage, sparse_models=sp.models,
         centre_residual=sp.centre_residual, sparse_fallback=sp.fallback,
         control=vr.control.to_dict() if vr.control is not None else None,
+        mask=vr.mask.to_dict() if vr.mask is not None else None,
         reported=np.asarray(views.reported, dtype=np.float64),
         K=np.asarray(views.K, dtype=np.float64))
 
