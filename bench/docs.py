@@ -346,6 +346,16 @@ def coverage(data: dict) -> str:
     return markdown(data)
 
 
+def masks(data: dict) -> str:
+    from bench.bench_masks import markdown
+    return markdown(data)
+
+
+def real(data: dict) -> str:
+    from bench.bench_real import markdown
+    return markdown(data)
+
+
 def recon_stages_section(rel: str, title: str) -> str:
     data = load(rel)
     body = [[name.replace('_', ' '), s['capture'], '/'.join(map(str, s.get('registered_images') or [])),

@@ -297,3 +297,45 @@ def test_second_sortie_goal(system) -> None:
         assert res.result.error_code == getattr(PlanViews.Result, code), res.result.error_msg
         assert text in res.result.error_msg and res.result.evaluations == 0 and not res.result.plan.poses
     assert planner.alive()
+
+
+def test_a_goal_plans_among_candidates(system) -> None:
+    """Issue 41: a goal's candidates (a rig's stops) are chosen among; the result names the chosen
+    ones (``selected``) and the plan is their poses as sent (roll kept); bad candidates are
+    INVALID_CANDIDATES and nothing is planned."""
+    from scipy.spatial.transform import Rotation
+
+    from vp_scene.messages import cameras_to_pose_array
+
+    client, action, _, planner = system
+    assert client.spin_until(lambda: "scene received" in planner.output(), TIMEOUT), planner.output()
+    a = 2 * np.pi * np.arange(12) / 12
+    c = np.stack([2.0 * np.cos(a), 2.0 * np.sin(a), np.full(12, 1.2)], axis=1)
+    cand = np.concatenate([c, np.array([0.0, 0.0, 1.0]) - c], axis=1)
+    msg = cameras_to_pose_array(cand, "map")
+    for p in msg.poses[:6]:  # a rig's camera with 3 degrees of roll about its optical axis
+        q = (Rotation.from_quat([p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w])
+             * Rotation.from_euler("x", 3.0, degrees=True)).as_quat()
+        p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w = (float(v) for v in q)
+    g = goal(num_cameras=4, method="circle", evaluations=20)
+    g.candidates = msg
+    _, res = send(client, action, g)
+    r = res.result
+    assert r.error_code == PlanViews.Result.NONE, r.error_msg
+    assert len(r.selected) == 4 == len(set(r.selected)) and all(0 <= i < 12 for i in r.selected)
+    assert sorted(np.diff(np.sort(r.selected)).tolist() + [12 - max(r.selected) + min(r.selected)]) == [3] * 4
+    assert [p.orientation for p in r.plan.poses] == [msg.poses[i].orientation for i in r.selected]
+    bad = cand.copy()
+    bad[2, 1] = np.nan
+    for candidates, values, text in [
+        (cameras_to_pose_array(cand, "odom"), {}, "'odom'"),
+        (cameras_to_pose_array(bad, "map"), {}, "not finite"),
+        (msg, {"num_cameras": 13}, "13 cameras cannot be chosen among 12"),
+        (msg, {"method": "lawnmower"}, "no candidates mode"),
+    ]:
+        g = goal(**{"num_cameras": 4, "method": "circle", "evaluations": 20, **values})
+        g.candidates = candidates
+        _, res = send(client, action, g)
+        assert res.result.error_code == PlanViews.Result.INVALID_CANDIDATES, res.result.error_msg
+        assert text in res.result.error_msg and not res.result.plan.poses and not res.result.selected
+    assert planner.alive()

@@ -10,6 +10,7 @@ the best feasible plan, reports progress and sees a cancel); none returns a plan
 from __future__ import annotations
 
 import math
+from typing import Callable, Optional
 
 import numpy as np
 from numpy.typing import NDArray
@@ -20,7 +21,7 @@ from .request import PlanRequest
 from .space import NoFeasiblePlanError, ViewSpace
 
 __all__ = ["CircleFamily", "ARC_PHASES", "batch_size", "evaluate_plans", "plan_circle", "plan_arc", "plan_sa",
-           "plan_random", "plan_lawnmower", "sa_candidates", "run_circle", "run_arc", "run_sa", "run_random",
+           "plan_random", "plan_lawnmower", "sa_candidates", "anneal_subsets", "run_circle", "run_arc", "run_sa", "run_random",
            "run_lawnmower"]
 
 #: Plans evaluated per reward call by the non-BO methods (bounds how late a cancel is seen) ...
@@ -207,21 +208,32 @@ def sa_candidates(space: ViewSpace, n_azimuth: int = 16, elevations_deg: tuple[f
 
 def plan_sa(space: ViewSpace, obj: Objective, evaluations: int, rng: np.random.Generator,
         t0: float = 0.02, t_end: float = 2e-5, neighbours: int = 8, p_local: float = 0.8) -> None:
-    """Simulated annealing over N-subsets of :func:`sa_candidates`.
-
-    Move: replace one chosen viewpoint by one of its ``neighbours`` nearest candidates (by
-    position) with probability ``p_local``, else by a random candidate; moves that break the
-    separation rule are redrawn. Metropolis acceptance exp((r_new - r_cur) / T), geometric
-    cooling T_k = t0 (t_end / t0)^(k / E). Every proposal costs one evaluation.
-    """
+    """Simulated annealing over N-subsets of :func:`sa_candidates` (:func:`anneal_subsets`),
+    keeping the separation rule."""
     cand = sa_candidates(space)
     N = space.num_cameras
+    if len(cand) < N:
+        raise NoFeasiblePlanError(f"no feasible plan: only {len(cand)} feasible candidate viewpoints for {N} cameras")
+    anneal_subsets(cand, N, obj, evaluations, rng, space.min_separation, t0, t_end, neighbours, p_local)
+
+
+def anneal_subsets(cand: NDArray[np.float64], N: int, obj: Objective, evaluations: int, rng: np.random.Generator,
+                   min_separation: float = 0.0, t0: float = 0.02, t_end: float = 2e-5, neighbours: int = 8,
+                   p_local: float = 0.8, encode: Optional[Callable] = None) -> None:
+    """Simulated annealing over N-subsets of the candidate cameras ``cand`` (M, 6): ``sa``, and
+    ``sa`` among given candidates (:mod:`vp_planner.candidates`).
+
+    Move: replace one chosen viewpoint by one of its ``neighbours`` nearest candidates (by
+    position) with probability ``p_local``, else by a random candidate; moves that put two
+    cameras closer than ``min_separation`` are redrawn. Metropolis acceptance
+    exp((r_new - r_cur) / T), geometric cooling T_k = t0 (t_end / t0)^(k / E). Every proposal
+    costs one evaluation, recorded with ``encode(subset)`` as its U row (None: NaN, the subset
+    is not a point of the objective's space).
+    """
     M = len(cand)
-    if M < N:
-        raise NoFeasiblePlanError(f"no feasible plan: only {M} feasible candidate viewpoints for {N} cameras")
     pos = cand[:, :3]
     D = np.linalg.norm(pos[:, None] - pos[None], axis=-1)
-    sep_ok = D >= space.min_separation - 1e-9
+    sep_ok = D >= min_separation - 1e-9
     np.fill_diagonal(sep_ok, False)
     order = np.argsort(D, axis=1)[:, 1 : neighbours + 1]
 
@@ -239,9 +251,14 @@ def plan_sa(space: ViewSpace, obj: Objective, evaluations: int, rng: np.random.G
             break
     if cur is None:
         raise NoFeasiblePlanError(f"no feasible plan: no {N} candidate viewpoints at least "
-                                  f"{space.min_separation} m apart")
-    nanU = np.full((1, space.dim), np.nan)
-    r_cur = float(obj.record(nanU, cand[cur][None])[0])
+                                  f"{min_separation} m apart")
+    nanU = np.full((1, obj.space.dim), np.nan)
+
+    def record(sel: NDArray[np.int64]) -> float:
+        U = nanU if encode is None else np.asarray(encode(sel), dtype=np.float64).reshape(1, -1)
+        return float(obj.record(U, cand[sel][None])[0])
+
+    r_cur = record(cur)
     alpha = (t_end / t0) ** (1.0 / max(1, evaluations - 1))
     T = t0
     for _k in range(1, evaluations):
@@ -262,7 +279,7 @@ def plan_sa(space: ViewSpace, obj: Objective, evaluations: int, rng: np.random.G
                 break
         if prop is None:
             prop = cur.copy()
-        r_new = float(obj.record(nanU, cand[prop][None])[0])
+        r_new = record(prop)
         if r_new >= r_cur or rng.random() < math.exp((r_new - r_cur) / max(T, 1e-300)):
             cur, r_cur = prop, r_new
 

@@ -22,6 +22,15 @@ identical scene), fov, theta_match, image_size, simple_regret, ...) and ``OUT/no
 one line, exit 2); plan.json's ``scene.scenario`` then holds the layout itself (its canonical
 dict) and its top-level ``scenario`` the layout's name.
 
+Among candidate views (README "From a real flight"): ``--candidates FOLDER --prior PRIOR.ply``
+plans N of the flight folder's poses (poses.csv or COLMAP's text model; a rig's stops, a gantry,
+the images of an earlier flight) on the prior cloud (a PLY in the folder's frame, e.g. a first
+reconstruction), with every method but lawnmower (:mod:`vp_planner.candidates`); the image size
+and the field of view are the folder's camera's unless given. plan.json then names the chosen
+images (``images``, ``selected``: their indices among the folder's poses), the folder
+(``candidates``) and the prior (``prior``), and has no ``scene``; ``python -m vp_recon.cli
+--images FOLDER --select plan.json`` reconstructs those images.
+
 ``score`` rebuilds the scene of a plan file (its ``scene``, or ``--scenario``/``--models``/...
 for a flight plan without one; ``cameras`` or ``poses``) and prints the plan's reward under the
 chosen model as the last number on stdout (a second sortie's with its recorded cameras already
@@ -131,7 +140,8 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
         p.add_argument("--min-standoff", type=float, default=D["min_standoff"])
         p.add_argument("--min-altitude", type=float, default=D["min_altitude"])
         p.add_argument("--min-separation", type=float, default=D["min_separation"])
-        p.add_argument("--fov", type=float, default=D["fov"])
+        p.add_argument("--fov", type=float, default=None,
+                       help=f"rad (default {D['fov']:.4g}; among --candidates: the folder's camera's)")
         p.add_argument("--theta-match", type=float, default=D["theta_match"])
         p.add_argument("--structured-init", type=int, default=D["structured_init"],
                        help="structured plans in the egp/gp initial design (0: purely random, as the paper)")
@@ -156,10 +166,17 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
                                                                     "counts as reconstructed (%(default)s)")
         p.add_argument("--reconstructed-weight", type=float, default=D["reconstructed_weight"],
                        help="weight in [0, 1] of a reconstructed point in the reward (others 1; %(default)s)")
+        p.add_argument("--candidates", dest="candidates_folder", default=None, metavar="FOLDER",
+                       help="plan N of this flight folder's poses (poses.csv or COLMAP text; README 'From a real "
+                            "flight'); needs --prior")
+        p.add_argument("--prior", default=None, metavar="PLY",
+                       help="with --candidates: the planning cloud, a PLY in the folder's frame (a first reconstruction)")
         p.add_argument("--threads", type=int, default=1,
                        help="torch threads (default 1: leaves the other cores to a reconstruction beside it)")
         p.add_argument("--no-progress", action="store_true", help="no progress bar")
     args = p.parse_args(argv)
+    if command == "plan" and (args.candidates_folder is None) != (args.prior is None):
+        p.error("--candidates and --prior go together (the poses to choose among and the cloud they are scored on)")
     args.command = command
     return args
 
@@ -209,6 +226,24 @@ def _image_size(args: argparse.Namespace, default: Sequence[int]) -> tuple[int, 
     return w, h
 
 
+def candidates_of(folder: str, prior: str) -> dict:
+    """The candidate poses of a flight folder (no image decoded) and the prior they are scored
+    on: names, poses (M, 7, roll kept), cameras (M, 6), the camera's field of view and image size,
+    the prior's points as one realization (1, P, 3); CliError naming a bad file."""
+    from vp_scene.flight_poses import FlightError, read_poses
+    from vp_scene.camera import poses_to_cameras
+
+    try:
+        names, poses, K, size = read_poses(folder)
+    except FlightError as exc:
+        raise CliError(f"--candidates: {exc}") from None
+    points = reconstruction_of(prior, "--prior")
+    if len(points) == 0:
+        raise CliError(f"--prior: {prior} has no points")
+    return {"names": names, "poses": poses, "cameras": poses_to_cameras(poses), "size": size,
+            "fov": 2.0 * math.atan(0.5 * size[0] / float(K[0, 0])), "realizations": points[None]}
+
+
 def fixed_cameras_of(paths: Sequence[str]) -> np.ndarray:
     """The cameras (M, 6) of the plan files given with ``--fixed`` (in order), CliError naming a
     bad file."""
@@ -223,8 +258,8 @@ def fixed_cameras_of(paths: Sequence[str]) -> np.ndarray:
     return np.concatenate(cams)
 
 
-def reconstruction_of(path: Optional[str]) -> Optional[np.ndarray]:
-    """The points (Q, 3) of the ``--reconstructed`` PLY (None without one), CliError naming a bad
+def reconstruction_of(path: Optional[str], flag: str = "--reconstructed") -> Optional[np.ndarray]:
+    """The points (Q, 3) of the PLY given with ``flag`` (None without one), CliError naming a bad
     file."""
     if path is None:
         return None
@@ -234,7 +269,7 @@ def reconstruction_of(path: Optional[str]) -> Optional[np.ndarray]:
     try:
         return load_points(path)
     except PlantModelError as exc:
-        raise CliError(f"--reconstructed: {exc}") from None
+        raise CliError(f"{flag}: {exc}") from None
 
 
 #: Plan flags (argparse's names) that are fields of a request under another name; every other
@@ -248,7 +283,8 @@ def request_of(args: argparse.Namespace) -> "PlanRequest":
     place (the cameras already flown and the reconstruction are read from their files later)."""
     from .request import DEFAULTS, FLAT, PlanRequest
 
-    values = {REQUEST_FLAGS.get(k, k): v for k, v in vars(args).items() if REQUEST_FLAGS.get(k, k) in FLAT}
+    values = {REQUEST_FLAGS.get(k, k): v for k, v in vars(args).items()
+              if REQUEST_FLAGS.get(k, k) in FLAT and v is not None}
     values["image_size"] = _image_size(args, DEFAULTS["image_size"])
     return PlanRequest.from_dict(values)
 
@@ -269,8 +305,15 @@ def plan(args: argparse.Namespace) -> dict:
                               reconstruction=reconstruction_of(args.reconstructed))
     result_dir = ResultFolder(args.out, RESULT, "plan", args.overwrite).check()  # before the planning
     set_threads(args.threads)
-    scene = scene_of(args)
-    realizations, layout_name = build_scene(scene)
+    among = None
+    if args.candidates_folder:
+        among = candidates_of(args.candidates_folder, args.prior)
+        realizations, scene, layout_name = among["realizations"], None, None
+        request = request.replace(candidates=among["cameras"], fov=args.fov if args.fov is not None else among["fov"],
+                                  image_size=_image_size(args, among["size"]))
+    else:
+        scene = scene_of(args)
+        realizations, layout_name = build_scene(scene)
 
     bar: Any = None
     if not args.no_progress:
@@ -290,7 +333,7 @@ def plan(args: argparse.Namespace) -> dict:
     finally:
         if bar is not None:
             bar.close()
-    poses = cameras_to_poses(res.cameras)
+    poses = cameras_to_poses(res.cameras) if among is None else among["poses"][res.selected]
     entry, cams, bo, feas, sortie = BY_NAME[request.method], request.cameras, request.bo, request.feasibility, \
         request.sortie
     data = {
@@ -329,6 +372,11 @@ def plan(args: argparse.Namespace) -> dict:
             "reconstructed_weight": sortie.reconstructed_weight, "fraction": res.reconstructed_fraction},
         "scene": scene,
     }
+    if among is not None:
+        data.pop("scene")
+        data.update({"candidates": str(Path(args.candidates_folder).resolve()), "num_candidates": len(among["names"]),
+                     "selected": [int(i) for i in res.selected], "images": [among["names"][i] for i in res.selected],
+                     "prior": str(Path(args.prior).resolve()), "prior_points": int(realizations.shape[1])})
     with result_dir:  # both files, together
         np.save(result_dir.stage / "noisy_points.npy", realizations)
         write_plan(result_dir.stage / "plan.json", data)

@@ -18,7 +18,7 @@ import importlib
 from dataclasses import dataclass
 from typing import Any, Optional
 
-__all__ = ["Method", "REGISTRY", "METHODS", "BY_NAME", "DEFAULT_METHOD", "BAYESIAN", "MAX_EVALUATIONS",
+__all__ = ["Method", "REGISTRY", "METHODS", "CANDIDATE_METHODS", "BY_NAME", "DEFAULT_METHOD", "BAYESIAN", "MAX_EVALUATIONS",
            "method_table"]
 
 
@@ -29,13 +29,17 @@ class Method:
     stays torch-free), whether it is Bayesian optimization (``bayesian``: initial design, planning
     by parts, the GP budget bound) and with an ensemble of GPs (``ensemble``: the result carries
     its weights and models), its ``max_evaluations``, the ``evaluations`` a run makes whatever its
-    budget (None: the budget), and the ``settings`` group of the request it reads besides the
-    common fields (:class:`vp_planner.request.PlanRequest`'s ``bo``, ``arc``, ``lawnmower``).
+    budget (None: the budget), the ``settings`` group of the request it reads besides the
+    common fields (:class:`vp_planner.request.PlanRequest`'s ``bo``, ``arc``, ``lawnmower``), and
+    the function of its ``candidates`` mode: N of the request's candidate poses
+    (:mod:`vp_planner.candidates`; None: the method has none).
 
     The planner is called as ``plan(space, objective, request, rng, parts) -> dict``: it spends
     the budget on the :class:`~vp_planner.objective.Objective` of the
     :class:`~vp_planner.space.ViewSpace` (``parts``: the parts a field is planned by, 1 for one
     space) and returns what the run adds to its result (weights, models, steps, initial_best, parts).
+    The candidates mode is called as ``plan(space, objective, request, rng)`` on a
+    :class:`~vp_planner.candidates.CandidateSpace`.
     """
 
     name: str
@@ -46,31 +50,47 @@ class Method:
     max_evaluations: int = 100_000
     evaluations: Optional[int] = None
     settings: Optional[str] = None
+    candidates: Optional[str] = None
 
     def plan(self, space: Any, objective: Any, request: Any, rng: Any, parts: int) -> dict:
         """Plan ``request`` with this method (its :attr:`planner`); the run's extra results."""
-        module, _, function = self.planner.partition(":")
-        return getattr(importlib.import_module(module), function)(space, objective, request, rng, parts) or {}
+        return _function(self.planner)(space, objective, request, rng, parts) or {}
+
+    def plan_candidates(self, space: Any, objective: Any, request: Any, rng: Any) -> dict:
+        """Plan ``request`` among its candidates (:attr:`candidates`); the run's extra results."""
+        if self.candidates is None:
+            raise ValueError(f"method {self.name} has no candidates mode")
+        return _function(self.candidates)(space, objective, request, rng) or {}
+
+
+def _function(name: str) -> Any:
+    """The function ``"module:function"`` (imported on first use: this module stays torch-free)."""
+    module, _, function = name.partition(":")
+    return getattr(importlib.import_module(module), function)
 
 
 _BO = "vp_planner.bo_planning:run_bo"
+_C = "vp_planner.candidates:"
 REGISTRY: tuple[Method, ...] = (
     Method("egp", "EGP-VP: BO with an ensemble of 4 GPs and adaptive EI (the paper's method)", _BO, True, True, 1000,
-           settings="bo"),
-    Method("gp", "BO with one GP (RBF-ARD) and EI", _BO, True, False, 1000, settings="bo"),
+           settings="bo", candidates=_C + "run_bo"),
+    Method("gp", "BO with one GP (RBF-ARD) and EI", _BO, True, False, 1000, settings="bo", candidates=_C + "run_bo"),
     Method("circle", "the tuned circle: N cameras on a ring, radius and height by grid search",
-           "vp_planner.baselines:run_circle"),
+           "vp_planner.baselines:run_circle", candidates=_C + "run_circle"),
     Method("arc", "the tuned circle's ring, cameras 30 degrees apart on an arc facing the scene",
-           "vp_planner.baselines:run_arc", settings="arc"),
+           "vp_planner.baselines:run_arc", settings="arc", candidates=_C + "run_arc"),
     Method("sa", "simulated annealing over a grid of candidate viewpoints (the paper's baseline)",
-           "vp_planner.baselines:run_sa"),
-    Method("random", "uniformly random feasible plans", "vp_planner.baselines:run_random"),
+           "vp_planner.baselines:run_sa", candidates=_C + "run_sa"),
+    Method("random", "uniformly random feasible plans", "vp_planner.baselines:run_random",
+           candidates=_C + "run_random"),
     Method("lawnmower", "the grid survey farmers fly: flight lines with a set overlap, one evaluation",
            "vp_planner.baselines:run_lawnmower", evaluations=1, settings="lawnmower"),
 )
 
 #: The method names, in the registry's order.
 METHODS: tuple[str, ...] = tuple(m.name for m in REGISTRY)
+#: The methods that plan among candidate poses (:mod:`vp_planner.candidates`).
+CANDIDATE_METHODS: tuple[str, ...] = tuple(m.name for m in REGISTRY if m.candidates)
 #: The registry's entries by name.
 BY_NAME: dict[str, Method] = {m.name: m for m in REGISTRY}
 #: The method of a goal, a CLI run or the entry script that names none.

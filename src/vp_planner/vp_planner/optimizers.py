@@ -133,6 +133,8 @@ class PlanResult:
         fixed_cameras: M, the cameras already flown the reward counted (0: a first sortie).
         reconstructed_fraction: with a reconstruction, the fraction of the planning cloud's
             points within tau of it (weighed ``reconstructed_weight``); else None.
+        selected: among candidates, the indices (N,) of the chosen candidates in the request's
+            candidate list (the order of ``cameras``); None in free space.
     """
 
     method: str
@@ -151,6 +153,7 @@ class PlanResult:
     parts: Optional[list] = None
     fixed_cameras: int = 0
     reconstructed_fraction: Optional[float] = None
+    selected: Optional[list] = None
 
     def simple_regret(self, optimum: float = 1.0) -> NDArray[np.float64]:
         """SR(t) = r~(z*) - max_{tau <= t} r~(z_tau) (paper Sec. V-B), with r~(z*) = ``optimum``."""
@@ -210,25 +213,35 @@ def plan_views(request: PlanRequest, realizations: Any, callback: Optional[Callb
     sortie = q.sortie
     W, done = (None, None) if sortie.reconstruction is None else sortie_weights(
         R, sortie.reconstruction, sortie.tau, sortie.reconstructed_weight)
-    n_parts = check_parts(q.bo.parts, q.method, R, num_cameras)
+    among = q.candidates.poses is not None
+    n_parts = 1 if among else check_parts(q.bo.parts, q.method, R, num_cameras)
     budget = total_evaluations(q.method, q.evaluations, n_parts)
     check_budget_memory(q.method, num_cameras, budget)
     start = time.perf_counter()
     feas = q.feasibility
-    space = ViewSpace(R, num_cameras, min_standoff=feas.min_standoff, min_altitude=feas.min_altitude,
-                      min_separation=feas.min_separation, fov=q.cameras.fov, theta_match=q.reward.theta_match,
-                      shell_depth=q.cameras.shell_depth, reward_model=model, image_size=q.cameras.image_size,
-                      fixed_cameras=F, point_weights=W)
+    if among:  # N of the candidate poses (vp_planner.candidates): no feasibility rules, no free space
+        from .candidates import CandidateSpace
+
+        space = CandidateSpace(q.candidates.poses, num_cameras, R, fov=q.cameras.fov, theta_match=q.reward.theta_match,
+                               reward_model=model, image_size=q.cameras.image_size, fixed_cameras=F, point_weights=W)
+    else:
+        space = ViewSpace(R, num_cameras, min_standoff=feas.min_standoff, min_altitude=feas.min_altitude,
+                          min_separation=feas.min_separation, fov=q.cameras.fov, theta_match=q.reward.theta_match,
+                          shell_depth=q.cameras.shell_depth, reward_model=model, image_size=q.cameras.image_size,
+                          fixed_cameras=F, point_weights=W)
     obj = Objective(space, budget, callback=callback, dtype=getattr(torch, q.reward.dtype), should_stop=should_stop)
     rng = np.random.default_rng(q.seed)
     torch.manual_seed(q.seed)
     info: dict = {}
     try:
-        info = entry.plan(space, obj, q, rng, n_parts)
+        info = entry.plan_candidates(space, obj, q, rng) if among else entry.plan(space, obj, q, rng, n_parts)
     except PlanningCancelled:
         pass
-    stopped = obj.cancelled or obj.count < budget
+    # among candidates a method may need fewer evaluations than its budget (circle: one a phase)
+    stopped = obj.cancelled or (obj.count < budget and not among)
     best = obj.best_cameras()
+    if among and best is not None:  # in the order of the selected indices
+        best = space.decode(obj.U[obj.best_index])
     if best is None:
         if not stopped:
             raise NoFeasiblePlanError(f"no feasible plan among the {obj.count} evaluated plans")
@@ -256,4 +269,5 @@ def plan_views(request: PlanRequest, realizations: Any, callback: Optional[Callb
         parts=info.get("parts"),
         fixed_cameras=len(F),
         reconstructed_fraction=done,
+        selected=space.indices(obj.U[obj.best_index]).tolist() if among and obj.best_index >= 0 else None,
     )

@@ -9,7 +9,9 @@ reward, reward model and method, for the recon node) and camera frustums on
 ``/camera_plan/markers`` for RViz. With ``autostart`` it plans with its parameters as soon as a
 scene arrives.
 
-A goal may carry a second sortie's context (README "A second sortie"): ``fixed_cameras``, the
+A goal may carry ``candidates``, poses in ``frame_id`` to choose the N cameras among
+(:mod:`vp_planner.candidates`; the result's ``selected`` names them; another frame, NaN, fewer
+than N or lawnmower: INVALID_CANDIDATES). A goal may carry a second sortie's context (README "A second sortie"): ``fixed_cameras``, the
 cameras already flown, which every reward model counts with the plan, and ``reconstruction``,
 what they reconstructed (its points mark the scene points within ``tau`` as reconstructed,
 weighed ``reconstructed_weight``); both in ``frame_id`` (else INVALID_FIXED_CAMERAS /
@@ -43,8 +45,9 @@ from vp_planner.gp import MODEL_NAMES
 from vp_planner.methods import MAX_EVALUATIONS, METHODS
 from vp_planner.optimizers import InvalidSceneError, PlanResult, plan_views
 from vp_planner.request import (BO_MODES, DEFAULTS, FLAT, MAX_CAMERAS, BudgetTooLargeError, InvalidBudgetError,
-                                InvalidFixedCamerasError, InvalidNumCamerasError, InvalidReconstructionError,
-                                PlanRequest, UnknownMethodError, UnknownRewardModelError, check_fields)
+                                InvalidCandidatesError, InvalidFixedCamerasError, InvalidNumCamerasError,
+                                InvalidReconstructionError, PlanRequest, UnknownMethodError, UnknownRewardModelError,
+                                check_fields)
 from vp_planner.reward_models import REWARD_MODELS
 from vp_planner.space import NoFeasiblePlanError
 from vp_scene.cloud import pointcloud2_to_numpy, realizations_from_cloud
@@ -62,6 +65,7 @@ ERROR_CODES = (
     (UnknownRewardModelError, PlanViews.Result.UNKNOWN_REWARD_MODEL),
     (InvalidFixedCamerasError, PlanViews.Result.INVALID_FIXED_CAMERAS),  # NaN, or beyond the memory with the plan
     (InvalidReconstructionError, PlanViews.Result.INVALID_RECONSTRUCTION),
+    (InvalidCandidatesError, PlanViews.Result.INVALID_CANDIDATES),  # NaN, fewer than N, lawnmower
     (NoFeasiblePlanError, PlanViews.Result.NO_FEASIBLE_PLAN),
 )
 
@@ -270,11 +274,14 @@ class PlannerNode(Node):
                                f'seed {request.seed}')
         return plan_views(request, realizations, callback=progress, should_stop=should_stop)
 
-    def _publish_plan(self, result: PlanResult, fixed: Optional[np.ndarray] = None) -> PoseArray:
+    def _publish_plan(self, result: PlanResult, fixed: Optional[np.ndarray] = None,
+                      candidates: Optional[PoseArray] = None) -> PoseArray:
         """/camera_plan/info first (so that a recon has the reward, and the cameras already flown
         of a second sortie, when the plan arrives), then /camera_plan and the markers: one header,
-        one set of poses."""
+        one set of poses (among ``candidates``: the chosen candidates' own poses, roll and all)."""
         msg = cameras_to_pose_array(result.cameras, self._param('frame_id'), self.get_clock().now().to_msg())
+        if candidates is not None and result.selected is not None:
+            msg.poses = [candidates.poses[i] for i in result.selected]
         self.info_pub.publish(camera_plan_msg(msg, result.reward, result.reward_model, result.method,
                                               result.evaluations, result.seconds, fixed))
         self.plan_pub.publish(msg)
@@ -283,6 +290,7 @@ class PlannerNode(Node):
         self.get_logger().info(
             f'published /camera_plan: {len(msg.poses)} cameras, {result.reward_model} reward {result.reward:.4f}'
             + (f' with {result.fixed_cameras} cameras already flown' if result.fixed_cameras else '')
+            + (f' among {len(candidates.poses)} candidates' if candidates is not None else '')
             + f' ({result.method}, {result.evaluations} evaluations'
             + (f', by {len(result.parts)} parts of ' + '+'.join(str(p['cameras']) for p in result.parts) + ' cameras'
                if result.parts else '') + f', {result.seconds:.1f} s)')
@@ -309,14 +317,14 @@ class PlannerNode(Node):
             self._scene_arrived.wait(min(0.1, left))
         return self._realizations is not None
 
-    def _goal_fixed_cameras(self, msg: PoseArray) -> Optional[np.ndarray]:
-        """A goal's cameras already flown (M, 6), None when it has none; ValueError for another
-        frame or unusable poses (the library refuses NaN and too many)."""
+    def _goal_poses(self, msg: PoseArray, what: str) -> Optional[np.ndarray]:
+        """A goal's PoseArray ``what`` (fixed_cameras, candidates) as cameras (M, 6), None when it
+        is empty; ValueError for another frame or unusable poses (the library refuses NaN)."""
         if not msg.poses:
             return None
         frame = self._param('frame_id')
         if msg.header.frame_id != frame:
-            raise ValueError(f'fixed_cameras are in frame {msg.header.frame_id!r}, the planner plans in {frame!r} '
+            raise ValueError(f'{what} are in frame {msg.header.frame_id!r}, the planner plans in {frame!r} '
                              f'(frame_id); no transform is applied')
         return pose_array_to_cameras(msg.poses)
 
@@ -363,15 +371,19 @@ class PlannerNode(Node):
         except ValueError as exc:
             return abort(error_code(exc), str(exc))
         try:
-            fixed = self._goal_fixed_cameras(goal.fixed_cameras)
+            fixed = self._goal_poses(goal.fixed_cameras, 'fixed_cameras')
         except ValueError as exc:
             return abort(PlanViews.Result.INVALID_FIXED_CAMERAS, str(exc))
+        try:
+            candidates = self._goal_poses(goal.candidates, 'candidates')
+        except ValueError as exc:
+            return abort(PlanViews.Result.INVALID_CANDIDATES, str(exc))
         try:
             reconstruction = self._goal_reconstruction(goal.reconstruction)
         except ValueError as exc:
             return abort(PlanViews.Result.INVALID_RECONSTRUCTION, str(exc))
-        try:  # NaN poses, a non-finite reconstruction
-            request = request.replace(fixed_cameras=fixed, reconstruction=reconstruction)
+        try:  # NaN poses, a non-finite reconstruction, candidates fewer than N or for lawnmower
+            request = request.replace(fixed_cameras=fixed, reconstruction=reconstruction, candidates=candidates)
         except ValueError as exc:
             return abort(error_code(exc), str(exc))
         if not self._wait_for_scene():
@@ -405,7 +417,7 @@ class PlannerNode(Node):
                 result.evaluations = int(plan.evaluations)
                 self.get_logger().info(text)
                 return finish(PlanViews.Result.CANCELED, text)
-            msg = self._publish_plan(plan, fixed)
+            msg = self._publish_plan(plan, fixed, goal.candidates if candidates is not None else None)
             result.plan = msg
             result.cameras = [float(x) for x in np.asarray(plan.cameras).ravel()]
             result.reward = float(plan.reward)
@@ -413,6 +425,7 @@ class PlannerNode(Node):
             result.trace = [float(x) for x in plan.trace]
             result.planning_time = time.monotonic() - start
             result.evaluations = int(plan.evaluations)
+            result.selected = [int(i) for i in plan.selected or []]
             return finish(PlanViews.Result.NONE, '', succeed=True)
         except InvalidSceneError as exc:
             return abort(PlanViews.Result.NO_SCENE, f'unusable scene: {exc}')

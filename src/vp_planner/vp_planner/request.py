@@ -12,6 +12,7 @@ constructor, each field's default written once (in the group's class):
 ``arc``             :class:`ArcSpec`, arc's setting: spacing
 ``lawnmower``       :class:`LawnmowerSpec`, lawnmower's settings: overlap, tilt
 ``sortie``          :class:`Sortie`, a second sortie: fixed_cameras, reconstruction, tau, reconstructed_weight
+``candidates``      :class:`CandidateSet`, the poses to choose N of (None: plan in free space)
 ==================  ========================================================================================
 
 The planner node builds it from a goal and its parameters, the CLI from its flags, the benchmarks
@@ -59,6 +60,10 @@ every default):
                             reconstructed, finite >= 0 (InvalidReconstructionError)
 ``reconstructed_weight``    reward weight of a reconstructed point, in [0, 1] (InvalidReconstructionError)
 ``dtype``                   reward precision, ``'float64'`` or ``'float32'``
+``candidates``              (M, 6) candidate cameras [cx cy cz vx vy vz] the plan chooses N of
+                            (:mod:`vp_planner.candidates`), finite, non-zero viewing vectors,
+                            N <= M <= :data:`MAX_CANDIDATES`, a method with a candidates mode
+                            (InvalidCandidatesError); stored read-only; None: plan in free space
 ==========================  ===========================================================================
 
 Other bad fields raise :class:`InvalidRequestError` (the feasibility minima: ValueError, from
@@ -108,6 +113,10 @@ __all__ = [
     "BudgetTooLargeError",
     "InvalidFixedCamerasError",
     "InvalidReconstructionError",
+    "InvalidCandidatesError",
+    "CandidateSet",
+    "MAX_CANDIDATES",
+    "check_candidates",
     "check_lawnmower",
     "check_reconstruction",
     "check_sortie_weighting",
@@ -163,6 +172,34 @@ class InvalidFixedCamerasError(ValueError):
 class InvalidReconstructionError(ValueError):
     """A reconstruction (of an earlier sortie) with non-finite points, more points than the
     memory holds, or a tau / reconstructed_weight out of range."""
+
+
+class InvalidCandidatesError(ValueError):
+    """Candidates that are not finite (M, 6) cameras with a viewing direction, more than
+    :data:`MAX_CANDIDATES`, fewer than the plan's cameras, or a method without a candidates mode."""
+
+
+#: The most candidate poses a request may carry (the BO encoding has one input a candidate).
+MAX_CANDIDATES: int = 2000
+
+
+def check_candidates(candidates: Any) -> NDArray[np.float64]:
+    """Candidate cameras as a finite (M, 6) array [c, v], 2 <= M <= :data:`MAX_CANDIDATES`, each
+    with a viewing direction; InvalidCandidatesError naming the problem."""
+    try:
+        C = np.asarray(candidates, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InvalidCandidatesError(f"candidates must be (M, 6) cameras [cx cy cz vx vy vz]: {exc}") from None
+    if C.ndim != 2 or C.shape[1] != 6:
+        raise InvalidCandidatesError(f"candidates must have shape (M, 6) [cx cy cz vx vy vz], got {C.shape}")
+    if not 2 <= len(C) <= MAX_CANDIDATES:
+        raise InvalidCandidatesError(f"candidates: {len(C)} poses; between 2 and {MAX_CANDIDATES} are planned among")
+    bad = ~np.isfinite(C).all(axis=1)
+    bad[~bad] = np.linalg.norm(C[~bad, 3:], axis=1) <= 1e-12
+    if bad.any():
+        raise InvalidCandidatesError(f"candidate {int(np.flatnonzero(bad)[0])} of {len(C)} is not finite or has a "
+                                     "zero viewing direction")
+    return C
 
 
 def _integer(name: str, value: Any, lo: int, hi: Optional[int] = None, error: type = InvalidRequestError) -> int:
@@ -337,9 +374,20 @@ class Sortie:
         check_sortie_weighting(self.tau, self.reconstructed_weight)
 
 
+@dataclass(frozen=True, eq=False)
+class CandidateSet:
+    """The poses a plan chooses its N cameras among (stored read-only), or None: free space."""
+
+    poses: Any = _flat(None, "candidates")
+
+    def __post_init__(self) -> None:
+        if self.poses is not None:
+            _put(self, "poses", _read_only(check_candidates(self.poses)))
+
+
 #: The request's groups: attribute -> class, in the order a request is validated.
 GROUPS: dict[str, type] = {"cameras": CameraSpec, "feasibility": Feasibility, "reward": RewardSpec, "bo": BOSpec,
-                           "arc": ArcSpec, "lawnmower": LawnmowerSpec, "sortie": Sortie}
+                           "arc": ArcSpec, "lawnmower": LawnmowerSpec, "sortie": Sortie, "candidates": CandidateSet}
 
 
 def _check_method(method: Any) -> str:
@@ -368,6 +416,18 @@ def _check_seed(seed: Any) -> int:
     return _integer("seed", seed, 0)
 
 
+def _check_candidates_for(method: str, num_cameras: int, candidates: "CandidateSet") -> None:
+    """With candidates: the method has a candidates mode and there are at least N of them."""
+    if candidates.poses is None:
+        return
+    if BY_NAME[method].candidates is None:
+        raise InvalidCandidatesError(f"method {method} has no candidates mode; one of "
+                                     f"{', '.join(m for m in METHODS if BY_NAME[m].candidates)}")
+    if num_cameras > len(candidates.poses):
+        raise InvalidCandidatesError(f"{num_cameras} cameras cannot be chosen among {len(candidates.poses)} "
+                                     "candidates")
+
+
 @dataclass(frozen=True, eq=False)
 class PlanRequest:
     """What to plan: the method, its budget and seed, and the groups (the module docstring gives
@@ -384,6 +444,7 @@ class PlanRequest:
     arc: ArcSpec = field(default_factory=ArcSpec)
     lawnmower: LawnmowerSpec = field(default_factory=LawnmowerSpec)
     sortie: Sortie = field(default_factory=Sortie)
+    candidates: CandidateSet = field(default_factory=CandidateSet)
 
     def __post_init__(self) -> None:
         _check_method(self.method)
@@ -393,6 +454,7 @@ class PlanRequest:
         _put(self, "evaluations", _check_evaluations(self.evaluations, self.method))
         _check_design(self.method, self.evaluations, self.bo)
         _put(self, "seed", _check_seed(self.seed))
+        _check_candidates_for(self.method, self.cameras.num_cameras, self.candidates)
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> "PlanRequest":
@@ -418,6 +480,8 @@ class PlanRequest:
         out["fixed_cameras"] = self.sortie.fixed_cameras.tolist()
         rec = self.sortie.reconstruction
         out["reconstruction"] = None if rec is None else rec.tolist()
+        cand = self.candidates.poses
+        out["candidates"] = None if cand is None else cand.tolist()
         return out
 
     def replace(self, **values: Any) -> "PlanRequest":
@@ -492,8 +556,10 @@ def _build(values: Mapping[str, Any], between: bool) -> dict:
         _check_design(method, out["evaluations"], out["bo"])
     out["reward"] = _group("reward", values)
     out["seed"] = _check_seed(values.get("seed", DEFAULTS["seed"]))
-    for name in ("feasibility", "arc", "lawnmower", "sortie"):
+    for name in ("feasibility", "arc", "lawnmower", "sortie", "candidates"):
         out[name] = _group(name, values)
+    if between:
+        _check_candidates_for(method, out["cameras"].num_cameras, out["candidates"])
     return out
 
 

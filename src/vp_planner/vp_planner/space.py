@@ -61,6 +61,7 @@ from .reward_models import DEFAULT_REWARD_MODEL, RewardFunction, check_fixed_cam
 
 __all__ = [
     "SceneExtent",
+    "PlanReward",
     "ViewSpace",
     "PlanningCancelled",
     "NoFeasiblePlanError",
@@ -112,7 +113,27 @@ def to_numpy(x: Any) -> tuple[NDArray[np.float64], bool]:
     return np.asarray(x, dtype=np.float64), False
 
 
-class ViewSpace:
+class PlanReward:
+    """The reward of a space's plans: its ``reward_model`` on its ``realizations`` with its
+    ``fov``, ``theta_match``, ``image`` (a CameraModel), ``fixed_cameras`` and ``point_weights``
+    (a ViewSpace's, a :class:`vp_planner.candidates.CandidateSpace`'s), built once per dtype
+    into ``_rewards``."""
+
+    def reward_function(self, dtype: torch.dtype = torch.float64) -> RewardFunction:
+        """This space's reward model on its realizations (built once per dtype)."""
+        if dtype not in self._rewards:
+            self._rewards[dtype] = make_reward(self.reward_model, self.realizations, self.fov, self.theta_match,
+                                               self.image, dtype=dtype, fixed_cameras=self.fixed_cameras,
+                                               point_weights=self.point_weights)
+        return self._rewards[dtype]
+
+    def reward(self, cams: Any, dtype: torch.dtype = torch.float64) -> Any:
+        """Reward (averaged over the wind realizations, eq. 7) of plans (..., N, 6) under this
+        space's reward model, fov and theta_match (with its fixed cameras and point weights)."""
+        return self.reward_function(dtype)(cams)
+
+
+class ViewSpace(PlanReward):
     """Unit-cube parameterization of N-camera plans (dim = 6N) with feasibility rules.
 
     Args:
@@ -291,19 +312,6 @@ class ViewSpace:
         """U (B, 6N) from per-camera position parameters (B, N, 3) and target parameters (B, N, 3)."""
         u = np.concatenate([np.asarray(u_pos, float), np.asarray(u_tgt, float)], axis=-1)
         return np.clip(u, 0.0, 1.0).reshape(u.shape[0], -1)
-
-    def reward_function(self, dtype: torch.dtype = torch.float64) -> RewardFunction:
-        """This space's reward model on its realizations (built once per dtype)."""
-        if dtype not in self._rewards:
-            self._rewards[dtype] = make_reward(self.reward_model, self.realizations, self.fov, self.theta_match,
-                                               self.image, dtype=dtype, fixed_cameras=self.fixed_cameras,
-                                               point_weights=self.point_weights)
-        return self._rewards[dtype]
-
-    def reward(self, cams: Any, dtype: torch.dtype = torch.float64) -> Any:
-        """Reward (averaged over the wind realizations, eq. 7) of plans (..., N, 6) under this
-        space's reward model, fov and theta_match (with its fixed cameras and point weights)."""
-        return self.reward_function(dtype)(cams)
 
     # ------------------------------------------------------------------ feasibility
     def feasible(self, x: Any) -> Any:

@@ -17,7 +17,8 @@ from vp_scene.capture import IDEAL
 
 from vp_recon.cli import main
 from vp_recon.config import ReconConfig
-from vp_recon.flight import POSES_FILE, CapturedViews, FlightError, read_flight, write_flight
+from vp_recon.flight import CapturedViews, read_flight, write_flight
+from vp_scene.flight_poses import POSES_FILE, FlightError
 from vp_recon.metrics import coverage_of_prior
 from vp_recon.pipeline import reconstruct_views, render_flight
 from vp_recon.results import Prior

@@ -18,7 +18,8 @@ from vp_scene.camera import cameras_to_poses, look_at, poses_to_cameras, roll_of
 from vp_scene.capture import IDEAL, CaptureModel
 
 from vp_recon.cli import main as recon_main
-from vp_recon.flight import POSES_FILE, CapturedViews, read_flight, write_flight
+from vp_recon.flight import CapturedViews, read_flight, write_flight
+from vp_scene.flight_poses import POSES_FILE
 from vp_recon.config import ReconConfig
 from vp_recon.pipeline import reconstruct_views, render_flight
 from vp_recon.sparse import similarity_from_poses

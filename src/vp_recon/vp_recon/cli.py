@@ -1,6 +1,7 @@
 """Command line reconstruction of a plan: render, reconstruct and score every wind realization.
 
-    python -m vp_recon.cli --images DIR --out OUT [--overwrite] [--prior plan.json] [--sparse-only] [--max-megapixels 768] [...]
+    python -m vp_recon.cli --images DIR --out OUT [--overwrite] [--prior plan.json|PRIOR.ply] [--select plan.json]
+        [--reference REF.ply] [--sparse-only] [--max-megapixels 768] [--mask auto|exg|background] [...]
     python -m vp_recon.cli --plan out/run/plan.json --out out/run [--overwrite] [--width 2000 --height 1500]
         [--realizations 0,1] [--sparse-only] [--sparse-mode known_poses|incremental]
         [--matching auto|exhaustive|poses]
@@ -26,7 +27,13 @@ Rebuilds the scene from plan.json's ``scene`` dict (vp_scene.build.build_noisy_s
 a ground truth: registered images, mean reprojection error, mean track length, points and, with
 ``--prior plan.json``, coverage_of_prior per plant; Chamfer when the folder's flight.json names
 the realization of the prior's scene it flew), ``OUT/recon.ply``, ``OUT/views.png`` and, with a
-prior, ``OUT/uncovered.png``. Every input is checked before OUT is made.
+prior, ``OUT/uncovered.png``. Every input is checked before OUT is made. The prior may also be a
+PLY (a first reconstruction in the folder's frame: crop box, pairs, coverage, masks).
+``--select plan.json`` reconstructs only the images the plan names (``images``: a plan made
+among the folder's views, ``python -m vp_planner.cli --candidates``), with the plan's ``prior``
+PLY as the prior unless ``--prior`` is given; ``--reference REF.ply`` scores the reconstruction
+against a reference cloud in the folder's frame (``chamfer_mean``, x100) and after a rigid ICP
+onto it (``chamfer_shape_mean``: the shape), beside the metrics without a ground truth.
 
 Nothing is lost or mixed: these files (:data:`RESULT`, with ``work/``) are written into a hidden
 folder in OUT and moved into OUT together when the run ends; an error or an interrupt leaves OUT
@@ -104,6 +111,7 @@ def capture_from_args(args: argparse.Namespace) -> object:
 
 def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     from .config import MATCH_POSES_FROM, MATCHINGS, MAX_CAMERAS, MAX_MEGAPIXELS, ReconConfig
+    from .segment import MASK_METHODS
     from .sparse import MODES
 
     p = _Parser(prog=PROG, description="Render, reconstruct (COLMAP on CPU + SGBM) and score a view plan.")
@@ -113,7 +121,12 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
                                        "(README 'From a real flight')")
     p.add_argument("--prior", default=None,
                    help="with --images: plan.json whose scene is the planning cloud (coverage_of_prior, crop box, "
-                        "pairs; Chamfer when flight.json names the realization)")
+                        "pairs; Chamfer when flight.json names the realization), or a PLY in the folder's frame")
+    p.add_argument("--select", default=None, metavar="PLAN.json",
+                   help="with --images: reconstruct only the images this plan names (a plan among the folder's views: "
+                        "vp_planner.cli --candidates); its prior PLY is the prior unless --prior is given")
+    p.add_argument("--reference", default=None, metavar="PLY",
+                   help="with --images: score against this reference cloud (folder's frame; and after ICP: shape)")
     p.add_argument("--out", required=True, help="output folder (its reconstruction files are written together at "
                                                   "the end; one that holds a reconstruction is refused)")
     p.add_argument("--overwrite", action="store_true",
@@ -145,6 +158,9 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
                    help="render a textured soil plane under the plants (--no-ground: a blue screen); default: "
                         "soil for a realistic capture (plant masks from the images alone, by excess green), "
                         "the blue screen for --capture ideal")
+    p.add_argument("--mask", default="auto", choices=MASK_METHODS,
+                   help="plant masks of images over soil or a real background: auto (default: excess green for a "
+                        "green plant, else the background model), exg or background (README 'From a real flight')")
     # as the recon node: the last core stays with a planner beside it (a planner of 1 thread took
     # 2.4x its time beside a reconstruction on all cores of 2; README "Results")
     p.add_argument("--threads", type=int, default=max(1, (os.cpu_count() or 2) - 1),
@@ -184,8 +200,8 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
         p.error(f"--max-megapixels must be > 0, got {args.max_megapixels}")
     if args.plan and args.max_megapixels is not None:
         p.error("--max-megapixels goes with --images (a plan is bounded by --max-cameras)")
-    if args.prior and not args.images:
-        p.error("--prior goes with --images (a plan brings its own scene)")
+    if (args.prior or args.select or args.reference) and not args.images:
+        p.error("--prior, --select and --reference go with --images (a plan brings its own scene)")
     if args.images:  # a flight folder has its own images: the options of rendering a plan do not apply
         given = [f for f, v in (("--width", args.width), ("--height", args.height), ("--realizations", args.realizations),
                                 ("--mesh-cache", args.mesh_cache), ("--scheduler", args.scheduler),
@@ -232,7 +248,7 @@ def run(args: argparse.Namespace) -> dict:
                              voxel=args.voxel, mesh_cache=args.mesh_cache, keep_workdir=args.keep_workdir,
                              ground=args.ground, num_threads=args.threads, matching=args.matching,
                              dense_scale=args.dense_scale, sift_first_octave=args.sift_first_octave,
-                             capture=capture_from_args(args), max_cameras=max_cameras).validate()
+                             capture=capture_from_args(args), max_cameras=max_cameras, mask=args.mask).validate()
     except ValueError as exc:
         raise CliError(str(exc)) from None
     try:  # before the output folder is made: a bad scene leaves nothing behind
@@ -345,23 +361,74 @@ def _prior_scene(path: str) -> object:
         raise CliError(f"cannot rebuild the scene of {path}: {exc}") from None
 
 
+def _cloud(path: str, flag: str) -> np.ndarray:
+    """The points (M, 3) of a PLY given with ``flag`` (CliError naming it)."""
+    from vp_scene.plants import PlantModelError
+    from vp_scene.ply import load_points
+
+    try:
+        points = load_points(path)
+    except PlantModelError as exc:
+        raise CliError(f"{flag}: {exc}") from None
+    if len(points) == 0:
+        raise CliError(f"{flag}: {path} has no points")
+    return points
+
+
+def _selection(path: str) -> tuple[list, Optional[str]]:
+    """The image names a plan among a folder's views chose (``images``) and its prior PLY."""
+    try:
+        data = json.loads(Path(path).read_text())
+    except (OSError, ValueError) as exc:
+        raise CliError(f"--select: cannot read {path}: {exc}") from None
+    names = data.get("images") if isinstance(data, dict) else None
+    if not isinstance(names, list) or len(names) < 2 or not all(isinstance(n, str) for n in names) \
+            or len(set(names)) != len(names):
+        raise CliError(f"--select: {path} names no list of 2 or more distinct images ('images': a plan made with "
+                       "python -m vp_planner.cli --candidates)")
+    prior = data.get("prior")
+    return names, prior if isinstance(prior, str) else None
+
+
+def select_views(views: Any, names: Sequence[str]) -> Any:
+    """The capture set of the images ``names`` of ``views`` (in that order); CliError naming an
+    image the folder does not hold."""
+    import dataclasses
+
+    index = {n: i for i, n in enumerate(views.names)}
+    missing = [n for n in names if n not in index]
+    if missing:
+        raise CliError(f"--select: {len(missing)} image(s) the plan names are not in the folder: {missing[:3]}")
+    idx = [index[n] for n in names]
+    return dataclasses.replace(views, names=list(names), images=[views.images[i] for i in idx],
+                               reported=np.asarray(views.reported)[idx],
+                               masks=None if views.masks is None else [views.masks[i] for i in idx])
+
+
 def run_images(args: argparse.Namespace) -> dict:
     """Reconstruct a flight folder (``--images``); returns the recon.json dict (also written)."""
     from vp_scene.folders import ResultFolder
     from .config import MAX_MEGAPIXELS, ReconConfig
     from .errors import ensure_writable_dir
-    from .flight import FlightError, read_flight
+    from vp_scene.flight_poses import FlightError
+    from .flight import read_flight
     from .metrics import chamfer, chamfer_after_icp
     from .outputs import contact_sheet, no_truth_metrics, uncovered_image, write_image, write_json, write_ply
     from .pipeline import reconstruct_views
     from .results import Prior
 
     result_dir = ResultFolder(args.out, RESULT, PROG, args.overwrite).check()
+    selected, plan_prior = _selection(args.select) if args.select else (None, None)
     try:  # every input checked before OUT is made: nothing half-written
         views = read_flight(args.images, MAX_MEGAPIXELS if args.max_megapixels is None else args.max_megapixels)
     except FlightError as exc:
         raise CliError(str(exc)) from None
-    noisy = _prior_scene(args.prior) if args.prior else None
+    if selected is not None:
+        views = select_views(views, selected)
+    prior_path = args.prior or plan_prior
+    prior_cloud = _cloud(prior_path, "--prior") if prior_path and prior_path.lower().endswith(".ply") else None
+    noisy = _prior_scene(prior_path) if prior_path and prior_cloud is None else None
+    reference = _cloud(args.reference, "--reference") if args.reference else None
     width, height = views.size
     try:
         config = ReconConfig(width=width, height=height, fov=views.horizontal_fov, dense=not args.sparse_only,
@@ -369,7 +436,7 @@ def run_images(args: argparse.Namespace) -> dict:
                              voxel=args.voxel, keep_workdir=args.keep_workdir, ground=args.ground,
                              num_threads=args.threads, matching=args.matching,
                              dense_scale=args.dense_scale, sift_first_octave=args.sift_first_octave,
-                             capture=capture_from_args(args)).validate()
+                             capture=capture_from_args(args), mask=args.mask).validate()
     except ValueError as exc:
         raise CliError(str(exc)) from None
     k = views.realization
@@ -380,15 +447,20 @@ def run_images(args: argparse.Namespace) -> dict:
     with result_dir:  # an error or an interrupt leaves OUT as it was
         out = result_dir.stage
         info = {"source": "images", "images": str(Path(args.images).resolve()), "num_images": len(views.images),
-                "prior": str(Path(args.prior).resolve()) if args.prior else None, "realization": k,
+                "prior": str(Path(prior_path).resolve()) if prior_path else None, "realization": k,
+                "select": str(Path(args.select).resolve()) if args.select else None,
+                "selected": list(views.names) if selected is not None else None,
+                "reference": str(Path(args.reference).resolve()) if args.reference else None,
                 "width": width, "height": height, "fov": config.fov, "dense": config.dense, "ground": config.ground_used,
                 "sparse_mode": config.sparse_mode_used, "matching": config.matching,
                 "capture": config.capture.to_dict(),
                 "units": "chamfer, chamfer_shape: metres x 100 (paper Table I); mean_reprojection_error: pixels; "
                          "coverage_tau: metres"}
+        prior = Prior.of_scene(noisy) if noisy is not None else None
+        if prior_cloud is not None:
+            prior = Prior(points=prior_cloud, plant=np.zeros(len(prior_cloud), np.int64))
         try:
-            vr = reconstruct_views(views, config, workdir=out / "work" if args.keep_workdir else None,
-                                   prior=Prior.of_scene(noisy) if noisy is not None else None)
+            vr = reconstruct_views(views, config, workdir=out / "work" if args.keep_workdir else None, prior=prior)
         except Exception as exc:
             failure = _record_failure(result_dir, info, exc)
             if failure is exc:
@@ -401,9 +473,13 @@ def run_images(args: argparse.Namespace) -> dict:
                                            len(vr.points), vr.coverage, sp.centre_residual),
                 "cloud": vr.source, "chamfer_mean": None, "sparse_points": len(sp.points), "sparse_models": sp.models,
                 "sparse_mode": sp.mode, "sparse_fallback": sp.fallback,  # the model kept (incremental may fall back)
+                "mask": vr.mask.to_dict() if vr.mask is not None else None,
                 "seconds": {k: round(float(v), 3) for k, v in {**views.seconds, **vr.seconds}.items()}}
         if vr.coverage is not None:
-            write_image(out / "uncovered.png", uncovered_image(noisy.points, vr.coverage))
+            write_image(out / "uncovered.png", uncovered_image(prior.points if noisy is None else noisy.points,
+                                                               vr.coverage))
+        if reference is not None:
+            truth = reference
         if truth is not None:
             data["chamfer_mean"] = chamfer(vr.points, truth, config.fscore_threshold).chamfer * 100.0
             data["chamfer_shape_mean"] = chamfer_after_icp(vr.points, truth, config.fscore_threshold).chamfer * 100.0

@@ -92,6 +92,9 @@ class ReconConfig:
             :func:`vp_recon.pairs.select_pairs` picks from the known poses and scene) or
             ``'auto'``: poses from :data:`MATCH_POSES_FROM` cameras up, exhaustive below.
         max_cameras: a plan of more cameras is refused (PLAN_TOO_LARGE, :func:`check_plan_size`).
+        mask: how a flight's images are segmented over soil (:data:`vp_recon.segment.MASK_METHODS`):
+            ``'auto'`` (excess green for a green plant, else the background model), ``'exg'`` or
+            ``'background'`` (:func:`vp_recon.segment.flight_masks`); the blue screen keeps its colour key.
     """
 
     width: int = IMAGE_SIZE[0]
@@ -116,6 +119,7 @@ class ReconConfig:
     matching: str = "auto"
     capture: CaptureModel = REALISTIC
     max_cameras: int = MAX_CAMERAS
+    mask: str = "auto"
 
     @property
     def sparse_mode_used(self) -> str:
@@ -165,6 +169,10 @@ class ReconConfig:
             raise ValueError(f"sift_first_octave must be -1, 0 or 1, got {self.sift_first_octave!r}")
         if not (isinstance(self.dense_scale, (int, float)) and 0 < self.dense_scale <= 1):
             raise ValueError(f"dense_scale must be in (0, 1], got {self.dense_scale!r}")
+        from .segment import MASK_METHODS
+
+        if self.mask not in MASK_METHODS:
+            raise ValueError(f"mask must be one of {', '.join(MASK_METHODS)}, got {self.mask!r}")
         if isinstance(self.max_cameras, bool) or not isinstance(self.max_cameras, (int, np.integer)) \
                 or self.max_cameras < 2:
             raise ValueError(f"max_cameras must be an integer >= 2, got {self.max_cameras!r}")

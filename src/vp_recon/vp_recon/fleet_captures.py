@@ -13,7 +13,8 @@ import numpy as np
 from rclpy.node import Node
 
 from vp_recon.errors import CAPTURE_MISSING, ReconError
-from vp_recon.flight import CapturedViews, FlightError
+from vp_recon.flight import CapturedViews
+from vp_scene.flight_poses import FlightError
 from vp_scene.messages import camera_info_intrinsics, compressed_image_array, drone_topic, image_array, pose_array
 from vp_scene.node_runtime import LATCHED
 

@@ -7,29 +7,9 @@ later, received from the fleet.
 
 The flight folder (README "From a real flight")
 ------------------------------------------------
-A folder ``DIR`` holds the images (PNG or JPEG, RGB, one camera for all) and a pose file:
-
-``DIR/poses.csv`` (first choice), a header line then one row per image::
-
-    image,x,y,z,qx,qy,qz,qw,frame,fx,fy,cx,cy,width,height[,k1,k2,p1,p2,k3]
-    view_000.png,1.4,0.0,1.2,0.0,0.12,0.0,0.99,map,1000.0,1000.0,999.5,749.5,2000,1500
-
-* ``image``: the file name in DIR (no folders, unique);
-* ``x y z``: the camera centre in ``frame``, metres; ``qx qy qz qw``: the camera's attitude as
-  a ``geometry_msgs/Pose`` of the suite (the REP-103 *body* frame: x along the optical axis,
-  y left, z up; :mod:`vp_scene.camera`), any attitude (a roll about the optical axis is kept),
-  so a drone's reported ``PoseStamped`` goes in as is;
-* ``frame``: ``map`` (the suite's frame; anything else is refused);
-* ``fx fy cx cy``: pinhole intrinsics in pixels, OpenCV / ``sensor_msgs/CameraInfo`` convention
-  (pixel centres at integers: cx = (width - 1) / 2 for a centred principal point);
-  ``width height``: the image size, which must match the file;
-* optional, after them and in any order, the lens distortion :data:`DISTORTION_COLUMNS` (OpenCV's
-  and CameraInfo's ``plumb_bob`` k1, k2, p1, p2, k3; a column left out is 0).
-
-``DIR/cameras.txt`` + ``DIR/images.txt`` (COLMAP's text model, the interchange format of
-photogrammetry tools; read when there is no poses.csv): cameras of the models
-:data:`COLMAP_MODELS` (COLMAP's pixel convention: centres at +0.5), image poses as COLMAP's
-``cam_from_world`` (QW QX QY QZ TX TY TZ, optical frame), in ``map``.
+A folder ``DIR`` holds the images (PNG or JPEG, RGB, one camera for all) and a pose file,
+``DIR/poses.csv`` or COLMAP's text model (:mod:`vp_scene.flight_poses`: the format, its reader
+and writer; the planner reads the poses alone).
 
 Distortion: the images of a camera with distortion are undistorted once, as they are read, to a
 pinhole camera (COLMAP's undistorter, ``pycolmap.undistort_camera`` / ``undistort_image``: no
@@ -50,7 +30,6 @@ truncated or corrupt image refused). ROS-free: numpy, OpenCV, Pillow, scipy.
 """
 from __future__ import annotations
 
-import csv
 import json
 import math
 import os
@@ -66,39 +45,21 @@ from scipy.spatial.transform import Rotation
 
 from vp_scene.ground_control import GroundControl, GroundControlError, read_gcp_list, read_markers_csv, \
     write_markers_csv
-from vp_scene.camera import as_poses, body_from_optical, principal_point_gl, world_to_camera
+from vp_scene.camera import as_poses, principal_point_gl, world_to_camera
+from vp_scene.flight_poses import FRAME, POSES_FILE, FlightCamera, FlightError, read_pose_files, write_poses_csv
 from vp_scene.images import ImageError, image_size, read_image
 
 from .config import MAX_MEGAPIXELS
 
-__all__ = ["POSES_FILE", "MARKERS_FILE", "GCP_LIST_FILE", "POSES_COLUMNS", "DISTORTION_COLUMNS", "COLMAP_MODELS",
-           "IMAGE_SUFFIXES", "FRAME", "FlightError", "CapturedViews", "write_flight", "write_poses_csv", "read_flight",
+__all__ = ["MARKERS_FILE", "GCP_LIST_FILE", "IMAGE_SUFFIXES", "CapturedViews", "write_flight", "read_flight",
            "capture_folder", "locate_flown", "flown_views", "join_views"]
 
-POSES_FILE = "poses.csv"
 #: The ground-control files of a flight folder (module docstring).
 MARKERS_FILE = "markers.csv"
 GCP_LIST_FILE = "gcp_list.txt"
-POSES_COLUMNS = ("image", "x", "y", "z", "qx", "qy", "qz", "qw", "frame", "fx", "fy", "cx", "cy", "width", "height")
-#: Optional columns of poses.csv after :data:`POSES_COLUMNS`: OpenCV's (and CameraInfo plumb_bob's) distortion.
-DISTORTION_COLUMNS = ("k1", "k2", "p1", "p2", "k3")
-#: COLMAP camera models read from cameras.txt and their parameters (COLMAP's order; the radial
-#: and OpenCV ones are OpenCV's distortion model with some coefficients 0, and undistorted).
-COLMAP_MODELS = {"SIMPLE_PINHOLE": ("f", "cx", "cy"), "PINHOLE": ("fx", "fy", "cx", "cy"),
-                 "SIMPLE_RADIAL": ("f", "cx", "cy", "k1"), "RADIAL": ("f", "cx", "cy", "k1", "k2"),
-                 "OPENCV": ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2"),
-                 "FULL_OPENCV": ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")}
-#: OpenCV's distortion coefficients, in its order, that a camera may have (the rational model's).
-_OPENCV_COEFFS = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
-#: The one frame of the suite.
-FRAME = "map"
 
 PathLike = Union[str, os.PathLike]
-
-
-class FlightError(ValueError):
-    """A flight folder (or capture set) that cannot be reconstructed; the message names the file."""
 
 
 @dataclass
@@ -167,36 +128,7 @@ class CapturedViews:
         return self
 
 
-@dataclass(frozen=True)
-class _Camera:
-    """A flight's camera as read: OpenCV pinhole intrinsics (pixel centres at integers), the image
-    size and OpenCV's distortion coefficients :data:`_OPENCV_COEFFS` (all 0: a pinhole camera)."""
-
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-    width: float
-    height: float
-    dist: tuple = (0.0,) * len(_OPENCV_COEFFS)
-
-    @property
-    def K(self) -> NDArray[np.float64]:
-        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
-
-    @property
-    def distorted(self) -> bool:
-        return any(self.dist)
-
-    def colmap(self, pycolmap: object) -> object:
-        """The camera as COLMAP's OPENCV (FULL_OPENCV when k3..k6 are used): OpenCV's model,
-        COLMAP's pixel convention (centres at +0.5)."""
-        full = any(self.dist[4:])
-        return pycolmap.Camera(model="FULL_OPENCV" if full else "OPENCV", width=int(self.width),
-                               height=int(self.height), params=[self.fx, self.fy, self.cx + 0.5, self.cy + 0.5, *self.dist[:8 if full else 4]])
-
-
-def _undistorter(cam: _Camera) -> tuple[object, _Camera]:
+def _undistorter(cam: FlightCamera) -> tuple[object, FlightCamera]:
     """(undistort(image) -> image, the pinhole camera of the undistorted images) of a camera with
     distortion: COLMAP's undistorter (no blank pixels; the size may change by a few pixels), the
     one COLMAP applies before its dense stereo, so that the rest of the suite stays pinhole."""
@@ -211,27 +143,7 @@ def _undistorter(cam: _Camera) -> tuple[object, _Camera]:
         out, _ = pycolmap.undistort_image(options, pycolmap.Bitmap.from_array(np.ascontiguousarray(image)), source)
         return np.ascontiguousarray(out.to_array()[..., :3], dtype=np.uint8)
 
-    return undistort, _Camera(fx, fy, cx - 0.5, cy - 0.5, int(pin.width), int(pin.height))
-
-
-def write_poses_csv(path: PathLike, names: Sequence[str], poses: ArrayLike, K: ArrayLike, size: tuple[int, int],
-                    distortion: Optional[Sequence[float]] = None) -> None:
-    """``poses.csv`` (module docstring) of the images ``names`` taken from ``poses`` (N, 7) (or
-    levelled cameras (N, 6)) by one camera: pinhole ``K`` (OpenCV convention) at ``size`` (width,
-    height) and, when given, its distortion ``(k1, k2, p1, p2, k3)`` (the optional columns)."""
-    P = as_poses(np.asarray(poses, dtype=np.float64).reshape(len(names), -1))
-    K = np.asarray(K, dtype=np.float64)
-    extra = [] if distortion is None else [repr(float(v)) for v in distortion]
-    if len(extra) not in (0, len(DISTORTION_COLUMNS)):
-        raise ValueError(f"distortion must be the {len(DISTORTION_COLUMNS)} numbers {DISTORTION_COLUMNS}, "
-                         f"got {distortion!r}")
-    intr = [repr(float(K[0, 0])), repr(float(K[1, 1])), repr(float(K[0, 2])), repr(float(K[1, 2])),
-            str(int(size[0])), str(int(size[1]))]
-    with open(path, "w", newline="") as f:
-        wr = csv.writer(f)
-        wr.writerow(POSES_COLUMNS + (DISTORTION_COLUMNS if extra else ()))
-        for name, pose in zip(names, P):
-            wr.writerow([name] + [repr(float(v)) for v in pose] + [FRAME] + intr + extra)
+    return undistort, FlightCamera(fx, fy, cx - 0.5, cy - 0.5, int(pin.width), int(pin.height))
 
 
 def write_flight(views: CapturedViews, folder: PathLike, meta: Optional[dict] = None) -> Path:
@@ -282,112 +194,6 @@ def write_flight(views: CapturedViews, folder: PathLike, meta: Optional[dict] = 
     return out
 
 
-def _number(text: str, where: str, what: str) -> float:
-    if not text.strip():
-        raise FlightError(f"{where}: {what} is empty (missing pose)")
-    try:
-        v = float(text)
-    except (TypeError, ValueError):
-        raise FlightError(f"{where}: {what} {text!r} is not a number") from None
-    if not math.isfinite(v):
-        raise FlightError(f"{where}: {what} is {text} (missing or NaN pose)")
-    return v
-
-
-def _read_poses_csv(path: Path) -> tuple[list, NDArray[np.float64], list]:
-    """(names, poses (N, 7), cameras (:class:`_Camera`)) of poses.csv."""
-    names, poses, cams = [], [], []
-    try:
-        with open(path, newline="") as f:
-            rows = list(csv.reader(f))
-    except (OSError, UnicodeDecodeError, csv.Error) as exc:
-        raise FlightError(f"{path}: cannot read: {exc}") from None
-    header = [c.strip() for c in rows[0]] if rows else []
-    extra = header[len(POSES_COLUMNS):]
-    if header[:len(POSES_COLUMNS)] != list(POSES_COLUMNS) or len(set(extra)) != len(extra) \
-            or not set(extra) <= set(DISTORTION_COLUMNS):
-        raise FlightError(f"{path}: the first line must be the header {','.join(POSES_COLUMNS)}, then optionally "
-                          f"any of the distortion columns {','.join(DISTORTION_COLUMNS)}")
-    columns = tuple(header)
-    for line, row in enumerate(rows[1:], start=2):
-        if not row or not "".join(row).strip():
-            continue
-        where = f"{path} line {line}"
-        if len(row) != len(columns):
-            raise FlightError(f"{where}: {len(row)} columns, expected {len(columns)} ({','.join(columns)})")
-        row = [c.strip() for c in row]
-        name = row[0]
-        if not name or Path(name).name != name:
-            raise FlightError(f"{where}: image {name!r} must be a file name in the folder")
-        if name in names:
-            raise FlightError(f"{where}: duplicate image name {name}")
-        pose = [_number(v, f"{where} ({name})", c) for v, c in zip(row[1:8], columns[1:8])]
-        if row[8] != FRAME:
-            raise FlightError(f"{where} ({name}): frame {row[8]!r}; poses must be in {FRAME!r}")
-        k = [_number(v, f"{where} ({name})", c) for v, c in zip(row[9:], columns[9:])]
-        if np.linalg.norm(pose[3:]) < 1e-9:
-            raise FlightError(f"{where} ({name}): the quaternion is zero")
-        given = dict(zip(columns[15:], k[6:]))
-        names.append(name)
-        poses.append(pose)
-        cams.append(_Camera(*k[:6], dist=tuple(given.get(c, 0.0) for c in _OPENCV_COEFFS)))
-    return names, np.array(poses, dtype=np.float64).reshape(-1, 7), cams
-
-
-def _colmap_camera(model: str, w: float, h: float, p: list) -> _Camera:
-    """A COLMAP camera (:data:`COLMAP_MODELS`; centres at +0.5) as OpenCV's."""
-    named = dict(zip(COLMAP_MODELS[model], p))
-    fx, fy = (named["f"], named["f"]) if "f" in named else (named["fx"], named["fy"])
-    return _Camera(fx, fy, named["cx"] - 0.5, named["cy"] - 0.5, w, h,
-                   dist=tuple(named.get(c, 0.0) for c in _OPENCV_COEFFS))
-
-
-def _read_colmap_text(folder: Path) -> tuple[list, NDArray[np.float64], list]:
-    """(names, poses (N, 7) in the suite's body convention, cameras) of COLMAP's text model."""
-    cams: dict = {}
-    path = folder / "cameras.txt"
-    for line, text in enumerate(path.read_text(errors="replace").splitlines(), start=1):
-        f = text.split()
-        if not f or f[0].startswith("#"):
-            continue
-        where = f"{path} line {line}"
-        if len(f) < 5 or f[1] not in COLMAP_MODELS:
-            raise FlightError(f"{where}: camera model {' '.join(f[1:2])!r} is not read; the models read are "
-                              f"{', '.join(COLMAP_MODELS)}")
-        w, h = (_number(v, where, "size") for v in f[2:4])
-        p = [_number(v, where, "parameter") for v in f[4:]]
-        if len(p) != len(COLMAP_MODELS[f[1]]):
-            raise FlightError(f"{where}: {f[1]} has {len(COLMAP_MODELS[f[1]])} parameters "
-                              f"({' '.join(COLMAP_MODELS[f[1]])}), got {len(p)}")
-        cams[f[0]] = _colmap_camera(f[1], w, h, p)
-    path = folder / "images.txt"
-    names, poses, used = [], [], []
-    data = [(n, t) for n, t in enumerate(path.read_text(errors="replace").splitlines(), start=1)
-            if t.strip() and not t.lstrip().startswith("#")]
-    # two lines an image (the second, its 2D points, may be empty and then was dropped above)
-    for line, text in data:
-        f = text.split()
-        if len(f) != 10 or not f[0].isdigit():
-            continue  # a POINTS2D line
-        where = f"{path} line {line}"
-        name = f[9]
-        if Path(name).name != name:
-            raise FlightError(f"{where}: image {name!r} must be a file name in the folder")
-        if name in names:
-            raise FlightError(f"{where}: duplicate image name {name}")
-        qw, qx, qy, qz, tx, ty, tz = (_number(v, f"{where} ({name})", "pose") for v in f[1:8])
-        if f[8] not in cams:
-            raise FlightError(f"{where} ({name}): camera {f[8]} is not in cameras.txt")
-        if math.hypot(qw, qx, qy, qz) < 1e-9:
-            raise FlightError(f"{where} ({name}): the quaternion is zero")
-        R_cw = Rotation.from_quat([qx, qy, qz, qw]).as_matrix()
-        c = -R_cw.T @ np.array([tx, ty, tz])
-        poses.append(np.concatenate([c, body_from_optical(R_cw)]))
-        names.append(name)
-        used.append(cams[f[8]])
-    return names, np.array(poses, dtype=np.float64).reshape(-1, 7), used
-
-
 def read_flight(folder: PathLike, max_megapixels: float = MAX_MEGAPIXELS) -> CapturedViews:
     """The capture set of a flight folder (module docstring); FlightError naming the file for a
     missing, corrupt or truncated image, a size not matching its intrinsics, a missing or NaN
@@ -398,16 +204,7 @@ def read_flight(folder: PathLike, max_megapixels: float = MAX_MEGAPIXELS) -> Cap
     their undistorted size), are refused before decoding. A camera with distortion is
     undistorted as its images are read (module docstring; ``seconds['undistort']``)."""
     d = Path(folder)
-    if not d.is_dir():
-        raise FlightError(f"{d}: not a folder")
-    if (d / POSES_FILE).is_file():
-        names, poses, cams = _read_poses_csv(d / POSES_FILE)
-        source = d / POSES_FILE
-    elif (d / "cameras.txt").is_file() and (d / "images.txt").is_file():
-        names, poses, cams = _read_colmap_text(d)
-        source = d / "images.txt"
-    else:
-        raise FlightError(f"{d}: no {POSES_FILE} (or COLMAP cameras.txt + images.txt) with the poses")
+    names, poses, cams, source = read_pose_files(d)
     present = sorted(p.name for p in d.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)
     unposed = sorted(set(present) - set(names))
     if unposed:

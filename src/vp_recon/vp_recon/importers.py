@@ -42,8 +42,10 @@ import numpy as np
 
 from vp_scene.camera import body_from_optical, cameras_to_poses
 
-from .flight import COLMAP_MODELS, DISTORTION_COLUMNS, IMAGE_SUFFIXES, POSES_FILE, FlightError, _colmap_camera, \
+from vp_scene.flight_poses import COLMAP_MODELS, DISTORTION_COLUMNS, POSES_FILE, FlightError, colmap_camera, \
     write_poses_csv
+
+from .flight import IMAGE_SUFFIXES
 
 __all__ = ["ScanError", "ROMI_POSES", "romi_poses", "import_romi", "main"]
 
@@ -88,7 +90,7 @@ def _camera(meta: dict, where: str) -> tuple:
     if model not in COLMAP_MODELS or len(params) != len(COLMAP_MODELS[model]):
         raise ScanError(f"{where}: camera model {model} with {len(params)} parameters is not one of "
                            f"{', '.join(COLMAP_MODELS)}")
-    cam = _colmap_camera(model, w, h, params)
+    cam = colmap_camera(model, w, h, params)
     if any(cam.dist[len(DISTORTION_COLUMNS):]):
         raise ScanError(f"{where}: k4..k6 of {model} have no poses.csv column")
     return cam.K, (w, h), tuple(cam.dist[:len(DISTORTION_COLUMNS)])

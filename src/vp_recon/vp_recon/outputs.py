@@ -137,6 +137,7 @@ def summary(result: Any, extra: Optional[dict] = None) -> dict:
             "matching": r.matching, "matched_pairs": int(r.matched_pairs), "sparse_models": int(r.sparse_models),
             "sparse_mode": r.sparse_mode, "sparse_fallback": r.sparse_fallback or None,
             "control": r.control,
+            "mask": r.mask,
             "seconds": {k: float(v) for k, v in r.seconds.items()},
             **no_truth_metrics(r.images, r.mean_reprojection_error, r.mean_track_length, len(r.points), r.coverage,
                                r.centre_residual),

@@ -134,8 +134,9 @@ def reconstruct_views(views: object, config: Optional[ReconConfig] = None, workd
     """Reconstruct a capture set (:class:`vp_recon.flight.CapturedViews`: images, reported poses,
     one pinhole camera): the one path of rendered plans, flight folders and the fleet.
 
-    Masks: ``views.masks`` when given (the ideal capture's renderer masks), else from each image
-    alone (:func:`vp_recon.segment.image_mask`, by ``config.ground_used``). Sparse step
+    Masks: ``views.masks`` when given (the ideal capture's renderer masks), else from the images
+    alone: over soil by ``config.mask`` (:func:`vp_recon.segment.flight_masks`; the background model
+    learns outside the prior's box projected), the blue screen's colour key otherwise. Sparse step
     ``config.sparse_mode_used`` with the reported centres as pose priors (incremental, unless the
     capture is ideal); the sparse cloud is cropped to the prior's box (+ ``crop_margin``; without
     a prior: the box of its points on plant pixels) and silhouette-filtered, then dense stereo.
@@ -154,7 +155,7 @@ def reconstruct_views(views: object, config: Optional[ReconConfig] = None, workd
     from .dense import crop_to_box, dense_reconstruct, silhouette_filter
     from .metrics import coverage_of_prior
     from .pairs import select_pairs
-    from .segment import image_mask
+    from .segment import flight_masks, image_mask
     from .sparse import SparseError, sparse_reconstruct
 
     cfg = (config or ReconConfig()).validate()
@@ -162,7 +163,14 @@ def reconstruct_views(views: object, config: Optional[ReconConfig] = None, workd
     views.validate()
     images, reported, K = views.images, views.reported, views.K
     n = len(images)
-    masks = views.masks if views.masks is not None else [image_mask(im, cfg.ground_used) for im in images]
+    mask_choice = None
+    if views.masks is not None:
+        masks = views.masks
+    elif not cfg.ground_used:
+        masks = [image_mask(im, ground=False) for im in images]
+    else:
+        masks, mask_choice = flight_masks(images, cfg.mask, reported, K,
+                                          None if prior is None else crop_box(prior.points, cfg.crop_margin))
     fg = np.array([int(m.sum()) for m in masks])
     seeing = np.flatnonzero(fg >= cfg.min_foreground)
     if len(seeing) == 0:
@@ -253,7 +261,7 @@ def reconstruct_views(views: object, config: Optional[ReconConfig] = None, workd
         if prior is not None and len(points) else None
     return ViewsResult(points=points, colors=colors, source=source, sparse=sp, sparse_clean=clean, dense=dn,
                        seeing=seeing, matching=matching, mode=mode, t_pairs=t_pairs, coverage=coverage,
-                       seconds=seconds, control=control)
+                       seconds=seconds, control=control, mask=mask_choice)
 
 
 def reconstruct_realization(noisy_scene: object, k: int, cameras: ArrayLike, config: Optional[ReconConfig] = None,
@@ -335,6 +343,7 @@ def reconstruct_captured(noisy_scene: object, views: object, config: Optional[Re
         mean_reprojection_error=sp.mean_reprojection_error, coverage=vr.coverage, sparse_models=sp.models,
         centre_residual=sp.centre_residual, sparse_fallback=sp.fallback,
         control=vr.control.to_dict() if vr.control is not None else None,
+        mask=vr.mask.to_dict() if vr.mask is not None else None,
         reported=np.asarray(views.reported, dtype=np.float64),
         K=np.asarray(views.K, dtype=np.float64))
 

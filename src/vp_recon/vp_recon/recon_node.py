@@ -67,7 +67,8 @@ from vp_interfaces.msg import CameraPlan, ReconstructionScore, SceneDescription
 from vp_recon.config import MAX_CAMERAS, ReconConfig
 from vp_recon.errors import ReconError, check_plan_size, ensure_writable_dir
 from vp_recon.fleet_captures import IMAGE_TRANSPORTS, FleetCaptures
-from vp_recon.flight import FlightError, flown_views, join_views, locate_flown, write_flight
+from vp_scene.flight_poses import FlightError
+from vp_recon.flight import flown_views, join_views, locate_flown, write_flight
 from vp_recon.metrics import DEFAULT_FSCORE_THRESHOLD
 from vp_recon.outputs import contact_sheet, write_image, write_ply
 from vp_recon.pipeline import reconstruct_captured, reconstruct_plan

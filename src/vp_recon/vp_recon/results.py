@@ -59,6 +59,8 @@ class RealizationResult(Scores):
             model anchored on the reported poses, ``sparse_mode`` 'anchored'); '' otherwise.
         control: the registration on the flight's ground control
             (:meth:`vp_recon.gcp.Registration.to_dict`), None without control points.
+        mask: how the images were segmented (:meth:`vp_recon.segment.MaskChoice.to_dict`; None:
+            the renderer's masks or the blue screen's colour key).
         reported, K: the poses the drones reported ((N, 6) [c, v] or (N, 7) poses) and the
             intrinsics: with ``rendered``, the capture set (:meth:`captured_views`).
     """
@@ -91,6 +93,7 @@ class RealizationResult(Scores):
     centre_residual: float = math.nan
     sparse_fallback: str = ""
     control: Optional[dict] = None
+    mask: Optional[dict] = None
     reported: Optional[NDArray[np.float64]] = field(default=None, repr=False)
     K: Optional[NDArray[np.float64]] = field(default=None, repr=False)
 
@@ -173,6 +176,8 @@ class ViewsResult:
         seconds: wall time of ``sparse`` and ``dense``.
         control: the :class:`vp_recon.gcp.Registration` on the flight's ground control (None
             without control points).
+        mask: the :class:`vp_recon.segment.MaskChoice` of a flight segmented over soil (None: the
+            renderer's masks or the blue screen's colour key).
     """
 
     points: NDArray[np.float64]
@@ -188,3 +193,4 @@ class ViewsResult:
     coverage: object = None
     seconds: dict = field(default_factory=dict)
     control: object = None
+    mask: object = None
