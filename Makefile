@@ -46,7 +46,7 @@ setup:
 	@tools/setup.sh
 
 test: setup
-	@$(ENV) python -m pytest -q -p no:cacheprovider tests src/vp_scene/test src/vp_planner/test src/vp_recon/test
+	@$(ENV) python -m pytest -q -p no:cacheprovider --durations=20 tests src/vp_scene/test src/vp_planner/test src/vp_recon/test
 
 run: setup
 	@$(ENV) python tools/run_suite.py --scenario $(SCENE_ARG) --method $(METHOD) --cameras $(CAMERAS) \
