@@ -318,12 +318,19 @@ def test_scene_planner_recon_and_dispatcher_on_three_hosts(lab, ros_env, tmp_pat
                  "the next plan on the recon host", listener, planner)[0]
     redispatch = wait(lambda: answer(result["stamp"]), 30, "the dispatch of the next plan", dispatcher)[-1]
     assert redispatch["error_code"] == 0 and len(redispatch["entries"]) == 3, redispatch
+    # the heartbeat is reliable and in order: nothing sent after the link went down is delivered
+    # until the writer has resent what the reader missed (it learns of the gap from the writer's
+    # periodic HEARTBEAT), so the beats resume some seconds after the link, not with the next plan
+    # (CI of stop 43 looked at once and found none)
+    wait(lambda: [b for b in events(listener, "beat") if b["stamp"] > t_down], 30,
+         "the heartbeats sent during the link-down, after it came back", listener, talker)
     beats = events(listener, "beat")
     # a heartbeat sent after the link went down cannot arrive before it is up, unless the data
     # takes another path (shared memory): then taking the link down would prove nothing
     during = [b for b in beats if b["stamp"] > t_down and b["t"] < t_up]
     assert not during, f"{len(during)} heartbeats crossed while the link was down: the test link is not the path"
-    assert [b for b in beats if b["stamp"] > t_down], "no heartbeat sent during the link-down arrived afterwards"
+    held = [b for b in beats if t_down + 0.5 < b["stamp"] < t_up - 0.5]
+    assert held, "no heartbeat sent while the link was down arrived after it came back (resent from the history)"
     recovered = [b["t"] for b in beats if b["t"] >= t_up]
     assert recovered, "no heartbeat after the link came back"
 
