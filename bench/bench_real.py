@@ -142,12 +142,12 @@ def reconstruct(views, config, prior=None, reference=None) -> dict:
 def run(args: argparse.Namespace) -> dict:
     from vp_planner.optimizers import plan_views
     from vp_planner.request import PlanRequest
-    from vp_planner.reward_models import DEFAULT_REWARD_MODEL
+    from vp_planner.reward_models import DEFAULT_REWARD_MODEL, REWARD_MODELS, make_reward
     from vp_recon.cli import select_views
     from vp_recon.flight import read_flight
     from vp_recon.outputs import write_ply
     from vp_recon.pipeline import Prior, ReconConfig
-    from vp_scene.camera import poses_to_cameras
+    from vp_scene.camera import CameraModel, poses_to_cameras
     from vp_scene.ply import load_points
 
     scan = args.scan.resolve()
@@ -205,15 +205,16 @@ def run(args: argparse.Namespace) -> dict:
             plans.append({'n': n, 'method': method, 'selected': p['selected'], 'reward': p['reward'],
                           'planning_seconds': p['seconds']})
         rng = np.random.default_rng([args.seed, n])
-        from vp_planner.reward_models import make_reward
-        from vp_scene.camera import CameraModel
-
         reward = make_reward(DEFAULT_REWARD_MODEL, prior_points[None], fov, image=CameraModel(*size, fov))
         for j in range(args.random):
             sel = sorted(int(i) for i in rng.choice(len(names), n, replace=False))
             plans.append({'n': n, 'method': 'random subset', 'draw': j, 'selected': sel,
                           'reward': float(reward(cams[sel][None])[0])})
     gaps = wide_gaps(cams, prior_points, fov, size)
+    for model in REWARD_MODELS:  # every reward model's value of every plan (the variants of the Spearman bar)
+        score = make_reward(model, prior_points[None], fov, image=CameraModel(*size, fov))
+        for p in plans:
+            p.setdefault('rewards', {})[model] = float(score(cams[sorted(p['selected'])][None])[0])
     for p in plans:
         rec = subset_record(p['selected'], 'subset', prior, reference)
         p.update({k: rec.get(k) for k in ('registered', 'points', 'chamfer', 'shape', 'coverage_of_prior', 'error',
@@ -257,7 +258,9 @@ def analyse(plans: list, ns: list) -> dict:
                                                            [p.get('chamfer') for p in plans]),
            'spearman_reward_vs_minus_shape': spearman_of([p['reward'] for p in plans],
                                                          [p.get('shape') for p in plans]),
-           'plans': len(plans), 'failed': sum(1 for p in plans if p.get('error')), 'by_n': {}}
+           'plans': len(plans), 'failed': sum(1 for p in plans if p.get('error')), 'by_n': {},
+           'spearman_by_reward_model': {m: spearman_of([p['rewards'][m] for p in plans], [p.get('chamfer') for p in plans])
+                                        for m in (plans[0].get('rewards') or {}) if plans}}
     for n in ns:
         here = [p for p in plans if p['n'] == n]
         rand = [p for p in here if p['method'] == 'random subset']
@@ -307,6 +310,9 @@ def markdown(data: dict) -> str:
               + ', '.join(f'{n}: {num(a["by_n"][str(n)]["spearman"], 3)}' for n in data['ns'])
               + f'. Failed plans: {a["failed"]}. egp\'s Chamfer at most the evenly spaced plan\'s: '
               + ', '.join(f'N={n} {"yes" if b else "no" if b is not None else "-"}' for n, b in bars.items()) + '.']
+    if a.get('spearman_by_reward_model'):
+        lines += ['', 'Spearman against -Chamfer over the same plans of each reward model\'s value: '
+                  + ', '.join(f'{m} {num(v, 3)}' for m, v in a['spearman_by_reward_model'].items()) + '.']
     if data.get('wide_gaps'):
         lines += ['', f'The {data["reward_model"]} reward of evenly spaced plans (not reconstructed): '
                   + ', '.join(f'{k} views {num(v, 3)}' for k, v in data['wide_gaps'].items()) + '.']
