@@ -356,6 +356,11 @@ def real(data: dict) -> str:
     return markdown(data)
 
 
+def flights_check(data: dict) -> str:
+    from bench.flights_check import markdown
+    return markdown(data)
+
+
 def recon_stages_section(rel: str, title: str) -> str:
     data = load(rel)
     body = [[name.replace('_', ' '), s['capture'], '/'.join(map(str, s.get('registered_images') or [])),
@@ -496,6 +501,8 @@ CURRENT = [
     ('Fields: 3 planning seeds x 5 realizations', 'results/rerun/fields_combined/fields_combined.json',
      lambda rel, t: combined_section(rel, t, 'Fields')),
     ('Plan-quality study, realistic capture', 'results/plan_quality.json', plan_quality_section),
+    ('Real photographs', 'results/real/romi_real_plant.json', own_markdown(real)),
+    ('Plant masks', 'results/masks.json', own_markdown(masks)),
     ('Second sortie', 'results/bench_sorties.json', sorties_section),
     ('Coverage of the prior against the Chamfer', 'results/coverage_check.json', own_markdown(coverage)),
     ('Reconstruction stages', 'results/bench_recon.json', recon_stages_section),
