@@ -118,7 +118,8 @@ def bars(before: dict, after: dict) -> dict:
             if key.startswith('cell:') and key.endswith(f'/{m}') and before.get(key) and before[key]['map']:
                 cells[key[5:].split('/')[0]] = None if c['map'] is None else 1.0 - c['map'] / before[key]['map']
         out[m] = {'table1_cell_gains': cells,
-                  'cells_ok': bool(cells) and all(g is not None and g >= MIN_GAIN for g in cells.values()),'failed_fraction': a['failed_fraction'], 'failed_ok': a['failed_fraction'] <= MAX_FAILED,
+                  'cells_ok': bool(cells) and all(g is not None and g >= MIN_GAIN for g in cells.values()),
+                  'failed_fraction': a['failed_fraction'], 'failed_ok': a['failed_fraction'] <= MAX_FAILED,
                   'far_off': a['far_off'], 'far_off_ok': a['far_off'] == 0,
                   'share_median': a['share_median'],
                   'share_ok': a['share_median'] is not None and a['share_median'] <= MAX_SHARE,
