@@ -42,6 +42,8 @@ NS = (6, 8, 12)
 METHODS = ('egp', 'circle', 'arc', 'sa', 'random')
 #: views of the first pass (the prior)
 PRIOR_VIEWS = 12
+#: the label of a plan drawn at random (not a planning method: none of the registry's entries)
+RANDOM_SUBSET = 'random subset'
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -208,7 +210,7 @@ def run(args: argparse.Namespace) -> dict:
         reward = make_reward(DEFAULT_REWARD_MODEL, prior_points[None], fov, image=CameraModel(*size, fov))
         for j in range(args.random):
             sel = sorted(int(i) for i in rng.choice(len(names), n, replace=False))
-            plans.append({'n': n, 'method': 'random subset', 'draw': j, 'selected': sel,
+            plans.append({'n': n, 'method': RANDOM_SUBSET, 'draw': j, 'selected': sel,
                           'reward': float(reward(cams[sel][None])[0])})
     gaps = wide_gaps(cams, prior_points, fov, size)
     for model in REWARD_MODELS:  # every reward model's value of every plan (the variants of the Spearman bar)
@@ -263,8 +265,8 @@ def analyse(plans: list, ns: list) -> dict:
                                         for m in (plans[0].get('rewards') or {}) if plans}}
     for n in ns:
         here = [p for p in plans if p['n'] == n]
-        rand = [p for p in here if p['method'] == 'random subset']
-        by = {p['method']: p for p in here if p['method'] != 'random subset'}
+        rand = [p for p in here if p['method'] == RANDOM_SUBSET]
+        by = {p['method']: p for p in here if p['method'] != RANDOM_SUBSET}
         egp, circle = by.get('egp'), by.get('circle')
         bar = None
         if egp is not None and circle is not None:
@@ -294,7 +296,7 @@ def markdown(data: dict) -> str:
              '(shape); a failure is counted with its reason.', '']
     body = []
     for n in data['ns']:
-        for p in [p for p in data['plans'] if p['n'] == n and p['method'] != 'random subset']:
+        for p in [p for p in data['plans'] if p['n'] == n and p['method'] != RANDOM_SUBSET]:
             body.append([str(n), p['method'], num(p['reward'], 3), p.get('error') or f'{p["registered"]} / {n}',
                          num(p.get('chamfer')), num(p.get('shape'))])
         r = a['by_n'][str(n)]['random']
