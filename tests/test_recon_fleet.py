@@ -101,7 +101,7 @@ def test_fleet_images_reconstruct_as_the_render_source_and_a_silent_drone_is_nam
     assert client.spin_until(lambda: aggregates(scores), TIMEOUT), recon.output()[-4000:]
     agg = aggregates(scores)[0]
     assert agg.error_code == Score.CAPTURE_MISSING and "d9" in agg.error_msg and "d0" not in agg.error_msg
-    assert "capture of d0 stamped 1000000000 ns is older than capture 0 of this plan: ignored" in recon.output()
+    assert recon.wait_for_output("capture of d0 stamped 1000000000 ns is older than capture 0 of this plan: ignored", 20), recon.output()[-3000:]
     assert recon.poll() is None
 
 
@@ -151,9 +151,9 @@ def test_compressed_images_on_a_dask_cluster_give_the_raw_in_process_reconstruct
     agg = aggregates(scores)[0]
     assert agg.error_code == Score.NONE, agg.error_msg
     assert agg.realizations == 2 and agg.num_images == 4
-    assert "realizations in parallel on Dask (local" in recon.output()
+    assert recon.wait_for_output("realizations in parallel on Dask (local", 20), recon.output()[-3000:]
     for d in drones:
-        assert f"subscribed /{d}/camera/image_raw/compressed" in recon.output()
+        assert recon.wait_for_output(f"subscribed /{d}/camera/image_raw/compressed", 20), recon.output()[-3000:]
         assert "recon" in [e.node_name for e in client.node.get_subscriptions_info_by_topic(
             f"/{d}/camera/image_raw/compressed")]
         assert "recon" not in [e.node_name for e in client.node.get_subscriptions_info_by_topic(
@@ -205,7 +205,7 @@ def test_a_second_fleet_sortie_reconstructs_with_the_first_sorties_images(ros_en
     agg = aggregates(scores)[0]
     assert agg.error_code == Score.NONE, agg.error_msg
     assert agg.realizations == 2 and agg.num_images == 6
-    assert "with the 4 images of the cameras already flown" in recon.output()
+    assert recon.wait_for_output("with the 4 images of the cameras already flown", 20), recon.output()[-3000:]
     scene = scene_of_description(descriptions[-1])
     for s in (s for s in scores if s.realization != Score.AGGREGATE):
         ref = reconstruct_realization(scene, s.realization, np.vstack([cams, new]),
