@@ -495,8 +495,12 @@ def flights_section(rel: str, title: str) -> str:
 
 #: (section title, results file, renderer), in the order of docs/results.md
 CURRENT = [
-    ('Table I, realistic capture: 3 planning seeds x 5 realizations', 'results/rerun/table1_combined/table1_combined.json',
-     lambda rel, t: combined_section(rel, t, 'Table I')),
+    ('Table I, realistic capture, the anchored model and ground markers: 3 planning seeds x 5 realizations',
+     'results/rerun/issue40_table1_combined/table1_combined.json', lambda rel, t: combined_section(rel, t, 'Table I')),
+    ('Flights that reconstruct: Table I before and after the anchored model and ground markers',
+     'results/rerun/issue40_flights/flights_check.json', own_markdown(flights_check)),
+    ('Table I, realistic capture before the anchored model: 3 planning seeds x 5 realizations',
+     'results/rerun/table1_combined/table1_combined.json', lambda rel, t: combined_section(rel, t, 'Table I')),
     ('Table I, seed 0: the plans, their rewards, paired differences', 'results/table1.json', table1_seed0_section),
     ('Fields: 3 planning seeds x 5 realizations', 'results/rerun/fields_combined/fields_combined.json',
      lambda rel, t: combined_section(rel, t, 'Fields')),
