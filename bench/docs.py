@@ -511,6 +511,8 @@ CURRENT = [
     ('Coverage of the prior against the Chamfer', 'results/coverage_check.json', own_markdown(coverage)),
     ('Reconstruction stages', 'results/bench_recon.json', recon_stages_section),
     ('Cheaper reconstruction settings', 'results/bench_recon_speed.json', own_markdown(recon_speed)),
+    ('make run with the anchored model and ground markers', 'results/rerun/issue40_make_run/bench_make_run.json',
+     own_markdown(make_run)),
     ('make run: wall time per setting', 'results/bench_make_run.json', own_markdown(make_run)),
     ('Planners: final reward', 'results/bench_planners.json', planners_section),
     ('Cost of a reward evaluation', 'results/bench_reward.json', reward_cost_section),
