@@ -16,6 +16,7 @@ stale. Spreads are named: "sample std (n-1)" where this script computes them fro
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import math
 import shlex
@@ -322,43 +323,14 @@ def plan_quality_section(rel: str, title: str) -> str:
 
 # ---------------------------------------------------------------- smaller benchmarks
 
-def own_markdown(fn: Callable[[dict], str]) -> Callable[[str, str], str]:
-    """A section from a benchmark's own markdown function of its JSON."""
+def own_markdown(module: str) -> Callable[[str, str], str]:
+    """A section from a benchmark's own ``markdown(data)`` of its JSON (``module``: the benchmark,
+    imported when the section is rendered)."""
     def render(rel: str, title: str) -> str:
         data = load(rel)
-        md = demote(fn(data), 2).split('\n', 1)[1].lstrip()
+        md = demote(importlib.import_module(module).markdown(data), 2).split('\n', 1)[1].lstrip()
         return f'## {title}\n\n{md}\n{source(rel, data)}\n'
     return render
-
-
-def recon_speed(data: dict) -> str:
-    from bench.bench_recon_speed import markdown
-    return markdown(data)
-
-
-def make_run(data: dict) -> str:
-    from bench.bench_make_run import markdown
-    return markdown(data)
-
-
-def coverage(data: dict) -> str:
-    from bench.coverage_check import markdown
-    return markdown(data)
-
-
-def masks(data: dict) -> str:
-    from bench.bench_masks import markdown
-    return markdown(data)
-
-
-def real(data: dict) -> str:
-    from bench.bench_real import markdown
-    return markdown(data)
-
-
-def flights_check(data: dict) -> str:
-    from bench.flights_check import markdown
-    return markdown(data)
 
 
 def recon_stages_section(rel: str, title: str) -> str:
@@ -498,22 +470,22 @@ CURRENT = [
     ('Table I, realistic capture, the anchored model and ground markers: 3 planning seeds x 5 realizations',
      'results/rerun/issue40_table1_combined/table1_combined.json', lambda rel, t: combined_section(rel, t, 'Table I')),
     ('Flights that reconstruct: Table I before and after the anchored model and ground markers',
-     'results/rerun/issue40_flights/flights_check.json', own_markdown(flights_check)),
+     'results/rerun/issue40_flights/flights_check.json', own_markdown('bench.flights_check')),
     ('Table I, realistic capture before the anchored model: 3 planning seeds x 5 realizations',
      'results/rerun/table1_combined/table1_combined.json', lambda rel, t: combined_section(rel, t, 'Table I')),
     ('Table I, seed 0: the plans, their rewards, paired differences', 'results/table1.json', table1_seed0_section),
     ('Fields: 3 planning seeds x 5 realizations', 'results/rerun/fields_combined/fields_combined.json',
      lambda rel, t: combined_section(rel, t, 'Fields')),
     ('Plan-quality study, realistic capture', 'results/plan_quality.json', plan_quality_section),
-    ('Real photographs', 'results/real/romi_real_plant.json', own_markdown(real)),
-    ('Plant masks', 'results/masks.json', own_markdown(masks)),
+    ('Real photographs', 'results/real/romi_real_plant.json', own_markdown('bench.bench_real')),
+    ('Plant masks', 'results/masks.json', own_markdown('bench.bench_masks')),
     ('Second sortie', 'results/bench_sorties.json', sorties_section),
-    ('Coverage of the prior against the Chamfer', 'results/coverage_check.json', own_markdown(coverage)),
+    ('Coverage of the prior against the Chamfer', 'results/coverage_check.json', own_markdown('bench.coverage_check')),
     ('Reconstruction stages', 'results/bench_recon.json', recon_stages_section),
-    ('Cheaper reconstruction settings', 'results/bench_recon_speed.json', own_markdown(recon_speed)),
+    ('Cheaper reconstruction settings', 'results/bench_recon_speed.json', own_markdown('bench.bench_recon_speed')),
     ('make run with the anchored model and ground markers', 'results/rerun/issue40_make_run/bench_make_run.json',
-     own_markdown(make_run)),
-    ('make run: wall time per setting', 'results/bench_make_run.json', own_markdown(make_run)),
+     own_markdown('bench.bench_make_run')),
+    ('make run: wall time per setting', 'results/bench_make_run.json', own_markdown('bench.bench_make_run')),
     ('Planners: final reward', 'results/bench_planners.json', planners_section),
     ('Cost of a reward evaluation', 'results/bench_reward.json', reward_cost_section),
     ('The benchmarks on a Dask cluster', 'results/bench_cluster.json', cluster_section),
