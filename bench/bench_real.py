@@ -106,13 +106,9 @@ def clean_prior(points: np.ndarray, colors: Optional[np.ndarray] = None, k: int 
 
 def spearman_of(rewards: list, chamfers: list) -> Optional[float]:
     """Spearman's rho of the rewards against -Chamfer (a failure, None: Chamfer inf, ranked last)."""
-    from scipy.stats import spearmanr
+    from bench.stats import spearman
 
-    x = np.asarray(rewards, float)
-    y = -np.array([math.inf if c is None else c for c in chamfers], float)
-    if len(x) < 3 or len(set(x.tolist())) < 2 or len(set(y.tolist())) < 2:
-        return None
-    return float(spearmanr(x, y).statistic)
+    return spearman([float(r) for r in rewards], [-(math.inf if c is None else float(c)) for c in chamfers])
 
 
 def reconstruct(views, config, prior=None, reference=None) -> dict:

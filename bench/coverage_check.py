@@ -26,6 +26,7 @@ import numpy as np
 
 if not __package__:  # python bench/coverage_check.py: as python -m bench.coverage_check (bench/_script.py)
     import _script  # noqa: F401
+from bench.stats import spearman  # noqa: E402
 from bench.common import (ROOT, SCENARIOS, default_models, machine, models_tag, scene,  # noqa: E402
                           split_realizations, write_report)
 
@@ -57,14 +58,6 @@ def records(results: Path, models: str, capture: str) -> dict:
 
 def scenario_of(stem: str) -> str:
     return next(s for s in SCENARIOS if f'-{s}-' in stem)
-
-
-def spearman(x: list, y: list) -> float | None:
-    from scipy.stats import spearmanr
-
-    if len(x) < 3 or len(set(x)) < 2 or len(set(y)) < 2:
-        return None
-    return float(spearmanr(x, y).statistic)
 
 
 def run(args) -> dict:

@@ -98,3 +98,12 @@ def describe_difference(d: dict) -> str:
     interval = f' [{d["low"]:+.3f}, {d["high"]:+.3f}]' if d['n'] > 1 else ''  # one pair: no interval
     return (f'{d["mean"]:+.3f}{interval} (n={d["n"]}'
             + (', ' + ', '.join(fails) if fails else '') + ')')
+
+
+def spearman(x: Sequence[float], y: Sequence[float]) -> Optional[float]:
+    """Spearman's rho of x and y (scipy); None for fewer than 3 pairs or a constant side."""
+    from scipy.stats import spearmanr
+
+    if len(x) < 3 or len(set(x)) < 2 or len(set(y)) < 2:
+        return None
+    return float(spearmanr(x, y).statistic)
