@@ -84,23 +84,20 @@ def first_pass_views(cameras: np.ndarray, n: int = PRIOR_VIEWS) -> list[int]:
     return [int(i) for i in evenly_spaced(space, 1)[0]]
 
 
-def clean_prior(points: np.ndarray, colors: Optional[np.ndarray] = None, k: int = 8) -> np.ndarray:
+def clean_prior(points: np.ndarray, k: int = 8) -> np.ndarray:
     """The indices of the largest connected part of a cloud: points joined when closer than 4
     times the median distance to their ``k``-th nearest neighbour (a first pass keeps specks of
-    background, a cloth fold, a pot's rim, apart from the plant). Why our own: a connected
-    components pass over scipy's KD-tree pairs (no point-cloud library is a dependency)."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
+    background, a cloth fold, a pot's rim, apart from the plant): Open3D's DBSCAN with one point a
+    core (its clusters are the connected parts of that radius graph)."""
+    import open3d as o3d
     from scipy.spatial import cKDTree
 
     if len(points) < k + 2:
         return np.arange(len(points))
-    tree = cKDTree(points)
-    d, _ = tree.query(points, k=k + 1)
+    d, _ = cKDTree(points).query(points, k=k + 1)
     radius = 4.0 * float(np.median(d[:, -1]))
-    pairs = tree.query_pairs(radius, output_type='ndarray')
-    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(points),) * 2)
-    _, labels = connected_components(graph, directed=False)
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, dtype=np.float64)))
+    labels = np.asarray(cloud.cluster_dbscan(eps=radius, min_points=1))
     return np.flatnonzero(labels == np.argmax(np.bincount(labels)))
 
 
