@@ -163,14 +163,14 @@ def reconstruct_views(views: object, config: Optional[ReconConfig] = None, workd
     views.validate()
     images, reported, K = views.images, views.reported, views.K
     n = len(images)
+    prior_box = None if prior is None else crop_box(prior.points, cfg.crop_margin)  # the masks' and the crop's
     mask_choice = None
     if views.masks is not None:
         masks = views.masks
     elif not cfg.ground_used:
         masks = [image_mask(im, ground=False) for im in images]
     else:
-        masks, mask_choice = flight_masks(images, cfg.mask, reported, K,
-                                          None if prior is None else crop_box(prior.points, cfg.crop_margin))
+        masks, mask_choice = flight_masks(images, cfg.mask, reported, K, prior_box)
     fg = np.array([int(m.sum()) for m in masks])
     seeing = np.flatnonzero(fg >= cfg.min_foreground)
     if len(seeing) == 0:
@@ -234,7 +234,7 @@ def reconstruct_views(views: object, config: Optional[ReconConfig] = None, workd
         geo = reported if capture.ideal or mode == "known_poses" else \
             np.where(np.isfinite(sp.cameras), sp.cameras, as_poses(reported))
         if prior is not None:
-            box = crop_box(prior.points, cfg.crop_margin)
+            box = prior_box
             keep = crop_to_box(sp.points, box[0], box[1])
             keep[keep] = silhouette_filter(sp.points[keep], geo, K, masks)
         else:
