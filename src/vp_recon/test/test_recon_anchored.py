@@ -82,6 +82,33 @@ def test_a_structure_from_motion_that_fails_falls_back_to_the_anchored_model(flo
                            prior_centres=views.reported[:, :3], fallback=None)
 
 
+def test_an_anchored_adjustment_that_drifts_keeps_the_points_at_the_reported_poses(flown, tmp_path,
+                                                                                    monkeypatch) -> None:
+    """Choose, don't fail, one step further: when the anchored model's adjustment slides a camera
+    further from its report than the self-check allows (here: one camera pushed 1 m after the
+    last registration), the tracks triangulated at the reported poses are kept, the drift named."""
+    cfg, views = flown
+    register_parts = sparse_mod._register_parts
+    calls = []
+
+    def drift(pycolmap, rec, *args, **kwargs):  # the last registration (after the last adjustment) slides
+        register_parts(pycolmap, rec, *args, **kwargs)
+        calls.append(1)
+        if len(calls) == sparse_mod.ANCHOR_ROUNDS + 1:
+            im = rec.images[min(rec.images)]
+            pose = im.cam_from_world()
+            im.frame.rig_from_world = pycolmap.Rigid3d(pose.rotation, (np.asarray(pose.translation).reshape(3)
+                                                                       + [1.0, 0.0, 0.0]).reshape(3, 1))
+
+    monkeypatch.setattr(sparse_mod, "_register_parts", drift)
+    sp = sparse_reconstruct(views.images, views.reported, views.K, tmp_path, mode="anchored", num_threads=1)
+    assert sp.mode == "anchored" and "kept the points triangulated at the reported poses" in sp.fallback, sp.fallback
+    assert "from the reported ones (more than 0.20 m" in sp.fallback and sp.centre_residual == 0.0
+    kept = np.isfinite(sp.cameras[:, 0])
+    assert kept.sum() >= 3 and len(sp.points) > 100
+    np.testing.assert_allclose(sp.cameras[kept, :3], views.reported[kept, :3])
+
+
 def test_ground_markers_are_found_and_place_the_model(scene, flown) -> None:
     """The realistic capture's 4 markers are rendered, found in the images, triangulated, and the
     reconstruction is placed on them and the reported centres: the map Chamfer moves towards the

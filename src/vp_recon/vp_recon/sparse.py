@@ -38,7 +38,11 @@ Pipeline (Schönberger & Frahm, "Structure-from-Motion Revisited", CVPR 2016):
    structure from motion fails (no model, fewer than 3 images registered, a model its poses
    cannot place, or the self-check), the anchored model of the same matches is made instead
    and the SfM's reason is kept (``SparseResult.fallback``); only when that fails too is the
-   sparse step a failure (SparseError with both reasons).
+   sparse step a failure (SparseError with both reasons). The anchored model itself does not
+   fail when its adjustment drifts (a weak model of a few dozen points, some false, lets the
+   cameras slide more than the self-check's bound from the reports): the points triangulated at
+   the reported poses are kept instead, nothing adjusted (:func:`_reported_pose_model`), and
+   the drift is the ``fallback`` reason.
 
 The 3D points come back in the world frame.
 """
@@ -329,8 +333,13 @@ def _sparse(pycolmap: object, images: Sequence[NDArray[np.uint8]], cameras: NDAr
                 why = str(exc)
         if model is None:  # anchored, asked for or in place of a structure from motion that failed
             try:
-                model = _anchored_model(pycolmap, db_path, img_dir, out_dir, options, db_cameras, db_images, names,
-                                        cams, anchor, attitudes, max_residual, sigmas)
+                try:
+                    model = _anchored_model(pycolmap, db_path, img_dir, out_dir, options, db_cameras, db_images,
+                                            names, cams, anchor, attitudes, max_residual, sigmas)
+                except _AdjustmentDrifted as drift:  # choose, don't fail: the points at the reported poses
+                    model = _reported_pose_model(pycolmap, db_path, img_dir, out_dir, options, db_cameras, db_images,
+                                                 names, cams)
+                    why = (f"{why}; " if why else "") + f"{drift}: kept the points triangulated at the reported poses"
             except SparseError as exc:
                 raise SparseError(f"{why}; the model anchored on the reported poses failed too: {exc}"
                                   if why else str(exc)) from None
@@ -390,11 +399,7 @@ def _anchored_model(pycolmap: object, db_path: Path, img_dir: Path, out_dir: Pat
     the reports put it and the registration (centres and attitudes) restores it: on the same arc
     the cameras end 0.13-0.31 degrees and 1.5-2.1 cm from the true poses, as the incremental
     mapper's model does. An image that observes no point is not registered (NaN row)."""
-    loose = pycolmap.IncrementalPipelineOptions(options.todict())
-    for name in ("merge_max_reproj_error", "complete_max_reproj_error"):
-        setattr(loose.triangulation, name, ANCHOR_REPROJECTION_PX)
-    loose.triangulation.create_max_angle_error = loose.triangulation.continue_max_angle_error = ANCHOR_ANGLE_DEG
-    loose.mapper.filter_max_reproj_error = ANCHOR_REPROJECTION_PX
+    loose = _loose(pycolmap, options)
     ba = pycolmap.BundleAdjustmentOptions()
     ba.refine_focal_length = ba.refine_principal_point = ba.refine_extra_params = False
     ba.ceres.loss_function_type = pycolmap.LossFunctionType.CAUCHY
@@ -422,10 +427,55 @@ def _anchored_model(pycolmap: object, db_path: Path, img_dir: Path, out_dir: Pat
     kept = np.isfinite(est[:, 0])
     residual = float(np.sqrt(np.mean(np.sum((est[kept, :3] - anchor[kept]) ** 2, axis=1))))
     if not residual <= max_residual:
-        raise SparseError(f"the anchored model's camera centres lie {residual:.2f} m (RMS) from the reported ones "
-                          f"(more than {max_residual:.2f} m)")
+        raise _AdjustmentDrifted(f"the adjusted model's camera centres lay {residual:.2f} m (RMS) from the reported "
+                                 f"ones (more than {max_residual:.2f} m; {len(xyz)} points)")
     return MergedModels(xyz, rgb, track, est, int(kept.sum()), float(rec.compute_mean_reprojection_error()), 1,
                         residual)
+
+
+def _loose(pycolmap: object, options: object) -> object:
+    """``options`` with the anchored model's loose triangulation thresholds
+    (:data:`ANCHOR_REPROJECTION_PX`, :data:`ANCHOR_ANGLE_DEG`)."""
+    loose = pycolmap.IncrementalPipelineOptions(options.todict())
+    for name in ("merge_max_reproj_error", "complete_max_reproj_error"):
+        setattr(loose.triangulation, name, ANCHOR_REPROJECTION_PX)
+    loose.triangulation.create_max_angle_error = loose.triangulation.continue_max_angle_error = ANCHOR_ANGLE_DEG
+    loose.mapper.filter_max_reproj_error = ANCHOR_REPROJECTION_PX
+    return loose
+
+
+class _AdjustmentDrifted(SparseError):
+    """The anchored model's adjustment took the cameras away from the reported poses (a weak model:
+    a few dozen points, some of them false tracks, let the poses slide); :func:`sparse_reconstruct`
+    then keeps :func:`_reported_pose_model`."""
+
+
+def _reported_pose_model(pycolmap: object, db_path: Path, img_dir: Path, out_dir: Path, options: object,
+                         db_cameras: list, db_images: dict, names: Sequence[str],
+                         cams: NDArray[np.float64]) -> "MergedModels":
+    """The anchored model's last resort (module docstring, 6): the tracks triangulated at the
+    reported poses with the loose thresholds of its first step, nothing adjusted; consistent with
+    the reports by construction (centre residual 0), as accurate as they are. Measured on the
+    realistic plan-quality study (2026-11-28, realization 0): every one of its 10 failures in 152
+    plans was this drift (0.21-1.98 m), all of plans whose cameras share few points (wide arcs,
+    circles, random plans); three of them kept this way scored Chamfer x100 12.6, 25.2 and 49.5
+    (shape 12.0, 25.2, 44.7): poor models, but where the reports put them, and said so.
+    SparseError when no track triangulates."""
+    rec = _known_pose_model(pycolmap, db_cameras, db_images, names, cams)
+    rec = pycolmap.triangulate_points(rec, db_path, img_dir, out_dir, clear_points=True,
+                                      options=_loose(pycolmap, options))
+    if len(rec.points3D) == 0:
+        raise SparseError(f"no track triangulates at the reported poses: 0 of {len(names)} images registered (the "
+                          "matched images see no common point from far enough apart)")
+    xyz, rgb, track = _read_points(rec)
+    est = np.full((len(names), 7), np.nan)
+    poses = as_poses(cams)
+    idx = {n: i for i, n in enumerate(names)}
+    for im in rec.images.values():
+        if im.num_points3D > 0:
+            est[idx[im.name]] = poses[idx[im.name]]
+    return MergedModels(xyz, rgb, track, est, int(np.isfinite(est[:, 0]).sum()),
+                        float(rec.compute_mean_reprojection_error()), 1, 0.0)
 
 
 def _adjust(pycolmap: object, rec: object, options: object) -> None:
