@@ -276,7 +276,15 @@ def plan_quality_section(rel: str, title: str) -> str:
             models = list(next(iter(check.values())))
             head = ['model'] + [f'{s} check (design)' for s in check]
             body = [[m] + [f'{num(check[s].get(m))} ({num(design[s].get(m))})' for s in check] for m in models]
-            lines += [f'Spearman rho of reward against -Chamfer, `{vname}`, check half (design half):', '']
+            caption = f'Spearman rho of reward against -Chamfer, `{vname}`, check half (design half)'
+            auc, auc_d = v.get('auc_check'), v.get('auc_design')
+            if auc:  # the failures' separation (ROC AUC), beside each scenario's rho
+                head += [f'{s} failed: AUC check (design)' for s in auc]
+                body = [row + [f'{num(auc[s].get(m))} ({num(auc_d[s].get(m))})' for s in auc]
+                        for row, m in zip(body, models)]
+                caption += ('; AUC: how well the reward tells the plans that failed from those that reconstructed '
+                            '(ROC AUC, 1 perfect, 0.5 chance; - where no plan of the half failed)')
+            lines += [caption + ':', '']
         else:
             sp = v.get('spearman') or {}
             models = list(next(iter(sp.values()))) if sp else []

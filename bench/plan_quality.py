@@ -310,6 +310,29 @@ def spearman_halves(ids: list[str], rewards: dict, chamfer: np.ndarray, half: di
     return out
 
 
+def auc_halves(ids: list[str], rewards: dict, chamfer: np.ndarray, half: dict[str, str]) -> dict:
+    """{'design': {model: AUC}, 'check': {model: AUC}}: how well each reward separates the plans
+    that failed (Chamfer inf) from those that reconstructed (:func:`roc_auc`), over the recorded
+    plans of each half (issue 42's bar: 0.9 on the check half)."""
+    out = {}
+    for name in ('design', 'check'):
+        sel = np.array([half.get(i) == name for i in ids], dtype=bool) & ~np.isnan(chamfer)
+        out[name] = {m: roc_auc(np.asarray(r)[sel], np.isinf(chamfer[sel])) for m, r in rewards.items()}
+    return out
+
+
+def roc_auc(reward, failed) -> float:
+    """ROC AUC of ``reward`` as a score of reconstructing: the probability that a plan that
+    reconstructed has a higher reward than one that failed, ties counted half, i.e. Mann-Whitney's
+    U / (n_reconstructed n_failed) (scipy); NaN when either group is empty."""
+    from scipy.stats import mannwhitneyu
+
+    r, f = np.asarray(reward, dtype=float), np.asarray(failed, dtype=bool)
+    if f.all() or not f.any():
+        return float('nan')
+    return float(mannwhitneyu(r[~f], r[f]).statistic / ((~f).sum() * f.sum()))
+
+
 def realization_chamfer(record: dict, key: str = 'chamfer') -> float:
     """``key`` of one realization's record; inf when it failed (an error or no value)."""
     v = record.get(key)
@@ -412,6 +435,9 @@ def analyze(args) -> dict:
                                          ch, half)
                 vres.setdefault('spearman_design', {})[s] = halves['design']
                 vres.setdefault('spearman_check', {})[s] = halves['check']
+                aucs = auc_halves([p['id'] for p in plans], {m: r['reward'] for m, r in rewards.items()}, ch, half)
+                vres.setdefault('auc_design', {})[s] = aucs['design']
+                vres.setdefault('auc_check', {})[s] = aucs['check']
                 vres.setdefault('split', {})[s] = half
                 vres['spearman'][s] = {m: spearman(r['reward'], -ch) for m, r in rewards.items()}
                 vres.setdefault('reliability', {})[s] = realization_agreement(plans, key)
@@ -433,7 +459,8 @@ def analyze(args) -> dict:
         mv = result['variants'][main_v]
         result['plans'], result['spearman'] = mv['plans'], mv['spearman']
         result['spearman_reconstructed'], result['failed'] = mv['spearman_reconstructed'], mv['failed']
-        for key in ('counts', 'spearman_design', 'spearman_check', 'split', 'reliability', 'realizations'):
+        for key in ('counts', 'spearman_design', 'spearman_check', 'auc_design', 'auc_check', 'split', 'reliability',
+                    'realizations'):
             result[key] = mv.get(key, {})
         result['split_seed'] = args.split_seed
     out = Path(args.out)
@@ -508,7 +535,8 @@ def check_from_records(args) -> dict:
     if main_v not in result.get('variants', {}):
         raise SystemExit(f'{path}: no variant {main_v} to split')
     records = result['variants'][main_v]['per_plan']
-    result.update(counts={}, spearman_design={}, spearman_check={}, split={}, split_seed=args.split_seed)
+    result.update(counts={}, spearman_design={}, spearman_check={}, auc_design={}, auc_check={}, split={},
+                  split_seed=args.split_seed)
     for s in args.scenarios:
         every = plans_of(s, args.models)
         by_id = {r['id']: r for r in records.get(s, [])}
@@ -522,6 +550,8 @@ def check_from_records(args) -> dict:
         rewards = {m: [r['reward'][m] for r in recorded] for m in recorded[0]['reward']} if recorded else {}
         halves = spearman_halves([r['id'] for r in recorded], rewards, ch, half)
         result['spearman_design'][s], result['spearman_check'][s] = halves['design'], halves['check']
+        aucs = auc_halves([r['id'] for r in recorded], rewards, ch, half)
+        result['auc_design'][s], result['auc_check'][s] = aucs['design'], aucs['check']
         result['split'][s] = half
         print(f'{s}: {result["counts"][s]}')
         for m in rewards:
@@ -539,8 +569,10 @@ def print_table(result: dict) -> None:
             if rel:
                 print(f'  realization {rel["realizations"][0]} vs {rel["realizations"][1]}: rho {rel["rho_between"]:+.3f} '
                       f'(noise ceiling of the mean ~{rel["ceiling_mean"]:.2f}, n {rel["n"]})')
+            check, auc = v.get('spearman_check', {}).get(s, {}), v.get('auc_check', {}).get(s, {})
             for m, rho in sorted(rhos.items(), key=lambda kv: -np.nan_to_num(kv[1], nan=-9)):
                 print(f'  {m:40s} rho {rho:+.3f}   reconstructed {v["spearman_reconstructed"][s][m]:+.3f}   '
+                      f'check {check.get(m, float("nan")):+.3f}   check AUC {auc.get(m, float("nan")):.3f}   '
                       f'{result["ms_per_plan"].get(s, {}).get(m, float("nan")):.1f} ms/plan')
 
 

@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from bench.plan_quality import realization_agreement, spearman_halves, split_halves, study_counts
+from bench.plan_quality import auc_halves, realization_agreement, roc_auc, spearman_halves, split_halves, \
+    study_counts
 
 
 def _plans() -> list[dict]:
@@ -41,6 +42,21 @@ def test_spearman_per_half_ranks_a_failure_last_and_uses_only_its_half():
     rho = spearman_halves(ids, {"m": reward}, chamfer, half)
     assert rho["check"]["m"] == pytest.approx(1.0)
     assert rho["design"]["m"] == pytest.approx(-0.8)   # d = (3, 0, 0, -3): 1 - 6 * 18 / 60
+
+
+def test_auc_separates_the_failed_plans_per_half():
+    """ROC AUC (Mann-Whitney U / (n1 n0)): 1 when every reconstructed plan outranks every failed
+    one, ties half, NaN when a half has no failed plan (or only failed ones); skipped plans
+    (Chamfer NaN) are left out."""
+    assert roc_auc([0.9, 0.8, 0.1], [False, False, True]) == 1.0
+    assert roc_auc([0.1, 0.8, 0.9], [False, False, True]) == 0.0
+    assert roc_auc([0.5, 0.5, 0.9], [False, True, False]) == 0.75         # one tie, one win
+    assert math.isnan(roc_auc([0.5, 0.6], [False, False])) and math.isnan(roc_auc([0.5], [True]))
+    ids = [f"p{i}" for i in range(6)]
+    half = {i: ("design" if n < 3 else "check") for n, i in enumerate(ids)}
+    chamfer = np.array([0.01, math.inf, 0.02, 0.03, math.inf, math.nan])
+    auc = auc_halves(ids, {"m": [0.9, 0.1, 0.8, 0.2, 0.7, 0.0]}, chamfer, half)
+    assert auc["design"]["m"] == 1.0 and auc["check"]["m"] == 0.0          # check: p5 skipped, p4 failed above p3
 
 
 def test_check_reads_the_main_variant_of_the_capture(tmp_path):
