@@ -66,28 +66,16 @@ def test_the_anchored_model_stays_on_the_reported_poses_and_corrects_their_attit
 
 def test_a_structure_from_motion_that_fails_falls_back_to_the_anchored_model(flown, tmp_path, monkeypatch) -> None:
     """Choose, don't fail: the incremental mode keeps the SfM's reason and makes the anchored model
-    of the same matches; with ``fallback=None`` the SfM's failure is the sparse step's."""
+    of the same matches; with ``fallback=None`` the SfM's failure is the sparse step's. One step
+    further: when the anchored model's adjustment then slides a camera further from its report
+    than the self-check allows (here: one camera pushed 1 m after the last registration), the
+    tracks triangulated at the reported poses are kept, the slide named too."""
     cfg, views = flown
 
     def no_model(*args, **kwargs):
         raise SparseError("the model of 4 registered images is inconsistent: its camera centres lie 0.42 m (RMS) "
                           "from the reported ones")
 
-    monkeypatch.setattr(sparse_mod, "_incremental_model", no_model)
-    sp = sparse_reconstruct(views.images, views.reported, views.K, tmp_path / "a", mode="incremental", num_threads=1,
-                            prior_centres=views.reported[:, :3])
-    assert sp.mode == "anchored" and sp.registered == 4 and "0.42 m" in sp.fallback
-    with pytest.raises(SparseError, match="0.42 m"):
-        sparse_reconstruct(views.images, views.reported, views.K, tmp_path / "b", mode="incremental", num_threads=1,
-                           prior_centres=views.reported[:, :3], fallback=None)
-
-
-def test_an_anchored_adjustment_that_drifts_keeps_the_points_at_the_reported_poses(flown, tmp_path,
-                                                                                    monkeypatch) -> None:
-    """Choose, don't fail, one step further: when the anchored model's adjustment slides a camera
-    further from its report than the self-check allows (here: one camera pushed 1 m after the
-    last registration), the tracks triangulated at the reported poses are kept, the drift named."""
-    cfg, views = flown
     register_parts = sparse_mod._register_parts
     calls = []
 
@@ -100,13 +88,19 @@ def test_an_anchored_adjustment_that_drifts_keeps_the_points_at_the_reported_pos
             im.frame.rig_from_world = pycolmap.Rigid3d(pose.rotation, (np.asarray(pose.translation).reshape(3)
                                                                        + [1.0, 0.0, 0.0]).reshape(3, 1))
 
+    monkeypatch.setattr(sparse_mod, "_incremental_model", no_model)
     monkeypatch.setattr(sparse_mod, "_register_parts", drift)
-    sp = sparse_reconstruct(views.images, views.reported, views.K, tmp_path, mode="anchored", num_threads=1)
-    assert sp.mode == "anchored" and "kept the points triangulated at the reported poses" in sp.fallback, sp.fallback
+    sp = sparse_reconstruct(views.images, views.reported, views.K, tmp_path / "a", mode="incremental", num_threads=1,
+                            prior_centres=views.reported[:, :3])
+    assert sp.mode == "anchored" and "0.42 m" in sp.fallback, sp.fallback
+    assert "kept the points triangulated at the reported poses" in sp.fallback, sp.fallback
     assert "from the reported ones (more than 0.20 m" in sp.fallback and sp.centre_residual == 0.0
     kept = np.isfinite(sp.cameras[:, 0])
     assert kept.sum() >= 3 and len(sp.points) > 100
     np.testing.assert_allclose(sp.cameras[kept, :3], views.reported[kept, :3])
+    with pytest.raises(SparseError, match="0.42 m"):
+        sparse_reconstruct(views.images, views.reported, views.K, tmp_path / "b", mode="incremental", num_threads=1,
+                           prior_centres=views.reported[:, :3], fallback=None)
 
 
 def test_ground_markers_are_found_and_place_the_model(scene, flown) -> None:
