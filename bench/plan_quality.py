@@ -241,7 +241,10 @@ def run_plans(args, client) -> dict:
     for s, plans in study.items():
         if isinstance(plans, dict):  # a failed task: its named error
             raise SystemExit(f'{s}: the plan set failed: {plans["error"]}: {plans["error_msg"]}')
-        print(f'{s}: {len(plans)} feasible plans')
+        # the task's cached file is the whole plan set: its repeats are not reconstructed twice
+        study[s], dropped = distinct_plans(plans)
+        print(f'{s}: {len(study[s])} distinct feasible plans ({len(dropped)} repeats left out: '
+              f'{", ".join(f"{a} = {b}" for a, b in dropped.items()) or "none"})')
     return study
 
 
