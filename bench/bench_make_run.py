@@ -11,7 +11,11 @@ paired difference per realization to the benchmarks' settings (``benchmarks``, t
 node's defaults). A run that fails is recorded with its exit status, never dropped. Each run
 has its own ROS_DOMAIN_ID and stays on this machine (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST).
 
-    python bench/bench_make_run.py [--variants benchmarks sift0 make-run sift0-dense0.5] [--out results]
+With ``--repeats R`` each variant runs R times (one after the other): the row is the first run's,
+with every run's wall time beside it (``walls``, their median and maximum); a failed repeat is
+counted in ``failed_repeats``, never dropped.
+
+    python bench/bench_make_run.py [--variants benchmarks sift0 make-run sift0-dense0.5] [--repeats 1] [--out results]
 """
 from __future__ import annotations
 
@@ -92,7 +96,11 @@ def markdown(result: dict) -> str:
             continue
         load = '-' if r.get('load_average_1min') is None else f"{r['load_average_1min']:.1f}"
         cv = '-' if r.get('cv') is None else f"{r['cv']:.2f}"
-        lines.append(f"| {name} | `{' '.join(r['options'])}` | {r['wall']:.1f} | {load} | {r['chamfer_mean']:.2f} | "
+        wall = f"{r['wall']:.1f}"
+        if len(r.get('walls', [])) > 1:
+            wall += (f" (runs: {', '.join(f'{w:.1f}' for w in r['walls'])}; median {r['wall_median']:.1f}, max "
+                     f"{r['wall_max']:.1f}{'; ' + str(r['failed_repeats']) + ' failed' if r.get('failed_repeats') else ''})")
+        lines.append(f"| {name} | `{' '.join(r['options'])}` | {wall} | {load} | {r['chamfer_mean']:.2f} | "
                      f"{cv} | {iv(r.get('vs_base'))} | {r['chamfer_shape_mean']:.2f} | {iv(r.get('shape_vs_base'))} |")
     return '\n'.join(lines) + '\n'
 
@@ -102,13 +110,26 @@ def main() -> int:
     ap.add_argument('--variants', nargs='+', default=list(VARIANTS), choices=list(VARIANTS))
     ap.add_argument('--timeout', type=float, default=900.0, help='seconds a run may take')
     ap.add_argument('--domain-id', type=int, default=77, help='ROS_DOMAIN_ID of the first run (then +1 each)')
+    ap.add_argument('--repeats', type=int, default=1, help='runs of each variant (module docstring)')
     ap.add_argument('--out', default=str(ROOT / 'results'))
     args = ap.parse_args()
+    if args.repeats < 1:
+        ap.error(f'--repeats must be >= 1, got {args.repeats}')
     runs = {}
-    for i, name in enumerate(args.variants):
+    domain = args.domain_id
+    for name in args.variants:
         print(f'make run, {name}: {" ".join(VARIANTS[name])}', flush=True)
-        runs[name] = run_variant(name, args.domain_id + i, args.timeout)
-        print(f"  {runs[name]['wall']:.1f} s, Chamfer x100 {runs[name].get('chamfer_mean')}", flush=True)
+        repeats = []
+        for _ in range(args.repeats):
+            repeats.append(run_variant(name, domain, args.timeout))
+            domain += 1
+            print(f"  {repeats[-1]['wall']:.1f} s, Chamfer x100 {repeats[-1].get('chamfer_mean')}", flush=True)
+        runs[name] = repeats[0]
+        if args.repeats > 1:
+            walls = [r['wall'] for r in repeats]
+            runs[name].update(walls=walls, wall_median=float(np.median(walls)), wall_max=max(walls),
+                              failed_repeats=sum(r.get('chamfer_mean') is None for r in repeats),
+                              chamfer_means=[r.get('chamfer_mean') for r in repeats])
     if BASE in runs and runs[BASE].get('chamfer'):
         for name, r in runs.items():
             if name != BASE and r.get('chamfer'):

@@ -493,8 +493,8 @@ CURRENT = [
     ('Coverage of the prior against the Chamfer', 'results/coverage_check.json', own_markdown('bench.coverage_check')),
     ('Reconstruction stages', 'results/bench_recon.json', recon_stages_section),
     ('Cheaper reconstruction settings', 'results/bench_recon_speed.json', own_markdown('bench.bench_recon_speed')),
-    ('make run with the anchored model and ground markers', 'results/rerun/issue40_make_run/bench_make_run.json',
-     own_markdown('bench.bench_make_run')),
+    ('make run with the drones\' camera thread, the images\' heartbeat and the dense pair budget',
+     'results/rerun/issue40_make_run_camera_thread/bench_make_run.json', own_markdown('bench.bench_make_run')),
     ('make run: wall time per setting', 'results/bench_make_run.json', own_markdown('bench.bench_make_run')),
     ('Planners: final reward', 'results/bench_planners.json', planners_section),
     ('Cost of a reward evaluation', 'results/bench_reward.json', reward_cost_section),
@@ -539,6 +539,9 @@ SUPERSEDED = [
      'results/rerun/issue42_reward_candidates_before_last_resort/reward_candidates.json',
      own_markdown('bench.reward_candidates'),
      'The candidates on the study before its failures were reconstructed again (the failures\' AUC is measured here).'),
+    ('make run with the anchored model and ground markers', 'results/rerun/issue40_make_run/bench_make_run.json',
+     own_markdown('bench.bench_make_run'), 'Superseded by make run with the drones\' camera thread, the images\' '
+     'heartbeat and the dense pair budget (issue 40).'),
     ('Planners, one_plant under coverage, rerun', 'results/rerun/bench_planners_one_plant_coverage.json',
      planners_section, 'A reproduction of the planners table\'s one_plant rows under coverage.'),
 ]

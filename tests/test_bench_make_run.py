@@ -26,3 +26,7 @@ def test_failed_runs_are_rows_and_pairs_skip_missing_realizations() -> None:
     text = bmr.markdown({"machine": "m", "date": "d", "target_s": 60.0, "variants": {"make-run": ok2}})
     assert "| make-run | `--sift-first-octave -1 --dense-scale 1.0` | 190.0 | 3.4 | 3.00 | 0.11 | - | 1.40 | - |" in text
     assert "Target: 60 s and Chamfer std / mean" in text
+    # --repeats: every run's wall time beside the first run's row, a failed repeat counted
+    rep = {**ok2, "walls": [56.3, 57.4, 61.0], "wall_median": 57.4, "wall_max": 61.0, "failed_repeats": 1}
+    text = bmr.markdown({"machine": "m", "date": "d", "target_s": 60.0, "variants": {"make-run": rep}})
+    assert "| 190.0 (runs: 56.3, 57.4, 61.0; median 57.4, max 61.0; 1 failed) | 3.4 |" in text

@@ -459,6 +459,9 @@ def run(args: argparse.Namespace) -> int:
     os.environ.update({k: env[k] for k in ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_DOMAIN_ID')})
     env.setdefault('PYOPENGL_PLATFORM', 'egl')
     env['PYTHONUNBUFFERED'] = '1'
+    if not env.get('FASTRTPS_DEFAULT_PROFILES_FILE'):  # the images' heartbeat (vp_scene/config/fastdds.xml)
+        from ament_index_python.packages import get_package_share_directory
+        env['FASTRTPS_DEFAULT_PROFILES_FILE'] = str(Path(get_package_share_directory('vp_scene')) / 'config' / 'fastdds.xml')
     start = time.monotonic()
     deadline = start + args.timeout
     print(f'vp-suite: {args.scenario_name}, {args.cameras} cameras, {args.method}, {args.evals} evaluations, '

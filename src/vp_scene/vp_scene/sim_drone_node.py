@@ -26,11 +26,17 @@ all with one stamp,
 * ``{camera_topic}/pose`` (geometry_msgs/PoseStamped, ``frame_id``): the pose it reports.
 
 A trigger for a plan that gives it no pose is ignored with a log line; one trigger, one capture.
+The camera works in its own thread (one, which owns the OpenGL context), so the drone keeps
+reporting its pose while it renders, as a real drone's autopilot does beside its camera; it
+builds the scene and renders once as soon as ``/scene/description`` arrives (while the planner
+plans), so that its first picture costs what the others do.
 """
 from __future__ import annotations
 
 import math
+import threading
 import time
+from concurrent.futures import ThreadPoolExecutor, wait
 
 import numpy as np
 from geometry_msgs.msg import PoseStamped
@@ -40,7 +46,7 @@ from .camera import IMAGE_SIZE
 from .messages import (POSE_TYPES, camera_info_msg, compressed_image_msg, drone_topic, image_msg, pose_array, pose_report,
                        scene_of_description)
 from .node_runtime import LATCHED, Param, declare_typed, run_node, typed_values
-from .sim_drone import fly_toward, photograph
+from .sim_drone import fly_toward, photograph, warm_up
 
 
 #: how far (m, per axis) from its assigned goal a drone may hover and still take that plan's picture
@@ -101,6 +107,11 @@ class SimDroneNode(Node):
         self.get_logger().info(f'sim drone {v["drone"]} at ({v["x"]:.2f}, {v["y"]:.2f}, {v["z"]:.2f}) '
                                f'in {v["frame_id"]!r}, {v["speed"]:g} m/s')
 
+    def on_shutdown(self, timeout: float) -> bool:
+        """SIGINT/SIGTERM (:func:`vp_scene.node_runtime.run_node`): pictures not begun are dropped;
+        True once the one being taken, if any, is done within ``timeout`` seconds."""
+        return self._camera is None or self._camera.stop(timeout)
+
     def _on_goal(self, msg: PoseStamped) -> None:
         if msg.header.frame_id != self._v['frame_id']:
             self.get_logger().error(f'ignoring a goal in frame {msg.header.frame_id!r} (mine: {self._v["frame_id"]!r})')
@@ -132,7 +143,12 @@ class _Camera:
 
         self._node, self._v = node, v
         self._description = None
-        self._scene = None
+        self._scene = None            # the camera thread's only: (description, NoisyScene)
+        self._warm = False            # the camera thread's only
+        # one thread: it owns the OpenGL context (current to the thread that made it)
+        self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f'{v["drone"]}-camera')
+        self._jobs: list = []
+        self._jobs_lock = threading.Lock()
         self._assignments: dict = {}  # plan stamp -> pose index of this drone (None: no pose)
         self._pending = None          # the trigger waiting for the drone to settle
         base = drone_topic(v['camera_topic'], v['drone'])
@@ -149,7 +165,48 @@ class _Camera:
         return (int(stamp.sec), int(stamp.nanosec))
 
     def _on_description(self, msg) -> None:
-        self._description, self._scene = msg, None
+        self._description = msg
+        self._submit('the camera\'s warm-up', self._prepare, msg)
+
+    def _submit(self, what: str, job, *args) -> None:
+        """``job(*args)`` in the camera thread, after the jobs before it; its error is logged."""
+        def logged():
+            try:
+                job(*args)
+            except Exception as exc:  # noqa: BLE001 - a failed capture is logged, the drone flies on
+                self._node.get_logger().error(f'{what} failed: {type(exc).__name__}: {exc}')
+
+        with self._jobs_lock:
+            self._jobs = [j for j in self._jobs if not j.done()]
+            try:
+                self._jobs.append(self._worker.submit(logged))
+            except RuntimeError:  # shutting down: no new picture
+                pass
+
+    def stop(self, timeout: float) -> bool:
+        """Drop the jobs not begun; True once the running one, if any, ends within ``timeout`` s."""
+        self._worker.shutdown(wait=False, cancel_futures=True)
+        with self._jobs_lock:
+            jobs = list(self._jobs)
+        return not wait(jobs, timeout=timeout).not_done
+
+    def _scene_of(self, description):
+        """The NoisyScene of ``description``, built once (camera thread)."""
+        if self._scene is None or self._scene[0] is not description:
+            self._scene = (description, scene_of_description(description))
+        return self._scene[1]
+
+    def _prepare(self, description) -> None:
+        """Camera thread: the scene built, and the renderer warmed up once (:func:`warm_up`)."""
+        from .capture import CaptureModel
+
+        scene = self._scene_of(description)
+        if not self._warm:
+            v = self._v
+            seconds = warm_up(scene, CaptureModel.named(v['capture'], seed=v['capture_seed']), v['width'],
+                              v['height'], v['fov'])
+            self._warm = True
+            self._node.get_logger().info(f'camera ready ({v["width"]}x{v["height"]}, warmed up in {seconds:.1f} s)')
 
     def _on_assignment(self, msg) -> None:
         mine = [(int(e.pose_index), pose_array(e.goal)[:3]) for e in msg.entries if e.drone == self._v['drone']]
@@ -176,23 +233,17 @@ class _Camera:
         if self._description is None:  # latched, it may come after the trigger: wait for it
             return
         self._pending = None
-        try:
-            self._capture(trigger, i, pose)
-        except Exception as exc:  # noqa: BLE001 - a failed capture is logged, the drone flies on
-            self._node.get_logger().error(f'capture failed: {type(exc).__name__}: {exc}')
+        self._submit('capture', self._capture, trigger, i, pose, self._description)
 
-    def _capture(self, trigger, i: int, pose: np.ndarray) -> None:
+    def _capture(self, trigger, i: int, pose: np.ndarray, description) -> None:
+        """Camera thread: pose i of the trigger's plan photographed from ``pose`` and published."""
         from .camera import cameras_to_poses, poses_to_cameras
         from .capture import CaptureModel
 
         v = self._v
-        if self._description is None:
-            raise ValueError('no /scene/description yet: nothing to photograph')
-        if self._scene is None:
-            self._scene = scene_of_description(self._description)
         capture = CaptureModel.named(v['capture'], seed=v['capture_seed'])
-        views = photograph(self._scene, int(trigger.realization), poses_to_cameras(pose)[None], capture, v['width'],
-                           v['height'], v['fov'], indices=[i])
+        views = photograph(self._scene_of(description), int(trigger.realization), poses_to_cameras(pose)[None],
+                           capture, v['width'], v['height'], v['fov'], indices=[i])
         stamp = self._node.get_clock().now().to_msg()
         optical = f'{v["drone"]}/camera_optical'
         image = views.images[0]
