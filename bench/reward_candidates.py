@@ -11,7 +11,9 @@ that failed (``roc_auc``). Candidates:
 ``coverage``, ``coverage-graph``, ``paper``
     the reward models as the planner has them (``vp_planner.reward_models``);
 ``coverage-graph scale s``
-    coverage x min(1, lambda_2 / s) for s over 1e-4 ... 1e-2 (the view graph SfM can chain);
+    coverage x min(1, lambda_2 / s) for s over 1e-4 ... 1e-2 (the view graph SfM can chain), the
+    planner's own (``make_reward`` with ``CoverageParams(view_graph=True, graph_scale=s)``);
+    lambda_2 alone (``vp_planner.reward_models.view_graph``) is a feature of the surrogates;
 ``coverage window/resolution (design-best)``
     coverage's matching window (cutoff 45-90 degrees, flat to 25 or 35) and full resolution
     (250-1000 px/m) chosen by the design half's mean rho over both scenarios;
@@ -180,9 +182,10 @@ def run(args) -> dict:
     cands: dict = {}
     for name in ('coverage', 'paper'):
         cands[name] = {s: d[name] for s, d in data.items()}
-    for scale in GRAPH_SCALES:
-        cands[f'coverage-graph scale {scale:g}'] = {s: d['coverage'] * np.minimum(1.0, np.maximum(d['lambda2'], 0.0)
-                                                                                    / scale) for s, d in data.items()}
+    for scale in GRAPH_SCALES:  # the planner's own coverage-graph (make_reward), at each scale
+        p = replace(CoverageParams(), view_graph=True, graph_scale=scale)
+        cands[f'coverage-graph scale {scale:g}'] = {s: _rewards(('coverage', p), d['R'], d['cams'])
+                                                    for s, d in data.items()}
     cands['registration dop'] = {s: -d['dop'] for s, d in data.items()}
     grid = []
     for cutoff, high, ppm in WINDOW_GRID:

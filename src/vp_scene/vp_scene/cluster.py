@@ -48,15 +48,32 @@ from distributed import WorkerPlugin  # noqa: E402
 
 
 class OneThread(WorkerPlugin):
-    """Worker plugin: torch (and whatever reads the env later) on one thread per worker."""
+    """Worker plugin: torch (and whatever reads the env later) on one thread per worker; and
+    pycolmap imported with the worker's SIGTERM handler kept.
+
+    Importing pycolmap installs glog's failure handler for SIGTERM, which prints a stack trace
+    ("*** Aborted at ... SIGTERM received") before the process dies: every worker that had
+    reconstructed wrote two such traces into the recon node's log as its cluster closed, as if
+    it had crashed. The worker imports it here, at set-up, and puts the handler it had back (as
+    the recon node and ``vp_recon.cli`` do for their own process)."""
     name = 'vp-one-thread'
 
     def setup(self, worker) -> None:
+        import signal
+
         os.environ.update(ONE_THREAD_ENV)
         try:
             import torch
             torch.set_num_threads(1)
         except ImportError:  # a worker without torch runs no planning task anyway
+            pass
+        try:
+            before = signal.getsignal(signal.SIGTERM)
+            import pycolmap  # noqa: F401
+            signal.signal(signal.SIGTERM, before if before is not None else signal.SIG_DFL)
+        except ImportError:  # a worker without pycolmap reconstructs nothing
+            pass
+        except ValueError:  # not the worker's main thread: the handler cannot be set from here
             pass
 
 
