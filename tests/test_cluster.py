@@ -104,6 +104,9 @@ def test_failing_task_recorded_with_named_error_others_finish(capfd):
         # a worker stopped by SIGTERM (as its nanny stops it when the node using the cluster ends)
         # dies quietly: pycolmap, imported at its set-up, would have put glog's stack trace there
         assert client.run(lambda: "pycolmap" in sys.modules) == {w: True for w in client.run(os.getpid)}
+        # and never paused for its memory (a paused worker left a study waiting with no message)
+        assert set(client.run(lambda: __import__("dask").config.get("distributed.worker.memory.pause")).values()) \
+            == {False}
         victim = sorted(client.run(os.getpid).values())[0]
         os.kill(victim, signal.SIGTERM)
         assert _gone(victim, 20.0)

@@ -226,7 +226,12 @@ def open_client(scheduler: Optional[str] = None, workers: int = 1, quiet: bool =
         stack.callback(log.removeFilter, silence)  # last: after the client closed
         if scheduler == 'local':
             security = Security.temporary()  # per run, in memory (needs the cryptography package)
-            with dask.config.set({'distributed.nanny.pre-spawn-environ': env}):
+            # a worker is never paused for its memory: a reconstruction's working set (5-9 GB for
+            # row_12's 12 views at 2000 x 1500) stays with the process after the task (malloc), so a
+            # worker at Dask's 80 % pause threshold took no further task and the study waited with no
+            # message (the pause is logged below ERROR); unpaused, it runs on, and at 95 % its
+            # nanny restarts it and the task is retried (Dask's allowed failures), which is reported
+            with dask.config.set({'distributed.nanny.pre-spawn-environ': env, 'distributed.worker.memory.pause': False}):
                 cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, env=env,
                                        host=LOCAL_HOST, dashboard_address=f'{LOCAL_HOST}:0', security=security,
                                        silence_logs=logging.ERROR)
