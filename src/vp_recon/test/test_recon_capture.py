@@ -40,7 +40,14 @@ BEFORE = {
 
 
 @pytest.mark.parametrize("name", sorted(BEFORE))
-def test_ideal_capture_reproduces_the_pipeline_before_it_bit_for_bit(scene, name) -> None:
+def test_ideal_capture_reproduces_the_pipeline_before_it_bit_for_bit(scene, name, monkeypatch) -> None:
+    # the dense step's pair budget (later than f11de5b) matches some pairs of these rings smaller
+    # (ring6 Chamfer 0.015687 -> 0.015545, ring9 0.014475 -> 0.014578): off, as it was then
+    import functools
+
+    from vp_recon import dense
+
+    monkeypatch.setattr(dense, "dense_reconstruct", functools.partial(dense.dense_reconstruct, pair_budget=False))
     cams = ring(6) if name == "ring6" else ring(9, arc=math.radians(240))
     r = reconstruct_realization(scene, 1, cams, ReconConfig(width=640, height=480, num_threads=1, capture=IDEAL))
     digest = hashlib.sha256(np.ascontiguousarray(r.points).tobytes()).hexdigest()[:16]
