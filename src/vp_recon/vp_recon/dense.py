@@ -328,7 +328,7 @@ def dense_reconstruct(images: Sequence[NDArray[np.uint8]], masks: Sequence[NDArr
             :func:`scaled_views`): SGM's cost falls about as scale^3 (pixels x disparities), the
             depth step grows as 1 / scale. The silhouette filter keeps the full-size masks.
         pair_budget: a pair whose SGM would cost more than the whole view searching a quarter of
-            its width in disparities is matched on smaller rectified views (``_pair_points``'s
+            its longer side in disparities is matched on smaller rectified views (``_pair_points``'s
             ``max_cost``); False: every pair at full size (the dense step before the budget).
     """
     if not (isinstance(scale, (int, float)) and 0 < scale <= 1):
@@ -347,9 +347,8 @@ def dense_reconstruct(images: Sequence[NDArray[np.uint8]], masks: Sequence[NDArr
     K_full, masks_full = K, masks
     if scale < 1 and len(images):
         images, masks, K = scaled_views(images, masks, K, scale)
-    width = int(np.asarray(images[0]).shape[1]) if len(images) else 16
-    max_disp = max(16, (max(width, np.asarray(images[0]).shape[0]) // 16) * 16) if len(images) else 16
-    height = int(np.asarray(images[0]).shape[0]) if len(images) else 16
+    height, width = (int(n) for n in np.asarray(images[0]).shape[:2]) if len(images) else (16, 16)
+    max_disp = max(16, (max(width, height) // 16) * 16)
     # a pair's SGM work at most that of the whole view searching a quarter of max_disp (_pair_points)
     max_cost = _sgm_cost(height, width, max_disp // 4) if pair_budget else None
     R, t = world_to_camera(cams)
