@@ -66,29 +66,21 @@ def parse_args(argv=None) -> argparse.Namespace:
     return ap.parse_args(argv)
 
 
-def _skew(a: np.ndarray) -> np.ndarray:
-    """[a]x of vectors (..., 3) -> (..., 3, 3)."""
-    o = np.zeros_like(a[..., 0])
-    x, y, z = a[..., 0], a[..., 1], a[..., 2]
-    return np.stack([np.stack([o, -z, y], -1), np.stack([z, o, -x], -1), np.stack([-y, x, o], -1)], -2)
-
-
 def registration_dop(cameras: np.ndarray, points: np.ndarray, sigma_position: float = SIGMA_POSITION,
                      sigma_attitude: float = SIGMA_ATTITUDE) -> float:
     """RMS displacement (m) of ``points`` (P, 3) when a model is placed by the similarity fitted to
-    the cameras' (N, 6+) reported centres and attitudes (module docstring). Degenerate: a single
+    the cameras' (N, 6+) reported centres and attitudes (module docstring): the planner's own
+    ``vp_planner.reward_models.placement_error`` with all cameras in one part. Degenerate: a single
     camera (or coincident ones) leaves the scale unknown: inf."""
-    c = np.asarray(cameras, dtype=np.float64)[:, :3]
-    a = c - c.mean(0)
-    J = np.concatenate([np.broadcast_to(np.eye(3), (len(a), 3, 3)), -_skew(a), a[:, :, None]], 2)  # (N, 3, 7)
-    info = np.einsum('nki,nkj->ij', J, J) / sigma_position ** 2
-    info[3:6, 3:6] += len(c) * np.eye(3) / sigma_attitude ** 2
-    if np.linalg.cond(info) > 1e15:
-        return math.inf
-    cov = np.linalg.inv(info)
-    b = np.asarray(points, dtype=np.float64) - c.mean(0)
-    G = np.concatenate([np.broadcast_to(np.eye(3), (len(b), 3, 3)), -_skew(b), b[:, :, None]], 2)  # (P, 3, 7)
-    return float(np.sqrt(np.einsum('pij,jk,pik->p', G, cov, G).mean()))
+    import torch
+
+    from vp_planner.reward_models import placement_error
+
+    c = torch.as_tensor(np.asarray(cameras, dtype=np.float64)[None, :, :3])
+    same = torch.ones(1, c.shape[1], c.shape[1], dtype=torch.bool)
+    var = placement_error(c, same, torch.as_tensor(np.asarray(points, dtype=np.float64)), sigma_position,
+                          math.degrees(sigma_attitude))[0, 0]
+    return float(torch.sqrt(var.mean()))
 
 
 def _rewards(spec, R: np.ndarray, cams: np.ndarray) -> np.ndarray:

@@ -108,9 +108,10 @@ def test_bo_methods(method: str, realizations: np.ndarray) -> None:
         seen.append((done, weights))
         return True
 
-    res = plan_views(PlanRequest.of(method, 2, evaluations=12, initial_evaluations=8, seed=0), realizations,
+    # 3 cameras: a pair of the space's shell is mostly wider than the window and scores ~0
+    res = plan_views(PlanRequest.of(method, 3, evaluations=12, initial_evaluations=8, seed=0), realizations,
                      callback=cb)
-    check_result(res, method, realizations, 2, 12)
+    check_result(res, method, realizations, 3, 12)
     assert [s[0] for s in seen] == list(range(1, 13))
     if method == "egp":
         assert res.ensemble_weights is not None and len(res.ensemble_weights) == len(res.model_names)

@@ -10,12 +10,14 @@ import torch
 
 from vp_planner.reward import noisy_reward
 from vp_planner.reward_models import (DEFAULT_REWARD_MODEL, REWARD_MODELS, CoverageParams, check_reward_model,
-                                      coverage_reward, make_reward, point_coverage, view_graph,
-                                      view_graph_factor)
+                                      coverage_reward, make_reward, model_parts, placement_error, point_coverage,
+                                      view_graph, view_graph_factor, within_tau)
 from vp_scene.camera import CameraModel, look_at
 
 IMAGE = CameraModel(2000, 1500, math.pi / 2)
 ALL_ON = CoverageParams(max_points=0)
+#: every ingredient but the registration (the view graph's tests: its factor alone)
+NO_REGISTRATION = replace(ALL_ON, registration=False)
 
 
 def pair_at(distance: float, half_angle_deg: float, target=(0.0, 0.0, 1.0)) -> np.ndarray:
@@ -90,9 +92,13 @@ def test_identical_pairs_do_not_double_a_points_score() -> None:
 def test_matching_window() -> None:
     """Pairs too close (no triangulation) or too wide (no matches) cover less than a good one."""
     pts = grid_patch(0.0, half=0.02, n=3)[None]
-    r = {a: coverage_reward(pair_at(1.5, a / 2), pts, ALL_ON, IMAGE) for a in (1, 15, 40, 60)}
+    r = {a: coverage_reward(pair_at(1.5, a / 2), pts, NO_REGISTRATION, IMAGE) for a in (1, 15, 40, 60)}
     assert r[15] == pytest.approx(1.0, abs=1e-6)
     assert r[1] < 0.5 and r[60] == 0.0 and 0 < r[40] < r[15]
+    # with the registration a pair in the window is one part of the model, which the ground
+    # markers place: as without
+    for a in (15, 40):
+        assert coverage_reward(pair_at(1.5, a / 2), pts, ALL_ON, IMAGE) == pytest.approx(r[a], abs=1e-6)
 
 
 def test_image_frustum_is_rectangular() -> None:
@@ -147,7 +153,7 @@ def test_view_graph_of_two_tight_pairs_falls_apart_and_zeroes_the_reward() -> No
     scores them well; the same four cameras on a 24-degree arc hang together and keep their
     coverage times min(1, lambda_2 / scale)."""
     pts = blob()
-    params = replace(ALL_ON, view_graph=True)
+    params = replace(NO_REGISTRATION, view_graph=True)
     split = ring_at(2.0, [0, 8, 90, 98])
     arc = ring_at(2.0, [0, 8, 16, 24])
     E = view_graph(split, pts, params, IMAGE)
@@ -155,13 +161,13 @@ def test_view_graph_of_two_tight_pairs_falls_apart_and_zeroes_the_reward() -> No
     assert E[0, 1] > 0.1 and E[2, 3] > 0.1                        # inside a pair: many shared points
     assert np.all(E[:2, 2:] == 0)                                 # between the pairs: none
     assert view_graph_factor(torch.as_tensor(E)[None], 1e-3).item() == 0.0
-    cov_split = coverage_reward(split, pts, ALL_ON, IMAGE)
+    cov_split = coverage_reward(split, pts, NO_REGISTRATION, IMAGE)
     assert cov_split > 0.3 and coverage_reward(split, pts, params, IMAGE) == 0.0
     E_arc = torch.as_tensor(view_graph(arc, pts, params, IMAGE))[None]
     lam2 = torch.linalg.eigvalsh(torch.diag_embed(E_arc.sum(-1)) - E_arc)[0, 1].item()
     assert lam2 > 0
     for scale in (1e-9, 10 * lam2):                               # saturated; and a tenth of it
-        want = coverage_reward(arc, pts, ALL_ON, IMAGE) * min(1.0, lam2 / scale)
+        want = coverage_reward(arc, pts, NO_REGISTRATION, IMAGE) * min(1.0, lam2 / scale)
         got = coverage_reward(arc, pts, replace(params, graph_scale=scale), IMAGE)
         assert got == pytest.approx(want, rel=1e-5)
     with pytest.raises(ValueError, match="graph_scale"):
@@ -175,10 +181,64 @@ def test_view_graph_links_a_second_sortie_to_the_cameras_flown() -> None:
     flown = ring_at(2.0, [0, 8])
     far, near = ring_at(2.0, [90, 98]), ring_at(2.0, [16, 24])
     fn = make_reward("coverage-graph", pts, fov=IMAGE.fov, image=IMAGE, fixed_cameras=flown)
-    plain = make_reward("coverage", pts, fov=IMAGE.fov, image=IMAGE, fixed_cameras=flown)
+    plain = make_reward(("coverage", CoverageParams(registration=False)), pts, fov=IMAGE.fov, image=IMAGE,
+                        fixed_cameras=flown)
     got = fn(np.stack([far, near]))
     assert got[0] == 0.0 and plain(far[None])[0] > 0.3
     # the name decides: ("coverage-graph", params) keeps the view graph even if params leave it off
     named = make_reward(("coverage-graph", CoverageParams()), pts, fov=IMAGE.fov, image=IMAGE, fixed_cameras=flown)
     assert named(far[None])[0] == 0.0
     assert 0.0 < got[1] <= plain(near[None])[0] + 1e-12
+
+
+def _skew(a: np.ndarray) -> np.ndarray:
+    return np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+
+
+def test_placement_error_is_the_similarity_fit_propagated_to_the_points() -> None:
+    """sigma_i(p)^2 in closed form against the 7 x 7 information of the similarity (t, omega, s)
+    fitted to the centres and attitudes, inverted and propagated with G(b) = [I, -[b]x, b];
+    within_tau against scipy's chi(3) CDF; a part of one camera: inf."""
+    from scipy.stats import chi
+
+    rng = np.random.default_rng(3)
+    c = rng.normal(size=(5, 3)) * [1.0, 0.5, 0.2] + [0, 0, 2]
+    pts = rng.normal(size=(7, 3))
+    sp, sa = 0.02, 0.5
+    a = c - c.mean(0)
+    J = [np.concatenate([np.eye(3), -_skew(x), x[:, None]], 1) for x in a]
+    info = sum(j.T @ j for j in J) / sp ** 2
+    info[3:6, 3:6] += len(c) * np.eye(3) / math.radians(sa) ** 2
+    cov = np.linalg.inv(info)
+    want = [np.trace(G @ cov @ G.T) for G in
+            (np.concatenate([np.eye(3), -_skew(b), b[:, None]], 1) for b in pts - c.mean(0))]
+    cams = torch.as_tensor(np.concatenate([c, -c], 1))[None]
+    got = placement_error(cams, torch.ones(1, 5, 5, dtype=torch.bool), torch.as_tensor(pts), sp, sa)
+    assert got.shape == (1, 5, 7) and np.allclose(got[0].numpy(), np.array(want)[None], rtol=1e-9)
+    alone = placement_error(cams, torch.eye(5, dtype=torch.bool)[None], torch.as_tensor(pts), sp, sa)
+    assert torch.isinf(alone).all()
+    var = torch.tensor([1e-6, 1e-4, 4e-4, 1e-2, math.inf, 0.0])
+    x = math.sqrt(3) * 0.02 / np.sqrt(var.numpy()[:4])
+    assert np.allclose(within_tau(var, 0.02).numpy()[:4], chi.cdf(x, 3), atol=1e-7)
+    assert within_tau(var, 0.02)[4] == 0.0 and within_tau(var, 0.02)[5] == 1.0
+
+
+def test_a_model_in_two_parts_is_placed_worse_than_one() -> None:
+    """Three cameras on each side of a plant (8 degrees apart; the sides share no point SIFT can
+    match) make two parts, each placed on its own 0.3 m of baseline: the registration lowers
+    their coverage, with ground markers too (they place the whole, not one part against the
+    other). Six cameras on one 40-degree arc make one part: with markers the reward is coverage's;
+    without them its placement counts too."""
+    pts = blob()
+    split = ring_at(2.0, [0, 8, 16, 180, 188, 196])
+    arc = ring_at(2.0, [0, 8, 16, 24, 32, 40])
+    E = torch.as_tensor(view_graph(split, pts, ALL_ON, IMAGE))[None]
+    same = model_parts(E, 1e-3)[0]
+    assert same[:3, :3].all() and same[3:, 3:].all() and not same[:3, 3:].any()
+    plain = {k: coverage_reward(c, pts, NO_REGISTRATION, IMAGE) for k, c in (("split", split), ("arc", arc))}
+    reg = {k: coverage_reward(c, pts, ALL_ON, IMAGE) for k, c in (("split", split), ("arc", arc))}
+    bare = {k: coverage_reward(c, pts, replace(ALL_ON, ground_control=False), IMAGE)
+            for k, c in (("split", split), ("arc", arc))}
+    assert plain["split"] > 0.5 and reg["split"] < 0.8 * plain["split"] and bare["split"] < reg["split"]
+    assert reg["arc"] == pytest.approx(plain["arc"], abs=1e-6) and bare["arc"] < plain["arc"]
+    assert reg["arc"] > reg["split"]

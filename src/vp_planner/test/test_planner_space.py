@@ -112,7 +112,7 @@ def test_objective_records_and_cancels(space4: ViewSpace, realizations: np.ndarr
         return done < 6
 
     obj = Objective(space4, total=8, callback=cb)
-    U = random_plans(space4, 3, np.random.default_rng(5))
+    U = random_plans(space4, 3, np.random.default_rng(9))   # 3 plans that score (most random plans fall apart)
     infeasible = U[:1].copy()
     infeasible[0, 6:12] = infeasible[0, 0:6]  # two cameras at the same place
     assert not space4.feasible(infeasible).any()

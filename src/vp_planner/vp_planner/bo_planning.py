@@ -96,8 +96,10 @@ def optimize_in(space: Any, obj: Objective, X0: NDArray[np.float64], evaluations
 def plan_bo_by_parts(space: ViewSpace, obj: Objective, evaluations: int, initial_evaluations: int, seed: int,
                  ensemble: bool, structured_init: int, bo_mode: str, parts: int) -> dict:
     """EGP-EI (GP-EI) by parts (:mod:`vp_planner.parts`): each of the ``parts`` parts gets the budget
-    of a plan (``evaluations``, ``initial_evaluations``) on its own points, then the union of the
-    part plans is refined on the whole field's reward with ``evaluations // 2`` evaluations.
+    of a plan (``evaluations``, ``initial_evaluations``) on its own points, then the whole field's
+    structured plans are scored (up to ``structured_init``, at most half of the ``evaluations // 2``
+    left), and the better start of the union of the part plans and the best structured plan (put
+    into the parts' shells) is refined on the whole field's reward with the rest.
 
     ``obj`` is the whole run's objective (the joint space's): it counts the part evaluations too
     (recorded with reward 0 and ``candidate=False``: a part's reward is not a plan's) so that the
@@ -129,12 +131,41 @@ def plan_bo_by_parts(space: ViewSpace, obj: Objective, evaluations: int, initial
         records.append({"part": g, "cameras": int(counts[g]), "points": int(sub.realizations.shape[1]),
                         "evaluations": part_obj.count, "reward": float(part_obj.best_value),
                         "initial_best": info.get("initial_best")})
+    # The whole field's structured plans (rings, arcs, caps about all the parts) are evaluated too,
+    # from the joint budget: part plans each good on their own part can make a model that falls
+    # into parts (4 low cameras on each side of a 3 x 3 grid: two parts, each placed on its own
+    # reported poses, README "Reward models"), where one ring over the field holds together.
+    joint_budget = max(1, evaluations // 2)
+    room = min(structured_init, (joint_budget - 2) // 2)      # at most half, and 2 left for the joint start
+    S = structured_plans(space, max_plans=room) if room > 0 else []
+    X0 = [np.concatenate(part_U)]
+    if len(S):
+        whole = space.decode(S)
+        values = obj.record(S, whole)
+        X0.append(_in_parts(whole[int(np.argmax(values))], part_spaces, labels, R))
     joint = JointSpace(space, part_spaces)
     obj.space = joint
-    info = optimize_in(joint, obj, np.concatenate(part_U)[None], max(1, evaluations // 2), 1, seed, ensemble,
-                     "trust_region")
+    info = optimize_in(joint, obj, np.stack(X0), joint_budget - len(S), len(X0), seed, ensemble, "trust_region")
     info["parts"] = records
     return info
+
+
+def _in_parts(cameras: NDArray[np.float64], part_spaces: list, labels: NDArray[np.int64],
+              realizations: NDArray[np.float64]) -> NDArray[np.float64]:
+    """A whole-field plan (N, 6) in the joint space's coordinates: each part takes as many of its
+    cameras as it has, nearest first (the assignment of cameras to the parts' slots minimizing the
+    horizontal distances to the parts' centres: scipy's linear_sum_assignment), each camera
+    encoded in its part's shell (projected onto it where the shell cannot hold it)."""
+    from scipy.optimize import linear_sum_assignment
+
+    xy = realizations[0, :, :2]
+    centres = np.array([xy[labels == g].mean(axis=0) for g in range(len(part_spaces))])
+    slots = np.repeat(np.arange(len(part_spaces)), [p.num_cameras for p in part_spaces])
+    cost = np.linalg.norm(cameras[:, None, :2] - centres[slots][None], axis=-1)
+    rows, cols = linear_sum_assignment(cost)
+    part_of = np.empty(len(cameras), dtype=np.int64)
+    part_of[rows] = slots[cols]
+    return np.concatenate([p.encode_cameras(cameras[part_of == g]) for g, p in enumerate(part_spaces)])
 
 
 def _forward(obj: Objective) -> Callback:

@@ -13,9 +13,15 @@ evaluations, 262 s, and a lower reward than planning by parts in 70 s). Planning
 3. **plan each part** with EGP-EI (or GP-EI) in its own 6 n_g dimensions, on its own points:
    its reward is the reconstruction of that part, its cameras keep the stand-off from every
    plant of the field and the separation from the cameras of the parts planned before it;
-4. **refine jointly**: the union of the part plans is the incumbent of a trust-region EGP-EI on
-   the whole field's reward, each camera parameterized in its own part's shell
-   (:class:`JointSpace`), so that cameras can trade coverage across part boundaries.
+4. **the whole field**: the field's structured plans (rings, arcs, caps about all its points) are
+   scored on the whole field's reward too: part plans each good on their own part can make a
+   model that falls apart (a part's cameras share no point with the next part's), which the
+   reward's registration term scores low (:mod:`vp_planner.reward_models`);
+5. **refine jointly**: the better of the union of the part plans and the best structured plan
+   (each camera put into a part's shell, :func:`vp_planner.bo_planning._in_parts`) is the
+   incumbent of a trust-region EGP-EI on the whole field's reward, each camera parameterized in
+   its own part's shell (:class:`JointSpace`), so that cameras can trade coverage across part
+   boundaries.
 
 How many parts (:func:`auto_parts`): one per :data:`CAMERAS_PER_PART` cameras (4, the paper's
 one-plant N), but parts no narrower than :data:`MIN_PART_SIZE` along the field's longest

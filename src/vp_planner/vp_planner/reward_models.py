@@ -53,6 +53,35 @@ Each ingredient can be switched off (``ablations()``), which is how the study me
     wind) and ignores the point weights (registration needs shared points, reconstructed or not).
     The window and the scale were chosen on the design half of the realistic study alone.
 
+``registration`` (an ingredient of ``coverage``, on by default)
+    Under a flight the model is built from tracks and placed on the poses the drones reported
+    (the anchored model: each connected part of the model, the cameras that share tracks, on its
+    own reported centres and attitudes). A part whose cameras bunch together is placed badly: its
+    scale and turn rest on a short lever. Cameras i and j are linked when the points both see,
+    weighted by w(theta_ij), are at least ``link_overlap`` of what the one seeing less sees (as
+    the reconstruction picks the pairs it matches, ``vp_recon/pairs.py``); the parts are the
+    linked cameras closed under chaining. For the part g of camera i, the similarity
+    (t, omega, s) fitted to its n_g centres (sigma_p) and attitudes (sigma_a) has, about the
+    part's centroid (a_k = c_k - mean c, sum a_k = 0), the block-diagonal information (satellite
+    navigation's dilution of precision)::
+
+        I_t = n_g / sigma_p^2 I_3,   I_w = (sum_k |a_k|^2 I_3 - a_k a_k^T) / sigma_p^2 + n_g / sigma_a^2 I_3,
+        I_s = sum_k |a_k|^2 / sigma_p^2
+
+    and a point b = p - mean c moves by delta = t + omega x b + s b, so
+    E|delta|^2 = 3 / I_t + |b|^2 (tr I_w^-1 + 1 / I_s) - b^T I_w^-1 b =: sigma_i(p)^2. With delta
+    isotropic Gaussian, the probability that the point stays within tau is the chi(3) CDF
+    g(x) = erf(x / sqrt 2) - sqrt(2 / pi) x exp(-x^2 / 2) at x = sqrt(3) tau / sigma, and
+    q_ij(p) is multiplied by g at sigma = max(sigma_i(p), sigma_j(p)) for a pair within one part
+    (0 for a pair across parts: it shares no track): R becomes the expected recall at tau of the
+    evaluation's F-score. With ground control (``ground_control``: markers of surveyed position
+    in the images, the realistic capture's default) the model as a whole is placed on the
+    markers, which removes the error its G parts (of 2 cameras or more: a lone camera holds no
+    point) have in common: sigma_i(p)^2 (1 - 1/G) is used instead, 0 for a model in one part.
+    Degenerate: a part of one camera (or of coincident ones) has no scale (I_s = 0): g = 0; so a
+    camera whose pairs all lie outside the window adds nothing. Not modelled: the model's shape
+    within a part (the bundle adjustment from tracks), and which parts see the markers.
+
 A second sortie (README "A second sortie"): every model takes the cameras already flown,
 ``fixed_cameras`` (M, 6), and scores a plan z together with them, R(z | F) = R(z ∪ F): pairs
 between a new and a fixed camera count like pairs within the plan. It also takes point weights
@@ -81,7 +110,8 @@ from .feasibility import check_realizations
 from .reward import DEFAULT_FOV, DEFAULT_THETA_MATCH, noisy_reward, prepare_points
 
 __all__ = ["REWARD_MODELS", "DEFAULT_REWARD_MODEL", "CoverageParams", "RewardFunction", "make_reward",
-           "coverage_reward", "point_coverage", "view_graph", "view_graph_factor", "ablations", "check_reward_model",
+           "coverage_reward", "point_coverage", "view_graph", "view_graph_factor", "ablations", "model_parts",
+           "placement_error", "within_tau", "check_reward_model",
            "reconstructed_weights", "reconstructed_mask",
            "DEFAULT_TAU", "DEFAULT_RECONSTRUCTED_WEIGHT", "check_fixed_cameras"]
 
@@ -126,6 +156,16 @@ class CoverageParams:
         view_graph: multiply by the view graph's connectivity (``coverage-graph``).
         match_full, match_cutoff: m(theta) of the view graph, degrees.
         graph_scale: lambda_2 at and above which the graph counts as fully connected.
+        registration: weigh each pair by the probability that the point it reconstructs lands
+            within ``registration_tau`` of the truth once its part of the model is placed on the
+            reported poses (``registration``, module docstring).
+        position_sigma, attitude_sigma: the reported centres' (m) and attitudes' (degrees) error.
+        link_overlap: cameras i, j belong to one part of the model when the points both see
+            (vis_i vis_j) weighted by the window w(theta_ij) are at least this share of what the
+            one seeing less sees (the reconstruction's pair rule: 10 %).
+        registration_tau: metres (the F-score's threshold of the evaluation).
+        ground_control: markers on the ground place the model as a whole (the realistic
+            capture's default), so only where its parts lie relative to one another counts.
     """
 
     occlusion: bool = True
@@ -146,6 +186,13 @@ class CoverageParams:
     match_full: float = 10.0
     match_cutoff: float = 30.0
     graph_scale: float = 1e-3
+    # the reported poses' accuracy (the drone's RTK and gimbal, not fitted) and the F-score's tau
+    registration: bool = True
+    position_sigma: float = 0.02
+    attitude_sigma: float = 0.5
+    link_overlap: float = 0.1
+    registration_tau: float = 0.02
+    ground_control: bool = True
 
 
 def ablations() -> dict[str, tuple[str, CoverageParams]]:
@@ -297,6 +344,52 @@ def view_graph_factor(E: torch.Tensor, scale: float) -> torch.Tensor:
     return (lam2 / scale).clamp(0.0, 1.0).to(E.dtype)
 
 
+def model_parts(E: torch.Tensor, link: float) -> torch.Tensor:
+    """Same-part matrix (B, N, N) bool of pair shares E (B, N, N): i and j in one connected part
+    of the graph whose edges are e_ij >= ``link`` (reachability by repeated squaring).
+    ``coverage``'s registration links on the pairs' overlaps (``link_overlap``)."""
+    N = E.shape[-1]
+    A = ((E >= link) | torch.eye(N, dtype=torch.bool)).to(torch.float64)
+    for _ in range(max(1, math.ceil(math.log2(max(N, 2))))):
+        A = ((A @ A) > 0).to(torch.float64)
+    return A > 0
+
+
+def placement_error(cams: torch.Tensor, parts: torch.Tensor, points: torch.Tensor, position_sigma: float,
+                    attitude_sigma_deg: float) -> torch.Tensor:
+    """sigma_i(p)^2 (B, N, M): the mean squared displacement of points (M, 3) when camera i's
+    part of the model is placed by the similarity fitted to the part's reported centres and
+    attitudes (module docstring, ``registration``). ``cams`` (B, N, 6+), ``parts`` (B, N, N) bool
+    from :func:`model_parts`. inf for a part without scale (one camera, or coincident ones)."""
+    dt = cams.dtype
+    c = cams[..., :3]
+    m = parts.to(dt)                                               # (B, N, N): m[b, i, k] = k in i's part
+    n = m.sum(-1)                                                  # (B, N)
+    centre = (m @ c) / n[..., None]                                # (B, N, 3)
+    a = c[:, None, :, :] - centre[:, :, None, :]                   # (B, N, N, 3): a_k about i's part
+    a = a * m[..., None]
+    a2 = (a * a).sum(-1).sum(-1)                                   # sum_k |a_k|^2, (B, N)
+    eye = torch.eye(3, dtype=dt)
+    sp2 = position_sigma ** 2
+    Iw = (a2[..., None, None] * eye - torch.einsum("bikx,biky->bixy", a, a)) / sp2 \
+        + (n / math.radians(attitude_sigma_deg) ** 2)[..., None, None] * eye
+    Cw = torch.linalg.inv(Iw)                                      # (B, N, 3, 3)
+    var_s = torch.where(a2 > 1e-12, sp2 / a2.clamp_min(1e-12), torch.full_like(a2, math.inf))
+    b = points.to(dt)[None, None, :, :] - centre[:, :, None, :]    # (B, N, M, 3)
+    bb = (b * b).sum(-1)
+    bCb = torch.einsum("bimx,bixy,bimy->bim", b, Cw, b)
+    tr = Cw.diagonal(dim1=-2, dim2=-1).sum(-1)
+    var = (3 * sp2 / n)[..., None] + bb * (tr + var_s.clamp(max=1e30))[..., None] - bCb
+    return torch.where(torch.isinf(var_s)[..., None], torch.full_like(var, math.inf), var)
+
+
+def within_tau(var: torch.Tensor, tau: float) -> torch.Tensor:
+    """P(|delta| < tau) for an isotropic Gaussian delta with E|delta|^2 = var: the chi(3) CDF at
+    x = sqrt(3) tau / sqrt(var) (0 where var is inf, 1 where it is 0)."""
+    x = math.sqrt(3.0) * tau / var.clamp_min(1e-30).sqrt()
+    return (torch.erf(x / math.sqrt(2.0)) - math.sqrt(2.0 / math.pi) * x * torch.exp(-0.5 * x * x)).clamp(0.0, 1.0)
+
+
 def _one_plan(cameras: Any) -> torch.Tensor:
     """One plan (N, 6) as a batch (1, N, 6) in float64; ValueError for N < 2 (no pairs)."""
     cams = torch.as_tensor(np.asarray(cameras, dtype=np.float64)).reshape(1, -1, 6)
@@ -310,8 +403,8 @@ def view_graph(cameras: Any, realizations: Any, params: CoverageParams = Coverag
     """The view graph E (N, N) of one plan (``coverage-graph``, module docstring): e_ij, the share
     of the realizations' points cameras i and j both image usefully within the matching window."""
     cams = _one_plan(cameras)
-    _, E = _point_coverage(cams, _points(realizations, params.max_points, 0), replace(params, view_graph=True),
-                           image, 1 << 22)
+    _, E = _point_coverage(cams, _points(realizations, params.max_points, 0),
+                           replace(params, view_graph=True, registration=False), image, 1 << 22)
     return E[0].numpy()
 
 
@@ -355,6 +448,7 @@ def _point_coverage(cams: torch.Tensor, pts: torch.Tensor, p: CoverageParams, im
         near = depth <= zmin[key.clamp_min(0)] * (1.0 + p.occlusion_tolerance)
         vis = inside & near
     q = vis.to(dt)
+    seen_pt = q                                                    # visible (registration's links: any resolution)
     if p.resolution:
         q = q * ((image.focal_px / r.clamp_min(1e-9)) / p.ppm_full).clamp(max=1.0)
     unit = d / r.clamp_min(1e-12)[..., None]
@@ -364,12 +458,36 @@ def _point_coverage(cams: torch.Tensor, pts: torch.Tensor, p: CoverageParams, im
     total = torch.zeros(B, K * P, dtype=dt)
     E = torch.zeros(B, N, N, dtype=dt)
     block = max(1, max_elements // max(1, 3 * B * K * P))
+
+    def angles(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+        cos = (unit[:, a] * unit[:, b]).sum(-1).clamp(-1.0, 1.0)    # (B, s, KP)
+        return torch.rad2deg(torch.arccos(cos))
+
+    var = None
+    if p.registration:  # the pairs' overlaps first (a pass of their own), then sigma_i(p)^2 of each camera's part
+        L = torch.zeros(B, N, N, dtype=dt)
+        for s0 in range(0, S, block):
+            a, b = ii[s0:s0 + block], jj[s0:s0 + block]
+            e = (seen_pt[:, a] * seen_pt[:, b] * _window(angles(a, b), p)).mean(-1)
+            L[:, a, b] = e
+            L[:, b, a] = e
+        seen = seen_pt.mean(-1)                                    # (B, N): what each camera images
+        same = model_parts(L / torch.minimum(seen[:, :, None], seen[:, None, :]).clamp_min(1e-12),
+                           p.link_overlap)
+        var = placement_error(cams, same, flat[0, 0], p.position_sigma, p.attitude_sigma)
+        if p.ground_control:  # the markers place the whole: what the G parts share is gone
+            size = same.to(dt).sum(-1)                              # (B, N): cameras in camera i's part
+            G = ((size > 1.5).to(dt) / size).sum(-1)                # parts of 2 cameras or more (a lone one: no point)
+            var = torch.where((G > 1.5)[:, None, None], var * (1.0 - 1.0 / G.clamp_min(1.0))[:, None, None],
+                              torch.zeros_like(var))
     for s0 in range(0, S, block):
         a, b = ii[s0:s0 + block], jj[s0:s0 + block]
-        cos = (unit[:, a] * unit[:, b]).sum(-1).clamp(-1.0, 1.0)    # (B, s, KP)
-        theta = torch.rad2deg(torch.arccos(cos))
+        theta = angles(a, b)
         qq = q[:, a] * q[:, b]
         qij = qq * _window(theta, p)
+        if var is not None:  # within a part only, the point within tau once placed (module docstring)
+            qij = qij * same[:, a, b, None].to(dt) * within_tau(torch.maximum(var[:, a], var[:, b]),
+                                                                p.registration_tau)
         if p.view_graph:  # e_ij: the mean over all K P points
             e = (qq * _match_window(theta, p)).mean(-1)
             E[:, a, b] = e
