@@ -475,15 +475,15 @@ def flights_section(rel: str, title: str) -> str:
 
 #: (section title, results file, renderer), in the order of docs/results.md
 CURRENT = [
-    ('Table I, realistic capture, the anchored model and ground markers: 3 planning seeds x 5 realizations',
-     'results/rerun/issue40_table1_combined/table1_combined.json', lambda rel, t: combined_section(rel, t, 'Table I')),
+    ('Table I with the registration in the reward (egp planned again): 3 planning seeds x 5 realizations',
+     'results/rerun/issue42_table1_combined/table1_combined.json', lambda rel, t: combined_section(rel, t, 'Table I')),
+    ('Fields with the registration in the reward (egp planned again): 3 planning seeds x 5 realizations',
+     'results/rerun/issue42_fields_combined/fields_combined.json', lambda rel, t: combined_section(rel, t, 'Fields')),
     ('Flights that reconstruct: Table I and the fields before and after the anchored model and ground markers',
      'results/rerun/issue40_flights_fields/flights_check.json', own_markdown('bench.flights_check')),
     ('Table I, realistic capture before the anchored model: 3 planning seeds x 5 realizations',
      'results/rerun/table1_combined/table1_combined.json', lambda rel, t: combined_section(rel, t, 'Table I')),
     ('Table I, seed 0: the plans, their rewards, paired differences', 'results/table1.json', table1_seed0_section),
-    ('Fields, the anchored model and ground markers: 3 planning seeds x 5 realizations',
-     'results/rerun/issue40_fields_combined/fields_combined.json', lambda rel, t: combined_section(rel, t, 'Fields')),
     ('Fields before the anchored model: 3 planning seeds x 5 realizations',
      'results/rerun/fields_combined/fields_combined.json', lambda rel, t: combined_section(rel, t, 'Fields')),
     ('Plan-quality study, realistic capture', 'results/plan_quality.json', plan_quality_section),
@@ -495,8 +495,8 @@ CURRENT = [
     ('Coverage of the prior against the Chamfer', 'results/coverage_check.json', own_markdown('bench.coverage_check')),
     ('Reconstruction stages', 'results/bench_recon.json', recon_stages_section),
     ('Cheaper reconstruction settings', 'results/bench_recon_speed.json', own_markdown('bench.bench_recon_speed')),
-    ('make run with the drones\' camera thread, the images\' heartbeat and the dense pair budget',
-     'results/rerun/issue40_make_run_camera_thread/bench_make_run.json', own_markdown('bench.bench_make_run')),
+    ('make run with the registration in the reward',
+     'results/rerun/issue42_make_run/bench_make_run.json', own_markdown('bench.bench_make_run')),
     ('make run: wall time per setting', 'results/bench_make_run.json', own_markdown('bench.bench_make_run')),
     ('Planners: final reward', 'results/bench_planners.json', planners_section),
     ('Cost of a reward evaluation', 'results/bench_reward.json', reward_cost_section),
@@ -514,6 +514,14 @@ IDEAL = [
 ]
 #: superseded runs: (title, file, renderer, what became of it); docs/history.md tells their story
 SUPERSEDED = [
+    ('Table I, realistic capture, the anchored model and ground markers: 3 planning seeds x 5 realizations',
+     'results/rerun/issue40_table1_combined/table1_combined.json', lambda rel, t: combined_section(rel, t, 'Table I'),
+     'egp\'s rows were planned before the registration term of the reward (issue 42); superseded by Table I with '
+     'it, whose other rows are these records.'),
+    ('Fields, the anchored model and ground markers: 3 planning seeds x 5 realizations',
+     'results/rerun/issue40_fields_combined/fields_combined.json', lambda rel, t: combined_section(rel, t, 'Fields'),
+     'egp\'s rows were planned before the registration term of the reward (issue 42); superseded by the fields '
+     'with it, whose other rows are these records.'),
     ('Fields, realistic capture, 2 realizations (2026-11-25)', 'results/bench_fields.json', fields_section,
      'Superseded by the fields with 3 seeds x 5 realizations.'),
     ('Fields, grid rows rerun with every SfM model registered', 'results/rerun/fields_merged_models_grid/bench_fields.json',
@@ -543,6 +551,9 @@ SUPERSEDED = [
      'The candidates on the study before its failures were reconstructed again (the failures\' AUC is measured here).'),
     ('Flights that reconstruct: Table I alone', 'results/rerun/issue40_flights/flights_check.json',
      own_markdown('bench.flights_check'), 'Superseded by the same check with the fields (issue 40).'),
+    ('make run with the drones\' camera thread, the images\' heartbeat and the dense pair budget',
+     'results/rerun/issue40_make_run_camera_thread/bench_make_run.json', own_markdown('bench.bench_make_run'),
+     'Superseded by make run with the registration in the reward (issue 42: the planner\'s plan moved).'),
     ('make run with the anchored model and ground markers', 'results/rerun/issue40_make_run/bench_make_run.json',
      own_markdown('bench.bench_make_run'), 'Superseded by make run with the drones\' camera thread, the images\' '
      'heartbeat and the dense pair budget (issue 40).'),
