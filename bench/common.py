@@ -146,6 +146,8 @@ VARIANTS = {
     'egp-random-init': Variant({'method': 'egp', 'structured_init': 0}, ('planners',)),  # the paper's random design
     'egp-paper-config': Variant({'method': 'egp', 'structured_init': 0, 'bo_mode': 'global'}),  # the paper's BO
     'egp-one-space': Variant({'method': 'egp', 'parts': 1}, ('fields',)),       # a field in one 6N-dim space
+    # by parts under coverage-graph: the parts' chains weighed by the view graph (issue 42)
+    'egp-graph': Variant({'method': 'egp', 'reward': 'coverage-graph'}, ('fields',)),
     'gp': Variant({'method': 'gp'}),
     'circle': Variant({'method': 'circle'}, ('planners', 'fields', 'sorties')),
     'arc': Variant({'method': 'arc'}, ('planners', 'fields', 'sorties')),

@@ -28,9 +28,11 @@ def test_every_variant_is_a_request_and_the_registry_says_which_are_baselines() 
 def test_the_benchmarks_read_the_one_table() -> None:
     from bench import bench_fields, bench_planners, bench_sorties, table1
 
-    assert bench_fields.METHODS == ("egp", "egp-one-space", "circle", "arc", "sa", "lawnmower", "lawnmower-oblique")
+    assert bench_fields.METHODS == ("egp", "egp-one-space", "egp-graph", "circle", "arc", "sa", "lawnmower",
+                                    "lawnmower-oblique")
     assert bench_fields.BASELINES == ("circle", "arc", "sa", "lawnmower", "lawnmower-oblique")
-    assert bench_fields.by_parts("egp") and not bench_fields.by_parts("egp-one-space")
+    assert bench_fields.by_parts("egp") and bench_fields.by_parts("egp-graph") and not bench_fields.by_parts("egp-one-space")
+    assert common.variant_request("egp-graph", num_cameras=8).reward.name == "coverage-graph"
     assert common.variant_request("lawnmower-oblique", num_cameras=8).lawnmower.tilt > 0
     assert table1.BASELINES == ("circle", "arc", "sa") and all(v in common.VARIANTS for v, _ in table1.ROWS.values())
     assert bench_sorties.CASES == ("a", "b", "c-circle", "c-arc", "d", "e")

@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from vp_planner.designs import structured_plans
 from vp_planner.optimizers import plan_views
 from vp_planner.request import InvalidNumCamerasError, PlanRequest
 from vp_planner.parts import JointSpace, allocate_cameras, auto_parts, partition
@@ -91,6 +92,10 @@ def test_egp_by_parts_plans_every_plant_and_counts_every_evaluation(two_plants) 
     assert [p["cameras"] for p in res.parts] == [2, 2] and all(p["evaluations"] == 12 for p in res.parts)
     assert not res.trace[:24].any() and res.trace[-1] > 0 and np.all(np.diff(res.trace[24:]) >= 0)
     assert res.reward == pytest.approx(float(make_reward("coverage", R)(res.cameras[None])[0]), abs=1e-6)
+    # evaluations 25-26: the whole field's first structured plans, scored on the whole field
+    space = ViewSpace(R, 4)
+    whole = space.decode(structured_plans(space, 2))
+    np.testing.assert_allclose(res.rewards[24:26], make_reward("coverage", R)(whole), atol=1e-6)
     image = CameraModel()
     for g in (0, 1):
         pts = R[0, plant == g]
