@@ -266,6 +266,10 @@ def plan_quality_section(rel: str, title: str) -> str:
     scen = list(data.get('counts') or data.get('plans'))
     lines = [f'## {title}', '']
     counts = data.get('counts') or {}
+    if data.get('records'):  # rewards scored again against a committed study's reconstructions
+        r = data['records']
+        lines += [f'The reconstructions are the per-plan records of `{r["file"]}` (measured {r.get("date")} at '
+                  f'`{r.get("commit")}`, not run again); the rewards are scored at this report\'s commit.', '']
     if counts:
         lines += ['Plans: ' + '; '.join(f'{s} {c["planned"]} planned, {c["reconstructed"]} reconstructed, '
                                         f'{c["failed"]} failed, {c["skipped"]} skipped' for s, c in counts.items())
@@ -541,6 +545,10 @@ SUPERSEDED = [
     ('Plan-quality study, realistic capture before the anchored model',
      'results/rerun/plan_quality_before_anchored/plan_quality.json', plan_quality_section,
      'Superseded by the study rerun under the anchored model and ground markers (issue 42).'),
+    ('Plan-quality study, the rewards before the registration term',
+     'results/rerun/issue42_plan_quality_before_registration/plan_quality.json', plan_quality_section,
+     'The same reconstructions scored by the rewards before coverage weighed the registration (issue 42); '
+     'superseded by the study scored again from its records.'),
     ('Plan-quality study, the anchored model before its last resort',
      'results/rerun/issue42_plan_quality_before_last_resort/plan_quality.json', plan_quality_section,
      'The same reconstructions before a drifting anchored adjustment kept the points at the reported poses; '

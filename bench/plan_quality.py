@@ -15,7 +15,10 @@ ablations of ``study_models``) scores every plan, and Spearman's rho between the
 
 Phases (``--phase``): ``plans`` (generate, cached), ``recon`` (reconstruct, one cached JSON per
 plan and realization: resumable), ``analyze`` (models, Spearman, ``results/plan_quality.json``
-and ``results/plan_quality.png``), ``all``. Variants: ``--ground`` / ``--no-ground`` choose the
+and ``results/plan_quality.png``), ``all``. ``--phase analyze --records REPORT`` scores the plans
+under today's reward models against the per-plan records a committed report keeps (every score of
+every realization, failures with their reasons) instead of the cache: a reward changed, the
+reconstruction did not, and its hours are not spent again. Variants: ``--ground`` / ``--no-ground`` choose the
 background (default: by the capture, soil for a flight, as ``vp_recon.cli``); each variant is analyzed against
 three scores of the same reconstructions (:data:`CLOUDS`): the dense cloud's Chamfer in map (the
 main one), the sparse cloud's, and the dense cloud's shape after ICP (``chamfer_shape``).
@@ -68,6 +71,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     add_capture(ap)
     ap.add_argument('--variants', nargs='+', default=None,
                     help='analyze: variants to report (default: every one found in the cache)')
+    ap.add_argument('--records', default=None,
+                    help="analyze: score the plans under today's reward models against the per-plan records of "
+                         "this plan_quality.json instead of the cache (a study whose reconstructions are "
+                         "committed but whose cache is gone; the reconstruction is not run again)")
     ap.add_argument('--out', default=str(ROOT / 'results'))
     add_cluster_args(ap)
     ap.add_argument('--limit', type=int, default=0, help='reconstruct only the first n plans (0: all)')
@@ -278,6 +285,16 @@ def load_study(scenario: str, models: str, variant: str) -> list[dict]:
     return out
 
 
+def load_records(report: dict, scenario: str, models: str, variant: str) -> list[dict]:
+    """As :func:`load_study`, from the per-plan records a report keeps of its dense variant
+    (``plan_record``: every score of every realization x 100, or the failure and its reason) rather
+    than from the cache: every plan of the plan set, ``recon == {}`` when the report has no record of
+    it (skipped, counted). The ranks and the split read the same; Chamfer is in centimetres."""
+    by_id = {r['id']: r for r in report['variants'].get(f'{variant}/dense', {}).get('per_plan', {}).get(scenario, [])}
+    return [{**p, 'recon': by_id[p['id']]['realizations'] if p['id'] in by_id else {}, 'record': by_id.get(p['id'])}
+            for p in plans_of(scenario, models)]
+
+
 def split_halves(plans: list[dict], seed: int = SPLIT_SEED) -> dict[str, str]:
     """plan id -> 'design' | 'check': within each family the ids are shuffled (seeded) and the
     first floor(n / 2) design, the rest check (a family of one plan is checked only), so both
@@ -404,21 +421,31 @@ def study_models() -> dict:
 
 
 def analyze(args) -> dict:
-    variants = args.variants or sorted({d.name for s in args.scenarios
-                                        for d in (CACHE / models_tag(args.models) / s).glob('*') if d.is_dir()})
+    source = json.loads(Path(args.records).read_text()) if args.records else None
+    if source is not None:  # the rewards of today against a committed study's reconstructions
+        found = sorted({k.rsplit('/', 1)[0] for k, v in source.get('variants', {}).items() if v.get('per_plan')})
+        if not found:
+            raise SystemExit(f'{args.records}: no per-plan records to score')
+        variants = args.variants or found
+    else:
+        variants = args.variants or sorted({d.name for s in args.scenarios
+                                            for d in (CACHE / models_tag(args.models) / s).glob('*') if d.is_dir()})
     specs = study_models()
     from vp_planner.reward_models import DEFAULT_REWARD_MODEL
 
     result: dict = {'default': DEFAULT_REWARD_MODEL, 'date': time.strftime('%Y-%m-%d'), 'machine': machine(),
                     'models_folder': models_tag(args.models), 'plans': {}, 'spearman': {},
                     'spearman_reconstructed': {}, 'variants': {}, 'ms_per_plan': {}, 'failed': {}}
+    if source is not None:
+        result['records'] = {'file': str(args.records), 'commit': source.get('commit'), 'date': source.get('date')}
     per_plan: dict = {}
     for variant in variants:
         for cloud, key in CLOUDS.items():
             vname = f'{variant}/{cloud}'
             vres: dict = {'plans': {}, 'spearman': {}, 'spearman_reconstructed': {}, 'failed': {}}
             for s in args.scenarios:
-                every = load_study(s, args.models, variant)
+                every = (load_records(source, s, args.models, variant) if source is not None
+                         else load_study(s, args.models, variant))
                 if cloud == 'shape':  # records from before chamfer_shape was kept do not count
                     if not any(key in r for p in every for r in p['recon'].values()):
                         continue  # no record of this scenario has it: no shape study (not 'all failed')
@@ -449,7 +476,13 @@ def analyze(args) -> dict:
                                                      for m, r in rewards.items()}
                 result['ms_per_plan'][s] = {m: r['ms_per_plan'] for m, r in rewards.items()}
                 per_plan[(vname, s)] = (plans, ch, rewards)
-                if cloud == 'dense':
+                if cloud == 'dense' and source is not None:  # the committed record, today's rewards
+                    vres.setdefault('per_plan', {})[s] = [
+                        {**p['record'], 'reward': {m: round(float(r['reward'][i]), 5) for m, r in rewards.items()}}
+                        for i, p in enumerate(plans)]
+                    vres.setdefault('recon_hours', {})[s] = (
+                        source['variants'][f'{variant}/dense'].get('recon_hours', {}).get(s))
+                elif cloud == 'dense':
                     vres.setdefault('per_plan', {})[s] = [plan_record(p, {m: r['reward'][i] for m, r in rewards.items()},
                                                                       s, args.models)
                                                           for i, p in enumerate(plans)]

@@ -125,3 +125,46 @@ def test_the_study_counts_each_distinct_plan_once() -> None:
              {"id": "arc-001", "cameras": [[1.0, 1.0, 2.0, 0.0, -1.0, -1.0]] * 2}]
     kept, dropped = plan_quality.distinct_plans(plans)
     assert [p["id"] for p in kept] == ["structured-000", "arc-001"] and dropped == {"egp-073": "structured-000"}
+
+
+def test_analyze_scores_todays_rewards_against_a_reports_records(tmp_path):
+    """--records: a committed study's reconstructions (per-plan records, failures with their
+    reasons) are scored under today's reward models without the cache; the records are kept as
+    they were, the rewards are today's, a plan the report never recorded is counted as skipped."""
+    import json
+
+    from bench import plan_quality
+    from vp_planner.reward_models import make_reward
+
+    args = plan_quality.parse_args(["--scenarios", "one_plant", "--out", str(tmp_path)])
+    if not plan_quality.plans_path("one_plant", args.models).exists():
+        pytest.skip("the committed one_plant plan set is for another plant folder")
+    plans = plan_quality.plans_of("one_plant", args.models)
+    rng = np.random.default_rng(0)
+    records = []
+    for i, p in enumerate(plans[:-1]):                      # the last plan: never reconstructed
+        realization = ({"error": "RECONSTRUCTION_FAILED", "error_msg": "no pair"} if i == 0 else
+                       {"chamfer": float(rng.uniform(1, 5)), "chamfer_shape": float(rng.uniform(1, 4)),
+                        "sparse_chamfer": float(rng.uniform(1, 5))})
+        records.append({"id": p["id"], "family": p["family"], "reward": {"coverage": 123.0},
+                        "realizations": {"0": realization, "1": realization}})
+    variant = f"{plan_quality.variant_name(args)}/dense"
+    source = tmp_path / "before" / "plan_quality.json"
+    source.parent.mkdir()
+    source.write_text(json.dumps({"commit": "abc", "variants": {variant: {"per_plan": {"one_plant": records},
+                                                                          "recon_hours": {"one_plant": 1.5}}}}))
+    result = plan_quality.analyze(plan_quality.parse_args(["--scenarios", "one_plant", "--out", str(tmp_path),
+                                                           "--records", str(source)]))
+    assert result["records"]["commit"] == "abc"
+    assert result["counts"]["one_plant"] == {"planned": len(plans), "reconstructed": len(plans) - 2,
+                                             "failed": 1, "skipped": 1}
+    kept = result["variants"][variant]["per_plan"]["one_plant"]
+    assert [r["id"] for r in kept] == [r["id"] for r in records]
+    assert kept[0]["realizations"]["0"]["error_msg"] == "no pair" and kept[5]["realizations"] == records[5]["realizations"]
+    from bench.common import scene
+    noisy, _ = scene("one_plant", args.models)
+    today = float(make_reward("coverage", noisy.points)(np.array([plans[5]["cameras"]]))[0])
+    assert kept[5]["reward"]["coverage"] == pytest.approx(today, abs=1e-5) and today != 123.0
+    assert result["variants"][variant]["recon_hours"]["one_plant"] == 1.5
+    assert set(result["variants"]) == {variant, variant.replace("/dense", "/sparse"), variant.replace("/dense", "/shape")}
+    assert (tmp_path / "plan_quality.json").exists()
