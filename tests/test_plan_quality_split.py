@@ -59,6 +59,17 @@ def test_auc_separates_the_failed_plans_per_half():
     assert auc["design"]["m"] == 1.0 and auc["check"]["m"] == 0.0          # check: p5 skipped, p4 failed above p3
 
 
+def _one_plant_plan_set(tmp_path):
+    """(the study's arguments writing into tmp_path, the committed one_plant plan set); skipped
+    where the plan set is for another plant folder."""
+    from bench import plan_quality
+
+    args = plan_quality.parse_args(["--scenarios", "one_plant", "--out", str(tmp_path)])
+    if not plan_quality.plans_path("one_plant", args.models).exists():
+        pytest.skip("the committed one_plant plan set is for another plant folder")
+    return args, plan_quality.plans_of("one_plant", args.models)
+
+
 def test_check_reads_the_main_variant_of_the_capture(tmp_path):
     """The check half of a study is read from the variant of the capture asked for: a flight's
     (realistic, soil) by default, the ideal one with --capture ideal; another is a named error."""
@@ -66,10 +77,7 @@ def test_check_reads_the_main_variant_of_the_capture(tmp_path):
 
     from bench import plan_quality
 
-    args = plan_quality.parse_args(["--scenarios", "one_plant", "--out", str(tmp_path)])
-    if not plan_quality.plans_path("one_plant", args.models).exists():
-        pytest.skip("the committed one_plant plan set is for another plant folder")
-    plans = plan_quality.plans_of("one_plant", args.models)
+    args, plans = _one_plant_plan_set(tmp_path)
     rng = np.random.default_rng(0)
     records = []
     for i, p in enumerate(plans):
@@ -136,10 +144,7 @@ def test_analyze_scores_todays_rewards_against_a_reports_records(tmp_path):
     from bench import plan_quality
     from vp_planner.reward_models import make_reward
 
-    args = plan_quality.parse_args(["--scenarios", "one_plant", "--out", str(tmp_path)])
-    if not plan_quality.plans_path("one_plant", args.models).exists():
-        pytest.skip("the committed one_plant plan set is for another plant folder")
-    plans = plan_quality.plans_of("one_plant", args.models)
+    args, plans = _one_plant_plan_set(tmp_path)
     rng = np.random.default_rng(0)
     records = []
     for i, p in enumerate(plans[:-1]):                      # the last plan: never reconstructed
