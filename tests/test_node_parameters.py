@@ -20,6 +20,7 @@ PKG = {"planner": "vp_planner", "recon": "vp_recon", "dispatcher": "vp_planner"}
     ("planner", {"parts": -1}, "parts must be >= 0"),
     ("planner", {"lawnmower_overlap": 1.0}, "lawnmower overlap must be in [0, 0.95]"),
     ("planner", {"lawnmower_tilt": 1.5}, "lawnmower tilt must be in [0, 60 degrees]"),
+    ("planner", {"report_position_sigma": 0.0}, "report_position_sigma must be finite and in (0, 10), got 0.0"),
     ("recon", {"width": 640.0}, "'width' must be an integer"),
     ("recon", {"dense": 1}, "'dense' must be a boolean"),
     ("recon", {"max_realizations": -1}, "max_realizations must be >= 0"),

@@ -149,6 +149,33 @@ def test_cli_paper_reward_and_score(tmp_path: Path, capsys: pytest.CaptureFixtur
     assert float(capsys.readouterr().out.split()[-1]) == pytest.approx(plan["reward"], abs=1e-6)
 
 
+def test_cli_records_the_flights_reported_pose_errors_and_score_reads_them(tmp_path: Path,
+                                                                           capsys: pytest.CaptureFixture) -> None:
+    """Issue 42: a flight with plain GNSS and no ground markers tells the planner
+    (--report-position-sigma, --no-ground-control); plan.json records them as ``registration``
+    and `score` scores the plan under them (a plan without the record: the defaults)."""
+    out = tmp_path / "run"
+    rc = main(["--scenario", "one_plant", "--method", "arc", "--cameras", "4", "--evals", "1", "--out", str(out),
+               "--points-per-plant", "500", "--realizations", "2", "--report-position-sigma", "0.05",
+               "--report-attitude-sigma", "1", "--no-ground-control", "--no-progress"])
+    assert rc == 0
+    plan = json.loads((out / "plan.json").read_text())
+    assert plan["registration"] == {"report_position_sigma": 0.05, "report_attitude_sigma": 1.0,
+                                    "ground_control": False}
+    capsys.readouterr()
+    assert main(["score", "--plan", str(out / "plan.json")]) == 0
+    assert float(capsys.readouterr().out.split()[-1]) == pytest.approx(plan["reward"], abs=1e-6)
+    del plan["registration"]
+    (out / "plan.json").write_text(json.dumps(plan))
+    assert main(["score", "--plan", str(out / "plan.json")]) == 0
+    assert float(capsys.readouterr().out.split()[-1]) > plan["reward"] + 0.01   # RTK and markers place it better
+    plan["registration"] = {"report_position_sigma": -1}
+    (out / "plan.json").write_text(json.dumps(plan))
+    assert main(["score", "--plan", str(out / "plan.json")]) == 2
+    err = capsys.readouterr().err
+    assert "report_position_sigma must be finite and in (0, 10)" in err and len(err.strip().splitlines()) == 1
+
+
 def test_cli_score_errors(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     assert main(["score", "--plan", str(tmp_path / "missing.json")]) == 2
     assert "not found" in capsys.readouterr().err

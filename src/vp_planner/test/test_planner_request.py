@@ -81,6 +81,9 @@ def test_request_round_trips_and_is_frozen(realizations: np.ndarray) -> None:
     ({"tau": -1.0}, InvalidReconstructionError, "tau"),
     ({"reconstructed_weight": 1.5}, InvalidReconstructionError, "reconstructed_weight"),
     ({"dtype": "float16"}, InvalidRequestError, "dtype"),
+    ({"report_position_sigma": 0.0}, InvalidRequestError, r"report_position_sigma must be finite and in \(0, 10\)"),
+    ({"report_attitude_sigma": 45.0}, InvalidRequestError, "report_attitude_sigma"),
+    ({"ground_control": "yes"}, InvalidRequestError, "ground_control must be true or false"),
 ])
 def test_each_bad_field_is_refused_with_its_error(fields: dict, error: type, text: str) -> None:
     good = {"method": "egp", "num_cameras": 4, "evaluations": 30, "initial_evaluations": 10}
@@ -104,7 +107,7 @@ def test_the_request_is_grouped_and_each_group_validates_itself() -> None:
     assert request.lawnmower == LawnmowerSpec(tilt=0.2) and request.reward == RewardSpec("paper")
     assert isinstance(request.sortie, Sortie) and request.sortie.tau == 0.05
     assert set(GROUPS) == {"cameras", "feasibility", "reward", "bo", "arc", "lawnmower", "sortie", "candidates"}
-    assert len(FLAT) == 25 and set(request.as_dict()) == set(FLAT)
+    assert len(FLAT) == 28 and set(request.as_dict()) == set(FLAT)
     for group, bad, error in ((CameraSpec, {"num_cameras": 1}, InvalidNumCamerasError),
                               (Feasibility, {"min_altitude": -1.0}, ValueError),
                               (RewardSpec, {"name": "magic"}, UnknownRewardModelError),
@@ -133,7 +136,7 @@ def test_each_default_lives_in_one_place() -> None:
 
     params = {name: spec.default for name, spec in planner_node.PARAMS.items()}
     shared = set(params) & set(FLAT)
-    assert len(shared) == 19, sorted(shared)
+    assert len(shared) == 22, sorted(shared)
     assert {n: params[n] for n in shared} == {n: DEFAULTS[n] for n in shared}
     assert (params["image_width"], params["image_height"]) == DEFAULTS["image_size"] == IMAGE_SIZE
     flags = vars(cli.parse_args(["--out", "x"]))
@@ -180,3 +183,24 @@ def test_a_bad_value_is_the_same_one_line_error_via_node_cli_and_api(node, flags
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f"plan: error: {api_error.value}"]
     assert not (tmp_path / "x").exists()
+
+
+# ---------------------------------------------------------------- issue 42: the flight's reported poses
+def test_the_flights_reported_pose_errors_reach_the_reward(realizations: np.ndarray) -> None:
+    """report_position_sigma, report_attitude_sigma and ground_control (node parameters, CLI flags,
+    plan.json's ``registration``) set the coverage models' registration term: an arc (one part of
+    the model) under ground markers scores as with RTK whatever the GNSS; without markers its
+    placement from 3 m GNSS poses loses (nearly) every pair; paper has no such term."""
+    from vp_planner.request import RewardSpec
+    from vp_planner.reward_models import CoverageParams
+
+    spec = RewardSpec(position_sigma=3.0, attitude_sigma=2.0, ground_control=False).model_spec()
+    assert spec == ("coverage", CoverageParams(position_sigma=3.0, attitude_sigma=2.0, ground_control=False))
+    assert RewardSpec("paper", position_sigma=3.0).model_spec() == "paper"
+    rewards = {}
+    for name, fields in (("rtk", {}), ("gnss, markers", {"report_position_sigma": 3.0}),
+                         ("gnss, no markers", {"report_position_sigma": 3.0, "ground_control": False})):
+        result = plan_views(PlanRequest.of("arc", 4, evaluations=1, **fields), realizations)
+        rewards[name] = result.reward
+    assert rewards["gnss, markers"] == pytest.approx(rewards["rtk"], abs=1e-9) and rewards["rtk"] > 0.1
+    assert rewards["gnss, no markers"] < 0.01 * rewards["rtk"], rewards

@@ -143,6 +143,14 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
         p.add_argument("--fov", type=float, default=None,
                        help=f"rad (default {D['fov']:.4g}; among --candidates: the folder's camera's)")
         p.add_argument("--theta-match", type=float, default=D["theta_match"])
+        p.add_argument("--report-position-sigma", type=float, default=D["report_position_sigma"],
+                       help="m per axis: the error of the camera centres the flight reports (RTK about 0.02, "
+                            "plain GNSS 1-3); the coverage models' registration term")
+        p.add_argument("--report-attitude-sigma", type=float, default=D["report_attitude_sigma"],
+                       help="degrees per axis: the error of the attitudes the flight reports")
+        p.add_argument("--ground-control", action=argparse.BooleanOptionalAction, default=D["ground_control"],
+                       help="ground-control markers place the model as a whole (--no-ground-control: the "
+                            "reported poses alone)")
         p.add_argument("--structured-init", type=int, default=D["structured_init"],
                        help="structured plans in the egp/gp initial design (0: purely random, as the paper)")
         p.add_argument("--bo-mode", default=D["bo_mode"], choices=BO_MODES,
@@ -359,6 +367,9 @@ def plan(args: argparse.Namespace) -> dict:
         "seconds": float(res.seconds),
         "fov": cams.fov,
         "theta_match": request.reward.theta_match,
+        "registration": {"report_position_sigma": request.reward.position_sigma,
+                         "report_attitude_sigma": request.reward.attitude_sigma,
+                         "ground_control": request.reward.ground_control},
         "image_size": list(cams.image_size),
         "feasibility": {"min_standoff": feas.min_standoff, "min_altitude": feas.min_altitude,
                         "min_separation": feas.min_separation},
@@ -407,7 +418,7 @@ def score(args: argparse.Namespace) -> float:
 
     from vp_scene.camera import IMAGE_SIZE, CameraModel
 
-    from .request import CameraSpec
+    from .request import CameraSpec, InvalidRequestError, RewardSpec
     from .reward_models import DEFAULT_REWARD_MODEL, check_reward_model, make_reward
 
     try:
@@ -422,9 +433,20 @@ def score(args: argparse.Namespace) -> float:
     theta = args.theta_match if args.theta_match is not None else pf.theta_match
     spec = CameraSpec(fov=fov, image_size=_image_size(args, pf.image_size or IMAGE_SIZE))  # its checks
     image = CameraModel(*spec.image_size, spec.fov)
+    # the flight's reported-pose errors: the plan's (a plan from before they were recorded: the defaults)
+    registration = pf.data.get("registration") or {}
+    if not isinstance(registration, dict):
+        raise CliError(f"{args.plan}: its 'registration' record is not an object")
+    try:
+        reward = RewardSpec(name=model, theta_match=theta, **{
+            key: registration[flat] for key, flat in (("position_sigma", "report_position_sigma"),
+                                                      ("attitude_sigma", "report_attitude_sigma"),
+                                                      ("ground_control", "ground_control")) if flat in registration})
+    except InvalidRequestError as exc:
+        raise CliError(f"{args.plan}: {exc}") from None
     realizations, layout_name = build_scene(scene)
     fixed, weights = _sortie_of(pf.data, realizations)
-    value = float(np.asarray(make_reward(model, realizations, fov, theta, image, fixed_cameras=fixed,
+    value = float(np.asarray(make_reward(reward.model_spec(), realizations, fov, theta, image, fixed_cameras=fixed,
                                          point_weights=weights)(pf.cameras[None]))[0])
     print(f"plan score: {model} reward of {args.plan} ({len(pf.cameras)} cameras, "
           f"{layout_name}):",

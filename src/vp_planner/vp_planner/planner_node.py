@@ -44,9 +44,9 @@ from vp_interfaces.msg import CameraPlan
 from vp_planner.gp import MODEL_NAMES
 from vp_planner.methods import MAX_EVALUATIONS, METHODS
 from vp_planner.optimizers import InvalidSceneError, PlanResult, plan_views
-from vp_planner.request import (BO_MODES, DEFAULTS, FLAT, MAX_CAMERAS, BudgetTooLargeError, InvalidBudgetError,
-                                InvalidCandidatesError, InvalidFixedCamerasError, InvalidNumCamerasError,
-                                InvalidReconstructionError, PlanRequest, UnknownMethodError, UnknownRewardModelError,
+from vp_planner.request import (BO_MODES, DEFAULTS, FLAT, MAX_ATTITUDE_SIGMA, MAX_CAMERAS, MAX_POSITION_SIGMA,
+                                BudgetTooLargeError, InvalidBudgetError, InvalidCandidatesError, InvalidFixedCamerasError,
+                                InvalidNumCamerasError, InvalidReconstructionError, PlanRequest, UnknownMethodError, UnknownRewardModelError,
                                 check_fields)
 from vp_planner.reward_models import REWARD_MODELS
 from vp_planner.space import NoFeasiblePlanError
@@ -112,6 +112,13 @@ PARAMS = {
     'min_separation': Param(D['min_separation'], 'm between cameras', (0.0, math.inf)),
     'fov': Param(D['fov'], 'horizontal field of view, rad', (0.0, math.pi), False, _OPEN),
     'theta_match': Param(D['theta_match'], 'matching angle of the reward, rad', (0.0, math.pi), False, _OPEN),
+    'report_position_sigma': Param(D['report_position_sigma'], 'm per axis: the error of the camera centres the '
+                                   'flight reports (RTK about 0.02, plain GNSS 1-3; the registration term)',
+                                   (0.0, MAX_POSITION_SIGMA), False, _OPEN),
+    'report_attitude_sigma': Param(D['report_attitude_sigma'], 'degrees per axis: the error of the reported attitudes',
+                                   (0.0, MAX_ATTITUDE_SIGMA), False, _OPEN),
+    'ground_control': Param(D['ground_control'], 'ground-control markers place the model as a whole (false: the '
+                                                 'reported poses alone place it)'),
     'frame_id': Param('map', 'frame of the plans; the scene cloud must be in it', None, False, 'not empty'),
     'scene_timeout': Param(10.0, 's a goal that arrives before the scene waits for it', (0.0, math.inf)),
     'tau': Param(D['tau'], 'm: a scene point this close to a goal\'s reconstruction counts as reconstructed',

@@ -60,6 +60,11 @@ every default):
                             reconstructed, finite >= 0 (InvalidReconstructionError)
 ``reconstructed_weight``    reward weight of a reconstructed point, in [0, 1] (InvalidReconstructionError)
 ``dtype``                   reward precision, ``'float64'`` or ``'float32'``
+``report_position_sigma``   m per axis, the reported camera centres' error the coverage models'
+                            registration term assumes, in (0, :data:`MAX_POSITION_SIGMA`)
+``report_attitude_sigma``   degrees per axis, the reported attitudes' error, in (0, :data:`MAX_ATTITUDE_SIGMA`)
+``ground_control``          bool: ground-control markers place the model as a whole (else the reported
+                            poses alone place it)
 ``candidates``              (M, 6) candidate cameras [cx cy cz vx vy vz] the plan chooses N of
                             (:mod:`vp_planner.candidates`), finite, non-zero viewing vectors,
                             N <= M <= :data:`MAX_CANDIDATES`, a method with a candidates mode
@@ -89,8 +94,8 @@ from vp_scene.camera import IMAGE_SIZE
 from .feasibility import Feasibility
 from .methods import BY_NAME, DEFAULT_METHOD, METHODS
 from .reward import DEFAULT_FOV, DEFAULT_THETA_MATCH
-from .reward_models import (DEFAULT_RECONSTRUCTED_WEIGHT, DEFAULT_REWARD_MODEL, DEFAULT_TAU, check_fixed_cameras,
-                            check_reward_model)
+from .reward_models import (DEFAULT_RECONSTRUCTED_WEIGHT, DEFAULT_REWARD_MODEL, DEFAULT_TAU, CoverageParams,
+                            check_fixed_cameras, check_reward_model)
 
 __all__ = [
     "MAX_CAMERAS",
@@ -130,6 +135,8 @@ __all__ = [
     "available_memory",
     "check_parts",
     "total_evaluations",
+    "MAX_POSITION_SIGMA",
+    "MAX_ATTITUDE_SIGMA",
 ]
 
 #: The largest number of cameras N of a plan (:mod:`vp_planner.optimizers` says why).
@@ -138,6 +145,12 @@ MAX_CAMERAS: int = 100
 DTYPES: tuple[str, ...] = ("float64", "float32")
 #: egp/gp searches of the acquisition.
 BO_MODES: tuple[str, ...] = ("trust_region", "global")
+#: The largest reported-pose errors a request takes (m per axis; degrees per axis, the capture
+#: model's bound on attitudes): a flight whose poses are worse than these is not placed by them.
+MAX_POSITION_SIGMA: float = 10.0
+MAX_ATTITUDE_SIGMA: float = 10.0
+#: The coverage models' ingredients as the planner uses them (the request sets the flight's errors).
+_COVERAGE = CoverageParams()
 
 
 class InvalidRequestError(ValueError):
@@ -296,12 +309,19 @@ class CameraSpec:
 
 @dataclass(frozen=True)
 class RewardSpec:
-    """The reward the plan maximizes: its model (``name``), the matching angle (rad) and the
-    precision of its sums."""
+    """The reward the plan maximizes: its model (``name``), the matching angle (rad), the
+    precision of its sums, and what the flight reports to place the model by (the coverage
+    models' registration term, :mod:`vp_planner.reward_models`): the reported camera centres'
+    error (``position_sigma``, m per axis: RTK about 0.02, plain GNSS 1-3), the reported
+    attitudes' (``attitude_sigma``, degrees per axis) and whether ground-control markers place
+    the model as a whole (``ground_control``)."""
 
     name: str = _flat(DEFAULT_REWARD_MODEL, "reward")
     theta_match: float = DEFAULT_THETA_MATCH
     dtype: str = "float64"
+    position_sigma: float = _flat(_COVERAGE.position_sigma, "report_position_sigma")
+    attitude_sigma: float = _flat(_COVERAGE.attitude_sigma, "report_attitude_sigma")
+    ground_control: bool = _flat(_COVERAGE.ground_control, "ground_control")
 
     def __post_init__(self) -> None:
         try:
@@ -311,6 +331,22 @@ class RewardSpec:
         _put(self, "theta_match", _real("theta_match", self.theta_match, 0.0, math.pi, open_ends=True))
         if self.dtype not in DTYPES:
             raise InvalidRequestError(f"dtype must be one of {', '.join(DTYPES)}, got {self.dtype!r}")
+        # a zero error would make the placement's information infinite: (0, MAX)
+        _put(self, "position_sigma", _real("report_position_sigma", self.position_sigma, 0.0, MAX_POSITION_SIGMA,
+                                           open_ends=True))
+        _put(self, "attitude_sigma", _real("report_attitude_sigma", self.attitude_sigma, 0.0, MAX_ATTITUDE_SIGMA,
+                                           open_ends=True))
+        if not isinstance(self.ground_control, (bool, np.bool_)):
+            raise InvalidRequestError(f"ground_control must be true or false, got {self.ground_control!r}")
+        _put(self, "ground_control", bool(self.ground_control))
+
+    def model_spec(self) -> Any:
+        """What :func:`vp_planner.reward_models.make_reward` takes: the name for ``paper`` (it has
+        no registration term), else the coverage model with this flight's reported-pose errors."""
+        if self.name == "paper":
+            return self.name
+        return self.name, dataclasses.replace(_COVERAGE, position_sigma=self.position_sigma,
+                                              attitude_sigma=self.attitude_sigma, ground_control=self.ground_control)
 
 
 @dataclass(frozen=True)

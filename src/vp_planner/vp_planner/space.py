@@ -143,7 +143,8 @@ class ViewSpace(PlanReward):
         min_altitude: minimum camera height above the ground z = 0.
         min_separation: minimum distance between any two cameras.
         fov, theta_match: reward parameters (kept here so that the objective uses the same).
-        reward_model: name of the reward model (:data:`vp_planner.reward_models.REWARD_MODELS`)
+        reward_model: name of the reward model (:data:`vp_planner.reward_models.REWARD_MODELS`), or a
+            ``(name, CoverageParams)`` spec of :func:`~vp_planner.reward_models.make_reward` (the request's)
             or a ``(name, params)`` spec.
         image_size: (width, height) in pixels of the images the cameras will take (the
             ``coverage`` model's resolution term).
