@@ -225,20 +225,30 @@ def test_placement_error_is_the_similarity_fit_propagated_to_the_points() -> Non
 
 def test_a_model_in_two_parts_is_placed_worse_than_one() -> None:
     """Three cameras on each side of a plant (8 degrees apart; the sides share no point SIFT can
-    match) make two parts, each placed on its own 0.3 m of baseline: the registration lowers
-    their coverage, with ground markers too (they place the whole, not one part against the
-    other). Six cameras on one 40-degree arc make one part: with markers the reward is coverage's;
-    without them its placement counts too."""
+    match) make two parts when the reconstruction matches the pairs the poses pick (from
+    ``exhaustive_below`` cameras up; here set to 0), each placed on its own 0.3 m of baseline: the
+    registration lowers their coverage, with ground markers too (they place the whole, not one
+    part against the other). Six cameras on one 40-degree arc make one part: with markers the
+    reward is coverage's; without them its placement counts too. With ``exhaustive_below`` 8 (every
+    pair matched below 8 cameras, as the reconstruction does; not the default) the sides are one
+    model (the soil and the markers link them)."""
     pts = blob()
     split = ring_at(2.0, [0, 8, 16, 180, 188, 196])
     arc = ring_at(2.0, [0, 8, 16, 24, 32, 40])
     E = torch.as_tensor(view_graph(split, pts, ALL_ON, IMAGE))[None]
     same = model_parts(E, 1e-3)[0]
     assert same[:3, :3].all() and same[3:, 3:].all() and not same[:3, 3:].any()
+    picked = ALL_ON
+    assert ALL_ON.exhaustive_below == 0
     plain = {k: coverage_reward(c, pts, NO_REGISTRATION, IMAGE) for k, c in (("split", split), ("arc", arc))}
-    reg = {k: coverage_reward(c, pts, ALL_ON, IMAGE) for k, c in (("split", split), ("arc", arc))}
-    bare = {k: coverage_reward(c, pts, replace(ALL_ON, ground_control=False), IMAGE)
+    reg = {k: coverage_reward(c, pts, picked, IMAGE) for k, c in (("split", split), ("arc", arc))}
+    bare = {k: coverage_reward(c, pts, replace(picked, ground_control=False), IMAGE)
             for k, c in (("split", split), ("arc", arc))}
     assert plain["split"] > 0.5 and reg["split"] < 0.8 * plain["split"] and bare["split"] < reg["split"]
     assert reg["arc"] == pytest.approx(plain["arc"], abs=1e-6) and bare["arc"] < plain["arc"]
     assert reg["arc"] > reg["split"]
+    exhaustive = replace(ALL_ON, exhaustive_below=8)
+    assert coverage_reward(split, pts, exhaustive, IMAGE) == pytest.approx(plain["split"], abs=1e-6)
+    # without markers the one model of both sides is placed on all six centres: better than either side
+    assert coverage_reward(split, pts, replace(exhaustive, ground_control=False), IMAGE) > bare["split"]
+    assert coverage_reward(split, pts, replace(ALL_ON, exhaustive_below=6), IMAGE) == pytest.approx(reg["split"])
