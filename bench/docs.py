@@ -481,8 +481,8 @@ def flights_section(rel: str, title: str) -> str:
 CURRENT = [
     ('Table I with the registration in the reward (egp planned again): 3 planning seeds x 5 realizations',
      'results/rerun/issue42_table1_combined/table1_combined.json', lambda rel, t: combined_section(rel, t, 'Table I')),
-    ('Fields with the registration in the reward (egp planned again): 3 planning seeds x 5 realizations',
-     'results/rerun/issue42_fields_combined/fields_combined.json', lambda rel, t: combined_section(rel, t, 'Fields')),
+    ('Fields, egp starting from the circle\'s rings: 3 planning seeds x 5 realizations',
+     'results/rerun/issue42_fields_rings_combined/fields_combined.json', lambda rel, t: combined_section(rel, t, 'Fields')),
     ('Flights that reconstruct: Table I and the fields before and after the anchored model and ground markers',
      'results/rerun/issue40_flights_fields/flights_check.json', own_markdown('bench.flights_check')),
     ('Table I, realistic capture before the anchored model: 3 planning seeds x 5 realizations',
@@ -545,6 +545,10 @@ SUPERSEDED = [
     ('Plan-quality study, realistic capture before the anchored model',
      'results/rerun/plan_quality_before_anchored/plan_quality.json', plan_quality_section,
      'Superseded by the study rerun under the anchored model and ground markers (issue 42).'),
+    ('Fields with the registration in the reward (egp planned again): 3 planning seeds x 5 realizations',
+     'results/rerun/issue42_fields_combined/fields_combined.json', lambda rel, t: combined_section(rel, t, 'Fields'),
+     'egp by parts before the tuned circle\'s rings were among its whole-field starts (and egp-graph, the same under '
+     'coverage-graph); superseded by the fields with them, whose baselines are the same records.'),
     ('Table I, egp with the registration\'s parts following exhaustive matching (measured, not kept)',
      'results/rerun/issue42_table1_egp_exhaustive/table1_combined.json', lambda rel, t: combined_section(rel, t, 'Table I'),
      'egp planned with CoverageParams(exhaustive_below=8): below 8 cameras every camera in one part, as the '

@@ -7,6 +7,8 @@ import math
 import numpy as np
 import pytest
 
+from vp_planner.baselines import CircleFamily
+from vp_planner.bo_planning import field_starts
 from vp_planner.designs import structured_plans
 from vp_planner.optimizers import plan_views
 from vp_planner.request import InvalidNumCamerasError, PlanRequest
@@ -81,7 +83,8 @@ def test_egp_by_parts_plans_every_plant_and_counts_every_evaluation(two_plants) 
     """Two plants 3 m apart, 4 cameras in 2 parts: each part's 2 cameras are planned on its own
     plant, then jointly. The plan is feasible for the whole field, every plant is seen by at least
     one pair, and the budget is 2 x 12 + 6 evaluations, the parts' first (no complete plan yet:
-    trace 0), then the whole field's structured plans (2 of the 6) and the joint refinement's."""
+    trace 0), then the whole field's starts (2 of the 6: the tuned circle's ring, a structured
+    plan) and the joint refinement's."""
     R, plant = two_plants
     seen = []
     res = plan_views(PlanRequest.of("egp", 4, evaluations=12, initial_evaluations=6, seed=0, parts=2), R,
@@ -92,9 +95,12 @@ def test_egp_by_parts_plans_every_plant_and_counts_every_evaluation(two_plants) 
     assert [p["cameras"] for p in res.parts] == [2, 2] and all(p["evaluations"] == 12 for p in res.parts)
     assert not res.trace[:24].any() and res.trace[-1] > 0 and np.all(np.diff(res.trace[24:]) >= 0)
     assert res.reward == pytest.approx(float(make_reward("coverage", R)(res.cameras[None])[0]), abs=1e-6)
-    # evaluations 25-26: the whole field's first structured plans, scored on the whole field
+    # evaluations 25-26: the whole field's starts, scored on the whole field: the circle family's
+    # ring (a grid of one cell: mid-height, mid-radius), then the first structured plan
     space = ViewSpace(R, 4)
-    whole = space.decode(structured_plans(space, 2))
+    fam = CircleFamily(space)
+    whole = np.stack([fam.plan(0.5, 0.5 * (fam.h_lo + fam.h_hi)), space.decode(structured_plans(space, 1))[0]])
+    np.testing.assert_allclose(field_starts(space, 2)[1], whole, atol=1e-12)
     np.testing.assert_allclose(res.rewards[24:26], make_reward("coverage", R)(whole), atol=1e-6)
     image = CameraModel()
     for g in (0, 1):
@@ -189,3 +195,19 @@ def test_lawnmower_method_is_one_feasible_survey(two_plants) -> None:
         plan_views(PlanRequest.of("lawnmower", 6, lawnmower_overlap=1.0), R)
     with pytest.raises(ValueError, match="tilt"):
         plan_views(PlanRequest.of("lawnmower", 6, lawnmower_tilt=math.radians(70)), R)
+
+
+def test_the_field_starts_hold_the_tuned_circles_grid(two_plants) -> None:
+    """Planning by parts scores the circle family's rings first (the grid the tuned circle
+    searches, about half of the starts: 3 x 3 of 20), then the structured plans; every one a
+    plan of the whole field's N cameras; none for a count of 0."""
+    R, _ = two_plants
+    space = ViewSpace(R, 6)
+    U, cams = field_starts(space, 20)
+    fam = CircleFamily(space)
+    rings = np.array([fam.plan(a, h) for a, h in fam.grid(10)])
+    structured = space.decode(structured_plans(space, 11))      # the infeasible ones dropped
+    assert len(rings) == 9 and U.shape == (9 + len(structured), space.dim) and len(cams) == len(U) <= 20
+    np.testing.assert_allclose(cams[:9], rings, atol=1e-12)
+    np.testing.assert_allclose(cams[9:], structured, atol=1e-12)
+    assert field_starts(space, 0)[0].shape == (0, space.dim)

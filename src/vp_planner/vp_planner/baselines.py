@@ -74,6 +74,15 @@ class CircleFamily:
         lo = self.rho_lo(h)
         return ring(self.centre, self.target, [lo + a * max(0.0, self.rho_hi - lo)], [h], self.N)[0]
 
+    def grid(self, evaluations: int) -> list[tuple[float, float]]:
+        """The (a, h) cells of a grid search of ``evaluations``: n_h = floor(sqrt(E)) heights,
+        evenly from h_lo to h_hi, times floor(E / n_h) radii, evenly over a in [0, 1]."""
+        n_h = max(1, int(math.isqrt(evaluations)))
+        n_r = max(1, evaluations // n_h)
+        hs = np.linspace(self.h_lo, self.h_hi, n_h) if n_h > 1 else np.array([0.5 * (self.h_lo + self.h_hi)])
+        As = np.linspace(0.0, 1.0, n_r) if n_r > 1 else np.array([0.5])
+        return [(float(a), float(h)) for h in hs for a in As]
+
 
 def plan_circle(space: ViewSpace, obj: Objective, evaluations: int, rng: np.random.Generator,
             candidate: bool = True) -> NDArray[np.float64]:
@@ -85,9 +94,7 @@ def plan_circle(space: ViewSpace, obj: Objective, evaluations: int, rng: np.rand
     fam = CircleFamily(space)
     n_h = max(1, int(math.isqrt(evaluations)))
     n_r = max(1, evaluations // n_h)
-    hs = np.linspace(fam.h_lo, fam.h_hi, n_h) if n_h > 1 else np.array([0.5 * (fam.h_lo + fam.h_hi)])
-    As = np.linspace(0.0, 1.0, n_r) if n_r > 1 else np.array([0.5])
-    grid = [(a, h) for h in hs for a in As]
+    grid = fam.grid(evaluations)
     extra = evaluations - len(grid)
     first = obj.count
     evaluate_plans(obj, np.array([fam.plan(a, h) for a, h in grid]), candidate)

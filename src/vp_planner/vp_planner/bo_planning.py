@@ -137,10 +137,9 @@ def plan_bo_by_parts(space: ViewSpace, obj: Objective, evaluations: int, initial
     # reported poses, README "Reward models"), where one ring over the field holds together.
     joint_budget = max(1, evaluations // 2)
     room = min(structured_init, (joint_budget - 2) // 2)      # at most half, and 2 left for the joint start
-    S = structured_plans(space, max_plans=room) if room > 0 else []
+    S, whole = field_starts(space, room)
     X0 = [np.concatenate(part_U)]
     if len(S):
-        whole = space.decode(S)
         values = obj.record(S, whole)
         X0.append(_in_parts(whole[int(np.argmax(values))], part_spaces, labels, R))
     joint = JointSpace(space, part_spaces)
@@ -148,6 +147,30 @@ def plan_bo_by_parts(space: ViewSpace, obj: Objective, evaluations: int, initial
     info = optimize_in(joint, obj, np.stack(X0), joint_budget - len(S), len(X0), seed, ensemble, "trust_region")
     info["parts"] = records
     return info
+
+
+def field_starts(space: ViewSpace, count: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Up to ``count`` whole-field plans planning by parts scores: (U (M, 6N), cameras (M, N, 6)).
+
+    First the tuned circle's family (:class:`vp_planner.baselines.CircleFamily`, horizontal rings
+    round the field facing its centre) on the grid its grid search uses, with about half of
+    ``count`` cells (3 x 3 of 20), then the structured plans (:func:`structured_plans`, the
+    infeasible ones dropped) for the rest. The structured rings sit at one steep elevation on the shell's edge; on the fields the
+    circle's lower, nearer rings scored higher than any plan egp by parts returned (grid_3x3,
+    N = 8: 0.894-0.898 against 0.837-0.865, coverage; 3 planning seeds), so egp starts from them.
+    A ring is recorded with its own cameras (U: :meth:`ViewSpace.encode_cameras`, projected where
+    the shell cannot hold it: the joint refinement starts in the parts' shells anyway)."""
+    from .baselines import CircleFamily
+
+    if count <= 0:
+        return np.zeros((0, space.dim)), np.zeros((0, space.num_cameras, 6))
+    fam = CircleFamily(space)
+    rings = np.array([fam.plan(a, h) for a, h in fam.grid(count // 2)]) if count >= 2 else \
+        np.zeros((0, space.num_cameras, 6))
+    S = structured_plans(space, max_plans=count - len(rings))
+    U = np.concatenate([space.encode_cameras(rings).reshape(len(rings), space.dim), S]) if len(rings) else S
+    cams = np.concatenate([rings, space.decode(S)]) if len(rings) else space.decode(S)
+    return U, cams
 
 
 def _in_parts(cameras: NDArray[np.float64], part_spaces: list, labels: NDArray[np.int64],
