@@ -493,7 +493,7 @@ CURRENT = [
     ('Plan-quality study, realistic capture', 'results/plan_quality.json', plan_quality_section),
     ('Reward candidates against the plan-quality study', 'results/rerun/issue42_reward_candidates/reward_candidates.json',
      own_markdown('bench.reward_candidates')),
-    ('Real photographs', 'results/real/romi_real_plant.json', own_markdown('bench.bench_real')),
+    ('Real photographs', 'results/rerun/issue42_real/real/romi_real_plant.json', own_markdown('bench.bench_real')),
     ('Plant masks', 'results/masks.json', own_markdown('bench.bench_masks')),
     ('Second sortie', 'results/bench_sorties.json', sorties_section),
     ('Coverage of the prior against the Chamfer', 'results/coverage_check.json', own_markdown('bench.coverage_check')),
@@ -549,6 +549,9 @@ SUPERSEDED = [
      'results/rerun/issue42_fields_combined/fields_combined.json', lambda rel, t: combined_section(rel, t, 'Fields'),
      'egp by parts before the tuned circle\'s rings were among its whole-field starts (and egp-graph, the same under '
      'coverage-graph); superseded by the fields with them, whose baselines are the same records.'),
+    ('Real photographs at 9104f5a', 'results/real/romi_real_plant.json', own_markdown('bench.bench_real'),
+     'The same scan (imported with --pose colmap) before the registration term of the reward and the dense pair '
+     'budget; superseded by the run at the current code.'),
     ('Table I, egp with the registration\'s parts following exhaustive matching (measured, not kept)',
      'results/rerun/issue42_table1_egp_exhaustive/table1_combined.json', lambda rel, t: combined_section(rel, t, 'Table I'),
      'egp planned with CoverageParams(exhaustive_below=8): below 8 cameras every camera in one part, as the '
