@@ -439,6 +439,7 @@ def analyze(args) -> dict:
     if source is not None:
         result['records'] = {'file': str(args.records), 'commit': source.get('commit'), 'date': source.get('date')}
     per_plan: dict = {}
+    scored: dict = {}
     for variant in variants:
         for cloud, key in CLOUDS.items():
             vname = f'{variant}/{cloud}'
@@ -455,7 +456,10 @@ def analyze(args) -> dict:
                 plans = [p for p in every if p['recon']]  # the skipped ones are counted, below
                 if not plans:
                     continue
-                rewards = score_models(s, args.models, plans, specs)
+                plan_set = (s, tuple(p['id'] for p in plans))  # a variant's clouds share the plans: score once
+                if plan_set not in scored:
+                    scored[plan_set] = score_models(s, args.models, plans, specs)
+                rewards = scored[plan_set]
                 ch = np.array([plan_chamfer(p, key) for p in plans])
                 ok = np.isfinite(ch)
                 vres['plans'][s] = len(plans)
