@@ -74,11 +74,16 @@ class CircleFamily:
         lo = self.rho_lo(h)
         return ring(self.centre, self.target, [lo + a * max(0.0, self.rho_hi - lo)], [h], self.N)[0]
 
-    def grid(self, evaluations: int) -> list[tuple[float, float]]:
-        """The (a, h) cells of a grid search of ``evaluations``: n_h = floor(sqrt(E)) heights,
-        evenly from h_lo to h_hi, times floor(E / n_h) radii, evenly over a in [0, 1]."""
+    @staticmethod
+    def grid_shape(evaluations: int) -> tuple[int, int]:
+        """(n_h, n_r) of a grid search of ``evaluations``: floor(sqrt(E)) heights x floor(E / n_h) radii."""
         n_h = max(1, int(math.isqrt(evaluations)))
-        n_r = max(1, evaluations // n_h)
+        return n_h, max(1, evaluations // n_h)
+
+    def grid(self, evaluations: int) -> list[tuple[float, float]]:
+        """The (a, h) cells of a grid search of ``evaluations`` (:meth:`grid_shape`): the heights
+        evenly from h_lo to h_hi, the radii evenly over a in [0, 1]."""
+        n_h, n_r = self.grid_shape(evaluations)
         hs = np.linspace(self.h_lo, self.h_hi, n_h) if n_h > 1 else np.array([0.5 * (self.h_lo + self.h_hi)])
         As = np.linspace(0.0, 1.0, n_r) if n_r > 1 else np.array([0.5])
         return [(float(a), float(h)) for h in hs for a in As]
@@ -92,8 +97,7 @@ def plan_circle(space: ViewSpace, obj: Objective, evaluations: int, rng: np.rand
     best so far); the remaining evaluations (fewer than n_h) jitter around the best cell.
     """
     fam = CircleFamily(space)
-    n_h = max(1, int(math.isqrt(evaluations)))
-    n_r = max(1, evaluations // n_h)
+    n_h, n_r = fam.grid_shape(evaluations)
     grid = fam.grid(evaluations)
     extra = evaluations - len(grid)
     first = obj.count

@@ -155,8 +155,8 @@ def field_starts(space: ViewSpace, count: int) -> tuple[NDArray[np.float64], NDA
     First the tuned circle's family (:class:`vp_planner.baselines.CircleFamily`, horizontal rings
     round the field facing its centre) on the grid its grid search uses, with about half of
     ``count`` cells (3 x 3 of 20), then the structured plans (:func:`structured_plans`, the
-    infeasible ones dropped) for the rest. The structured rings sit at one steep elevation on the shell's edge; on the fields the
-    circle's lower, nearer rings scored higher than any plan egp by parts returned (grid_3x3,
+    infeasible ones dropped) for the rest. The structured rings sit at one steep elevation on the
+    shell's edge; on the fields the circle's lower, nearer rings scored higher than any plan egp by parts returned (grid_3x3,
     N = 8: 0.894-0.898 against 0.837-0.865, coverage; 3 planning seeds), so egp starts from them.
     A ring is recorded with its own cameras (U: :meth:`ViewSpace.encode_cameras`, projected where
     the shell cannot hold it: the joint refinement starts in the parts' shells anyway)."""
@@ -165,12 +165,12 @@ def field_starts(space: ViewSpace, count: int) -> tuple[NDArray[np.float64], NDA
     if count <= 0:
         return np.zeros((0, space.dim)), np.zeros((0, space.num_cameras, 6))
     fam = CircleFamily(space)
-    rings = np.array([fam.plan(a, h) for a, h in fam.grid(count // 2)]) if count >= 2 else \
-        np.zeros((0, space.num_cameras, 6))
+    cells = fam.grid(count // 2) if count >= 2 else []
+    rings = np.array([fam.plan(a, h) for a, h in cells]).reshape(-1, space.num_cameras, 6)
     S = structured_plans(space, max_plans=count - len(rings))
-    U = np.concatenate([space.encode_cameras(rings).reshape(len(rings), space.dim), S]) if len(rings) else S
-    cams = np.concatenate([rings, space.decode(S)]) if len(rings) else space.decode(S)
-    return U, cams
+    if not len(rings):
+        return S, space.decode(S)
+    return np.concatenate([space.encode_cameras(rings), S]), np.concatenate([rings, space.decode(S)])
 
 
 def _in_parts(cameras: NDArray[np.float64], part_spaces: list, labels: NDArray[np.int64],

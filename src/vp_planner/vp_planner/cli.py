@@ -284,6 +284,9 @@ def reconstruction_of(path: Optional[str], flag: str = "--reconstructed") -> Opt
 #: flag named as a field of :data:`vp_planner.request.FLAT` (``--min-standoff``, ``--bo-mode``, ...)
 #: is that field.
 REQUEST_FLAGS = {"cameras": "num_cameras", "evals": "evaluations", "init": "initial_evaluations"}
+#: The request's flat names plan.json keeps as ``registration`` (the flight's reported-pose errors)
+#: and ``score`` reads back.
+REGISTRATION = ("report_position_sigma", "report_attitude_sigma", "ground_control")
 
 
 def request_of(args: argparse.Namespace) -> "PlanRequest":
@@ -305,6 +308,7 @@ def plan(args: argparse.Namespace) -> dict:
 
     from .methods import BY_NAME
     from .optimizers import plan_views
+    from .request import FLAT
 
     request = request_of(args)  # fail before reading files or building the scene
     if args.threads < 1:
@@ -367,9 +371,7 @@ def plan(args: argparse.Namespace) -> dict:
         "seconds": float(res.seconds),
         "fov": cams.fov,
         "theta_match": request.reward.theta_match,
-        "registration": {"report_position_sigma": request.reward.position_sigma,
-                         "report_attitude_sigma": request.reward.attitude_sigma,
-                         "ground_control": request.reward.ground_control},
+        "registration": {k: getattr(getattr(request, FLAT[k][0]), FLAT[k][1]) for k in REGISTRATION},
         "image_size": list(cams.image_size),
         "feasibility": {"min_standoff": feas.min_standoff, "min_altitude": feas.min_altitude,
                         "min_separation": feas.min_separation},
@@ -418,7 +420,7 @@ def score(args: argparse.Namespace) -> float:
 
     from vp_scene.camera import IMAGE_SIZE, CameraModel
 
-    from .request import CameraSpec, InvalidRequestError, RewardSpec
+    from .request import FLAT, CameraSpec, InvalidRequestError, RewardSpec
     from .reward_models import DEFAULT_REWARD_MODEL, check_reward_model, make_reward
 
     try:
@@ -438,10 +440,8 @@ def score(args: argparse.Namespace) -> float:
     if not isinstance(registration, dict):
         raise CliError(f"{args.plan}: its 'registration' record is not an object")
     try:
-        reward = RewardSpec(name=model, theta_match=theta, **{
-            key: registration[flat] for key, flat in (("position_sigma", "report_position_sigma"),
-                                                      ("attitude_sigma", "report_attitude_sigma"),
-                                                      ("ground_control", "ground_control")) if flat in registration})
+        reward = RewardSpec(name=model, theta_match=theta,
+                            **{FLAT[k][1]: registration[k] for k in REGISTRATION if k in registration})
     except InvalidRequestError as exc:
         raise CliError(f"{args.plan}: {exc}") from None
     realizations, layout_name = build_scene(scene)

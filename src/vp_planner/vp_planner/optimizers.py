@@ -219,15 +219,16 @@ def plan_views(request: PlanRequest, realizations: Any, callback: Optional[Callb
     check_budget_memory(q.method, num_cameras, budget)
     start = time.perf_counter()
     feas = q.feasibility
+    spec = q.reward.model_spec()  # the reward model with the flight's reported-pose errors
     if among:  # N of the candidate poses (vp_planner.candidates): no feasibility rules, no free space
         from .candidates import CandidateSpace
 
         space = CandidateSpace(q.candidates.poses, num_cameras, R, fov=q.cameras.fov, theta_match=q.reward.theta_match,
-                               reward_model=q.reward.model_spec(), image_size=q.cameras.image_size, fixed_cameras=F, point_weights=W)
+                               reward_model=spec, image_size=q.cameras.image_size, fixed_cameras=F, point_weights=W)
     else:
         space = ViewSpace(R, num_cameras, min_standoff=feas.min_standoff, min_altitude=feas.min_altitude,
                           min_separation=feas.min_separation, fov=q.cameras.fov, theta_match=q.reward.theta_match,
-                          shell_depth=q.cameras.shell_depth, reward_model=q.reward.model_spec(), image_size=q.cameras.image_size,
+                          shell_depth=q.cameras.shell_depth, reward_model=spec, image_size=q.cameras.image_size,
                           fixed_cameras=F, point_weights=W)
     obj = Objective(space, budget, callback=callback, dtype=getattr(torch, q.reward.dtype), should_stop=should_stop)
     rng = np.random.default_rng(q.seed)

@@ -45,9 +45,9 @@ from vp_planner.gp import MODEL_NAMES
 from vp_planner.methods import MAX_EVALUATIONS, METHODS
 from vp_planner.optimizers import InvalidSceneError, PlanResult, plan_views
 from vp_planner.request import (BO_MODES, DEFAULTS, FLAT, MAX_ATTITUDE_SIGMA, MAX_CAMERAS, MAX_POSITION_SIGMA,
-                                BudgetTooLargeError, InvalidBudgetError, InvalidCandidatesError, InvalidFixedCamerasError,
-                                InvalidNumCamerasError, InvalidReconstructionError, PlanRequest, UnknownMethodError, UnknownRewardModelError,
-                                check_fields)
+                                BudgetTooLargeError, InvalidBudgetError, InvalidCandidatesError,
+                                InvalidFixedCamerasError, InvalidNumCamerasError, InvalidReconstructionError,
+                                PlanRequest, UnknownMethodError, UnknownRewardModelError, check_fields)
 from vp_planner.reward_models import REWARD_MODELS
 from vp_planner.space import NoFeasiblePlanError
 from vp_scene.cloud import pointcloud2_to_numpy, realizations_from_cloud
