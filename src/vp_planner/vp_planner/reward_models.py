@@ -23,6 +23,19 @@ mean over the K realizations of its reward on each one.
       hidden by nearer points of the same realization: a z-buffer of the cloud on a coarse grid
       of ``zbuffer_width`` cells across the image; p is visible when its depth is within
       ``occlusion_tolerance`` (relative) of the nearest depth in its cell (self-occlusion).
+      Option ``zbuffer_cell`` (m, 0 = off, the default): cells that measure that much on the
+      plant at the median depth D_i of what camera i sees in that realization
+      (2 tan(FoV/2) D_i / zbuffer_cell cells across, clamped to ``ZBUFFER_CELLS``), so that a leaf
+      hides about its width whatever the distance (64 cells hide everything behind the nearest
+      leaf in 12.5 cm from 4 m). Measured and not kept (2026-11-29, docs/history.md,
+      docs/results.md): at 3 cm, the cell chosen on the design half of the plan-quality study
+      (1 to 4 cm), the study's design half rho went 0.671 -> 0.716 (one_plant) and 0.697 ->
+      0.694 (three_row), the check half 0.754 -> 0.761 and 0.671 -> 0.633; it ranks row_12's 12
+      plans (4 methods x 3 seeds) as they reconstruct (rho -0.53 -> +0.69), grid_3x3's no better
+      (-0.50 -> -0.75; their Chamfer spans 1.47-1.97, sa's plans scored highest); and
+      egp planned with it (planning seed 0, 5 realizations, map Chamfer x100) put the row's 12
+      cameras in three clusters of 4 whose anchored adjustment drifted 0.26-1.15 m in every
+      realization: row_12 18.85 (the image grid: 1.63), grid_3x3 1.42 (1.48).
     * rho(r) = min(1, (f / r) / ppm_full): image resolution, pixels per metre on the plant at
       distance r (f = (W/2) / tan(FoV/2) for the rendered image size) relative to the density
       ``ppm_full`` above which more pixels no longer help.
@@ -130,6 +143,9 @@ DEFAULT_TAU: float = 0.03
 #: The weight w_p of a reconstructed point (the others weigh 1).
 DEFAULT_RECONSTRUCTED_WEIGHT: float = 0.1
 
+#: Bounds of a camera's z-buffer grid (cells across the image, ``CoverageParams.zbuffer_cell``).
+ZBUFFER_CELLS: tuple[int, int] = (8, 1024)
+
 #: Reward models by name (``reward`` parameter, PlanViews goal field, ``--reward``).
 REWARD_MODELS: tuple[str, ...] = ("paper", "coverage", "coverage-graph")
 #: The model the plan-quality study supports (README; results/ideal/plan_quality.json, and under the
@@ -152,7 +168,10 @@ class CoverageParams:
 
     Attributes:
         occlusion: z-buffer self-occlusion test.
-        zbuffer_width: z-buffer cells across the image width (height in proportion).
+        zbuffer_width: z-buffer cells across the image width (height in proportion) when
+            ``zbuffer_cell`` is 0.
+        zbuffer_cell: metres a z-buffer cell measures on the plant at each camera's median depth
+            (0: ``zbuffer_width`` cells across every image).
         occlusion_tolerance: a point within this fraction of the cell's nearest depth is visible.
         resolution: weight cameras by pixels per metre on the plant.
         ppm_full: pixels per metre above which rho = 1.
@@ -183,6 +202,8 @@ class CoverageParams:
 
     occlusion: bool = True
     zbuffer_width: int = 64
+    # an option, measured and not kept (module docstring); 0.03 was chosen on the design half
+    zbuffer_cell: float = 0.0
     occlusion_tolerance: float = 0.03
     resolution: bool = True
     ppm_full: float = 500.0
@@ -210,6 +231,12 @@ class CoverageParams:
     # reconstruction's exhaustive matching below 8 cameras: measured and not kept (module docstring)
     exhaustive_below: int = 0
 
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.zbuffer_cell) and self.zbuffer_cell >= 0):
+            raise ValueError(f"zbuffer_cell must be finite and >= 0 (metres), got {self.zbuffer_cell}")
+        if not ZBUFFER_CELLS[0] <= int(self.zbuffer_width) <= ZBUFFER_CELLS[1] and not self.zbuffer_cell:
+            raise ValueError(f"zbuffer_width must be in [{ZBUFFER_CELLS[0]}, {ZBUFFER_CELLS[1]}], got {self.zbuffer_width}")
+
 
 def ablations() -> dict[str, tuple[str, CoverageParams]]:
     """Ingredient ablations of ``coverage`` (name -> spec) measured by the plan-quality study."""
@@ -220,6 +247,8 @@ def ablations() -> dict[str, tuple[str, CoverageParams]]:
         "coverage-no-window": ("coverage", replace(base, window=False)),
         "coverage-no-saturation": ("coverage", replace(base, saturation=False)),
         "coverage-cone": ("coverage", replace(base, frustum=False)),
+        # z-buffer cells of 3 cm on the plant (an option, measured and not kept)
+        "coverage-object-cells": ("coverage", replace(base, zbuffer_cell=0.03)),
     }
     return out
 
@@ -424,6 +453,55 @@ def view_graph(cameras: Any, realizations: Any, params: CoverageParams = Coverag
     return E[0].numpy()
 
 
+def _object_cells(inside: torch.Tensor, depth: torch.Tensor, K: int, p: CoverageParams,
+                  image: CameraModel) -> tuple[torch.Tensor, torch.Tensor]:
+    """Cells (gw, gh) (B, N, K P) across and down the z-buffer of each camera and realization
+    under ``zbuffer_cell`` (module docstring, vis_i): the median depth is a realization's own, so
+    that eq. 7's mean over the winds is the mean of the rewards of each wind."""
+    B, N, KP = inside.shape
+    seen = torch.where(inside, depth, torch.full((), math.nan, dtype=depth.dtype)).view(B, N, K, KP // K)
+    d_med = torch.nan_to_num(seen.nanmedian(dim=-1).values, nan=1.0)    # a camera seeing nothing: any grid
+    gw = (2.0 * image.tan_half_fov * d_med / p.zbuffer_cell).round().clamp(*ZBUFFER_CELLS).long()
+    gw = gw.repeat_interleave(KP // K, dim=-1)
+    gh = (gw.to(torch.float64) * image.height / image.width).round().clamp_min(1).long()
+    return gw, gh
+
+
+def _unoccluded(inside: torch.Tensor, depth: torch.Tensor, u: torch.Tensor, v: torch.Tensor, K: int,
+                p: CoverageParams, image: CameraModel) -> torch.Tensor:
+    """inside & not hidden by a nearer point of its realization in its z-buffer cell (B, N, K P).
+
+    One buffer per (plan, camera, realization): points of other winds do not occlude. The grid
+    fixed in the image is one dense array of B N K cells; the grids of ``zbuffer_cell`` (up to
+    1024 x 768 cells a camera) keep only the cells some point falls in (``torch.unique`` of the
+    cell keys), so their memory follows the points."""
+    B, N, KP = inside.shape
+    dt = depth.dtype
+    tx, ty = image.tan_half_fov, image.tan_half_fov_vertical
+    k_of = torch.arange(K).repeat_interleave(KP // K).view(1, 1, KP)
+    bn = torch.arange(B * N).view(B, N, 1)
+    if not p.zbuffer_cell:
+        gw = max(1, int(p.zbuffer_width))
+        gh = max(1, int(round(gw * image.height / image.width)))
+        iu = ((u / tx + 1.0) * 0.5 * gw).floor().clamp(0, gw - 1).long()
+        iv = ((v / ty + 1.0) * 0.5 * gh).floor().clamp(0, gh - 1).long()
+        key = ((bn * K + k_of) * gh + iv) * gw + iu
+        inf = torch.full((B * N * K * gh * gw,), math.inf, dtype=dt)
+        zmin = inf.scatter_reduce(0, key[inside], depth[inside], reduce="amin", include_self=True)
+        return inside & (depth <= zmin[key.clamp_min(0)] * (1.0 + p.occlusion_tolerance))
+    gw, gh = _object_cells(inside, depth, K, p, image)
+    iu = torch.minimum(((u / tx + 1.0) * 0.5 * gw).floor().clamp_min(0), (gw - 1).to(dt)).long()
+    iv = torch.minimum(((v / ty + 1.0) * 0.5 * gh).floor().clamp_min(0), (gh - 1).to(dt)).long()
+    stride = ZBUFFER_CELLS[1] + 1
+    key = ((bn * K + k_of) * stride + iv) * stride + iu
+    cells, which = torch.unique(key[inside], return_inverse=True)
+    z_in = depth[inside]
+    zmin = torch.full((len(cells),), math.inf, dtype=dt).scatter_reduce(0, which, z_in, reduce="amin")
+    vis = torch.zeros_like(inside)
+    vis[inside] = z_in <= zmin[which] * (1.0 + p.occlusion_tolerance)
+    return vis
+
+
 def _point_coverage(cams: torch.Tensor, pts: torch.Tensor, p: CoverageParams, image: CameraModel,
                     max_elements: int) -> tuple[torch.Tensor, torch.Tensor]:
     """cov(p) (B, K P) of plans (B, N, 6) on realizations (K, P, 3), flattened realization-major,
@@ -449,20 +527,7 @@ def _point_coverage(cams: torch.Tensor, pts: torch.Tensor, p: CoverageParams, im
         inside = front & (depth >= math.cos(0.5 * image.fov) * r)
         u = (xs / safe).clamp(-tx, tx)
         v = (ys / safe).clamp(-ty, ty)
-    vis = inside
-    if p.occlusion:
-        gw = max(1, int(p.zbuffer_width))
-        gh = max(1, int(round(gw * image.height / image.width)))
-        iu = ((u / tx + 1.0) * 0.5 * gw).floor().clamp(0, gw - 1).long()
-        iv = ((v / ty + 1.0) * 0.5 * gh).floor().clamp(0, gh - 1).long()
-        # one buffer per (plan, camera, realization): points of other winds do not occlude
-        k_of = torch.arange(K).repeat_interleave(P).view(1, 1, K * P)
-        bn = torch.arange(B * N).view(B, N, 1)
-        key = ((bn * K + k_of) * gh + iv) * gw + iu
-        inf = torch.full((B * N * K * gh * gw,), math.inf, dtype=dt)
-        zmin = inf.scatter_reduce(0, key[inside], depth[inside], reduce="amin", include_self=True)
-        near = depth <= zmin[key.clamp_min(0)] * (1.0 + p.occlusion_tolerance)
-        vis = inside & near
+    vis = _unoccluded(inside, depth, u, v, K, p, image) if p.occlusion else inside
     q = vis.to(dt)
     seen_pt = q                                                    # visible (registration's links: any resolution)
     if p.resolution:
