@@ -558,11 +558,12 @@ SUPERSEDED = [
      'reconstruction matches every pair (issue 42). Against egp in Table I with the registration (the same seeds and '
      'realizations): no better, six_rect worse (map +0.151 [+0.030, +0.272]); the default stays the pair rule.'),
     ('Fields, egp planned with z-buffer cells of 3 cm on the plant (measured, not kept)',
-     'results/rerun/issue42_fields_egp_zcell_seed0/bench_fields.json', fields_section,
+     'results/rerun/issue42_fields_zcell_combined/fields_combined.json', lambda rel, t: combined_section(rel, t, 'Fields'),
      'egp planned with CoverageParams(zbuffer_cell=0.03) (issue 42): occlusion cells that measure 3 cm on the plant '
-     'rather than 64 across the image, planning seed 0 alone. grid_3x3 1.42 (with the image grid, seed 0: 1.48); '
-     'row_12 18.85: the row\'s 12 cameras in three clusters of 4 whose anchored adjustment drifted in all 5 '
-     'realizations (0.26-1.15 m; the points kept at the reported poses). Not kept; the option stays, and the '
+     'rather than 64 across the image; the baselines are the current fields\' records. grid_3x3 1.46 (egp with the '
+     'image grid 1.50, circle 1.48); row_12 7.80 (3.19, arc 1.58): seeds 1 and 2 2.39 and 2.18 (with the image grid '
+     '2.58 and 5.37), seed 0 18.85: the row\'s 12 cameras in three clusters of 4 whose anchored adjustment drifted '
+     '0.26-1.15 m in all 5 realizations (the points kept at the reported poses). Not kept; the option stays, and the '
      'plan-quality study reports it (coverage-object-cells).'),
     ('Plan-quality study, the rewards before the registration term',
      'results/rerun/issue42_plan_quality_before_registration/plan_quality.json', plan_quality_section,

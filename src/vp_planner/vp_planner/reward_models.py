@@ -33,9 +33,10 @@ mean over the K realizations of its reward on each one.
       0.694 (three_row), the check half 0.754 -> 0.761 and 0.671 -> 0.633; it ranks row_12's 12
       plans (4 methods x 3 seeds) as they reconstruct (rho -0.53 -> +0.69), grid_3x3's no better
       (-0.50 -> -0.75; their Chamfer spans 1.47-1.97, sa's plans scored highest); and
-      egp planned with it (planning seed 0, 5 realizations, map Chamfer x100) put the row's 12
-      cameras in three clusters of 4 whose anchored adjustment drifted 0.26-1.15 m in every
-      realization: row_12 18.85 (the image grid: 1.63), grid_3x3 1.42 (1.48).
+      egp planned with it (3 planning seeds x 5 realizations, map Chamfer x100): grid_3x3 1.46
+      (the image grid: 1.50; the circle 1.48), row_12 7.80 (3.19; the arc 1.58): seeds 1 and 2
+      2.39 and 2.18 (2.58, 5.37), but seed 0 put the row's 12 cameras in three clusters of 4
+      whose anchored adjustment drifted 0.26-1.15 m in every realization (18.85; 1.63).
     * rho(r) = min(1, (f / r) / ppm_full): image resolution, pixels per metre on the plant at
       distance r (f = (W/2) / tan(FoV/2) for the rendered image size) relative to the density
       ``ppm_full`` above which more pixels no longer help.
@@ -472,7 +473,7 @@ def _unoccluded(inside: torch.Tensor, depth: torch.Tensor, u: torch.Tensor, v: t
     """inside & not hidden by a nearer point of its realization in its z-buffer cell (B, N, K P).
 
     One buffer per (plan, camera, realization): points of other winds do not occlude. The grid
-    fixed in the image is one dense array of B N K cells; the grids of ``zbuffer_cell`` (up to
+    fixed in the image is one dense array (B N K buffers of its cells); the grids of ``zbuffer_cell`` (up to
     1024 x 768 cells a camera) keep only the cells some point falls in (``torch.unique`` of the
     cell keys), so their memory follows the points."""
     B, N, KP = inside.shape
