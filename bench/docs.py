@@ -560,11 +560,10 @@ SUPERSEDED = [
     ('Fields, egp planned with z-buffer cells of 3 cm on the plant (measured, not kept)',
      'results/rerun/issue42_fields_zcell_combined/fields_combined.json', lambda rel, t: combined_section(rel, t, 'Fields'),
      'egp planned with CoverageParams(zbuffer_cell=0.03) (issue 42): occlusion cells that measure 3 cm on the plant '
-     'rather than 64 across the image; the baselines are the current fields\' records. grid_3x3 1.46 (egp with the '
-     'image grid 1.50, circle 1.48); row_12 7.80 (3.19, arc 1.58): seeds 1 and 2 2.39 and 2.18 (with the image grid '
-     '2.58 and 5.37), seed 0 18.85: the row\'s 12 cameras in three clusters of 4 whose anchored adjustment drifted '
-     '0.26-1.15 m in all 5 realizations (the points kept at the reported poses). Not kept; the option stays, and the '
-     'plan-quality study reports it (coverage-object-cells).'),
+     'rather than 64 across the image; the baselines are the current fields\' records. Against egp with the image '
+     'grid (the current fields): better on grid_3x3, worse on row_12, where planning seed 0 put the 12 cameras in '
+     'three clusters of 4 whose anchored adjustment drifted in every realization (the points kept at the reported '
+     'poses). Not kept; the option stays, and the plan-quality study reports it (coverage-object-cells).'),
     ('Plan-quality study, the rewards before the registration term',
      'results/rerun/issue42_plan_quality_before_registration/plan_quality.json', plan_quality_section,
      'The same reconstructions scored by the rewards before coverage weighed the registration (issue 42); '
