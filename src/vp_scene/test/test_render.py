@@ -109,3 +109,36 @@ def test_check_cameras_errors() -> None:
         check_cameras([[0, 0, 1, 0, 0, 0]])
     with pytest.raises(ValueError, match="NaN"):
         check_cameras([[0, 0, np.nan, 1, 0, 0]])
+
+
+def test_the_soil_does_not_repeat_and_renders_the_same_twice() -> None:
+    """Issue 42: one soil texture tiled every 4.1 m gave views across a row's ends hundreds of
+    false matches. Every square of the ground has its own texture: the soil photographed at x and
+    at x + 4.1 m differs, and the same view renders the same twice (the squares are kept)."""
+    from vp_scene.render import (SOIL_TEXELS, _SOIL, ground_meshes, soil_square_mesh, soil_squares, soil_texture,
+                                 soil_tile_seed)
+
+    period = 0.002 * SOIL_TEXELS
+    plant = trimesh.creation.box((0.4, 0.4, 1.0))
+    plant.apply_translation([6.0, 0.0, 0.5])  # a row's end: the ground spans x from -5.7 to 11.7
+    squares = soil_squares([plant])
+    assert len(set(squares)) == len(squares) and len({soil_tile_seed(i, j) for i, j in squares}) == len(squares)
+    lo = np.min([m.vertices.min(axis=0) for m in ground_meshes([plant])], axis=0)
+    hi = np.max([m.vertices.max(axis=0) for m in ground_meshes([plant])], axis=0)
+    assert lo[0] <= 5.8 - 5.5 and hi[0] >= 6.2 + 5.5 and lo[1] <= -5.7 and hi[1] >= 5.7  # the margin
+    grey = [soil_texture(SOIL_TEXELS, soil_tile_seed(i, 0)).mean(axis=2).ravel() for i in range(3)]
+    corr = np.corrcoef(grey)
+    assert np.all(np.abs(corr[np.triu_indices(3, 1)]) < 0.2), corr  # distinct squares, not shifted copies
+    first = soil_texture(SOIL_TEXELS, soil_tile_seed(1, 0)).copy()
+    _SOIL.clear()
+    assert np.array_equal(soil_texture(SOIL_TEXELS, soil_tile_seed(1, 0)), first)  # seeded: every process agrees
+    assert soil_square_mesh(1, 0).bounds[0, 0] == pytest.approx(0.5 * period)
+
+    r = Renderer(W, H, math.radians(50))
+    down = [0.0, 0.2, -1.0]
+    cams = np.array([[0.7, 0.3, 1.0, *down], [0.7 + period, 0.3, 1.0, *down], [0.7, 0.3, 1.0, *down]])
+    images, _, _ = r.render([plant], cams, ground=True)
+    again, _, _ = r.render([plant], cams[:1], ground=True)
+    assert np.array_equal(images[0], images[2]) and np.array_equal(images[0], again[0])
+    diff = np.abs(images[0].astype(np.int16) - images[1].astype(np.int16)).mean()
+    assert diff > 3.0, diff  # the tiled soil: these two views were the same picture (0.02; distinct squares 5.6)

@@ -35,7 +35,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from vp_scene.camera import camera_to_world_gl, check_cameras, intrinsics, principal_point_gl
 
-__all__ = ["SKY_COLOR", "KEY_TOLERANCE", "RenderError", "foreground_mask", "ground_mesh", "marker_meshes", "Renderer",
+__all__ = ["SKY_COLOR", "KEY_TOLERANCE", "RenderError", "foreground_mask", "ground_meshes", "marker_meshes", "soil_squares",
+           "soil_square_mesh", "soil_texture", "soil_tile_seed", "Renderer",
            "release_contexts"]
 
 #: Uniform background colour (pure blue: never a plant colour, corn is green / yellow / brown).
@@ -91,6 +92,10 @@ def _egl_or_osmesa():
 
 _CONTEXTS: dict = {}
 _LOCK = threading.RLock()
+#: pyrender meshes of the soil's squares per OpenGL context (image size): {(w, h): {(i, j): meshes}}
+_SQUARES: dict = {}
+#: squares kept per context (each holds a 12 MB texture; a 12-plant row stands on about 40)
+_SQUARES_KEPT: int = 64
 
 
 def release_contexts() -> None:
@@ -102,6 +107,7 @@ def release_contexts() -> None:
             except Exception:  # noqa: BLE001 - best effort
                 pass
         _CONTEXTS.clear()
+        _SQUARES.clear()
 
 
 class Renderer:
@@ -142,24 +148,48 @@ class Renderer:
         pr = self._pr
         bg = np.array([*SKY_COLOR, 255], dtype=np.float64) / 255.0
         scene = pr.Scene(bg_color=bg, ambient_light=np.ones(3))
-        items = [(m, (255, 255, 255)) for m in meshes]
-        if ground:
-            items.append((ground_mesh(meshes), (0, 0, 0)))
-        items += [(m, (0, 0, 0)) for m in markers]
+        items = [(m, (255, 255, 255)) for m in meshes] + [(m, (0, 0, 0)) for m in markers]
         seg_map: dict = {}
         for m, seg_color in items:
-            pm = pr.Mesh.from_trimesh(m, smooth=False)
-            for prim in pm.primitives:
-                prim.material.doubleSided = True
+            pm, two_sided = self._pyrender_mesh(m, with_segmentation=ground)
             scene.add(pm)
-            if ground:
-                faces = np.asarray(m.faces)
-                two_sided = pr.Mesh.from_trimesh(
-                    trimesh.Trimesh(vertices=np.asarray(m.vertices), faces=np.concatenate([faces, faces[:, ::-1]]),
-                                    process=False), smooth=False)
-                two_sided.is_visible = False
+            if two_sided is not None:
                 seg_map[scene.add(two_sided)] = seg_color
+        if ground:
+            for square in soil_squares(meshes):
+                pm, two_sided = self._soil_square(*square)
+                scene.add(pm)
+                seg_map[scene.add(two_sided)] = (0, 0, 0)
         return scene, seg_map
+
+    def _pyrender_mesh(self, m: object, with_segmentation: bool) -> tuple[object, Optional[object]]:
+        """pyrender's double-sided mesh of trimesh ``m``, and (``with_segmentation``) its hidden
+        two-sided copy for the segmentation pass."""
+        pr = self._pr
+        pm = pr.Mesh.from_trimesh(m, smooth=False)
+        for prim in pm.primitives:
+            prim.material.doubleSided = True
+        if not with_segmentation:
+            return pm, None
+        faces = np.asarray(m.faces)
+        two_sided = pr.Mesh.from_trimesh(
+            trimesh.Trimesh(vertices=np.asarray(m.vertices), faces=np.concatenate([faces, faces[:, ::-1]]),
+                            process=False), smooth=False)
+        two_sided.is_visible = False
+        return pm, two_sided
+
+    def _soil_square(self, i: int, j: int) -> tuple[object, object]:
+        """The pyrender meshes of soil square (i, j) in this renderer's OpenGL context, kept
+        between renders (:data:`_SQUARES`): pyrender uploads a mesh and its 12 MB texture once
+        per context while the same mesh object is in every scene (building them again for every
+        render cost 1.1 s for 16 squares). At most :data:`_SQUARES_KEPT` per context."""
+        with _LOCK:
+            kept = _SQUARES.setdefault((self.width, self.height), {})
+            if (i, j) not in kept:
+                if len(kept) >= _SQUARES_KEPT:
+                    kept.clear()
+                kept[(i, j)] = self._pyrender_mesh(soil_square_mesh(i, j), with_segmentation=True)
+            return kept[(i, j)]
 
     def render(self, meshes: Sequence, cameras: ArrayLike, keep_depth: bool = False, ground: bool = False,
                markers: Sequence = ()
@@ -205,45 +235,52 @@ class Renderer:
         return images, masks, (depths if keep_depth else None)
 
 
-#: Soil texture (RGB uint8), built once per process by :func:`soil_texture`.
+#: Soil textures (RGB uint8), each built once per process by :func:`soil_texture`.
 _SOIL: dict = {}
+#: Texels across one soil texture (a square of ``SOIL_TEXELS * texel`` metres of ground).
+SOIL_TEXELS: int = 2048
+#: Soil beyond the plants' x-y box, metres (at least; :func:`soil_squares`).
+GROUND_MARGIN: float = 5.5
 
 
-def soil_texture(size: int = 2048, seed: int = 7) -> NDArray[np.uint8]:
+def soil_texture(size: int = SOIL_TEXELS, seed: int | Sequence[int] = 7) -> NDArray[np.uint8]:
     """A seeded soil texture: brown multi-scale value noise with clods, stones and straw.
 
-    Built from the sum of upsampled random grids (periodic, so the plane can tile it) at cell
-    sizes 4-256 texels, then one clod or stone (a darker or lighter disc of 1-5 texels, 2-10 mm
-    on the 2 mm texels of :func:`ground_mesh`) per 600 texels and a thin straw stroke per 8000.
-    A field's soil is that rough; the clods are what SIFT finds on it at a few metres, and the
-    ground does not move in the wind: it anchors a flight's structure from motion. (Measured:
-    the earlier, smoother soil of 60 stones per 1024^2 texels gave 1,200-1,500 SIFT keypoints per
-    2000 x 1500 view and a 30-degree ring of 4 procedural-plant views registered 2 of 4 images;
-    this one registers 4 of 4, and 6 of 6 for the ring of 6.) Straw stays one texel wide: its
-    excess green (about 0.09) is above the plant mask's threshold, the mask's opening removes it.
+    Built from the sum of upsampled random grids (periodic: each grid is wrapped by two cells
+    before its cubic upsampling) at cell sizes 4-256 texels, then one clod or stone (a darker or
+    lighter disc of 1-5 texels, 2-10 mm on the 2 mm texels of :func:`ground_meshes`) per 600
+    texels and a thin straw stroke per 8000. A field's soil is that rough; the clods are what SIFT
+    finds on it at a few metres, and the ground does not move in the wind: it anchors a flight's
+    structure from motion. (Measured: the earlier, smoother soil of 60 stones per 1024^2 texels
+    gave 1,200-1,500 SIFT keypoints per 2000 x 1500 view and a 30-degree ring of 4
+    procedural-plant views registered 2 of 4 images; this one registers 4 of 4, and 6 of 6 for the
+    ring of 6.) Straw stays one texel wide: its excess green (about 0.09) is above the plant mask's
+    threshold, the mask's opening removes it. ``seed``: an int or a sequence of non-negative ints
+    (numpy's ``default_rng``), one texture per seed.
     """
     import cv2
 
-    key = (size, seed)
+    key = (int(size), tuple(np.atleast_1d(seed).tolist()))
     if key in _SOIL:
         return _SOIL[key]
     rng = np.random.default_rng(seed)
-    field = np.zeros((size, size), np.float64)
+    field = np.zeros((size, size), np.float32)
     for cell, amp in ((256, 0.3), (64, 0.25), (16, 0.25), (4, 0.2)):
         n = max(2, size // cell)
-        g = rng.random((n, n))
-        g = np.tile(g, (3, 3))  # periodic upsampling: resize a 3x3 tiling, keep the middle tile
-        up = cv2.resize(g, (3 * size, 3 * size), interpolation=cv2.INTER_CUBIC)[size:2 * size, size:2 * size]
-        field += amp * up
-    field = (field - field.min()) / max(1e-9, np.ptp(field))
-    dark = np.array([55, 40, 28], np.float64)
-    light = np.array([165, 130, 95], np.float64)
+        g = np.pad(rng.random((n, n), np.float32), 2, mode="wrap")  # periodic: the cubic kernel sees wrapped cells
+        c = size / n
+        up = cv2.resize(g, (round((n + 4) * c), round((n + 4) * c)), interpolation=cv2.INTER_CUBIC)
+        o = round(2 * c)
+        field += amp * up[o:o + size, o:o + size]
+    field = (field - field.min()) / max(1e-9, float(np.ptp(field)))
+    dark = np.array([55, 40, 28], np.float32)
+    light = np.array([165, 130, 95], np.float32)
     img = dark + field[..., None] * (light - dark)
     n = size * size // 600
     centres, radii, tones = rng.integers(0, size, (n, 2)), rng.integers(1, 6, n), rng.uniform(0.35, 1.6, n)
-    for (x, y), r, t in zip(centres, radii, tones):  # clods (darker) and stones (lighter)
-        colour = tuple(float(v) for v in np.clip(img[y, x] * t, 0, 235))
-        cv2.circle(img, (int(x), int(y)), int(r), colour, -1)
+    colours = np.clip(img[centres[:, 1], centres[:, 0]] * tones[:, None], 0, 235).tolist()
+    for (x, y), r, colour in zip(centres.tolist(), radii.tolist(), colours):  # clods (darker), stones (lighter)
+        cv2.circle(img, (x, y), r, colour, -1)
     for _ in range(size * size // 8000):
         x, y = rng.integers(0, size, 2)
         a = rng.uniform(0, np.pi)
@@ -255,27 +292,57 @@ def soil_texture(size: int = 2048, seed: int = 7) -> NDArray[np.uint8]:
     return out
 
 
-def ground_mesh(meshes: Sequence, margin: float = 6.0, texel: float = 0.002) -> object:
-    """A textured quad at z = 0 under ``meshes``: their x-y box grown by ``margin`` metres.
+def soil_tile_seed(i: int, j: int, seed: int = 7) -> tuple[int, int, int]:
+    """The texture seed of soil square (``i``, ``j``) (:func:`ground_meshes`): distinct for every
+    square of the plane (a bijection of the integers onto the naturals per axis)."""
+    def natural(k: int) -> int:
+        return 2 * k if k >= 0 else -2 * k - 1
+    return int(seed), natural(int(i)), natural(int(j))
 
-    The soil texture repeats every ``texel * 2048`` metres (2 mm texels: about a pixel of a
-    2000-pixel image at the plants' distance; the period, 4.1 m, is wider than a view's ground).
-    """
-    from PIL import Image
 
+def soil_squares(meshes: Sequence, margin: float = GROUND_MARGIN, texel: float = 0.002) -> list[tuple[int, int]]:
+    """The squares (i, j) of soil under ``meshes`` (:func:`ground_meshes`): every square of the
+    grid that meets their x-y box grown by ``margin`` metres (a box of +- ``margin`` when empty)."""
     if len(meshes):
         v = np.concatenate([np.asarray(m.vertices) for m in meshes])
         lo, hi = v[:, :2].min(axis=0) - margin, v[:, :2].max(axis=0) + margin
     else:
         lo, hi = np.full(2, -margin), np.full(2, margin)
-    tex = soil_texture()
-    period = texel * tex.shape[0]
-    corners = np.array([[lo[0], lo[1], 0.0], [hi[0], lo[1], 0.0], [hi[0], hi[1], 0.0], [lo[0], hi[1], 0.0]])
-    uv = corners[:, :2] / period
-    faces = np.array([[0, 1, 2], [0, 2, 3]])
-    material = trimesh.visual.material.SimpleMaterial(image=Image.fromarray(tex))
-    visual = trimesh.visual.TextureVisuals(uv=uv, image=Image.fromarray(tex), material=material)
-    return trimesh.Trimesh(vertices=corners, faces=faces, visual=visual, process=False)
+    period = texel * SOIL_TEXELS
+    first, last = np.floor(lo / period + 0.5).astype(int), np.floor(hi / period + 0.5).astype(int)
+    return [(i, j) for i in range(first[0], last[0] + 1) for j in range(first[1], last[1] + 1)]
+
+
+def soil_square_mesh(i: int, j: int, texel: float = 0.002, seed: int = 7) -> object:
+    """Soil square (``i``, ``j``) at z = 0: a textured quad of ``SOIL_TEXELS * texel`` m a side
+    centred on (i, j) times that, its own texture (:func:`soil_tile_seed`)."""
+    from PIL import Image
+
+    period = texel * SOIL_TEXELS
+    x0, y0 = (i - 0.5) * period, (j - 0.5) * period
+    corners = np.array([[x0, y0, 0.0], [x0 + period, y0, 0.0], [x0 + period, y0 + period, 0.0],
+                        [x0, y0 + period, 0.0]])
+    uv = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    image = Image.fromarray(soil_texture(SOIL_TEXELS, soil_tile_seed(i, j, seed)))
+    material = trimesh.visual.material.SimpleMaterial(image=image)
+    visual = trimesh.visual.TextureVisuals(uv=uv, image=image, material=material)
+    return trimesh.Trimesh(vertices=corners, faces=np.array([[0, 1, 2], [0, 2, 3]]), visual=visual, process=False)
+
+
+def ground_meshes(meshes: Sequence, margin: float = GROUND_MARGIN, texel: float = 0.002, seed: int = 7) -> list:
+    """The soil at z = 0 under ``meshes``: square quads of ``SOIL_TEXELS * texel`` m (4.1 m at 2 mm
+    texels: about a pixel of a 2000-pixel image at the plants' distance), square (0, 0) centred on
+    the origin, every square that meets the meshes' x-y box grown by ``margin`` metres
+    (:func:`soil_squares`; a plant at the origin stands on 3 x 3 squares, 12.3 m of soil a side).
+
+    The soil does not repeat: square (i, j) has its own texture (:func:`soil_tile_seed`), so no
+    two places of a field look alike. (One texture tiled every 4.1 m did: views across a row's
+    ends verified hundreds of false matches between soil 4.1 m apart, and the model of a 12-plant
+    row bent; issue 42.) Where two squares meet the soil's tone steps, as it does between real
+    patches of soil. A texture is built once per process (0.1 s) and :class:`Renderer` keeps each
+    square's OpenGL mesh between renders.
+    """
+    return [soil_square_mesh(i, j, texel, seed) for i, j in soil_squares(meshes, margin, texel)]
 
 
 def marker_meshes(centres: ArrayLike, size: float, texels: int = 240) -> list:
