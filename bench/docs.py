@@ -481,8 +481,8 @@ def flights_section(rel: str, title: str) -> str:
 CURRENT = [
     ('Table I with the registration in the reward (egp planned again): 3 planning seeds x 5 realizations',
      'results/rerun/issue42_table1_combined/table1_combined.json', lambda rel, t: combined_section(rel, t, 'Table I')),
-    ('Fields, egp starting from the circle\'s rings: 3 planning seeds x 5 realizations',
-     'results/rerun/issue42_fields_rings_combined/fields_combined.json', lambda rel, t: combined_section(rel, t, 'Fields')),
+    ('Fields on a soil that does not repeat: 3 planning seeds x 5 realizations',
+     'results/rerun/issue42_fields_soil_combined/fields_combined.json', lambda rel, t: combined_section(rel, t, 'Fields')),
     ('Flights that reconstruct: Table I and the fields before and after the anchored model and ground markers',
      'results/rerun/issue40_flights_fields/flights_check.json', own_markdown('bench.flights_check')),
     ('Table I, realistic capture before the anchored model: 3 planning seeds x 5 realizations',
@@ -499,8 +499,8 @@ CURRENT = [
     ('Coverage of the prior against the Chamfer', 'results/coverage_check.json', own_markdown('bench.coverage_check')),
     ('Reconstruction stages', 'results/bench_recon.json', recon_stages_section),
     ('Cheaper reconstruction settings', 'results/bench_recon_speed.json', own_markdown('bench.bench_recon_speed')),
-    ('make run with the registration in the reward',
-     'results/rerun/issue42_make_run/bench_make_run.json', own_markdown('bench.bench_make_run')),
+    ('make run on a soil that does not repeat',
+     'results/rerun/issue42_make_run_soil/bench_make_run.json', own_markdown('bench.bench_make_run')),
     ('make run: wall time per setting', 'results/bench_make_run.json', own_markdown('bench.bench_make_run')),
     ('Planners: final reward', 'results/bench_planners.json', planners_section),
     ('Cost of a reward evaluation', 'results/bench_reward.json', reward_cost_section),
@@ -557,6 +557,11 @@ SUPERSEDED = [
      'egp planned with CoverageParams(exhaustive_below=8): below 8 cameras every camera in one part, as the '
      'reconstruction matches every pair (issue 42). Against egp in Table I with the registration (the same seeds and '
      'realizations): no better, six_rect worse (map +0.151 [+0.030, +0.272]); the default stays the pair rule.'),
+    ('Fields, egp starting from the circle\'s rings: 3 planning seeds x 5 realizations',
+     'results/rerun/issue42_fields_rings_combined/fields_combined.json', lambda rel, t: combined_section(rel, t, 'Fields'),
+     'Rendered over one soil texture tiled every 4.1 m (before c835c26), with the baselines\' records of the fields '
+     'under the anchored model (planned before the registration term of the reward); superseded by the fields on a '
+     'soil that does not repeat, every method planned again at one commit.'),
     ('Fields, egp planned with z-buffer cells of 3 cm on the plant (measured, not kept)',
      'results/rerun/issue42_fields_zcell_combined/fields_combined.json', lambda rel, t: combined_section(rel, t, 'Fields'),
      'egp planned with CoverageParams(zbuffer_cell=0.03) (issue 42): occlusion cells that measure 3 cm on the plant '
@@ -578,6 +583,10 @@ SUPERSEDED = [
      'The candidates on the study before its failures were reconstructed again (the failures\' AUC is measured here).'),
     ('Flights that reconstruct: Table I alone', 'results/rerun/issue40_flights/flights_check.json',
      own_markdown('bench.flights_check'), 'Superseded by the same check with the fields (issue 40).'),
+    ('make run with the registration in the reward',
+     'results/rerun/issue42_make_run/bench_make_run.json', own_markdown('bench.bench_make_run'),
+     'Rendered over the soil tiled every 4.1 m; superseded by make run on a soil that does not repeat (its '
+     'drones build a texture per 4.1 m square before their first picture).'),
     ('make run with the drones\' camera thread, the images\' heartbeat and the dense pair budget',
      'results/rerun/issue40_make_run_camera_thread/bench_make_run.json', own_markdown('bench.bench_make_run'),
      'Superseded by make run with the registration in the reward (issue 42: the planner\'s plan moved).'),
