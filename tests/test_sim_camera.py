@@ -26,8 +26,9 @@ TIMEOUT = 90.0
 
 
 def test_a_settled_drone_publishes_the_image_its_camera_of_the_plan_gets(ros_env, start_node, ros_node) -> None:
-    """Drone d0 holds pose 2 of a plan, sits at its goal; a trigger for another plan is ignored,
-    the plan's trigger (realization 1) gives one image (raw and PNG), camera_info and reported
+    """Drone d0 holds pose 2 of a plan, sits at its goal; a trigger for another plan is ignored
+    once that plan's assignment comes, a trigger before its plan's assignment waits for it; the plan's
+    trigger (realization 1) gives one image (raw and PNG), camera_info and reported
     pose with one stamp: exactly the render source's camera 2 (realistic capture, same seeds)."""
     cams = look_at(np.array([[1.6, 0.0, 1.2], [0.0, 1.6, 1.2], [-1.2, 1.0, 1.3]]), np.tile([0.0, 0.0, 0.9], (3, 1)))
     goal = cameras_to_poses(cams[2])
@@ -49,18 +50,27 @@ def test_a_settled_drone_publishes_the_image_its_camera_of_the_plan_gets(ros_env
     fleet.header.frame_id = "map"
     fleet.plan_stamp.sec = 7
     fleet.entries = [DroneAssignment(drone="d0", pose_index=2, goal=pose_msg(goal))]
-    assignment_pub.publish(fleet)
     g = PoseStamped(pose=pose_msg(goal))
     g.header.frame_id = "map"
     goal_pub.publish(g)
     other = CaptureTrigger(realization=1)
-    other.plan_stamp.sec = 6  # a plan that gave d0 no pose
+    other.plan_stamp.sec = 6  # a plan that gave d0 no pose: its trigger waits for its assignment, then is ignored
     trigger_pub.publish(other)
+    assert client.spin_until(lambda: "capture of plan (6, 0) waits for the plan's assignment" in drone.output(),
+                             TIMEOUT), drone.output()
+    elsewhere = FleetAssignment(num_poses=3, assignment="min_total", orientation="body")
+    elsewhere.header.frame_id = "map"
+    elsewhere.plan_stamp.sec = 6
+    elsewhere.entries = [DroneAssignment(drone="d1", pose_index=0, goal=pose_msg(goal))]
+    assignment_pub.publish(elsewhere)
     assert client.spin_until(lambda: "ignored: no pose of it is mine" in drone.output(), TIMEOUT), drone.output()
     assert not received["image_raw"]
     trigger = CaptureTrigger(realization=1)
     trigger.plan_stamp.sec = 7
-    trigger_pub.publish(trigger)
+    trigger_pub.publish(trigger)  # before plan 7's assignment (a fleet test's drone once dropped such a trigger)
+    assert client.spin_until(lambda: "capture of plan (7, 0) waits for the plan's assignment" in drone.output(),
+                             TIMEOUT), drone.output()
+    assignment_pub.publish(fleet)
     assert client.spin_until(lambda: all(received.values()), TIMEOUT), drone.output()[-3000:]
 
     (raw,), (png,), (info,), (pose,) = (received[n] for n in ("image_raw", "image_raw/compressed", "camera_info",

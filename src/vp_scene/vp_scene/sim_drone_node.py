@@ -25,7 +25,8 @@ all with one stamp,
   with zero distortion);
 * ``{camera_topic}/pose`` (geometry_msgs/PoseStamped, ``frame_id``): the pose it reports.
 
-A trigger for a plan that gives it no pose is ignored with a log line; one trigger, one capture.
+A trigger for a plan that gives it no pose is ignored with a log line, one that comes before its plan's
+assignment waits for it (the latest such); one trigger, one capture.
 The camera works in its own thread (one, which owns the OpenGL context), so the drone keeps
 reporting its pose while it renders, as a real drone's autopilot does beside its camera; it
 builds the scene and renders once as soon as ``/scene/description`` arrives (while the planner
@@ -151,6 +152,7 @@ class _Camera:
         self._jobs_lock = threading.Lock()
         self._assignments: dict = {}  # plan stamp -> pose index of this drone (None: no pose)
         self._pending = None          # the trigger waiting for the drone to settle
+        self._early = None            # the latest trigger whose plan's assignment has not arrived yet
         base = drone_topic(v['camera_topic'], v['drone'])
         self._image = node.create_publisher(Image, f'{base}/image_raw', LATCHED)
         self._compressed = node.create_publisher(CompressedImage, f'{base}/image_raw/compressed', LATCHED)
@@ -210,11 +212,19 @@ class _Camera:
 
     def _on_assignment(self, msg) -> None:
         mine = [(int(e.pose_index), pose_array(e.goal)[:3]) for e in msg.entries if e.drone == self._v['drone']]
-        self._assignments[self._key(msg.plan_stamp)] = mine[0] if mine else None
+        key = self._key(msg.plan_stamp)
+        self._assignments[key] = mine[0] if mine else None
+        if self._early is not None and self._key(self._early.plan_stamp) == key:
+            early, self._early = self._early, None
+            self._on_trigger(early)
 
     def _on_trigger(self, msg) -> None:
         key = self._key(msg.plan_stamp)
-        if self._assignments.get(key) is None:
+        if key not in self._assignments:  # two latched topics: the trigger may come before its assignment
+            self._early = msg
+            self._node.get_logger().info(f'capture of plan {key} waits for the plan\'s assignment')
+            return
+        if self._assignments[key] is None:
             self._node.get_logger().info(f'capture of plan {key} ignored: no pose of it is mine')
             return
         self._pending = (msg, *self._assignments[key])
