@@ -123,8 +123,9 @@ def test_the_soil_does_not_repeat_and_renders_the_same_twice() -> None:
     plant.apply_translation([6.0, 0.0, 0.5])  # a row's end: the ground spans x from -5.7 to 11.7
     squares = soil_squares([plant])
     assert len(set(squares)) == len(squares) and len({soil_tile_seed(i, j) for i, j in squares}) == len(squares)
-    lo = np.min([m.vertices.min(axis=0) for m in ground_meshes([plant])], axis=0)
-    hi = np.max([m.vertices.max(axis=0) for m in ground_meshes([plant])], axis=0)
+    ground = ground_meshes([plant])
+    lo = np.min([m.vertices.min(axis=0) for m in ground], axis=0)
+    hi = np.max([m.vertices.max(axis=0) for m in ground], axis=0)
     assert lo[0] <= 5.8 - 5.5 and hi[0] >= 6.2 + 5.5 and lo[1] <= -5.7 and hi[1] >= 5.7  # the margin
     grey = [soil_texture(SOIL_TEXELS, soil_tile_seed(i, 0)).mean(axis=2).ravel() for i in range(3)]
     corr = np.corrcoef(grey)

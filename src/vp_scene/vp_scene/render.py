@@ -35,9 +35,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from vp_scene.camera import camera_to_world_gl, check_cameras, intrinsics, principal_point_gl
 
-__all__ = ["SKY_COLOR", "KEY_TOLERANCE", "RenderError", "foreground_mask", "ground_meshes", "marker_meshes", "soil_squares",
-           "soil_square_mesh", "soil_texture", "soil_tile_seed", "Renderer",
-           "release_contexts"]
+__all__ = ["SKY_COLOR", "KEY_TOLERANCE", "RenderError", "foreground_mask", "ground_meshes", "marker_meshes",
+           "soil_squares", "soil_square_mesh", "soil_texture", "soil_tile_seed", "Renderer", "release_contexts"]
 
 #: Uniform background colour (pure blue: never a plant colour, corn is green / yellow / brown).
 SKY_COLOR: tuple[int, int, int] = (0, 0, 255)
@@ -94,7 +93,7 @@ _CONTEXTS: dict = {}
 _LOCK = threading.RLock()
 #: pyrender meshes of the soil's squares per OpenGL context (image size): {(w, h): {(i, j): meshes}}
 _SQUARES: dict = {}
-#: squares kept per context (each holds a 12 MB texture; a 12-plant row stands on about 40)
+#: squares kept per context (each holds a 12 MB texture; row_12 and grid_3x3 stand on 25, one_plant on 12)
 _SQUARES_KEPT: int = 64
 
 
@@ -333,7 +332,7 @@ def ground_meshes(meshes: Sequence, margin: float = GROUND_MARGIN, texel: float 
     """The soil at z = 0 under ``meshes``: square quads of ``SOIL_TEXELS * texel`` m (4.1 m at 2 mm
     texels: about a pixel of a 2000-pixel image at the plants' distance), square (0, 0) centred on
     the origin, every square that meets the meshes' x-y box grown by ``margin`` metres
-    (:func:`soil_squares`; a plant at the origin stands on 3 x 3 squares, 12.3 m of soil a side).
+    (:func:`soil_squares`; a plant under 1 m across at the origin stands on 3 x 3 squares, 12.3 m a side).
 
     The soil does not repeat: square (i, j) has its own texture (:func:`soil_tile_seed`), so no
     two places of a field look alike. (One texture tiled every 4.1 m did: views across a row's
