@@ -161,6 +161,26 @@ def read_recording(path: Path) -> tuple[dict, dict, dict]:
     return types, messages, summary.statistics
 
 
+def standard_reads(path: Path) -> dict:
+    """reader -> topic -> messages of an MCAP file as a user's script reads it: mcap_ros2's
+    ``read_ros2_messages`` (decoded) and mcap's ``make_reader(...).iter_messages()`` (raw); both
+    read the footer at the file's end first, also of a file whose writer was killed."""
+    import warnings
+
+    from mcap.reader import make_reader
+
+    with warnings.catch_warnings():  # mcap_ros2.reader warns that it is deprecated; users still call it
+        warnings.simplefilter("ignore", DeprecationWarning)
+        from mcap_ros2.reader import read_ros2_messages
+    reads: dict = {"read_ros2_messages": {}, "make_reader": {}}
+    for m in read_ros2_messages(str(path)):
+        reads["read_ros2_messages"].setdefault(m.channel.topic, []).append(m.ros_msg)
+    with open(path, "rb") as f:
+        for _schema, channel, message in make_reader(f).iter_messages():
+            reads["make_reader"].setdefault(channel.topic, []).append(message)
+    return reads
+
+
 def check_recording(path: Path, summary: dict, drones: int, realizations: int) -> None:
     """run.mcap of a finished run: every topic of the run with its type, the plan as in summary.json."""
     types, messages, stats = read_recording(path)
@@ -227,11 +247,40 @@ def test_killing_the_planner_stops_everything(ros_env, tmp_path) -> None:
     assert not wait_gone(pids, 10.0), text[-3000:]
 
 
-def test_interrupting_the_script_leaves_a_readable_recording(ros_env, tmp_path) -> None:
-    """SIGINT (Ctrl-C) mid-plan: exit 130, the nodes stopped, and run.mcap closed (it has its
-    summary) with what was published so far: the scene, no plan yet."""
+def test_a_running_script_holds_its_folder_and_ctrl_c_leaves_a_readable_recording(ros_env, tmp_path,
+                                                                                   capsys) -> None:
+    """While the script plans, its --out is locked: a second run_suite.py into it (a real second
+    process) is refused in one line naming the first, exit 2, and moves nothing aside (it moved
+    the first run's folder mid-run: two plan folders, one summary, run.mcap of two recorders), and
+    so are the planner's and the recon's CLIs. Then SIGINT (Ctrl-C): exit 130, the nodes stopped,
+    run.mcap closed (it has its summary) with what was published so far (the scene, no plan
+    yet), and the folder free again."""
+    from vp_planner.cli import main as plan_main
+    from vp_recon.cli import main as recon_main
+    from vp_scene.folders import FolderLock
+
     script, pids = planning_started(ros_env, tmp_path)
+    out = tmp_path / "run"
     try:
+        held = sorted(p.name for p in out.iterdir())
+        second = subprocess.run([sys.executable, str(SCRIPT), *SMALL, "--method", "circle", "--out", str(out)],
+                                env=ros_env, capture_output=True, text=True, timeout=120)
+        refusal = f"--out {out} is in use by another run (pid {script.pid}): wait until it ends, or give another --out"
+        assert second.returncode == 2, second.stdout + second.stderr
+        assert (second.stdout + second.stderr).strip().splitlines() == [f"error: {refusal}"], second.stdout + second.stderr
+        capsys.readouterr()
+        assert plan_main(["--scenario", "one_plant", "--method", "circle", "--cameras", "2", "--evals", "2",
+                          "--out", str(out), "--no-progress"]) == 2
+        plan = tmp_path / "plan.json"
+        plan.write_text(json.dumps({"scenario": "one_plant", "method": "ring", "reward": 0.5, "fov": math.pi / 2,
+                                    "cameras": [[1.4, 0, 1.2, -1.4, 0, -0.3], [-1.4, 0, 1.2, 1.4, 0, -0.3]],
+                                    "scene": {"scenario": "one_plant", "models": None, "seed": 0,
+                                              "points_per_plant": 2000, "realizations": 2}}))
+        assert recon_main(["--plan", str(plan), "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert err.splitlines() == [f"plan: error: {refusal}", f"recon: error: {refusal}"], err
+        assert [p.name for p in tmp_path.iterdir() if p.name.startswith("run-")] == []  # nothing moved aside
+        assert set(held) <= {p.name for p in out.iterdir()} and script.alive()
         script.signal(signal.SIGINT)
         code = script.wait(60)
     finally:
@@ -239,17 +288,26 @@ def test_interrupting_the_script_leaves_a_readable_recording(ros_env, tmp_path) 
     text = script.output()
     assert code == 130, text[-3000:]
     assert not wait_gone(pids, 10.0), text[-3000:]
-    types, messages, _stats = read_recording(tmp_path / "run" / "run.mcap")
+    types, messages, _stats = read_recording(out / "run.mcap")
     assert types["/scene/noisy_points"] == "sensor_msgs/msg/PointCloud2" and len(messages["/scene/noisy_points"]) == 1
     assert "/camera_plan" not in messages
+    FolderLock.check(out)
 
 
 def test_sigkill_of_the_script_takes_the_nodes_with_it(ros_env, tmp_path) -> None:
-    """Issue 10, item 3: no orphaned nodes when the supervisor itself is killed."""
+    """No orphaned nodes when the supervisor itself is killed. run.mcap reads with the standard
+    readers (mcap_ros2's read_ros2_messages, mcap's make_reader) at once, while the recorder still
+    finishes it (they raised RecordLengthLimitExceeded: no footer), and once the recorder has
+    ended it is closed with its summary, the scene in it. The folder's lock dies with the run."""
+    from vp_recon.recording import is_closed
+    from vp_scene.folders import FolderLock
+
     script, pids = planning_started(ros_env, tmp_path)
+    bag = tmp_path / "run" / "run.mcap"
     try:
         script.signal(signal.SIGKILL)
         assert script.wait(10) == -signal.SIGKILL
+        at_once = standard_reads(bag)
         t0 = time.monotonic()
         left = wait_gone(pids, 15.0)
     finally:
@@ -257,6 +315,12 @@ def test_sigkill_of_the_script_takes_the_nodes_with_it(ros_env, tmp_path) -> Non
             if alive(pid):
                 os.kill(pid, signal.SIGKILL)
     assert not left, f"still running {time.monotonic() - t0:.1f} s after the script was killed: {left}"
+    assert is_closed(bag)  # the recorder finished it on its parent-death signal
+    closed = standard_reads(bag)
+    for reader, topics in closed.items():
+        assert len(topics["/scene/noisy_points"]) == 1, (reader, sorted(topics))
+        assert all(len(at_once[reader].get(t, [])) <= len(m) for t, m in topics.items()), (reader, at_once, closed)
+    FolderLock.check(tmp_path / "run")  # no lock left behind by the killed run
 
 
 def test_a_dead_node_is_reported_last_without_tracebacks(ros_env, tmp_path) -> None:
@@ -295,8 +359,33 @@ def test_an_out_of_other_files_is_refused(tmp_path) -> None:
     with pytest.raises(FileExistsError, match="holds other files"):
         run_suite.prepare_out(tmp_path)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
-    assert run_suite.prepare_out(tmp_path / "new") is None and (tmp_path / "new").is_dir()
-    assert run_suite.prepare_out(tmp_path / "new") is None  # empty: used as it is
+    lock, moved = run_suite.prepare_out(tmp_path / "new")
+    assert moved is None and (tmp_path / "new").is_dir()
+    lock.release()
+    lock, moved = run_suite.prepare_out(tmp_path / "new")
+    assert moved is None  # empty: used as it is
+    lock.release()
+
+
+def test_a_domain_id_outside_ros_range_is_a_usage_error(monkeypatch, capsys) -> None:
+    """--domain-id 300 gave Fast DDS's raw port error once the nodes started; the range ROS 2
+    documents (0-232) is checked at parse time, for $ROS_DOMAIN_ID too."""
+    import run_suite
+
+    for argv, env, said in ((["--domain-id", "300"], "7", "--domain-id must be in 0-232, got 300"),
+                            (["--domain-id", "-1"], "7", "--domain-id must be in 0-232, got -1"),
+                            ([], "300", "ROS_DOMAIN_ID (environment) must be an integer in 0-232, got '300'"),
+                            ([], "abc", "ROS_DOMAIN_ID (environment) must be an integer in 0-232, got 'abc'")):
+        monkeypatch.setenv("ROS_DOMAIN_ID", env)
+        with pytest.raises(SystemExit) as exited:
+            run_suite.parse_args(argv)
+        assert exited.value.code == 2
+        assert capsys.readouterr().err.strip().splitlines()[-1].endswith(f"error: {said}"), argv
+    assert run_suite.parse_args(["--domain-id", "232"]).domain_id == 232
+    monkeypatch.setenv("ROS_DOMAIN_ID", "0")
+    assert run_suite.parse_args([]).domain_id == 0
+    monkeypatch.delenv("ROS_DOMAIN_ID")
+    assert 10 <= run_suite.parse_args([]).domain_id < 210
 
 
 def test_layout_file_goes_to_the_scene_node_as_an_absolute_path(monkeypatch) -> None:
