@@ -345,7 +345,7 @@ def reconstruct_captured(noisy_scene: object, views: object, config: Optional[Re
         control=vr.control.to_dict() if vr.control is not None else None,
         mask=vr.mask.to_dict() if vr.mask is not None else None,
         reported=np.asarray(views.reported, dtype=np.float64),
-        K=np.asarray(views.K, dtype=np.float64))
+        K=np.asarray(views.K, dtype=np.float64), ground_control=views.control)
 
 
 def reconstruct_plan(noisy_scene: object, cameras: ArrayLike, config: Optional[ReconConfig] = None,
