@@ -293,6 +293,41 @@ def test_a_dead_node_is_reported_last_without_tracebacks(ros_env, tmp_path) -> N
     assert not (earlier / "summary.json").exists() and (earlier / "recon.log").exists()
 
 
+def test_a_run_whose_outputs_are_not_all_written_fails_with_output_not_writable(ros_env, tmp_path) -> None:
+    """The suite on a full disk logged 'could not write the outputs of realization 0', then printed
+    the Chamfer, exited 0 and wrote error_code 0. A realization whose files cannot be written (here
+    a folder stands where its cloud goes, put there as the plan's folder appears) fails the plan:
+    its score and the aggregate say OUTPUT_NOT_WRITABLE naming the file, summary.json records it,
+    the script exits 1 with that as its last line and prints no Chamfer."""
+    out = tmp_path / "run"
+    script = start_script(ros_env, tmp_path, "--method", "circle", "--evals", "16", "--recon-workers", "1",
+                          "--timeout", "300")
+    try:
+        deadline = time.monotonic() + 240
+        while not list(out.glob("plan-*")):
+            assert script.poll() is None and time.monotonic() < deadline, script.output()[-3000:]
+            time.sleep(0.02)
+        (plan_dir,) = out.glob("plan-*")
+        for k in (0, 1):  # the realizations reconstruct one after the other: at least one is blocked
+            try:
+                (plan_dir / f"recon_{k}.ply").mkdir()
+            except FileExistsError:
+                pass
+        code = script.wait(240)
+    finally:
+        script.stop()
+    text = script.output()
+    assert code == 1, text[-3000:]
+    last = text.strip().splitlines()[-1]
+    assert last.startswith("error: reconstruction failed (error_code 6 OUTPUT_NOT_WRITABLE): realization ") and \
+        f"its outputs are not all written: could not write {plan_dir}/recon_" in last, text[-3000:]
+    assert "Chamfer distance x100" not in text
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["error_code"] == 6 and summary["chamfer_mean"] is None and "Is a directory" in summary["error_msg"]
+    failed = [r for r in summary["per_realization"] if r["error_code"] == 6]
+    assert len(failed) == 1 and "could not write" in failed[0]["error_msg"], summary["per_realization"]
+
+
 def test_an_out_of_other_files_is_refused(tmp_path) -> None:
     """Hardening III, item 8: an --out that holds files that are not an output of the suite is
     refused (the run's files would mix with them; a later run would move the folder aside)."""

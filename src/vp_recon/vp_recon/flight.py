@@ -38,7 +38,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Optional, Sequence, Union
 
-import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
@@ -46,10 +45,12 @@ from scipy.spatial.transform import Rotation
 from vp_scene.ground_control import GroundControl, GroundControlError, read_gcp_list, read_markers_csv, \
     write_gcp_list, write_markers_csv
 from vp_scene.camera import as_poses, principal_point_gl, world_to_camera
+from vp_scene.folders import write_atomic
 from vp_scene.flight_poses import FRAME, POSES_FILE, FlightCamera, FlightError, read_pose_files, write_poses_csv
 from vp_scene.images import ImageError, image_size, read_image
 
 from .config import MAX_MEGAPIXELS
+from .outputs import write_image
 
 __all__ = ["MARKERS_FILE", "GCP_LIST_FILE", "IMAGE_SUFFIXES", "CapturedViews", "write_flight", "read_flight",
            "capture_folder", "locate_flown", "flown_views", "join_views"]
@@ -150,8 +151,9 @@ def write_flight(views: CapturedViews, folder: PathLike, meta: Optional[dict] = 
     """Write a capture set as a flight folder (module docstring): the images (PNG, lossless),
     ``poses.csv``, COLMAP's ``cameras.txt`` / ``images.txt`` / ``points3D.txt`` and
     ``flight.json`` (``meta`` and the realization) and the ground control (``markers.csv``, or
-    ``gcp_list.txt`` for control points with observations). Every file is written under a temporary
-    name and renamed, the pose files last: a folder that has poses.csv is complete."""
+    ``gcp_list.txt`` for control points with observations). Every file is written whole or not at
+    all (:func:`vp_scene.folders.write_atomic`: OutputError naming it), the pose file last: a
+    folder that has poses.csv is complete."""
     views.validate()
     out = Path(folder)
     out.mkdir(parents=True, exist_ok=True)
@@ -159,20 +161,10 @@ def write_flight(views: CapturedViews, folder: PathLike, meta: Optional[dict] = 
     K = np.asarray(views.K, dtype=np.float64)
 
     def atomic(name: str, write) -> None:
-        tmp = out / f".{name}.tmp"
-        write(tmp)
-        tmp.replace(out / name)
+        write_atomic(out / name, write)
 
     for name, im in zip(views.names, views.images):
-        suffix = Path(name).suffix or ".png"
-
-        def write_image(tmp: Path, im=im, suffix=suffix) -> None:
-            ok, buf = cv2.imencode(suffix, cv2.cvtColor(np.asarray(im, np.uint8), cv2.COLOR_RGB2BGR))
-            if not ok:
-                raise OSError(f"cannot encode {name}")
-            tmp.write_bytes(buf.tobytes())
-
-        atomic(name, write_image)
+        write_image(out / name, im)
     R, t = world_to_camera(views.reported)
     cx, cy = principal_point_gl(K)
     meta = {**(meta or {}), "realization": views.realization, "frame": FRAME, "images": list(views.names)}
