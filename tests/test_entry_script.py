@@ -27,8 +27,10 @@ from node_process import NodeProcess  # tools/, on sys.path through conftest.py
 REPO = Path(__file__).resolve().parents[1]
 SCRIPT = REPO / "tools" / "run_suite.py"
 ECHO = REPO / "tests" / "echo_camera_plan.py"
-SMALL = ["--scenario", "one_plant", "--cameras", "4", "--points-per-plant", "3000", "--realizations", "2",
-         "--width", "800", "--height", "600", "--capture", "ideal"]  # the plumbing; realistic: test_recon_capture
+#: a small mission under the default (realistic) capture: hover and localization errors, ground markers
+SMALL_REALISTIC = ["--scenario", "one_plant", "--cameras", "4", "--points-per-plant", "3000", "--realizations", "2",
+                   "--width", "800", "--height", "600"]
+SMALL = [*SMALL_REALISTIC, "--capture", "ideal"]  # the plumbing; realistic: test_recon_capture, test_two_sorties
 
 
 def alive(pid: int) -> bool:
@@ -96,13 +98,14 @@ def test_end_to_end_small_mission(ros_env, tmp_path) -> None:
 
 
 def test_two_sorties(ros_env, tmp_path) -> None:
-    """Issue 21: --rounds 2 plans a second sortie of M cameras given the N flown and their
-    reconstruction (the goal's fixed_cameras and reconstruction), and the recon reconstructs from
-    all N + M images; summary.json has one record per sortie. As `make run ROUNDS=2`: with
-    drones, whose images the recon takes (source fleet), the first sortie's read back from its
-    capture sets."""
+    """--rounds 2 plans a second sortie of M cameras given the N flown and their reconstruction
+    (the goal's fixed_cameras and reconstruction), and the recon reconstructs from all N + M
+    images; summary.json has one record per sortie. As `make run ROUNDS=2` flies it: the default
+    realistic capture (ground markers), drones whose images the recon takes (source fleet), the
+    first sortie's read back from its capture sets with the field's markers, so that the two
+    sets are one reconstruction placed on the same ground control."""
     out = tmp_path / "run"
-    proc = subprocess.run([sys.executable, str(SCRIPT), *SMALL, "--realizations", "1", "--method", "circle",
+    proc = subprocess.run([sys.executable, str(SCRIPT), *SMALL_REALISTIC, "--realizations", "1", "--method", "circle",
                            "--evals", "16", "--rounds", "2", "--cameras2", "2", "--drones", "4", "--out", str(out),
                            "--timeout", "500"], env=ros_env, capture_output=True, text=True, timeout=560)
     log = proc.stdout + proc.stderr
@@ -111,7 +114,7 @@ def test_two_sorties(ros_env, tmp_path) -> None:
     assert "with 4 cameras already flown" in log  # the planner counted them
     assert "with the 4 images of the cameras already flown" in log  # the recon read sortie 1's back
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["source"] == "fleet"
+    assert summary["source"] == "fleet" and summary["capture"] == "realistic"
     first, second = summary["rounds"]
     assert (first["num_cameras"], first["fixed_cameras"], first["images"]) == (4, 0, 4)
     assert (second["num_cameras"], second["fixed_cameras"], second["images"]) == (2, 4, 6)
@@ -119,6 +122,10 @@ def test_two_sorties(ros_env, tmp_path) -> None:
     for r in (first, second):
         assert 0 < r["reward"] <= 1 and math.isfinite(r["chamfer_mean"]) and r["chamfer_mean"] > 0 and r["seconds"] > 0
     assert summary["chamfer_mean"] == second["chamfer_mean"] and summary["cameras"] == second["cameras"]
+    assert summary["registered_images"] > 4  # one model: images of both sorties registered together
+    sets = sorted(out.glob("plan-*/captures/realization_0"))  # the capture sets, with the field's markers
+    assert [len(list(d.glob("view_*.png"))) for d in sets] == [4, 6], sets
+    assert (sets[0] / "markers.csv").read_text() == (sets[1] / "markers.csv").read_text()
     types, messages, _stats = read_recording(out / "run.mcap")
     infos = messages["/camera_plan/info"]
     assert [len(m.fixed_poses) for m in infos] == [0, 4]  # the second plan names the cameras flown
@@ -348,6 +355,41 @@ def test_a_dead_node_is_reported_last_without_tracebacks(ros_env, tmp_path) -> N
     assert sorted(p.name for p in moved.iterdir()) == ["run.mcap", "summary.json"]
     assert (moved / "summary.json").read_text() == '{"earlier": true}'
     assert not (earlier / "summary.json").exists() and (earlier / "recon.log").exists()
+
+
+def test_a_run_whose_outputs_are_not_all_written_fails_with_output_not_writable(ros_env, tmp_path) -> None:
+    """The suite on a full disk logged 'could not write the outputs of realization 0', then printed
+    the Chamfer, exited 0 and wrote error_code 0. A realization whose files cannot be written (here
+    a folder stands where its cloud goes, put there as the plan's folder appears) fails the plan:
+    its score and the aggregate say OUTPUT_NOT_WRITABLE naming the file, summary.json records it,
+    the script exits 1 with that as its last line and prints no Chamfer."""
+    out = tmp_path / "run"
+    script = start_script(ros_env, tmp_path, "--method", "circle", "--evals", "16", "--recon-workers", "1",
+                          "--timeout", "300")
+    try:
+        deadline = time.monotonic() + 240
+        while not list(out.glob("plan-*")):
+            assert script.poll() is None and time.monotonic() < deadline, script.output()[-3000:]
+            time.sleep(0.02)
+        (plan_dir,) = out.glob("plan-*")
+        for k in (0, 1):  # the realizations reconstruct one after the other: at least one is blocked
+            try:
+                (plan_dir / f"recon_{k}.ply").mkdir()
+            except FileExistsError:
+                pass
+        code = script.wait(240)
+    finally:
+        script.stop()
+    text = script.output()
+    assert code == 1, text[-3000:]
+    last = text.strip().splitlines()[-1]
+    assert last.startswith("error: reconstruction failed (error_code 6 OUTPUT_NOT_WRITABLE): realization ") and \
+        f"its outputs are not all written: could not write {plan_dir}/recon_" in last, text[-3000:]
+    assert "Chamfer distance x100" not in text
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["error_code"] == 6 and summary["chamfer_mean"] is None and "Is a directory" in summary["error_msg"]
+    failed = [r for r in summary["per_realization"] if r["error_code"] == 6]
+    assert len(failed) == 1 and "could not write" in failed[0]["error_msg"], summary["per_realization"]
 
 
 def test_an_out_of_other_files_is_refused(tmp_path) -> None:

@@ -34,9 +34,10 @@ until they end): a second run into it, or a CLI's ``--out`` there, is refused in
 up to a few seconds before a kill, also a SIGKILL (:mod:`vp_recon.recording`; the recorder then
 finishes it when it gets its parent-death signal).
 
-Exit codes: 0 success, 1 the plan or the reconstruction failed (the error is printed), 2 bad
-arguments (a ``--domain-id`` or ``$ROS_DOMAIN_ID`` outside 0-232 too), an ``--out`` of other files
-or in use by another run, or missing build, 3 a node died, 4 timed out, 130 interrupted.
+Exit codes: 0 success, 1 the plan or the reconstruction failed, or its results are not all written
+(the error is printed; ``OUTPUT_NOT_WRITABLE``, a full disk said so), 2 bad arguments (a
+``--domain-id`` or ``$ROS_DOMAIN_ID`` outside 0-232 too), an ``--out`` of other files or in use by
+another run, or missing build, 3 a node died, 4 timed out, 130 interrupted.
 
 Run after ``make setup`` (``make run`` does both)::
 
@@ -472,6 +473,8 @@ def fly_sortie(mission: Mission, nodes: List[NodeProcess], deadline: float, args
 
 
 def run(args: argparse.Namespace) -> int:
+    from vp_recon.errors import ERROR_NAMES
+    from vp_scene.folders import write_atomic
     from vp_scene.messages import msgs_to_poses, point_array, pose_array, score_record  # conversions' one home
 
     out = Path(args.out).resolve()
@@ -596,9 +599,15 @@ def run(args: argparse.Namespace) -> int:
                 'drones': [{'drone': e.drone, 'pose_index': e.pose_index, 'distance': e.distance,
                             'start': point_array(e.start).tolist(),
                             'goal': pose_array(e.goal).tolist()} for e in fleet.entries]}
-        (out / 'summary.json').write_text(json.dumps(summary, indent=2))
+        text = json.dumps(summary, indent=2)
+        try:
+            write_atomic(out / 'summary.json', lambda tmp: tmp.write_text(text))
+        except OSError as exc:  # a run whose results are not all written failed (a full disk: said so)
+            outcome.append(f'error: [OUTPUT_NOT_WRITABLE] {exc}')
+            return EXIT_FAILED
         if agg.error_code != 0:
-            outcome.append(f'error: reconstruction failed (error_code {agg.error_code}): {agg.error_msg}')
+            outcome.append(f'error: reconstruction failed (error_code {agg.error_code} '
+                           f'{ERROR_NAMES.get(agg.error_code, "UNKNOWN")}): {agg.error_msg}')
             return EXIT_FAILED
         outcome.append(f'Chamfer distance x100: {agg.chamfer:.3f} +- {agg.chamfer_std:.3f} over '
                        f'{agg.realizations} wind realizations; summary: {out / "summary.json"}')

@@ -275,3 +275,44 @@ def test_cli_plans_a_field_by_parts_and_flies_a_lawnmower(tmp_path: Path) -> Non
     plan = json.loads((out / "plan.json").read_text())
     assert plan["evaluations"] == 1 and plan["lawnmower"] == {"overlap": 0.7, "tilt": 0.5} and plan["parts"] is None
     assert main(common + ["--method", "lawnmower", "--lawnmower-overlap", "1.2", "--out", str(out)]) == 2
+
+
+def test_a_full_disk_is_one_line_naming_the_file_and_leaves_out_as_it_was(tmp_path: Path) -> None:
+    """numpy's words for a short write ('480128 requested and 65536 written') were the whole
+    message. A plan whose files cannot all be written says the disk is full, naming the file, in
+    one line, exit 2, and OUT keeps what it held (no half plan, no stage). The child's file size
+    is capped (RLIMIT_FSIZE: writes past it stop short, as on a full disk)."""
+    import resource
+
+    def cap() -> None:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (64 << 10, 64 << 10))
+
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "notes.txt").write_text("the user's")
+    p = subprocess.run([sys.executable, "-m", "vp_planner.cli", "--method", "circle", "--cameras", "4", "--evals", "5",
+                        "--out", str(out), "--no-progress"],  # noisy_points.npy: 5 x 4000 x 3 doubles, 480 kB
+                       capture_output=True, text=True, timeout=120, preexec_fn=cap)
+    lines = [ln for ln in p.stderr.splitlines() if ln.strip()]
+    assert p.returncode == 2 and len(lines) == 1, p.stderr[-3000:]
+    assert lines[0].startswith(f"plan: error: could not write {out}/.partial-plan-") and \
+        "noisy_points.npy: the disk is full (a short write: " in lines[0], lines[0]
+    assert sorted(x.name for x in out.iterdir()) == ["notes.txt"]
+
+
+def test_a_refused_request_writes_nothing_and_the_corrected_one_runs(tmp_path: Path, capsys) -> None:
+    """Nothing is written before a request is valid: a refused plan (a missing --fixed file, a
+    bad flag value) leaves OUT as it was, and the corrected run into it is not refused as one
+    that already holds a result."""
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "notes.txt").write_text("the user's")
+    args = ["--scenario", "one_plant", "--method", "circle", "--cameras", "3", "--evals", "4",
+            "--points-per-plant", "300", "--realizations", "2", "--no-progress", "--out", str(out)]
+    for bad in (["--fixed", str(tmp_path / "missing.json")], ["--realizations", "0"]):
+        assert main(args + bad) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("plan: error:") and err.count("\n") == 1, err
+        assert sorted(x.name for x in out.iterdir()) == ["notes.txt"]
+    assert main(args) == 0, capsys.readouterr().err
+    assert sorted(x.name for x in out.iterdir()) == ["noisy_points.npy", "notes.txt", "plan.json"]

@@ -303,7 +303,7 @@ def request_of(args: argparse.Namespace) -> "PlanRequest":
 def plan(args: argparse.Namespace) -> dict:
     """Plan views; write OUT/plan.json and OUT/noisy_points.npy; return the plan dict."""
     from vp_scene.camera import cameras_to_poses
-    from vp_scene.folders import ResultFolder
+    from vp_scene.folders import ResultFolder, write_atomic
     from vp_scene.planfile import write_plan
 
     from .methods import BY_NAME
@@ -390,8 +390,12 @@ def plan(args: argparse.Namespace) -> dict:
         data.update({"candidates": str(Path(args.candidates_folder).resolve()), "num_candidates": len(among["names"]),
                      "selected": [int(i) for i in res.selected], "images": [among["names"][i] for i in res.selected],
                      "prior": str(Path(args.prior).resolve()), "prior_points": int(realizations.shape[1])})
-    with result_dir:  # both files, together
-        np.save(result_dir.stage / "noisy_points.npy", realizations)
+    def save_realizations(tmp: Path) -> None:
+        with open(tmp, "wb") as f:
+            np.save(f, realizations)
+
+    with result_dir:  # both files, together, whole (OutputError naming the one that cannot be written)
+        write_atomic(result_dir.stage / "noisy_points.npy", save_realizations)
         write_plan(result_dir.stage / "plan.json", data)
         result_dir.commit()
     return data

@@ -14,6 +14,7 @@ import pytest
 
 from vp_scene.camera import as_poses, poses_to_cameras, world_to_camera
 from vp_scene.capture import IDEAL
+from vp_scene.ground_control import GroundControl
 
 from vp_recon.cli import main
 from vp_recon.config import ReconConfig
@@ -269,19 +270,23 @@ def test_coverage_of_prior_per_plant_in_the_best_covered_realization() -> None:
 
 
 def test_a_second_sortie_reads_the_flown_cameras_images_back_from_the_first_plans_capture_sets(tmp_path) -> None:
-    """Issue 21 with the fleet: the cameras a second sortie names as flown are found in the
-    capture sets of the earlier plan that flew them (newest first, to 1e-6), read back for
-    realization k in the order named and put before the new images; a camera no sortie flew,
-    a realization not kept and a capture set of another camera are named errors."""
+    """With the fleet: the cameras a second sortie names as flown are found in the capture sets
+    of the earlier plan that flew them (newest first, to 1e-6), read back for realization k in
+    the order named, with the field's ground markers their capture sets kept, and put before the
+    new images (the new sortie photographs the same markers: one set); a camera no sortie flew,
+    a realization not kept, a capture set of another camera and one of other ground control
+    (other markers, or none) are named errors."""
     from vp_recon.flight import capture_folder, flown_views, join_views, locate_flown
+    from vp_scene.capture import REALISTIC
 
     rng = np.random.default_rng(1)
     K = np.array([[32.0, 0, 31.5], [0, 32.0, 23.5], [0, 0, 1]])
+    markers = REALISTIC.lay_markers(ring(6)[:, :3] * 0.3)[1]  # as the capture model surveys them
 
-    def views(cams, k, size=(48, 64)):
+    def views(cams, k, size=(48, 64), control=markers):
         return CapturedViews(names=[f"view_{i:03d}.png" for i in range(len(cams))],
                              images=[rng.integers(0, 255, (*size, 3), dtype=np.uint8) for _ in cams],
-                             reported=cams + rng.normal(0.0, 0.01, cams.shape), K=K, realization=k)
+                             reported=cams + rng.normal(0.0, 0.01, cams.shape), K=K, realization=k, control=control)
 
     first, other = ring(4), ring(6)[4:]
     plans = {"plan-a": first, "plan-b": other}
@@ -301,8 +306,10 @@ def test_a_second_sortie_reads_the_flown_cameras_images_back_from_the_first_plan
     np.testing.assert_allclose(poses_to_cameras(old.reported[0]), np.r_[v[:3], v[3:] / np.linalg.norm(v[3:])],
                                atol=1e-9)  # read back as a pose
     new = views(ring(6)[:2], 1)
+    assert old.control == markers  # read back from each capture set's markers.csv
     both = join_views([old, new]).validate()
     assert both.names == [f"view_{i:03d}.png" for i in range(5)] and both.realization == 1
+    assert both.control == markers
     np.testing.assert_array_equal(both.images[3], new.images[0])
     np.testing.assert_allclose(both.reported[3:], as_poses(new.reported), atol=1e-12)  # one set: all poses
 
@@ -314,3 +321,29 @@ def test_a_second_sortie_reads_the_flown_cameras_images_back_from_the_first_plan
         join_views([old, views(ring(6)[:2], 1, size=(60, 80))])
     with pytest.raises(FlightError, match="realizations 1 and 0"):
         join_views([old, views(ring(6)[:2], 0)])
+    moved = GroundControl(positions={**markers.positions, "0": (9.0, 9.0, 0.0)}, sigma=markers.sigma)
+    for other, words in ((moved, "4 points, sigma 0.01 m and 4 points"), (None, "4 points, sigma 0.01 m and none")):
+        with pytest.raises(FlightError, match=rf"different ground control \({words}.*cannot be reconstructed together"):
+            join_views([old, views(ring(6)[:2], 1, control=other)])
+
+
+def test_a_capture_set_is_written_with_its_ground_control(tmp_path) -> None:
+    """write_flight keeps a set's ground control, read back equal: ArUco markers as markers.csv,
+    control points with their observations (a user's gcp_list.txt) as gcp_list.txt."""
+    from vp_scene.ground_control import GcpObservation
+    from vp_recon.flight import GCP_LIST_FILE, MARKERS_FILE
+
+    rng = np.random.default_rng(2)
+    cams = ring(3)
+    K = np.array([[32.0, 0, 31.5], [0, 32.0, 23.5], [0, 0, 1]])
+    names = [f"view_{i:03d}.png" for i in range(3)]
+    markers = GroundControl(positions={"0": (0.1, -0.7, 0.0), "7": (1.25, 0.3, 0.001)}, sigma=0.02)
+    points = GroundControl(positions={"a": (0.1, -0.7, 0.0), "b": (1.25, 0.3, 0.001)},
+                           observations=(GcpObservation("a", names[0], 10.5, 20.25),
+                                         GcpObservation("b", names[2], 3.0, 4.0)))
+    for control, written in ((markers, MARKERS_FILE), (points, GCP_LIST_FILE)):
+        views = CapturedViews(names=names, images=[rng.integers(0, 255, (48, 64, 3), dtype=np.uint8) for _ in names],
+                              reported=cams, K=K, realization=0, control=control)
+        folder = write_flight(views, tmp_path / written)
+        assert (folder / written).is_file() and not (folder / ({MARKERS_FILE, GCP_LIST_FILE} - {written}).pop()).exists()
+        assert read_flight(folder).control == control

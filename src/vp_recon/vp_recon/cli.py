@@ -39,7 +39,11 @@ Nothing is lost or mixed: these files (:data:`RESULT`, with ``work/``) are writt
 folder in OUT and moved into OUT together when the run ends; an error or an interrupt leaves OUT
 as it was (and no OUT when there was none). An OUT that holds a reconstruction is refused (exit
 2) unless ``--overwrite``, which replaces it as a whole when the run succeeds (a run that fails
-keeps it and writes nothing). Other files in OUT (the plan) are never touched.
+keeps it and writes nothing). Other files in OUT (the plan) are never touched. A request refused
+(exit 2: a realization the scene does not have, ...) writes nothing; a file that cannot be
+written (a full disk) fails the run with ``[OUTPUT_NOT_WRITABLE]`` naming it. The stage and the
+COLMAP workspaces name their owner's pid and hold its lock (:class:`vp_scene.folders.OwnedFolder`):
+those a killed run left are removed by the next run.
 
 With ``--scheduler`` the realizations reconstruct in parallel on a Dask cluster
 (:mod:`vp_scene.cluster`; the same records as in this process). An address where no scheduler
@@ -227,7 +231,7 @@ def run(args: argparse.Namespace) -> dict:
 
     from vp_scene.folders import ResultFolder
     from .config import MAX_CAMERAS, ReconConfig
-    from .errors import ReconError, check_plan_size, ensure_writable_dir, validate_cameras
+    from .errors import ReconError, check_plan_size, check_realizations, ensure_writable_dir, validate_cameras
 
     result_dir = ResultFolder(args.out, RESULT, PROG, args.overwrite).check()
     try:
@@ -255,6 +259,10 @@ def run(args: argparse.Namespace) -> dict:
         noisy, _ = build_noisy_scene(**plan.scene)
     except (TypeError, ValueError, OSError) as exc:
         raise CliError(f"cannot rebuild the scene of {args.plan}: {exc}") from None
+    try:  # the realizations asked for, against the scene: the request is whole before OUT is touched
+        check_realizations(ks, noisy.points.shape[0])
+    except ReconError as exc:
+        raise CliError(f"--realizations: {exc}") from None
     ensure_writable_dir(args.out)
     with result_dir:  # an error or an interrupt leaves OUT as it was
         return _reconstruct_plan(args, result_dir, plan, noisy, cams, config, ks)
@@ -328,15 +336,17 @@ def _record_failure(result_dir: Any, info: dict, exc: Exception) -> Exception:
     scheduler lost, :class:`vp_scene.cluster.SchedulerLost`, becomes one, ``UNKNOWN``, naming it)
     is recorded in a recon.json that says what failed (batch tools: Table I counts failed plans),
     which becomes OUT's result; with --overwrite over an earlier result that one is kept and the
-    failure only reported. Any other exception is returned as it is, nothing recorded."""
+    failure only reported. A request error (:data:`vp_recon.errors.REQUEST_ERRORS`: exit 2, an
+    output folder that cannot be written among them) and any other exception are returned as
+    they are, nothing recorded: OUT stays as it was."""
     from vp_scene.cluster import SchedulerLost
 
-    from .errors import UNKNOWN, ReconError
+    from .errors import REQUEST_ERRORS, UNKNOWN, ReconError
     from .outputs import write_json
 
     if isinstance(exc, SchedulerLost):
         exc = ReconError(UNKNOWN, str(exc))
-    if not isinstance(exc, ReconError):
+    if not isinstance(exc, ReconError) or exc.code in REQUEST_ERRORS:
         return exc
     if result_dir.earlier():
         return ReconError(exc.code, f"{exc} (nothing written: {result_dir.out} keeps its earlier result)",
@@ -498,11 +508,16 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         os.environ.setdefault("LP_NUM_THREADS", str(args.threads))
     import pycolmap  # noqa: F401  (first: it installs glog's SIGTERM handler, replaced below)
 
-    from .errors import EMPTY_PLAN, NO_SCENE, OUTPUT_NOT_WRITABLE, PLAN_TOO_LARGE, ReconError
+    from vp_scene.folders import OutputError
+
+    from .errors import OUTPUT_NOT_WRITABLE, REQUEST_ERRORS, ReconError
 
     signal.signal(signal.SIGTERM, _terminate)  # SIGTERM ends the run as Ctrl-C does: exit 130
     try:
-        data = run_images(args) if args.images else run(args)
+        try:
+            data = run_images(args) if args.images else run(args)
+        except OutputError as exc:  # a result file not written (a full disk): the run failed, OUT as it was
+            raise ReconError(OUTPUT_NOT_WRITABLE, str(exc)) from None
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted", file=sys.stderr)
         return 130
@@ -511,7 +526,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return 2
     except ReconError as exc:
         print(f"{PROG}: error: [{exc.name}] {' '.join(str(exc).split())}", file=sys.stderr)
-        return 2 if exc.code in (EMPTY_PLAN, NO_SCENE, OUTPUT_NOT_WRITABLE, PLAN_TOO_LARGE) else 1
+        return 2 if exc.code in REQUEST_ERRORS else 1
     except (ValueError, OSError) as exc:
         print(f"{PROG}: error: {' '.join(str(exc).split())}", file=sys.stderr)
         return 2

@@ -44,7 +44,9 @@ plan in progress is finished; of the plans that arrive meanwhile only the newest
 (it replaces an older queued one, which is logged), because a newer plan supersedes older ones.
 Bad input (an empty plan, cameras that see no plant, nothing reconstructed, an unwritable output
 folder, no scene yet, a wrong frame, more than ``max_cameras`` cameras: refused as it arrives)
-gives a score message with an error code and message and a log line; the node keeps running.
+gives a score message with an error code and message and a log line; the node keeps running. A
+realization whose files cannot all be written (a full disk) fails the plan with
+``OUTPUT_NOT_WRITABLE``, its score and the aggregate naming the file.
 Signals, exit codes and parameter types follow :mod:`vp_scene.node_runtime`.
 """
 from __future__ import annotations
@@ -448,7 +450,7 @@ class ReconNode(Node):
 
         def on_realization(res: RealizationResult) -> None:
             k = res.realization
-            try:
+            try:  # a realization whose outputs are not all written failed: its score says so
                 write_ply(run_dir / f'recon_{k}.ply', res.points, res.colors)
                 if res.rendered:
                     write_image(run_dir / f'views_{k}.png', contact_sheet(res.rendered))
@@ -456,7 +458,7 @@ class ReconNode(Node):
                     write_flight(res.captured_views(), run_dir / 'captures' / f'realization_{k}',
                                  meta={'capture': res.capture})
             except (OSError, ValueError) as exc:
-                self.get_logger().error(f'could not write the outputs of realization {k}: {exc}')
+                raise ReconError(Score.OUTPUT_NOT_WRITABLE, f'its outputs are not all written: {exc}', k) from None
             done.append(res)
             msg = realization_score(self._score(k, K, n_cams, plan), res)
             self.score_pub.publish(msg)

@@ -33,7 +33,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = ["ARUCO_DICTIONARY", "MAX_MARKERS", "MARKER_MARGIN", "GroundControl", "GcpObservation", "GroundControlError",
-           "marker_layout", "marker_image", "read_markers_csv", "read_gcp_list", "write_markers_csv"]
+           "marker_layout", "marker_image", "read_markers_csv", "read_gcp_list", "write_markers_csv",
+           "write_gcp_list"]
 
 #: The ArUco dictionary of the markers (OpenCV ``cv2.aruco.DICT_4X4_50``: 50 markers of 4 x 4
 #: bits, the most robust to blur and small size of OpenCV's dictionaries).
@@ -211,3 +212,15 @@ def read_gcp_list(path: Union[str, Path], sigma: float = 0.01) -> GroundControl:
         # a pixel, well under a marker's detection error
         observations.append(GcpObservation(name=name, image=cells[5], u=u, v=v))
     return GroundControl(positions=positions, sigma=sigma, observations=tuple(observations))
+
+
+def write_gcp_list(control: GroundControl, path: Union[str, Path]) -> Path:
+    """:func:`read_gcp_list`'s file of ``control``'s observations, each point named (its first
+    line notes the frame: the flight's own, metres; the survey sigma is not part of the format)."""
+    path = Path(path)
+    rows = ["# the flight's frame (its poses' frame), metres"]
+    for o in control.observations:
+        x, y, z = control.positions[o.name]
+        rows.append(f"{x!r} {y!r} {z!r} {o.u!r} {o.v!r} {o.image} {o.name}")
+    path.write_text("\n".join(rows) + "\n")
+    return path

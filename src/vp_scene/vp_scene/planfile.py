@@ -147,10 +147,11 @@ def load_plan(path: PathLike, require_scene: bool = True) -> PlanFile:
 
 
 def write_plan(path: PathLike, data: dict) -> Path:
-    """Write ``data`` as JSON atomically (a temporary file renamed over ``path``)."""
+    """Write ``data`` as JSON, whole or not at all (:func:`vp_scene.folders.write_atomic`:
+    OutputError naming the file)."""
+    from .folders import write_atomic
+
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
-    tmp = p.with_name(p.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=1))
-    tmp.replace(p)
-    return p
+    text = json.dumps(data, indent=1)
+    return write_atomic(p, lambda tmp: tmp.write_text(text))
