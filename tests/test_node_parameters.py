@@ -82,7 +82,7 @@ DESCRIBED = {
         "wind_variance": (DOUBLE, 0.0, math.inf, False), "scenario": None},
         ("levels", 0), None),
     "recon": ("vp_recon", "recon", {}, {
-        "width": (INT, 16, INT64_MAX, False), "sensor_noise": (DOUBLE, 0.0, 0.5, False),
+        "width": (INT, 16, 16384, False), "sensor_noise": (DOUBLE, 0.0, 0.5, False),
         "hover_attitude_sigma": (DOUBLE, 0.0, 10.0, False), "max_realizations": (INT, 0, INT64_MAX, False),
         "max_cameras": (INT, 2, INT64_MAX, False)},
         ("sensor_noise", 0.9), None),

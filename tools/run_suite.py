@@ -59,7 +59,7 @@ from typing import Dict, List, Optional
 
 from node_process import NodeProcess, node_command
 from vp_planner.methods import DEFAULT_METHOD, METHODS  # the registry (torch-free)
-from vp_scene.camera import IMAGE_SIZE
+from vp_scene.camera import IMAGE_SIDE_RANGE, IMAGE_SIZE, image_side_arg
 
 #: s between the action server being ready and the goal: server_is_ready() sees the request side of
 #: the action's services only; a goal response sent before its reply path is matched is dropped by
@@ -109,8 +109,9 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
     ap.add_argument('--models', default='', help='folder of PLY plant models (default: procedural)')
     ap.add_argument('--realizations', type=int, default=5, help='K wind realizations')
     ap.add_argument('--points-per-plant', type=int, default=4000)
-    ap.add_argument('--width', type=int, default=IMAGE_SIZE[0], help='rendered image width')
-    ap.add_argument('--height', type=int, default=IMAGE_SIZE[1], help='rendered image height')
+    ap.add_argument('--width', type=image_side_arg, default=IMAGE_SIZE[0],
+                    help=f'rendered image width, pixels ({IMAGE_SIDE_RANGE[0]} to {IMAGE_SIDE_RANGE[1]})')
+    ap.add_argument('--height', type=image_side_arg, default=IMAGE_SIZE[1], help='rendered image height, pixels')
     ap.add_argument('--capture', default='realistic', choices=['realistic', 'ideal'],
                     help="the recon node's capture model (README 'Capture model'): realistic (hover and "
                          "localization errors, sensor noise, SfM with the reported poses) or ideal")

@@ -141,11 +141,11 @@ def test_cli_paper_reward_and_score(tmp_path: Path, capsys: pytest.CaptureFixtur
     cov = float(capsys.readouterr().out.split()[-1])
     expected = make_reward("coverage", pts)(np.array(plan["cameras"])[None])[0]
     assert cov == pytest.approx(float(expected), abs=1e-6) and cov != pytest.approx(plan["reward"])
-    # a flight plan given as poses, without a scene: the scene comes from the options
+    # a flight plan given as poses, without a scene: the scene comes from the options, named
     flight = tmp_path / "flight.json"
     flight.write_text(json.dumps({"poses": plan["poses"]}))
-    assert main(["score", "--plan", str(flight), "--reward", "paper", "--points-per-plant", "500",
-                 "--realizations", "2", "--seed", "1"]) == 0
+    assert main(["score", "--plan", str(flight), "--reward", "paper", "--scenario", "one_plant",
+                 "--points-per-plant", "500", "--realizations", "2", "--seed", "1"]) == 0
     assert float(capsys.readouterr().out.split()[-1]) == pytest.approx(plan["reward"], abs=1e-6)
 
 
@@ -187,6 +187,56 @@ def test_cli_score_errors(tmp_path: Path, capsys: pytest.CaptureFixture) -> None
     assert main(["score", "--plan", str(bad)]) == 2
     err = capsys.readouterr().err
     assert "'fov'" in err and "bad.json" in err
+
+
+def test_score_reads_the_plan_as_every_command_and_names_an_infeasible_camera(tmp_path: Path,
+                                                                              capsys: pytest.CaptureFixture) -> None:
+    """`score` of a plan without a scene silently scored one_plant
+    (recon refuses that file); the scene options beside a plan's own scene were ignored; a camera
+    inside the plant scored without a word; a coordinate of 1e300 printed nan and exited 0. Now:
+    a scene is the file's or one named with --scenario, never guessed nor silently replaced; an
+    infeasible camera is named on stderr (the score still printed); 1e300 is refused (exit 2)."""
+    scene = {"scenario": "one_plant", "points_per_plant": 500, "realizations": 2}
+    a = np.radians([0.0, 25.0, 50.0, 75.0])
+    c = np.stack([1.4 * np.cos(a), 1.4 * np.sin(a), np.full(4, 1.2)], axis=1)
+    ring = np.concatenate([c, np.array([0.0, 0.0, 0.9]) - c], axis=1).tolist()
+    path = tmp_path / "plan.json"
+
+    def score(plan: dict, *flags: str) -> tuple[int, str, str]:
+        path.write_text(json.dumps(plan))
+        capsys.readouterr()
+        rc = main(["score", "--plan", str(path), *flags])
+        out, err = capsys.readouterr()
+        return rc, out, err
+
+    rc, out, err = score({"cameras": ring})
+    assert rc == 2 and err.strip().splitlines() == [
+        f"plan: error: {path} has no 'scene': name the scene it was planned for with --scenario (and its other scene "
+        "options); no scene is guessed (vp_recon.cli refuses such a plan)"] and not out
+    rc, out, err = score({"cameras": ring}, "--scenario", "one_plant", "--points-per-plant", "500",
+                         "--realizations", "2")
+    named = float(out.split()[-1])
+    assert rc == 0 and "warning:" not in err and 0 < named < 1, err
+    rc, out, err = score({"cameras": ring, "scene": scene})
+    assert rc == 0 and float(out.split()[-1]) == pytest.approx(named, abs=1e-9)  # the same scene, the same reward
+    rc, out, err = score({"cameras": ring, "scene": scene}, "--scenario", "row_12", "--seed", "3")
+    assert rc == 2 and f"{path} names its scene ('scene'): --scenario, --seed are for a plan without one" in err
+
+    inside = [[0.0, 0.0, 1.0, 1.0, 0.0, 0.0]] + ring[1:]  # camera 0 in the plant's stalk
+    rc, out, err = score({"cameras": inside, "scene": scene})
+    warning = [t for t in err.splitlines() if "warning:" in t]
+    assert rc == 0 and 0 <= float(out.split()[-1]) < 1 and len(warning) == 1, err
+    assert warning[0].startswith(f"plan score: warning: {path} breaks the planner's feasibility rules (scored all the "
+                                 "same): camera 0 at (+0.00, +0.00, +1.00) is 0.0")
+    assert "m from the nearest scene point (min_standoff 0.5 m)" in warning[0]
+    rc, out, err = score({"cameras": inside, "scene": scene, "feasibility": {"min_standoff": 0.0, "min_altitude": 0.3,
+                                                                             "min_separation": 0.5}})
+    assert rc == 0 and "warning:" not in err  # the plan's own rules: planned without a stand-off
+
+    rc, out, err = score({"cameras": [[1e300, 0.0, 1.2, -1.0, 0.0, 0.0]] + ring[1:], "scene": scene})
+    assert rc == 2 and not out and "'cameras' holds 1e+300, outside [-10000, 10000]" in err, err
+    rc, out, err = score({"cameras": ring, "scene": scene}, "--image-width", "100000")
+    assert rc == 2 and "image width must be an integer of 16 to 16384 pixels, got 100000" in err, err
 
 
 def test_cli_refuses_more_cameras_than_it_can_plan(tmp_path: Path) -> None:

@@ -50,6 +50,7 @@ from vp_planner.request import (BO_MODES, DEFAULTS, FLAT, MAX_ATTITUDE_SIGMA, MA
                                 PlanRequest, UnknownMethodError, UnknownRewardModelError, check_fields)
 from vp_planner.reward_models import REWARD_MODELS
 from vp_planner.space import NoFeasiblePlanError
+from vp_scene.camera import IMAGE_SIDE_RANGE
 from vp_scene.cloud import pointcloud2_to_numpy, realizations_from_cloud
 from vp_scene.messages import cameras_to_pose_array, camera_plan_msg, frustum_markers, pose_array_to_cameras
 from vp_scene.node_runtime import (INT_MAX, LATCHED, Param, declare_typed, parameter_value, refuse_bad_changes,
@@ -93,8 +94,8 @@ PARAMS = {
     'seed': Param(D['seed'], 'random seed (goals with seed -1)', (0, INT_MAX)),
     'reward': Param(D['reward'], 'reward model', None, False, 'one of ' + ', '.join(REWARD_MODELS)),
     'image_width': Param(D['image_size'][0], 'image width of the cameras, pixels (the coverage reward)',
-                         (16, INT_MAX)),
-    'image_height': Param(D['image_size'][1], 'image height of the cameras, pixels', (16, INT_MAX)),
+                         IMAGE_SIDE_RANGE),
+    'image_height': Param(D['image_size'][1], 'image height of the cameras, pixels', IMAGE_SIDE_RANGE),
     'bo_mode': Param(D['bo_mode'], 'egp/gp: search of the acquisition', None, False, 'one of ' + ', '.join(BO_MODES)),
     'structured_init': Param(D['structured_init'],
                              'structured plans in the egp/gp initial design (0: random, as the paper)', (0, INT_MAX)),

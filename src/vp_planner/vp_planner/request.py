@@ -45,7 +45,8 @@ every default):
                             None (automatic) or finite > 0
 ``structured_init``         egp/gp: structured plans in the initial design, an integer >= 0 (0: random)
 ``reward``                  one of :data:`vp_planner.reward_models.REWARD_MODELS` (UnknownRewardModelError)
-``image_size``              (width, height) of the cameras' images, pixels, integers >= 16
+``image_size``              (width, height) of the cameras' images, pixels, integers in
+                            :data:`vp_scene.camera.IMAGE_SIDE_RANGE`
 ``bo_mode``                 egp/gp: ``'trust_region'`` or ``'global'`` (the paper's)
 ``arc_spacing``             arc: rad between neighbouring cameras, in (0, 2 pi)
 ``parts``                   egp/gp: parts a field is planned by, an integer >= 0 (0: automatic)
@@ -89,7 +90,7 @@ from typing import Any, Mapping, Optional
 import numpy as np
 from numpy.typing import NDArray
 
-from vp_scene.camera import IMAGE_SIZE
+from vp_scene.camera import IMAGE_SIZE, check_image_side
 
 from .feasibility import Feasibility
 from .methods import BY_NAME, DEFAULT_METHOD, METHODS
@@ -304,7 +305,11 @@ class CameraSpec:
             width, height = self.image_size
         except (TypeError, ValueError):
             raise InvalidRequestError(f"image_size must be (width, height), got {self.image_size!r}") from None
-        _put(self, "image_size", (_integer("image width", width, 16), _integer("image height", height, 16)))
+        try:  # the suite's one range of image sides (vp_scene.camera.IMAGE_SIDE_RANGE)
+            _put(self, "image_size", (check_image_side("image width", width),
+                                      check_image_side("image height", height)))
+        except ValueError as exc:
+            raise InvalidRequestError(str(exc)) from None
 
 
 @dataclass(frozen=True)

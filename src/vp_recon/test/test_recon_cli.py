@@ -28,11 +28,13 @@ def _plan(tmp_path: Path, cameras=None, **extra) -> Path:
 
 
 def test_cli_writes_outputs(tmp_path: Path) -> None:
+    """(The plan's image_size is the rendered size, as `score` reads it: no --width here.)"""
     out = tmp_path / "out"
-    rc = main(["--plan", str(_plan(tmp_path)), "--out", str(out), "--width", "640", "--height", "480", "--capture", "ideal",
+    rc = main(["--plan", str(_plan(tmp_path, image_size=[640, 480])), "--out", str(out), "--capture", "ideal",
                "--realizations", "1", "--no-progress"])
     assert rc == 0
     data = json.loads((out / "recon.json").read_text())
+    assert (data["width"], data["height"]) == (640, 480)
     for key in ("chamfer_mean", "chamfer_std", "per_realization", "seconds", "units", "method", "reward"):
         assert key in data, key
     assert "x 100" in data["units"]
@@ -104,7 +106,6 @@ def test_cli_unwritable_out_and_bad_args(tmp_path: Path, capsys) -> None:
     _fails(tmp_path, capsys, ["--plan", str(_plan(tmp_path)), "--out", str(f)], "not writable")
     _fails(tmp_path, capsys, ["--plan", str(_plan(tmp_path)), "--out", str(tmp_path), "--realizations", "a"],
            "comma-separated")
-    _fails(tmp_path, capsys, ["--plan", str(_plan(tmp_path)), "--out", str(tmp_path), "--width", "3"], "width")
     _fails(tmp_path, capsys, ["--plan", str(_plan(tmp_path)), "--out", str(tmp_path), "--dense-scale", "0"],
            "dense_scale must be in (0, 1]")
 

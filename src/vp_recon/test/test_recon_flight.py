@@ -210,10 +210,11 @@ def test_an_oversize_or_truncated_image_is_refused_before_anything_is_decoded(tm
         tripwire.setattr(cv2, "imdecode", lambda *a, **k: pytest.fail("an image was decoded"))
         tripwire.setattr(cv2, "imread", lambda *a, **k: pytest.fail("an image was decoded"))
         _refused(tmp_path, f, capsys, "im1.png", "30000x30000 pixels (900 MP); an image may have at most 150 MP")
-        for row in (1, 2, 3):  # the size declared in poses.csv as well
+        for row in (1, 2, 3):  # the size declared in poses.csv as well: beyond any image's side
             _edit_poses(f, row, "width", "30000")
             _edit_poses(f, row, "height", "30000")
-        _refused(tmp_path, f, capsys, "im1.png", "30000x30000 pixels (900 MP)")
+        _refused(tmp_path, f, capsys, "poses.csv", "the image width must be an integer of 16 to 16384 pixels, "
+                 "got 30000")
         f = _small_flight(tmp_path)  # 3 images of 64 x 48
         _refused(tmp_path, f, capsys, f"{f}: its 3 images have 0.009216 megapixels; at most 0.009 are reconstructed "
                  "at once (--max-megapixels", args=("--max-megapixels", "0.009"))
@@ -229,6 +230,69 @@ def test_an_oversize_or_truncated_image_is_refused_before_anything_is_decoded(tm
     _refused(tmp_path, f, capsys, "im1.jpg", "corrupt or truncated JPEG")
     with pytest.raises(FlightError, match=r"im1.jpg: corrupt or truncated JPEG"):
         read_flight(f)
+
+
+def test_a_pose_file_is_bounded_its_byte_order_mark_read_and_its_rows_counted_as_read(tmp_path: Path,
+                                                                                         capsys) -> None:
+    """A poses.csv coordinate of 1e300 ended in an OverflowError traceback of the
+    dense step; a UTF-8 byte-order mark (a spreadsheet's CSV) made the header wrong while the error
+    printed one that looked the same; a 400,000-row poses.csv was read whole, each name looked up
+    in a list (20,000 rows: 5 s). Now: every position and quaternion within MAX_COORDINATE (exit 2,
+    the line named), the mark read as one, at most MAX_POSES rows counted as they are read."""
+    from vp_scene.flight_poses import MAX_POSES, read_pose_files
+
+    f = _small_flight(tmp_path)
+    _edit_poses(f, 1, "x", "1e300")
+    _refused(tmp_path, f, capsys, "poses.csv line 2 (im0.png): the pose holds 1e+300, outside [-10000, 10000]")
+    f = _small_flight(tmp_path)
+    _edit_poses(f, 2, "qw", "-2e4")
+    _refused(tmp_path, f, capsys, "poses.csv line 3 (im1.png): the pose holds -20000")
+    f = _small_flight(tmp_path)  # COLMAP's text model: the centre -R^T t of a translation 1e300
+    (f / POSES_FILE).unlink()
+    lines = (f / "images.txt").read_text().splitlines()
+    i = next(n for n, t in enumerate(lines) if t.endswith(" im1.png"))
+    lines[i] = " ".join(lines[i].split()[:5] + ["1e300"] + lines[i].split()[6:])
+    (f / "images.txt").write_text("\n".join(lines) + "\n")
+    _refused(tmp_path, f, capsys, f"images.txt line {i + 1} (im1.png): the pose holds 1e+300")
+
+    f = _small_flight(tmp_path)
+    (f / POSES_FILE).write_bytes(b"\xef\xbb\xbf" + (f / POSES_FILE).read_bytes())
+    assert read_flight(f).names == ["im0.png", "im1.png", "im2.png"]
+    text = (f / POSES_FILE).read_text(encoding="utf-8-sig")
+    (f / POSES_FILE).write_text(text.replace("image,", "image\u200b,", 1))  # a header that looks the same
+    _refused(tmp_path, f, capsys, "the first line must be the header", "got 'image\\u200b,x,y,z")
+
+    # rows past MAX_POSES are not read: what follows the limit (here: no row at all) is never parsed
+    rows = text.splitlines()
+    big = tmp_path / "big"
+    big.mkdir()
+    (big / POSES_FILE).write_text("\n".join([rows[0]] + [rows[1].replace("im0.png", f"v{i}.png")
+                                                          for i in range(MAX_POSES + 1)]
+                                            + ["not a row"] * 1000) + "\n")
+    with pytest.raises(FlightError, match=rf"poses.csv: more than {MAX_POSES} images; a pose file lists at most "
+                                          rf"{MAX_POSES} \(the rest of the file was not read\)"):
+        read_pose_files(big)
+    (big / POSES_FILE).write_text("\n".join([rows[0]] + [rows[1].replace("im0.png", f"v{i}.png")
+                                                          for i in range(MAX_POSES)]) + "\n")
+    names, poses, cams, _ = read_pose_files(big)  # the limit itself: read
+    assert len(names) == len(set(names)) == MAX_POSES and poses.shape == (MAX_POSES, 7)
+    _refused(tmp_path, big, capsys, "v0.png: missing (listed in poses.csv)")
+
+
+def test_ground_control_in_another_frame_is_refused_naming_the_line(tmp_path: Path, capsys) -> None:
+    """A gcp_list.txt in UTM (its points 500 km from the flight's poses, in
+    map) was taken and gave nothing in recon.json. A control point is in the poses' frame, within
+    MAX_COORDINATE of map's origin: refused before anything is read, naming the line and the
+    coordinate system the file gives (not converted). Nearer ones that do not fit the poses are
+    rejected by the registration (test_recon_anchored)."""
+    f = _small_flight(tmp_path)
+    (f / "gcp_list.txt").write_text("+proj=utm +zone=15 +datum=WGS84 +units=m +no_defs\n"
+                                    "500123.5 4980456.25 280.0 31.5 23.5 im0.png gcp1\n")
+    _refused(tmp_path, f, capsys, "gcp_list.txt, line 2: geo_x, geo_y, geo_z holds 500124, outside [-10000, 10000]",
+             "(the poses' frame, metres; the coordinate system '+proj=utm +zone=15")
+    (f / "gcp_list.txt").unlink()
+    (f / "markers.csv").write_text("id,x,y,z\n0,1.0,2.0,0.0\n3,0.5,-20000,0.0\n")
+    _refused(tmp_path, f, capsys, "markers.csv, line 3: marker 3 holds -20000", "(markers.csv is in the poses' frame)")
 
 
 def test_a_truncated_png_is_refused_in_one_line(tmp_path: Path, capfd) -> None:

@@ -57,7 +57,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import math
 import os
 import signal
@@ -114,6 +113,8 @@ def capture_from_args(args: argparse.Namespace) -> object:
 
 
 def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
+    from vp_scene.camera import IMAGE_SIDE_RANGE, image_side_arg
+
     from .config import MATCH_POSES_FROM, MATCHINGS, MAX_CAMERAS, MAX_MEGAPIXELS, ReconConfig
     from .segment import MASK_METHODS
     from .sparse import MODES
@@ -135,10 +136,11 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
                                                   "the end; one that holds a reconstruction is refused)")
     p.add_argument("--overwrite", action="store_true",
                    help="replace the reconstruction OUT holds (when this run succeeds; a failed run keeps it)")
-    p.add_argument("--width", type=int, default=None,
-                   help=f"--plan: rendered image width, pixels (default and paper: {ReconConfig.width})")
-    p.add_argument("--height", type=int, default=None,
-                   help=f"--plan: rendered image height, pixels (default and paper: {ReconConfig.height})")
+    p.add_argument("--width", type=image_side_arg, default=None,
+                   help=f"--plan: rendered image width, pixels, {IMAGE_SIDE_RANGE[0]} to {IMAGE_SIDE_RANGE[1]} "
+                        f"(default: the plan's image_size, else {ReconConfig.width}, the paper's)")
+    p.add_argument("--height", type=image_side_arg, default=None,
+                   help=f"--plan: rendered image height, pixels (default: the plan's, else {ReconConfig.height})")
     p.add_argument("--realizations", default=None, help="comma-separated realization indices (default: all)")
     p.add_argument("--sparse-only", action="store_true", help="score the sparse cloud (no dense stereo)")
     p.add_argument("--sparse-mode", default="auto", choices=("auto",) + MODES,
@@ -207,7 +209,8 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     if (args.prior or args.select or args.reference) and not args.images:
         p.error("--prior, --select and --reference go with --images (a plan brings its own scene)")
     if args.images:  # a flight folder has its own images: the options of rendering a plan do not apply
-        given = [f for f, v in (("--width", args.width), ("--height", args.height), ("--realizations", args.realizations),
+        given = [f for f, v in (("--width", args.width), ("--height", args.height),
+                                ("--realizations", args.realizations),
                                 ("--mesh-cache", args.mesh_cache), ("--scheduler", args.scheduler),
                                 ("--max-cameras", args.max_cameras)) if v]
         if given:
@@ -246,8 +249,10 @@ def run(args: argparse.Namespace) -> dict:
     except ReconError as exc:
         raise CliError(f"{args.plan}: {exc}") from None
     try:
-        config = ReconConfig(width=args.width or ReconConfig.width, height=args.height or ReconConfig.height,
-                             fov=plan.fov, dense=not args.sparse_only,
+        size = plan.image_size or (ReconConfig.width, ReconConfig.height)  # the plan's cameras, as score has them
+        config = ReconConfig(width=size[0] if args.width is None else args.width,
+                             height=size[1] if args.height is None else args.height, fov=plan.fov,
+                             dense=not args.sparse_only,
                              sparse_mode=args.sparse_mode, fscore_threshold=args.fscore_threshold,
                              voxel=args.voxel, mesh_cache=args.mesh_cache, keep_workdir=args.keep_workdir,
                              ground=args.ground, num_threads=args.threads, matching=args.matching,
@@ -386,12 +391,15 @@ def _cloud(path: str, flag: str) -> np.ndarray:
 
 
 def _selection(path: str) -> tuple[list, Optional[str]]:
-    """The image names a plan among a folder's views chose (``images``) and its prior PLY."""
+    """The image names a plan among a folder's views chose (``images``) and its prior PLY (the
+    plan file read as every command reads it, :func:`vp_scene.planfile.load_plan`)."""
+    from vp_scene.planfile import PlanFileError, load_plan
+
     try:
-        data = json.loads(Path(path).read_text())
-    except (OSError, ValueError) as exc:
-        raise CliError(f"--select: cannot read {path}: {exc}") from None
-    names = data.get("images") if isinstance(data, dict) else None
+        data = load_plan(path, require_scene=False).data
+    except PlanFileError as exc:
+        raise CliError(f"--select: {exc}") from None
+    names = data.get("images")
     if not isinstance(names, list) or len(names) < 2 or not all(isinstance(n, str) for n in names) \
             or len(set(names)) != len(names):
         raise CliError(f"--select: {path} names no list of 2 or more distinct images ('images': a plan made with "
@@ -476,6 +484,11 @@ def run_images(args: argparse.Namespace) -> dict:
             if failure is exc:
                 raise
             raise failure from None
+        control = vr.control.to_dict() if vr.control is not None else None
+        if control is not None:  # what the ground control did, and what it refused and why
+            from .gcp import describe
+
+            print(f"{PROG}: {describe(control)}", file=sys.stderr)
         write_ply(out / "recon.ply", vr.points, vr.colors)
         write_image(out / "views.png", contact_sheet(views.images))
         sp = vr.sparse
@@ -483,7 +496,7 @@ def run_images(args: argparse.Namespace) -> dict:
                                            len(vr.points), vr.coverage, sp.centre_residual),
                 "cloud": vr.source, "chamfer_mean": None, "sparse_points": len(sp.points), "sparse_models": sp.models,
                 "sparse_mode": sp.mode, "sparse_fallback": sp.fallback,  # the model kept (incremental may fall back)
-                "mask": vr.mask.to_dict() if vr.mask is not None else None,
+                "mask": vr.mask.to_dict() if vr.mask is not None else None, "control": control,
                 "seconds": {k: round(float(v), 3) for k, v in {**views.seconds, **vr.seconds}.items()}}
         if vr.coverage is not None:
             write_image(out / "uncovered.png", uncovered_image(prior.points if noisy is None else noisy.points,

@@ -44,7 +44,7 @@ from scipy.spatial.transform import Rotation
 
 from vp_scene.ground_control import GroundControl, GroundControlError, read_gcp_list, read_markers_csv, \
     write_gcp_list, write_markers_csv
-from vp_scene.camera import as_poses, principal_point_gl, world_to_camera
+from vp_scene.camera import as_poses, check_image_side, principal_point_gl, world_to_camera
 from vp_scene.folders import write_atomic
 from vp_scene.flight_poses import FRAME, POSES_FILE, FlightCamera, FlightError, read_pose_files, write_poses_csv
 from vp_scene.images import ImageError, image_size, read_image
@@ -210,8 +210,13 @@ def read_flight(folder: PathLike, max_megapixels: float = MAX_MEGAPIXELS) -> Cap
         raise FlightError(f"{source} ({names[i]}): intrinsics differ from {names[0]}'s (one camera per flight)")
     cam = cams[0]
     w, h = cam.width, cam.height
-    if not (cam.fx > 0 and cam.fy > 0 and w >= 16 and h >= 16 and w == int(w) and h == int(h)):
-        raise FlightError(f"{source}: bad intrinsics fx {cam.fx} fy {cam.fy} size {w}x{h}")
+    try:
+        check_image_side("the image width", w)
+        check_image_side("the image height", h)
+    except ValueError as exc:
+        raise FlightError(f"{source}: {exc}") from None
+    if not (cam.fx > 0 and cam.fy > 0):
+        raise FlightError(f"{source}: bad intrinsics fx {cam.fx} fy {cam.fy}")
     pixels = 0
     for name in names:  # the headers first: nothing is decoded of a folder that is refused
         path = d / name

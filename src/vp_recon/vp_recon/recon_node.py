@@ -71,13 +71,14 @@ from vp_recon.errors import ReconError, check_plan_size, ensure_writable_dir
 from vp_recon.fleet_captures import IMAGE_TRANSPORTS, FleetCaptures
 from vp_scene.flight_poses import FlightError
 from vp_recon.flight import flown_views, join_views, locate_flown, write_flight
+from vp_recon.gcp import describe
 from vp_recon.metrics import DEFAULT_FSCORE_THRESHOLD
 from vp_recon.outputs import contact_sheet, write_image, write_ply
 from vp_recon.pipeline import reconstruct_captured, reconstruct_plan
 from vp_recon.progress import STAGES, ReconCancelled
 from vp_recon.results import RealizationResult, plan_result
 from vp_recon.tasks import worker_call, worker_result
-from vp_scene.camera import IMAGE_SIZE
+from vp_scene.camera import IMAGE_SIDE_RANGE, IMAGE_SIZE
 from vp_scene.capture import IDEAL, REALISTIC, CaptureModel
 from vp_scene.cloud import numpy_to_pointcloud2, realizations_from_cloud
 from vp_scene.cluster import KeptLocalCluster
@@ -101,8 +102,8 @@ _M = (0.0, math.inf)
 PARAMS = {
     'output_folder': Param(str(Path.home() / '.ros' / 'vp_recon'), 'a plan-<time> folder per plan goes here', None,
                            False, 'not empty'),
-    'width': Param(IMAGE_SIZE[0], 'rendered image width, pixels', (16, INT_MAX)),
-    'height': Param(IMAGE_SIZE[1], 'rendered image height, pixels', (16, INT_MAX)),
+    'width': Param(IMAGE_SIZE[0], 'rendered image width, pixels', IMAGE_SIDE_RANGE),
+    'height': Param(IMAGE_SIZE[1], 'rendered image height, pixels', IMAGE_SIDE_RANGE),
     'fov': Param(math.pi / 2, 'horizontal field of view, rad (the planner\'s)', (0.0, math.pi), False,
                  'the ends are excluded'),
     'sparse_mode': Param('auto', 'auto (anchored for a realistic capture, known_poses for the ideal one) | '
@@ -465,6 +466,10 @@ class ReconNode(Node):
             self._publish_clouds(done, frame)
             self.get_logger().info(f'realization {k}: Chamfer x100 {msg.chamfer:.3f}, {msg.num_points} points '
                                    f'({time.monotonic() - started[0]:.1f} s)')
+            if res.control is not None:  # what the ground control did; a warning when some was refused
+                log = self.get_logger().info if res.control['applied'] and not res.control['rejected'] \
+                    else self.get_logger().warning
+                log(f'realization {k}: {describe(res.control)}')
             started[0] = time.monotonic()
 
         try:

@@ -32,6 +32,8 @@ from typing import Optional, Union
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .camera import check_coordinates
+
 __all__ = ["ARUCO_DICTIONARY", "MAX_MARKERS", "MARKER_MARGIN", "GroundControl", "GcpObservation", "GroundControlError",
            "marker_layout", "marker_image", "read_markers_csv", "read_gcp_list", "write_markers_csv",
            "write_gcp_list"]
@@ -77,6 +79,16 @@ class GroundControl:
             p = np.asarray(p, dtype=np.float64)
             if p.shape != (3,) or not np.all(np.isfinite(p)):
                 raise GroundControlError(f"control point {name!r} needs a finite (x, y, z), got {p.tolist()}")
+            _in_map(p, f"control point {name!r}")
+
+
+def _in_map(xyz: ArrayLike, what: str, note: str = "") -> tuple:
+    """``xyz`` as a tuple when within :data:`vp_scene.camera.MAX_COORDINATE`, else
+    GroundControlError naming ``what`` (and ``note``)."""
+    try:
+        return tuple(float(v) for v in check_coordinates(xyz, what))
+    except ValueError as exc:
+        raise GroundControlError(f"{exc}{note}") from None
 
 
 def marker_layout(points: ArrayLike, count: int, margin: Optional[float] = None) -> NDArray[np.float64]:
@@ -139,7 +151,8 @@ def read_markers_csv(path: Union[str, Path], sigma: float = 0.01) -> GroundContr
     ``sigma``: the survey sigma, m, the same for all). GroundControlError naming the line."""
     path = Path(path)
     try:
-        lines = [ln.strip() for ln in path.read_text().splitlines() if ln.strip() and not ln.startswith("#")]
+        lines = [ln.strip() for ln in path.read_text(encoding="utf-8-sig").splitlines()
+                 if ln.strip() and not ln.startswith("#")]
     except (OSError, UnicodeDecodeError) as exc:
         raise GroundControlError(f"{path}: cannot read: {exc}") from None
     if not lines:
@@ -162,7 +175,8 @@ def read_markers_csv(path: Union[str, Path], sigma: float = 0.01) -> GroundContr
             raise GroundControlError(f"{where}: marker id {mid} is not in {ARUCO_DICTIONARY} (0-{MAX_MARKERS - 1})")
         if str(mid) in positions:
             raise GroundControlError(f"{where}: marker {mid} is listed twice")
-        positions[str(mid)] = tuple(_number(row[a], a, where) for a in "xyz")
+        positions[str(mid)] = _in_map([_number(row[a], a, where) for a in "xyz"], f"{where}: marker {mid}",
+                                      " (markers.csv is in the poses' frame)")
         if "sigma" in row:
             sigmas.add(_number(row["sigma"], "sigma", where))
     if len(sigmas) > 1:
@@ -184,11 +198,12 @@ def read_gcp_list(path: Union[str, Path], sigma: float = 0.01) -> GroundControl:
     per observation ``geo_x geo_y geo_z im_x im_y image_name [gcp_name]`` (whitespace separated;
     pixels from the image's top-left corner). The coordinates must be the flight's own (the
     frame of its poses, metres): the first line is kept as a note, not converted (a projected
-    CRS such as UTM, with poses.csv in the same CRS less an offset, is the user's to align).
+    CRS such as UTM, with poses.csv in the same CRS less an offset, is the user's to align); a
+    point beyond :data:`vp_scene.camera.MAX_COORDINATE` (UTM's 500 km) is refused, naming that.
     Points without a name are named by their coordinates. GroundControlError naming the line."""
     path = Path(path)
     try:
-        lines = [ln.strip() for ln in path.read_text().splitlines()]
+        lines = [ln.strip() for ln in path.read_text(encoding="utf-8-sig").splitlines()]
     except (OSError, UnicodeDecodeError) as exc:
         raise GroundControlError(f"{path}: cannot read: {exc}") from None
     body = [(n, ln) for n, ln in enumerate(lines[1:], start=2) if ln and not ln.startswith("#")]
@@ -202,7 +217,9 @@ def read_gcp_list(path: Union[str, Path], sigma: float = 0.01) -> GroundControl:
         where = f"{path}, line {n}"
         if len(cells) < 6:
             raise GroundControlError(f"{where}: expected geo_x geo_y geo_z im_x im_y image_name [gcp_name], got {ln!r}")
-        xyz = tuple(_number(c, a, where) for c, a in zip(cells[:3], ("geo_x", "geo_y", "geo_z")))
+        xyz = _in_map([_number(c, a, where) for c, a in zip(cells[:3], ("geo_x", "geo_y", "geo_z"))],
+                      f"{where}: geo_x, geo_y, geo_z",
+                      f" (the poses' frame, metres; the coordinate system {lines[0][:60]!r} is not converted)")
         u, v = (_number(c, a, where) for c, a in zip(cells[3:5], ("im_x", "im_y")))
         name = cells[6] if len(cells) > 6 else "{:.3f}_{:.3f}_{:.3f}".format(*xyz)
         if name in positions and not np.allclose(positions[name], xyz, atol=1e-6):
