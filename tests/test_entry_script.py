@@ -331,14 +331,17 @@ def test_sigkill_of_the_script_takes_the_nodes_with_it(ros_env, tmp_path) -> Non
 
 
 def test_a_dead_node_is_reported_last_without_tracebacks(ros_env, tmp_path) -> None:
-    """Issue 10, item 11: the recon exits at once with a one-line error (bad width); the script
-    stops the other two; its last line names the node and repeats that error, and no node prints
-    a traceback while being stopped."""
-    earlier = tmp_path / "run"  # Hardening III, item 8: make run twice lost (and mixed) the first run
+    """The scene node exits at once with a one-line error (its layout names a plant model that
+    needs a models folder: the script reads the layout, the scene resolves its models); the script
+    stops the others; its last line names the node and repeats that error, and no node prints a
+    traceback while being stopped."""
+    earlier = tmp_path / "run"  # make run twice lost (and mixed) the first run
     earlier.mkdir()
     (earlier / "summary.json").write_text('{"earlier": true}')
     (earlier / "run.mcap").write_bytes(b"the earlier recording")
-    script = start_script(ros_env, tmp_path, "--method", "circle", "--evals", "4", "--width", "4",
+    layout = tmp_path / "field.yaml"
+    layout.write_text("grid:\n  rows: 1\n  columns: 2\n  model: no_such_plant\n")
+    script = start_script(ros_env, tmp_path, "--method", "circle", "--evals", "4", "--scenario", str(layout),
                           "--timeout", "120")
     try:
         code = script.wait(120)
@@ -347,7 +350,7 @@ def test_a_dead_node_is_reported_last_without_tracebacks(ros_env, tmp_path) -> N
     text = script.output()
     assert code == 3, text[-3000:]
     last = text.strip().splitlines()[-1]
-    assert 'node "recon" died (exit code 2)' in last and "width" in last, text[-3000:]
+    assert 'node "scene" died (exit code 2)' in last and "no_such_plant" in last, text[-3000:]
     assert "Traceback" not in text and "KeyboardInterrupt" not in text, text[-6000:]
     # the earlier run was moved aside, whole, before this one started: nothing lost, nothing mixed
     (moved,) = [p for p in tmp_path.iterdir() if re.fullmatch(r"run-\d{8}-\d{6}", p.name)]
