@@ -36,7 +36,7 @@ print(json.dumps(out))
 #: execs sys.argv[2:] with its address space capped at sys.argv[1] bytes
 _CAPPED = "import os, resource, sys; c = int(sys.argv[1]); resource.setrlimit(resource.RLIMIT_AS, (c, c)); " \
           "os.execv(sys.argv[2], sys.argv[2:])"
-BEYOND = [  # realizations 100000 reached 11.7 GB in 60 s; the third fits the caps, not the memory
+BEYOND = [  # realizations 100000 grew the planner CLI by gigabytes; the third fits the caps, not the memory
     (["--realizations", "100000"], f"realizations = 100000 is above the bound of {MAX_REALIZATIONS}"),
     (["--points-per-plant", str(10 ** 9)], f"points_per_plant = 1000000000 is above the bound of {MAX_POINTS_PER_PLANT}"),
     (["--scenario", "row_12", "--points-per-plant", str(MAX_POINTS_PER_PLANT), "--realizations",

@@ -126,7 +126,7 @@ def test_bad_fixed_cameras_are_refused(realizations, fixed, text) -> None:
 
 
 def test_fixed_cameras_are_bounded_like_cameras() -> None:
-    """10,000 cameras already flown were accepted (a goal grew the planner to 4.3 GB): at most
+    """10,000 cameras already flown were accepted (a goal grew the planner by gigabytes): at most
     MAX_FIXED_CAMERAS, a full sortie, checked when the request is made."""
     PlanRequest.of("random", 2, evaluations=2, fixed_cameras=np.tile(ring_camera(0), (request.MAX_FIXED_CAMERAS, 1)))
     with pytest.raises(InvalidFixedCamerasError, match=f"10000 cameras already flown are above the bound of "

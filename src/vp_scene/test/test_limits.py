@@ -33,7 +33,7 @@ def test_the_default_scenes_fit() -> None:
 
 
 @pytest.mark.parametrize("scene", [
-    {"scenario": "one_plant", "realizations": 100000},       # 11.7 GB in 60 s, never refused
+    {"scenario": "one_plant", "realizations": 100000},       # was never refused
     {"scenario": "one_plant", "points_per_plant": 10 ** 9},
     {"scenario": "row_12", "points_per_plant": MAX_POINTS_PER_PLANT, "realizations": MAX_REALIZATIONS},
 ])
