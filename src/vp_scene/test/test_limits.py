@@ -74,3 +74,14 @@ def test_seed_flags_take_the_range() -> None:
     for text in (str(2 ** 64), "-1", "x"):
         with pytest.raises(argparse.ArgumentTypeError, match=f"must be an integer from 0 to {MAX_SEED}"):
             limits.seed_arg(text)
+
+
+def test_a_containers_memory_limit_counts(monkeypatch) -> None:
+    """In a cgroup of 4 GiB using 3 (1 of it reclaimable file cache) a request has 2 GiB, however
+    much the machine has; without a cgroup limit, the machine's MemAvailable."""
+    files = {("/proc/meminfo", "MemAvailable:"): 100 * GIB // 1024, ("/sys/fs/cgroup/memory.max", ""): 4 * GIB,
+             ("/sys/fs/cgroup/memory.current", ""): 3 * GIB, ("/sys/fs/cgroup/memory.stat", "inactive_file"): GIB}
+    monkeypatch.setattr(limits, "_first_number", lambda path, key="": files.get((path, key)))
+    assert limits.available_memory() == 2 * GIB
+    del files[("/sys/fs/cgroup/memory.max", "")]  # "max": no limit
+    assert limits.available_memory() == 100 * GIB

@@ -59,28 +59,33 @@ class SceneTooLargeError(ValueError):
     """A scene above a cap (realizations, points per plant) or beyond the memory."""
 
 
-def available_memory() -> Optional[int]:
-    """Bytes this process may still take: MemAvailable of /proc/meminfo, or less where a cgroup
-    (a container) limits the memory (memory.max - memory.current); None where unknown."""
-    have: Optional[int] = None
+def _first_number(path: str, key: str = "") -> Optional[int]:
+    """The number of a one-value file, or the one after ``key`` in a key-value file; None where
+    the file or the key is missing ("max" included)."""
     try:
-        with open("/proc/meminfo") as fh:
+        with open(path) as fh:
             for line in fh:
-                if line.startswith("MemAvailable:"):
-                    have = int(line.split()[1]) * 1024
-                    break
+                words = line.split()
+                if not key:
+                    return int(words[0])
+                if words and words[0] == key:
+                    return int(words[1])
     except (OSError, ValueError, IndexError):
         pass
-    try:
-        with open("/sys/fs/cgroup/memory.max") as fh:
-            limit = fh.read().strip()
-        with open("/sys/fs/cgroup/memory.current") as fh:
-            used = int(fh.read().strip())
-        if limit != "max":
-            room = max(0, int(limit) - used)
-            have = room if have is None else min(have, room)
-    except (OSError, ValueError):
-        pass
+    return None
+
+
+def available_memory() -> Optional[int]:
+    """Bytes this process may still take: MemAvailable of /proc/meminfo, or less where a cgroup v2
+    (a container) limits the memory: memory.max less what the cgroup uses (memory.current, its
+    reclaimable inactive file cache left out); None where unknown."""
+    have = _first_number("/proc/meminfo", "MemAvailable:")
+    have = None if have is None else have * 1024
+    limit = _first_number("/sys/fs/cgroup/memory.max")
+    used = _first_number("/sys/fs/cgroup/memory.current")
+    if limit is not None and used is not None:
+        room = max(0, limit - used + (_first_number("/sys/fs/cgroup/memory.stat", "inactive_file") or 0))
+        have = room if have is None else min(have, room)
     return have
 
 
