@@ -33,9 +33,12 @@ __all__ = ["POLL_S", "PlanProcessDied", "warm", "run_plan"]
 
 #: s between two looks at ``should_stop`` while the child plans.
 POLL_S: float = 0.05
-#: Modules the fork server imports once, so that a plan's child starts with them (the BO
-#: methods' botorch and gpytorch too).
-_PRELOAD = ["vp_planner.plan_process", "vp_planner.optimizers", "vp_planner.bo"]
+#: Modules the fork server imports once, so that a plan's child starts with them: the planner,
+#: and what its modules import only when a method needs it (botorch and gpytorch for egp/gp, the
+#: scipy parts of planning by parts), which every child would import again otherwise.
+_PRELOAD = ["vp_planner.plan_process", "vp_planner.optimizers", "vp_planner.bo", "vp_planner.bo_planning",
+            "vp_planner.parts", "botorch.acquisition.analytic", "botorch.fit", "botorch.models",
+            "botorch.models.transforms.outcome", "botorch.optim", "gpytorch", "scipy.cluster.vq", "scipy.optimize"]
 #: Linux's prctl option: the signal a process gets when its parent ends.
 _PR_SET_PDEATHSIG = 1
 
