@@ -60,6 +60,7 @@ from typing import Dict, List, Optional
 from node_process import NodeProcess, node_command
 from vp_planner.methods import DEFAULT_METHOD, METHODS  # the registry (torch-free)
 from vp_scene.camera import IMAGE_SIDE_RANGE, IMAGE_SIZE, image_side_arg
+from vp_scene.limits import MAX_SEED, seed_arg
 
 #: s between the action server being ready and the goal: server_is_ready() sees the request side of
 #: the action's services only; a goal response sent before its reply path is matched is dropped by
@@ -104,7 +105,7 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
     ap.add_argument('--cameras', type=int, default=4)
     ap.add_argument('--evals', type=int, default=100, help='reward evaluations')
     ap.add_argument('--init', type=int, default=50, help='initial random design (egp, gp)')
-    ap.add_argument('--seed', type=int, default=0)
+    ap.add_argument('--seed', type=seed_arg, default=0, help=f'seed of the scene, the wind and the planner (0 to {MAX_SEED})')
     ap.add_argument('--reward', default='', help="reward model: paper | coverage | coverage-graph ('': the planner's default)")
     ap.add_argument('--models', default='', help='folder of PLY plant models (default: procedural)')
     ap.add_argument('--realizations', type=int, default=5, help='K wind realizations')

@@ -53,6 +53,7 @@ from typing import TYPE_CHECKING, Any, Optional, Sequence
 import numpy as np
 
 from vp_scene.layout import BUILTIN_LAYOUTS, LayoutError, read_scenario
+from vp_scene.limits import MAX_SEED, seed_arg
 
 #: The entries of a plan in OUT: what --overwrite replaces, together.
 RESULT = ("plan.json", "noisy_points.npy")
@@ -97,7 +98,8 @@ def _scene_args(p: argparse.ArgumentParser, given_only: bool = False) -> None:
     p.add_argument("--scenario", default=d["scenario"], type=_scenario, metavar="NAME_OR_FILE",
                    help=f"a layout name ({', '.join(SCENARIO_NAMES)}) or a layout file (.yaml, .yml, .json; "
                         f"README 'Your own field')")
-    p.add_argument("--seed", type=int, default=d["seed"], help="seed of the scene, the wind and the planner")
+    p.add_argument("--seed", type=seed_arg, default=d["seed"],
+                   help=f"seed of the scene, the wind and the planner (0 to {MAX_SEED})")
     p.add_argument("--models", default=d["models"], help="folder of PLY plant models (default: procedural corn)")
     p.add_argument("--points-per-plant", type=int, default=d["points_per_plant"])
     p.add_argument("--plant-spacing", type=float, default=d["plant_spacing"])
@@ -239,6 +241,15 @@ def build_scene(scene: dict) -> tuple[np.ndarray, str]:
     return np.asarray(noisy.points, dtype=np.float64), noisy.scene.scenario
 
 
+def memory_beside(shape: Sequence[int]) -> Optional[int]:
+    """Bytes of memory available beside a scene of realizations ``shape`` (K, P) once it is built
+    (:func:`vp_scene.limits.scene_memory`); None where unknown."""
+    from vp_scene.limits import available_memory, scene_memory
+
+    have = available_memory()
+    return None if have is None else max(0, have - scene_memory(shape[1], shape[0]))
+
+
 def _image_size(args: argparse.Namespace, default: Sequence[int]) -> tuple[int, int]:
     """(--image-width, --image-height), each ``default``'s where not given (the request checks them)."""
     w = args.image_width if args.image_width is not None else default[0]
@@ -315,18 +326,23 @@ def request_of(args: argparse.Namespace) -> "PlanRequest":
 def plan(args: argparse.Namespace) -> dict:
     """Plan views; write OUT/plan.json and OUT/noisy_points.npy; return the plan dict."""
     from vp_scene.camera import cameras_to_poses
+    from vp_scene.build import scene_shape
     from vp_scene.folders import ResultFolder, write_atomic
     from vp_scene.planfile import write_plan
 
     from .methods import BY_NAME
     from .optimizers import plan_views
-    from .request import FLAT
+    from .request import FLAT, check_plan_memory
 
     request = request_of(args)  # fail before reading files or building the scene
     if args.threads < 1:
         raise CliError(f"--threads must be >= 1, got {args.threads}")
+    scene = None if args.candidates_folder else scene_of(args)
+    shape = None if scene is None else scene_shape(scene)  # the scene's bounds and memory, nothing built
     request = request.replace(fixed_cameras=fixed_cameras_of(args.fixed),
                               reconstruction=reconstruction_of(args.reconstructed))
+    if shape is not None:  # what the plan's cameras multiply, in the memory the scene leaves
+        check_plan_memory(request, shape, memory_beside(shape))
     result_dir = ResultFolder(args.out, RESULT, "plan", args.overwrite).check()  # before the planning
     set_threads(args.threads)
     among = None
@@ -336,7 +352,6 @@ def plan(args: argparse.Namespace) -> dict:
         request = request.replace(candidates=among["cameras"], fov=args.fov if args.fov is not None else among["fov"],
                                   image_size=_image_size(args, among["size"]))
     else:
-        scene = scene_of(args)
         realizations, layout_name = build_scene(scene)
 
     bar: Any = None
@@ -465,9 +480,10 @@ def score(args: argparse.Namespace) -> float:
     the default model) on the plan's scene (:func:`_score_scene`)."""
     from vp_scene.planfile import PlanFileError, load_plan
 
+    from vp_scene.build import scene_shape
     from vp_scene.camera import IMAGE_SIZE, CameraModel
 
-    from .request import FLAT, CameraSpec, InvalidRequestError, RewardSpec
+    from .request import FLAT, CameraSpec, InvalidRequestError, RewardSpec, check_memory
     from .reward_models import DEFAULT_REWARD_MODEL, check_reward_model, make_reward
 
     try:
@@ -491,6 +507,8 @@ def score(args: argparse.Namespace) -> float:
                             **{FLAT[k][1]: registration[k] for k in REGISTRATION if k in registration})
     except InvalidRequestError as exc:
         raise CliError(f"{args.plan}: {exc}") from None
+    shape = scene_shape(scene)  # the scene's bounds and memory, then what the cameras multiply
+    check_memory(len(pf.cameras) + len(pf.fixed_cameras), shape, model, memory_beside(shape))
     realizations, layout_name = build_scene(scene)
     weights = _reconstructed_weights(pf.data, realizations)
     warning = _feasibility_warning(pf, realizations)

@@ -85,6 +85,7 @@ def add_capture_arguments(p: argparse.ArgumentParser) -> None:
     """``--capture realistic|ideal`` and one flag per figure of :class:`vp_scene.capture.
     CaptureModel` (default: the realistic model's; the CLI, the benchmarks)."""
     from vp_scene.capture import CAPTURES, REALISTIC
+    from vp_scene.limits import MAX_SEED, seed_arg
 
     p.add_argument("--capture", default="realistic", choices=CAPTURES,
                    help="realistic: hover and localization errors and sensor noise of an RTK multirotor "
@@ -94,7 +95,8 @@ def add_capture_arguments(p: argparse.ArgumentParser) -> None:
                        ("sensor_noise", "of full scale")):
         p.add_argument("--" + name.replace("_", "-"), type=float, default=None,
                        help=f"capture figure, {unit} (default {getattr(REALISTIC, name):.4g}; ideal: 0)")
-    p.add_argument("--capture-seed", type=int, default=None, help="seed of the capture draws (default 0)")
+    p.add_argument("--capture-seed", type=seed_arg, default=None,
+                   help=f"seed of the capture draws, 0 to {MAX_SEED} (default 0)")
     p.add_argument("--gcp-markers", type=int, default=None,
                    help=f"ground markers laid around the plants and surveyed (default {REALISTIC.gcp_markers}; "
                         "0: none, the drones' reported poses alone place the model; README 'Capture model')")

@@ -83,6 +83,7 @@ from vp_scene.capture import IDEAL, REALISTIC, CaptureModel
 from vp_scene.cloud import numpy_to_pointcloud2, realizations_from_cloud
 from vp_scene.cluster import KeptLocalCluster
 from vp_scene.folders import new_run_folder, remove_if_empty
+from vp_scene.limits import MAX_SEED
 from vp_scene.messages import (aggregate_score, error_score, plan_key, pose_array_to_cameras, realization_score,
                                scene_of_description, score_msg)
 from vp_scene.node_runtime import (INT_MAX, LATCHED, NewestWins, Param, declare_typed, parameter_value,
@@ -119,7 +120,7 @@ PARAMS = {
                                                 'none, the reported poses alone place the model)', (0, 50)),
     'gcp_sigma': Param(REALISTIC.gcp_sigma, "capture: the markers' survey error, m per axis", (0.0, 1.0), False,
                        'above 0'),
-    'capture_seed': Param(0, 'capture: seed of the draws', (0, INT_MAX)),
+    'capture_seed': Param(0, 'capture: seed of the draws', (0, MAX_SEED)),
     'ground_control': Param('', 'source fleet: the field\'s ground control, a markers.csv or gcp_list.txt (README "From a '
                                 'real flight"); \'\': the capture model\'s markers (the simulated drones render them)'),
     'dense': Param(True, 'CPU dense stereo (else the sparse cloud is scored)'),
