@@ -29,7 +29,8 @@ C for which the solver's first-solution heuristic (parallel cheapest insertion, 
 views over the drones when C is tight; a C it cannot fill counts as too small) still fits every
 view, down to the lower bound max_v min_d (a sortie to view v alone); the solver's local search (greedy descent on
 SPAN_WEIGHT max_d T_d + sum_d T_d) then improves the routes under that C. No step stops on the
-clock, so the routes are the same on every machine. A view no drone reaches and returns from
+clock, so the routes are the same on every machine. ``objective="min_total"`` minimizes the total
+flight time instead (the local search on the arc costs alone, under B). A view no drone reaches and returns from
 within B, or views that do not fit under B, are refused with ``DOES_NOT_FIT`` and the shortfall
 in seconds (the routes solved without the budget tell how long the longest would be).
 
@@ -66,6 +67,7 @@ from .feasibility import Feasibility
 
 __all__ = [
     "ROUTE_CODES",
+    "OBJECTIVES",
     "RouteError",
     "FlightModel",
     "Route",
@@ -82,6 +84,8 @@ __all__ = [
     "BISECTIONS",
 ]
 
+#: The routes' objectives: the longest flight (the fleet's time on site) first, or the total.
+OBJECTIVES = ("min_max", "min_total")
 #: The refusals of :func:`plan_routes`, each its own code (also the dispatcher's error codes).
 ROUTE_CODES = ("INVALID_FLIGHT_MODEL", "INVALID_INPUT", "DOES_NOT_FIT", "SEPARATION_CONFLICT", "NO_CLEAR_LEG")
 #: Weight of the longest flight against the total in the solver's objective.
@@ -204,9 +208,10 @@ class FleetRoutes:
         return out
 
     def to_dict(self) -> dict:
-        """A plain record (summary.json, the CLI's fleet.json)."""
+        """A plain record, strict JSON (the CLI's and the dispatcher's fleet.json)."""
         return {
-            "time_on_site": self.time_on_site, "separation": self.separation, "min_separation": self.min_separation,
+            "time_on_site": self.time_on_site, "separation": self.separation,
+            "min_separation": self.min_separation if math.isfinite(self.min_separation) else None,  # one drone: none
             "model": {f.name: getattr(self.model, f.name) for f in fields(self.model)},
             "routes": [{"drone": r.drone, "views": r.views.tolist(), "flight_time": r.flight_time,
                         "distance": r.distance, "eta": r.eta().tolist(), "points": r.points.tolist(),
@@ -487,14 +492,15 @@ def _check_inputs(views: ArrayLike, homes: ArrayLike, separation: float) -> tupl
 
 
 def _solve(legs: _Legs, model: FlightModel, num_views: int, budget: Optional[float], lower: float,
-           time_limit_s: float) -> Optional[list[list[int]]]:
+           time_limit_s: float, objective: str = "min_max") -> Optional[list[list[int]]]:
     """Each drone's order of views (module docstring), None when none fits ``budget`` (None: no
     budget). The longest flight is minimized by bisection on the duration's hard capacity between
     ``lower`` and the longest of the last routes found, each capacity tried with OR-Tools'
     first-solution heuristic (parallel cheapest insertion: it spreads the views when the capacity
     is tight); the routes of the least capacity found are then improved by its local search
     (greedy descent on SPAN_WEIGHT x the longest + the total, to a local optimum). Deterministic:
-    no step stops on the clock (``time_limit_s`` only caps each solve)."""
+    no step stops on the clock (``time_limit_s`` only caps each solve). ``min_total``: the least
+    total flight time under ``budget`` (the local search on the total alone, no bisection)."""
     from ortools.constraint_solver import pywrapcp, routing_enums_pb2
 
     D = legs.num_homes
@@ -504,14 +510,14 @@ def _solve(legs: _Legs, model: FlightModel, num_views: int, budget: Optional[flo
     np.fill_diagonal(transit, 0.0)
     units = np.rint(transit / _UNIT_S).astype(np.int64).tolist()
 
-    def solve(cap_s: float, polish: bool) -> Optional[tuple[float, list[list[int]]]]:
+    def solve(cap_s: float, polish: bool, span: int = SPAN_WEIGHT) -> Optional[tuple[float, list[list[int]]]]:
         manager = pywrapcp.RoutingIndexManager(n, D, list(range(D)), list(range(D)))
         routing = pywrapcp.RoutingModel(manager)
         callback = routing.RegisterTransitMatrix(units)
         routing.SetArcCostEvaluatorOfAllVehicles(callback)
         routing.AddDimension(callback, 0, int(cap_s / _UNIT_S), True, "time")
         dim = routing.GetDimensionOrDie("time")
-        dim.SetGlobalSpanCostCoefficient(SPAN_WEIGHT)
+        dim.SetGlobalSpanCostCoefficient(span)
         params = pywrapcp.DefaultRoutingSearchParameters()
         params.first_solution_strategy = routing_enums_pb2.FirstSolutionStrategy.PARALLEL_CHEAPEST_INSERTION
         params.local_search_metaheuristic = routing_enums_pb2.LocalSearchMetaheuristic.GREEDY_DESCENT
@@ -532,6 +538,8 @@ def _solve(legs: _Legs, model: FlightModel, num_views: int, budget: Optional[flo
         return max(solution.Value(dim.CumulVar(routing.End(d))) for d in range(D)) * _UNIT_S, orders
 
     cap = budget if budget is not None else float(transit.sum())
+    if objective == "min_total":
+        return (solve(cap, True, 0) or (None, None))[1]
     found = solve(cap, False)
     if found is None:
         return None
@@ -551,12 +559,16 @@ def _solve(legs: _Legs, model: FlightModel, num_views: int, budget: Optional[flo
 
 def plan_routes(views: ArrayLike, homes: ArrayLike, model: FlightModel = FlightModel(),
                 separation: float = Feasibility.min_separation, obstacles: Optional[ArrayLike] = None,
-                standoff: float = Feasibility.min_standoff, time_limit_s: float = 2.0) -> FleetRoutes:
+                standoff: float = Feasibility.min_standoff, time_limit_s: float = 2.0,
+                objective: str = "min_max") -> FleetRoutes:
     """Each drone's timed route through the views (N, 6) from its home (D, 3), all within the
     budget and ``separation`` apart at every moment (module docstring). ``obstacles`` (P, 3) or
-    (K, P, 3): the scene's points the legs keep ``standoff`` from; ``time_limit_s``: the solver's.
+    (K, P, 3): the scene's points the legs keep ``standoff`` from; ``time_limit_s``: the solver's;
+    ``objective`` (:data:`OBJECTIVES`): the longest flight (the fleet's time on site) or the total.
     RouteError with its code (:data:`ROUTE_CODES`) and one line."""
     t0 = time.perf_counter()
+    if objective not in OBJECTIVES:
+        raise RouteError("INVALID_INPUT", f"objective must be one of {', '.join(OBJECTIVES)}, got {objective!r}")
     cams, h = _check_inputs(views, homes, separation)
     obs = None if obstacles is None else np.asarray(obstacles, dtype=np.float64).reshape(-1, 3)
     legs = _Legs(h, cams[:, :3], model, obs, standoff)
@@ -576,9 +588,9 @@ def plan_routes(views: ArrayLike, homes: ArrayLike, model: FlightModel = FlightM
                              f"(drone {int(np.argmin(sortie[:, worst]))}), the budget is {budget:.0f} s "
                              f"({model.flight_time_s:g} s less {100 * model.reserve:g} % reserve): "
                              f"{need[worst] - budget:.0f} s short")
-        orders = _solve(legs, model, N, budget, float(need.max()), time_limit_s)
+        orders = _solve(legs, model, N, budget, float(need.max()), time_limit_s, objective)
         if orders is None:  # the heuristic found none under the budget: the routes without one tell
-            orders = _solve(legs, model, N, None, float(need.max()), time_limit_s)
+            orders = _solve(legs, model, N, None, float(need.max()), time_limit_s, objective)
             longest = max(r.flight_time for r in time_routes(orders, h, cams[:, :3], model, legs))
             if longest > budget:
                 raise RouteError("DOES_NOT_FIT", f"the {N} views do not fit in {D} flights of {budget:.0f} s "
