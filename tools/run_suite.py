@@ -310,8 +310,9 @@ def start_node(name: str, pkg: str, exe: str, params: Dict[str, object], env, lo
 def assignment_lines(msg) -> List[str]:
     """What /fleet/assignment says, for the terminal: one line per drone."""
     lines = [f'fleet ({msg.assignment}): {len(msg.routes)} drones to {msg.num_poses} poses, time on site '
-             f'{msg.time_on_site:.1f} s, total {msg.total_distance:.2f} m, drones at least {msg.min_separation:.2f} m '
-             f'apart (separation {msg.separation:g} m)']
+             f'{msg.time_on_site:.1f} s, total {msg.total_distance:.2f} m, '
+             + (f'drones at least {msg.min_separation:.2f} m apart (separation {msg.separation:g} m)'
+                if math.isfinite(msg.min_separation) else 'one drone')]
     for r in msg.routes:
         lines.append(f'  {r.drone} -> cams {", ".join(str(i) for i in r.pose_indices)}: {r.flight_time:.1f} s flight '
                      f'(budget {msg.budget:.0f} s), {r.distance:.2f} m')

@@ -43,6 +43,11 @@ stand-off rule cannot be checked: the plan is refused (``NO_SCENE``), or, with
 dispatched on a worker thread, one at a time (a sortie in flight is finished first); of the plans
 that arrive meanwhile only the newest is kept. Signals, exit codes and parameter types follow
 :mod:`vp_scene.node_runtime`.
+
+A lifecycle node (rclpy.lifecycle; ``managed:=true`` waits unconfigured for a manager, the
+default configures and activates itself at start): configure makes the topics, subscriptions and
+the service, activate dispatches, deactivate ignores new plans and ends a sortie in flight,
+cleanup destroys what configure made.
 """
 from __future__ import annotations
 
@@ -57,7 +62,7 @@ from typing import Optional
 import numpy as np
 from geometry_msgs.msg import PoseArray, PoseStamped
 from nav_msgs.msg import Path as PathMsg
-from rclpy.node import Node
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import NavSatFix, PointCloud2
 
@@ -73,7 +78,8 @@ from vp_scene.folders import OutputExists, ResultFolder
 from vp_scene.geo import GeoError, GeoOrigin
 from vp_scene.messages import (POSE_TYPES, drone_topic, msgs_to_poses, navsatfix_msg, path_msg, point_msg, pose_msg,
                                position_of)
-from vp_scene.node_runtime import LATCHED, NewestWins, Param, declare_typed, refuse_bad_changes, run_node, typed_values
+from vp_scene.node_runtime import (LATCHED, MANAGED, NewestWins, Param, declare_typed, refuse_bad_changes, run_node,
+                                   start_lifecycle, typed_values)
 
 Msg = FleetAssignment
 #: routes' refusals -> the assignment's codes
@@ -137,6 +143,7 @@ PARAMS = {
     'require_scene': Param(True, 'refuse a plan when no scene arrived to check the stand-off (false: dispatch '
                                  'with a warning)'),
     'scene_timeout': Param(10.0, 's a plan that arrives before the scene waits for it', _M),
+    'managed': MANAGED,
 }
 _NAME = re.compile(r'^[A-Za-z][A-Za-z0-9_]*$')
 
@@ -219,14 +226,17 @@ class _Dispatched:
     cameras: np.ndarray
 
 
-class DispatcherNode(Node):
-    """ROS 2 adapter: plans, scene and drone poses in, :mod:`vp_planner.routes` calls, routes and goals out."""
+class DispatcherNode(LifecycleNode):
+    """ROS 2 adapter: plans, scene and drone poses in, :mod:`vp_planner.routes` calls, routes and
+    goals out. A lifecycle node (``managed``): its topics and service exist once configured; it
+    dispatches and flies only while active (a deactivation ends a sortie in flight)."""
 
     def __init__(self) -> None:
         super().__init__('dispatcher')
         v = declare_typed(self, PARAMS, check_parameters)  # ValueError: exit 2
         refuse_bad_changes(self, PARAMS, check_parameters)
 
+        self._start = v  # the read-only parameters (topics, drones) as they were at start
         self._drones: list[str] = list(v['drones'])
         # of the plans that arrive while one is dispatched, the newest waits
         self._plans = NewestWins('dispatcher-worker', self._dispatch_newest,
@@ -234,6 +244,9 @@ class DispatcherNode(Node):
                                                               self._values()),
                                  self.get_logger(), 'a newer plan arrived: it replaces the one waiting to be dispatched')
         self._lock = self._plans.lock
+        self._worker = False
+        self._active = False
+        self._entities: list = []  # (destroy, entity) of what on_configure made
         self._scene: Optional[np.ndarray] = None
         self._scene_problem = ''
         # drone -> (monotonic time of the report, frame_id, position (3,))
@@ -241,30 +254,73 @@ class DispatcherNode(Node):
         self._nonfinite: dict[str, tuple] = {}  # drone -> its latest position, when that was not finite
         self._triggers: dict[tuple, list] = {}  # plan stamp -> capture triggers not flown yet
         self._latest: Optional[_Dispatched] = None
+        start_lifecycle(self, v['managed'])
+
+    # ---------------------------------------------------------------- lifecycle
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """The topics, subscriptions and the missions service; the worker started once."""
+        v = self._start
+
+        def publisher(msg_type, topic: str):
+            pub = self.create_lifecycle_publisher(msg_type, topic, LATCHED)
+            self._entities.append((self.destroy_lifecycle_publisher, pub))
+            return pub
+
+        def subscribe(msg_type, topic: str, callback, qos=LATCHED) -> None:
+            self._entities.append((self.destroy_subscription, self.create_subscription(msg_type, topic, callback, qos)))
+
         self._goal_pubs, self._route_pubs, self._fix_pubs = {}, {}, {}
         pose_type = POSE_TYPES[v['pose_type']]
         for d in self._drones:
-            self._goal_pubs[d] = self.create_publisher(PoseStamped, drone_topic(v['goal_topic'], d), LATCHED)
-            self._route_pubs[d] = self.create_publisher(PathMsg, drone_topic(v['route_topic'], d), LATCHED)
-            self._fix_pubs[d] = self.create_publisher(NavSatFix, drone_topic(v['goal_fix_topic'], d), LATCHED)
-            self.create_subscription(pose_type, drone_topic(v['pose_topic'], d), partial(self._on_pose, d),
-                                     qos_profile_sensor_data)
-        self.assignment_pub = self.create_publisher(FleetAssignment, '/fleet/assignment', LATCHED)
-        self.create_subscription(PointCloud2, '/scene/noisy_points', self._on_scene, LATCHED)
-        self.create_subscription(PoseArray, '/camera_plan', self._on_plan, LATCHED)
-        self.create_subscription(CaptureTrigger, '/fleet/capture', self._on_capture, LATCHED)
-        self.create_service(WriteMissions, '~/write_missions', self._on_write_missions)
-        self._plans.start()
+            self._goal_pubs[d] = publisher(PoseStamped, drone_topic(v['goal_topic'], d))
+            self._route_pubs[d] = publisher(PathMsg, drone_topic(v['route_topic'], d))
+            self._fix_pubs[d] = publisher(NavSatFix, drone_topic(v['goal_fix_topic'], d))
+            subscribe(pose_type, drone_topic(v['pose_topic'], d), partial(self._on_pose, d), qos_profile_sensor_data)
+        self.assignment_pub = publisher(FleetAssignment, '/fleet/assignment')
+        subscribe(PointCloud2, '/scene/noisy_points', self._on_scene)
+        subscribe(PoseArray, '/camera_plan', self._on_plan)
+        subscribe(CaptureTrigger, '/fleet/capture', self._on_capture)
+        self._entities.append((self.destroy_service,
+                               self.create_service(WriteMissions, '~/write_missions', self._on_write_missions)))
+        if not self._worker:
+            self._plans.start()
+            self._worker = True
+        self.get_logger().info('dispatcher configured')
+        return super().on_configure(state)
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        v = self._values()
+        with self._lock:
+            self._active = True
         self.get_logger().info(
             f'dispatcher ready: {len(self._drones)} drones ({", ".join(self._drones)}), routes {v["assignment"]}, '
             f'flown on {v["fly_on"]}, goals on {drone_topic(v["goal_topic"], "<drone>")} in {v["fleet_frame"]!r}; '
             'waiting for /camera_plan')
+        return super().on_activate(state)
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        with self._lock:
+            self._active = False
+            self._lock.notify_all()
+        self.get_logger().info('dispatcher inactive: plans are not dispatched, a sortie in flight ends')
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        for destroy, entity in reversed(self._entities):
+            destroy(entity)
+        self._entities.clear()
+        self.get_logger().info('dispatcher cleaned up: no topics until configured again')
+        return super().on_cleanup(state)
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._plans.stop()
+        return super().on_shutdown(state)
 
     # ---------------------------------------------------------------- parameters
     def _values(self) -> dict:
         return check_parameters({n: self.get_parameter(n).value for n in PARAMS})
 
-    def on_shutdown(self, timeout: float) -> bool:
+    def wind_down(self, timeout: float) -> bool:
         """SIGINT/SIGTERM: the worker stops waiting (a sortie in flight is left); nothing else to wind down."""
         self._plans.stop()
         return True
@@ -310,6 +366,9 @@ class DispatcherNode(Node):
                                f'{realizations.shape[1]} points (for the stand-off check)')
 
     def _on_plan(self, msg: PoseArray) -> None:
+        if not self._active:
+            self.get_logger().warn(f'plan {_stamp(msg.header.stamp)} ignored: the dispatcher is inactive')
+            return
         self._plans.offer(msg)
         self.get_logger().info(f'plan received: {len(msg.poses)} poses (frame {msg.header.frame_id!r}, '
                                f'stamp {_stamp(msg.header.stamp)})')
@@ -342,8 +401,8 @@ class DispatcherNode(Node):
         while True:  # one sortie per capture trigger of this plan, until a newer plan or the end
             with self._lock:
                 self._lock.wait_for(lambda: self._triggers.get(key) or self._plans.pending is not None
-                                    or self._plans.stopped)
-                if self._plans.stopped or not self._triggers.get(key):
+                                    or self._plans.stopped or not self._active)
+                if self._plans.stopped or not self._active or not self._triggers.get(key):
                     return
                 _, realization = self._triggers[key].pop(0)
             self._fly(dispatched, f'for capture {realization}')
@@ -495,8 +554,8 @@ class DispatcherNode(Node):
         spare = f'; spare: {", ".join(out.spare_drones)}' if out.spare_drones else ''
         self.get_logger().info(
             f'plan {_stamp(dispatched.plan.header.stamp)} dispatched ({v["assignment"]}, time on site '
-            f'{fleet.time_on_site:.1f} s, drones at least {fleet.min_separation:.2f} m apart, routed in '
-            f'{fleet.seconds:.2f} s): {"; ".join(lines)}{spare}')
+            f'{fleet.time_on_site:.1f} s, {_apart(fleet.min_separation)}, routed in {fleet.seconds:.2f} s): '
+            f'{"; ".join(lines)}{spare}')
 
     def _fly(self, dispatched: _Dispatched, why: str) -> None:
         """One sortie of the dispatched routes: each drone's next waypoint once it has arrived at
@@ -529,7 +588,11 @@ class DispatcherNode(Node):
         while step and not self._plans.stopped:
             with self._lock:
                 self._lock.wait(0.05)
-                reports = dict(self._reports)
+                reports, active = dict(self._reports), self._active
+            if not active:
+                self.get_logger().warn(f'sortie of plan {_stamp(dispatched.plan.header.stamp)} ended: the dispatcher '
+                                       f'was deactivated ({", ".join(step)} in flight)')
+                return
             now = time.monotonic()
             for name in list(step):
                 r, k = routes[name], step[name]
@@ -583,6 +646,10 @@ class DispatcherNode(Node):
     def destroy_node(self) -> None:
         self._plans.stop()
         super().destroy_node()
+
+
+def _apart(distance: float) -> str:
+    return f'drones at least {distance:.2f} m apart' if math.isfinite(distance) else 'one drone'
 
 
 def _key(stamp) -> tuple:
