@@ -54,7 +54,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, fields
 from typing import Optional, Sequence
 
 import numpy as np
@@ -62,6 +62,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from vp_scene.camera import check_cameras
+from vp_scene.ranged import CodedError, bounded, check_ranges, range_text
 
 from .feasibility import Feasibility
 
@@ -102,19 +103,8 @@ _UNIT_S = 1e-3
 _CLEARANCE_TOL = 0.01
 
 
-class RouteError(ValueError):
+class RouteError(CodedError):
     """A refusal with its code (:data:`ROUTE_CODES`) and a one-line message."""
-
-    def __init__(self, code: str, message: str) -> None:
-        super().__init__(message)
-        self.code = code
-
-    def __str__(self) -> str:
-        return f"[{self.code}] {self.args[0]}"
-
-
-def _param(default: float, low: float, high: float, unit: str, help: str, low_open: bool = False):
-    return field(default=default, metadata={"range": (low, high), "low_open": low_open, "unit": unit, "help": help})
 
 
 @dataclass(frozen=True)
@@ -122,29 +112,19 @@ class FlightModel:
     """How a drone flies (validated once, on construction: :class:`RouteError` INVALID_FLIGHT_MODEL
     naming the field, its value and its range; each field's range is in its metadata)."""
 
-    cruise_speed: float = _param(5.0, 0.0, 30.0, "m/s", "horizontal speed between waypoints", low_open=True)
-    climb_rate: float = _param(2.0, 0.0, 10.0, "m/s", "vertical speed, up and down", low_open=True)
-    hover_s: float = _param(2.0, 0.0, 600.0, "s", "hover at each view: settling under wind, then the photograph")
-    flight_time_s: float = _param(1200.0, 0.0, 7200.0, "s", "a battery's flight time", low_open=True)
-    reserve: float = _param(0.2, 0.0, 0.9, "", "fraction of the battery kept in reserve at landing")
+    cruise_speed: float = bounded(5.0, 0.0, 30.0, "m/s", "horizontal speed between waypoints", low_open=True)
+    climb_rate: float = bounded(2.0, 0.0, 10.0, "m/s", "vertical speed, up and down", low_open=True)
+    hover_s: float = bounded(2.0, 0.0, 600.0, "s", "hover at each view: settling under wind, then the photograph")
+    flight_time_s: float = bounded(1200.0, 0.0, 7200.0, "s", "a battery's flight time", low_open=True)
+    reserve: float = bounded(0.2, 0.0, 0.9, "", "fraction of the battery kept in reserve at landing")
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            value, (low, high) = getattr(self, f.name), f.metadata["range"]
-            try:
-                ok = math.isfinite(value) and (value > low if f.metadata["low_open"] else value >= low) \
-                    and value <= high
-            except TypeError:
-                ok = False
-            if not ok:
-                raise RouteError("INVALID_FLIGHT_MODEL", f"{f.name} must be in {self.range_text(f.name)}, got {value!r}")
+        check_ranges(self, "INVALID_FLIGHT_MODEL", RouteError)
 
     @classmethod
     def range_text(cls, name: str) -> str:
         """The field's range as text, e.g. ``(0, 30] m/s``."""
-        f = {f.name: f for f in fields(cls)}[name]
-        low, high = f.metadata["range"]
-        return f"{'(' if f.metadata['low_open'] else '['}{low:g}, {high:g}] {f.metadata['unit']}".rstrip()
+        return range_text({f.name: f for f in fields(cls)}[name])
 
     @property
     def budget_s(self) -> float:

@@ -15,9 +15,11 @@ by about 1e-3 degrees a hundred metres east or west at 45 degrees of latitude.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from .ranged import CodedError, bounded, check_ranges
 
 __all__ = ["GEO_CODES", "GeoError", "GeoOrigin"]
 
@@ -25,19 +27,8 @@ __all__ = ["GEO_CODES", "GeoError", "GeoOrigin"]
 GEO_CODES = ("INVALID_ORIGIN",)
 
 
-class GeoError(ValueError):
+class GeoError(CodedError):
     """A refusal with its code (:data:`GEO_CODES`) and a one-line message."""
-
-    def __init__(self, code: str, message: str) -> None:
-        super().__init__(message)
-        self.code = code
-
-    def __str__(self) -> str:
-        return f"[{self.code}] {self.args[0]}"
-
-
-def _bounded(default: float, low: float, high: float, unit: str, help: str):
-    return field(default=default, metadata={"range": (low, high), "unit": unit, "help": help})
 
 
 @dataclass(frozen=True)
@@ -45,21 +36,13 @@ class GeoOrigin:
     """The map's origin on Earth, validated once (GeoError INVALID_ORIGIN naming the field, its
     value and its range; each field's range is in its metadata)."""
 
-    latitude: float = _bounded(0.0, -90.0, 90.0, "deg", "WGS84 latitude of the map's origin")
-    longitude: float = _bounded(0.0, -180.0, 180.0, "deg", "WGS84 longitude of the map's origin")
-    height: float = _bounded(0.0, -1000.0, 10000.0, "m", "ellipsoidal (WGS84) height of the map's origin")
-    yaw: float = _bounded(0.0, -2 * math.pi, 2 * math.pi, "rad", "the map's x axis from east, counter-clockwise")
+    latitude: float = bounded(0.0, -90.0, 90.0, "deg", "WGS84 latitude of the map's origin")
+    longitude: float = bounded(0.0, -180.0, 180.0, "deg", "WGS84 longitude of the map's origin")
+    height: float = bounded(0.0, -1000.0, 10000.0, "m", "ellipsoidal (WGS84) height of the map's origin")
+    yaw: float = bounded(0.0, -2 * math.pi, 2 * math.pi, "rad", "the map's x axis from east, counter-clockwise")
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            value, (low, high) = getattr(self, f.name), f.metadata["range"]
-            try:
-                ok = math.isfinite(value) and low <= value <= high
-            except TypeError:
-                ok = False
-            if not ok:
-                raise GeoError("INVALID_ORIGIN", f"origin {f.name} must be in [{low:g}, {high:g}] "
-                               f"{f.metadata['unit']}, got {value!r}")
+        check_ranges(self, "INVALID_ORIGIN", GeoError, prefix="origin ")
 
     @classmethod
     def parse(cls, text: str, yaw: float = 0.0) -> "GeoOrigin":
