@@ -128,6 +128,20 @@ def test_two_sorties(ros_env, tmp_path) -> None:
                                np.asarray(first["cameras"])[:, :3], atol=1e-9)
 
 
+def test_the_script_drives_managed_lifecycle_nodes(ros_env, tmp_path) -> None:
+    """--managed: the planner and the dispatcher start unconfigured (managed:=true) and the script
+    configures and activates them, as a lifecycle manager would, before the mission flies."""
+    proc = subprocess.run([sys.executable, str(SCRIPT), *SMALL, "--realizations", "1", "--method", "circle",
+                           "--evals", "16", "--drones", "2", "--managed", "--out", str(tmp_path / "run"),
+                           "--timeout", "400"], env=ros_env, capture_output=True, text=True, timeout=460)
+    log = proc.stdout + proc.stderr
+    assert proc.returncode == 0, log[-6000:]
+    for node in ("planner", "dispatcher"):
+        assert f"{node}: configured and activated (lifecycle)" in proc.stdout, proc.stdout[-3000:]
+        assert log.index(f"{node} configured") < log.index(f"{node} ready"), log[-3000:]
+    assert "Chamfer distance x100" in proc.stdout
+
+
 def test_the_reconstruction_goes_to_the_planner_thinned() -> None:
     """A first sortie's cloud (millions of points in a field) goes into the second goal as the
     mean of every occupied 5 mm voxel, in its frame."""

@@ -133,6 +133,9 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
     ap.add_argument('--dense-scale', type=float, default=0.7,
                     help='recon: dense stereo on the images resized by this factor, (0, 1] (default 0.7; '
                          'the benchmarks: 1)')
+    ap.add_argument('--managed', action='store_true',
+                    help='start the planner and the dispatcher as managed lifecycle nodes (managed:=true) and drive '
+                         'their transitions here (configure, activate), as a lifecycle manager does')
     ap.add_argument('--timeout', type=float, default=3600.0, help='seconds for the whole mission')
     ap.add_argument('--domain-id', type=int, default=None,
                     help='ROS_DOMAIN_ID of this run (default: $ROS_DOMAIN_ID, else derived from the process id)')
@@ -195,6 +198,10 @@ def check_scenario(ap: argparse.ArgumentParser, scenario: str) -> tuple:
     except LayoutError as exc:
         ap.error(f'--scenario: {exc}')
     return (scenario, None) if layout is None else (layout.name, str(Path(scenario).resolve()))
+
+
+class LifecycleRefused(RuntimeError):
+    """A lifecycle node (``--managed``) refused a transition."""
 
 
 class Mission:
@@ -284,6 +291,31 @@ class Mission:
         goal.reward = self.args.reward
         goal_id = UUID(uuid=list(uuid.uuid4().bytes))
         return self.client.send_goal_async(goal, feedback_callback=self.on_feedback, goal_uuid=goal_id), goal_id
+
+    def activate(self, name: str, nodes: List[NodeProcess], deadline: float) -> None:
+        """Drive the lifecycle node ``name`` from unconfigured to active (configure, then activate),
+        as a lifecycle manager does; a transition whose answer is lost in DDS discovery
+        (ros2/rmw_fastrtps#390) is read back from the node's state. LifecycleRefused when it refuses."""
+        from lifecycle_msgs.msg import State, Transition
+        from lifecycle_msgs.srv import ChangeState, GetState
+
+        change = self.node.create_client(ChangeState, f'/{name}/change_state')
+        get = self.node.create_client(GetState, f'/{name}/get_state')
+        wait_for(lambda: change.service_is_ready() and get.service_is_ready(), nodes, deadline,
+                 f'the lifecycle services of {name}')
+        for transition, label, target in ((Transition.TRANSITION_CONFIGURE, 'configure', State.PRIMARY_STATE_INACTIVE),
+                                          (Transition.TRANSITION_ACTIVATE, 'activate', State.PRIMARY_STATE_ACTIVE)):
+            asked = change.call_async(ChangeState.Request(transition=Transition(id=transition)))
+            answer_by = min(deadline, time.monotonic() + 5.0)
+            wait_for(lambda: asked.done() or time.monotonic() > answer_by, nodes, deadline, f'{name} to {label}')
+            if asked.done() and not asked.result().success:
+                raise LifecycleRefused(f'the {name} node refused to {label}')
+            if not asked.done():  # the answer was lost: the node's state says whether it happened
+                state = get.call_async(GetState.Request())
+                wait_for(state.done, nodes, deadline, f'the lifecycle state of {name}')
+                if state.result().current_state.id != target:
+                    raise LifecycleRefused(f'the {name} node did not {label}')
+        print(f'{name}: configured and activated (lifecycle)', flush=True)
 
     def accepted_handle(self, goal_id):
         """A handle for a goal the planner accepted (its feedback arrives) whose acceptance never
@@ -486,7 +518,8 @@ def run(args: argparse.Namespace) -> int:
         nodes.append(start_node('scene', 'vp_scene', 'scene', scene_params, {**env, 'OMP_NUM_THREADS': '1'}, out))
         nodes.append(start_node('planner', 'vp_planner', 'planner', {
             'num_cameras': args.cameras, 'method': args.method, 'evaluations': args.evals,
-            'initial_evaluations': min(args.init, args.evals), 'seed': args.seed, 'num_threads': 1},
+            'initial_evaluations': min(args.init, args.evals), 'seed': args.seed, 'num_threads': 1,
+            'managed': args.managed},
             {**env, 'OMP_NUM_THREADS': '1'}, out))
         # the realizations reconstruct after the plan is made (the planner idle): on a local Dask
         # cluster of one-thread workers, all cores (issue 18, part 4: make run's time)
@@ -502,7 +535,7 @@ def run(args: argparse.Namespace) -> int:
             drones = [f'd{k}' for k in range(args.drones)]
             # with the fleet's images: one sortie a wind realization the recon node asks for
             nodes.append(start_node('dispatcher', 'vp_planner', 'dispatcher', {
-                'drones': drones, 'assignment': args.assignment,
+                'drones': drones, 'assignment': args.assignment, 'managed': args.managed,
                 'fly_on': 'capture' if args.source == 'fleet' else 'plan'}, {**env, 'OMP_NUM_THREADS': '1'}, out))
             model = FlightModel()  # the dispatcher's: the simulated drones fly as its routes are timed
             for name, (x, y, z) in zip(drones, launch_row(args.drones).tolist()):
@@ -512,6 +545,9 @@ def run(args: argparse.Namespace) -> int:
                     'drone': name, 'x': x, 'y': y, 'z': z, 'speed': model.cruise_speed, 'climb_rate': model.climb_rate,
                     **camera}, {**env, 'OMP_NUM_THREADS': '1'}, out))
         mission = Mission(args)
+        if args.managed:
+            for name in ('planner', 'dispatcher')[:2 if args.drones else 1]:
+                mission.activate(name, nodes, deadline)
 
         wait_for(mission.scene_ready.is_set, nodes, deadline, 'the scene on /scene/noisy_points')
         wait_for(lambda: mission.client.server_is_ready(), nodes, deadline, 'the /plan_views server')
@@ -584,6 +620,9 @@ def run(args: argparse.Namespace) -> int:
     except TimeoutError as exc:
         outcome.append(f'error: {exc}')
         return EXIT_TIMEOUT
+    except LifecycleRefused as exc:
+        outcome.append(f'error: {exc}')
+        return EXIT_FAILED
     except FileNotFoundError as exc:
         outcome.append(f'error: {exc}')
         return EXIT_USAGE
