@@ -571,6 +571,8 @@ def plan_routes(views: ArrayLike, homes: ArrayLike, model: FlightModel = FlightM
         orders = _solve(legs, model, N, budget, float(need.max()), time_limit_s, objective)
         if orders is None:  # the heuristic found none under the budget: the routes without one tell
             orders = _solve(legs, model, N, None, float(need.max()), time_limit_s, objective)
+            if orders is None:
+                raise RouteError("DOES_NOT_FIT", f"the solver found no routes for the {N} views with {D} drones")
             longest = max(r.flight_time for r in time_routes(orders, h, cams[:, :3], model, legs))
             if longest > budget:
                 raise RouteError("DOES_NOT_FIT", f"the {N} views do not fit in {D} flights of {budget:.0f} s "
