@@ -49,9 +49,34 @@ def test_a_report_is_strict_json_and_says_where_it_came_from(tmp_path):
     write_report(out, {"std": float("nan"), "interval": [float("-inf"), 1.5], "n": 1})
     data = _strict(out.read_text())
     assert data["std"] is None and data["interval"] == [None, 1.5] and data["n"] == 1
-    assert data["commit"] == git_commit() and data["command"][0] == sys.argv[0] or data["command"][:2] == ["python", "-m"]
+    assert data["commit"] == git_commit()
+    assert data["command"][0] == sys.argv[0] or data["command"][:2] == ["python", "-m"], data["command"]
     write_json(tmp_path / "cache.json", {"mean": math.nan})  # cache records too
     assert _strict((tmp_path / "cache.json").read_text()) == {"mean": None}
+
+
+def test_every_benchmark_result_names_a_commit_of_this_repository():
+    """A result file written by a benchmark (its command ``python -m bench...``) names the commit it
+    was measured at, one this repository holds (``-dirty``: tracked files differed then); files
+    without a command predate the writer and say where they were committed in docs/results.md."""
+    commits = {}
+    for path in RESULTS:
+        data = _strict(path.read_text())
+        if isinstance(data, dict) and data.get("command", [])[:2] == ["python", "-m"]:
+            commits[str(path.relative_to(ROOT))] = data.get("commit")
+    assert commits
+    malformed = {p: c for p, c in commits.items() if not re.fullmatch(r"[0-9a-f]{12}(-dirty)?", str(c))}
+    assert not malformed, malformed
+    shallow = subprocess.run(["git", "rev-parse", "--is-shallow-repository"], cwd=ROOT, capture_output=True,
+                             text=True, timeout=30).stdout.strip()
+    if shallow != "false":
+        pytest.skip("a shallow clone holds only its newest commits")
+    heads = sorted({c.split("-")[0] for c in commits.values()})
+    asked = "".join(f"{h}^{{commit}}\n" for h in heads)
+    found = subprocess.run(["git", "cat-file", "--batch-check"], cwd=ROOT, input=asked, capture_output=True,
+                           text=True, timeout=60).stdout.splitlines()
+    unknown = {h for h, line in zip(heads, found) if line.endswith("missing")}
+    assert not unknown, {p: c for p, c in commits.items() if c.split("-")[0] in unknown}
 
 
 def test_a_benchmark_records_its_command_as_run(tmp_path):
