@@ -241,6 +241,20 @@ def dask_scheduler(tmp_path: Path, env: dict):
     return sched, worker, address
 
 
+def worker_busy(address: str, timeout: float) -> bool:
+    """Whether a worker of the scheduler at ``address`` is given a task within ``timeout`` s (the
+    scheduler's ``processing``: what each worker runs now); the client is gone when it returns."""
+    from distributed import Client
+
+    deadline = time.monotonic() + timeout
+    with Client(address, timeout=timeout, set_as_default=False) as client:
+        while time.monotonic() < deadline:
+            if any(client.processing().values()):
+                return True
+            time.sleep(0.05)
+    return False
+
+
 def test_a_scheduler_lost_mid_reconstruction_is_one_line_and_a_recorded_failure(tmp_path):
     """Hardening III, item 10: ``recon --scheduler tcp://...`` whose scheduler is SIGKILLed while
     the realizations reconstruct on its worker ended in three FutureCancelledError tracebacks (64
