@@ -114,8 +114,10 @@ def params_table(spec: str) -> str:
     return "\n".join(rows)
 
 
-def _names(names: list[str], lead: str = "") -> str:
-    return textwrap.fill(lead + ", ".join(f"`{n}`" for n in names) + ".", WIDTH, break_on_hyphens=False)
+def _names(names: list[str], lead: str = "", item: bool = False) -> str:
+    """``names`` in code spans, after ``lead``, wrapped (``item``: as a list item)."""
+    return textwrap.fill(lead + ", ".join(f"`{n}`" for n in names) + ".", WIDTH, break_on_hyphens=False,
+                         initial_indent="- " if item else "", subsequent_indent="  " if item else "")
 
 
 def param_names(spec: str) -> str:
@@ -180,9 +182,10 @@ def interface_names(kind: str, name: str) -> str:
     """An interface's field names by part, each part's constants after it."""
     out = []
     for title, part in zip(PART_NAMES[kind], interface_parts(kind, name)):
-        out.append(_names([f for _t, f, _c in part["fields"]], f"{title.capitalize()}: "))
+        out.append(_names([f for _t, f, _c in part["fields"]], f"{title.capitalize()}: ", item=True))
         if part["constants"]:
-            out.append(_names([n for _t, n, _v, _c in part["constants"]], f"{title.capitalize()} constants: "))
+            out.append(_names([n for _t, n, _v, _c in part["constants"]], f"{title.capitalize()} constants: ",
+                              item=True))
     return "\n".join(out)
 
 
