@@ -34,8 +34,10 @@ INTERFACES = ROOT / "src" / "vp_interfaces"
 BLOCK = re.compile(r"(<!-- generated: (?P<what>[^>]*?) -->\n)(?P<body>.*?)(<!-- end generated -->)", re.S)
 #: Lines of the name lists are wrapped to this width (the README keeps lines under 120 characters).
 WIDTH = 116
-#: Defaults that depend on the machine, shown as what they are: (module, parameter) -> (text, value here).
+#: Defaults that depend on the machine or the user, shown as what they are: (module, parameter) ->
+#: (text, the value here).
 MACHINE_DEFAULTS = {
+    ("vp_recon.recon_node", "output_folder"): ("`~/.ros/vp_recon`", lambda: str(Path.home() / ".ros" / "vp_recon")),
     ("vp_recon.recon_node", "num_threads"): ("cores - 1", lambda: max(1, (os.cpu_count() or 2) - 1)),
     ("vp_recon.recon_node", "workers"): ("cores - 1", lambda: max(1, (os.cpu_count() or 2) - 1)),
 }
@@ -68,9 +70,6 @@ def _default(module: str, name: str, value: Any) -> str:
     if isinstance(value, bool):
         return "`true`" if value else "`false`"
     if isinstance(value, str):
-        home = str(Path.home())
-        if value.startswith(home + os.sep):
-            value = "~" + value[len(home):]
         return f"`{value}`" if value else "`''`"
     if isinstance(value, (list, tuple)):
         return "`[" + ", ".join(str(v) for v in value) + "]`"
