@@ -345,6 +345,14 @@ def own_markdown(module: str) -> Callable[[str, str], str]:
     return render
 
 
+def committed_markdown(rel: str, title: str) -> str:
+    """A section from the markdown committed beside a results file (``results/<study>.md``): the
+    report of a study whose code has retired (it is in git history), as that study wrote it."""
+    data = load(rel)
+    md = demote((ROOT / rel).with_suffix('.md').read_text(), 2).split('\n', 1)[1].lstrip()
+    return f'## {title}\n\n{md}\n{source(rel, data)}\n'
+
+
 def recon_stages_section(rel: str, title: str) -> str:
     data = load(rel)
     body = [[name.replace('_', ' '), s['capture'], '/'.join(map(str, s.get('registered_images') or [])),
@@ -411,72 +419,6 @@ def cluster_section(rel: str, title: str) -> str:
     return '\n'.join(lines) + '\n\n' + source(rel, data) + '\n'
 
 
-def matching_section(rel: str, title: str) -> str:
-    data = load(rel)
-    body = [[r['size'], str(r['cameras']), r['matching'], str(r['pairs_matched']), str(r['pairs_verified']),
-             str(r.get('wide_verified')), str(r.get('images')), num(r.get('chamfer_x100')),
-             num(r.get('seconds_dense'), 1)]
-            for part in ('field', 'threshold') for r in data.get(part) or []]
-    lines = [f'## {title}', '', f'Exhaustive against pose-chosen image pairs ({data.get("scene")}; "wide": verified '
-             'pairs more than 90 degrees apart).', '']
-    lines += table(['size', 'cameras', 'matching', 'pairs matched', 'verified', 'wide verified', 'images',
-                    'Chamfer x100', 'dense s'], body)
-    return '\n'.join(lines) + '\n\n' + source(rel, data) + '\n'
-
-
-def fleet_section(rel: str, title: str) -> str:
-    data = load(rel)
-    lines = [f'## {title}', '',
-             f'Transport: {data["drones"]} drones, {data["width"]} x {data["height"]} rgb8 ({data["megabytes_per_set"]:.0f} '
-             f'MB a set), one publisher process to one subscriber: ' + ', '.join(num(s['seconds']) for s in data['sets'])
-             + f' s a set; the subscriber\'s peak RSS {num(data["subscriber_rss_mb_before"], 0)} -> '
-             + num(max(s['subscriber_max_rss_mb'] for s in data['sets']), 0) + ' MB.', '']
-    rn = data.get('recon_node_memory')
-    if rn:
-        lines += ['Recon node collecting a set (`source: fleet`), peak RSS MB: ' + ', '.join(
-            f'{k} {num(v, 0)}' for k, v in rn['recon_node_peak_rss_mb'].items()) + '.', '']
-    dp = data.get('drone_processes') or {}
-    if dp:
-        body = [[size, str(d['drones']), ', '.join(num(s['seconds_trigger_to_last_image']) for s in d['sets']),
-                 str(sum(len(s['missing_drones']) for s in d['sets'])), num(d.get('drone_rss_mb_mean'), 0)]
-                for size, d in dp.items()]
-        lines += ['Real `sim_drone` processes (camera on, ideal capture) to one subscriber:', '']
-        lines += table(['image size', 'drones', 'trigger to last image, s per set', 'images missing',
-                        'RSS MB a drone'], body) + ['']
-    ah = data.get('across_hosts_capture_set')
-    if ah:
-        lines += [f'Across hosts ({ah["from"]}): a {ah["megabytes_per_set"]:.0f} MB set, trigger to collected '
-                  f'{num(ah["trigger_to_collected_s"])} s, last capture to collected {num(ah["last_capture_to_collected_s"])} s.', '']
-    lines.append('Measured with a benchmark running beside it on 2 shared cores: noisy.')
-    return '\n'.join(lines) + '\n\n' + source(rel, data) + '\n'
-
-
-def viewer_section(rel: str, title: str) -> str:
-    data = load(rel)
-    body = [[str(r['cap']), num(r['server_reconstruction_s']), num(r['page_ready_s'], 1), num(r['frame_ms_median'], 0),
-             num(r['frame_ms_p95'], 0), num(r['fps'], 1), num(r['load_average_1min'], 1)] for r in data['runs']]
-    lines = [f'## {title}', '', f'{data["browser"]}; {data["cameras"]} frustums, a {data["scene_points"]}-point '
-             f'scene and a {data["reconstruction_points"]}-point reconstruction; per cap (points drawn per cloud).', '']
-    lines += table(['cap', 'server: reconstruction s', 'page ready s', 'frame ms median', 'frame ms p95', 'fps',
-                    'load average'], body)
-    return '\n'.join(lines) + '\n\n' + source(rel, data) + '\n'
-
-
-def ideal_table1_section(rel: str, title: str) -> str:
-    return table1_seed0_section(rel, title)
-
-
-def flights_section(rel: str, title: str) -> str:
-    data = load(rel)
-    body = [[k, describe(record_summary(c['flown']), 2), num(c['flown'].get('chamfer_shape_mean')),
-             describe(record_summary(c['ideal']), 2)] for k, c in data['cells'].items()]
-    lines = [f'## {title}', '', f'The seed-0 plans of the ideal Table I flown (capture {data["capture"]["kind"]}, '
-             f'over the blue screen), {data["resolution"][0]} x {data["resolution"][1]}, realizations 0-'
-             f'{data["realizations"] - 1}. Chamfer x100, {STD}.', '']
-    lines += table(['scenario / method', 'flown', 'flown shape', 'ideal'], body)
-    return '\n'.join(lines) + '\n\n' + source(rel, data) + '\n'
-
-
 #: (section title, results file, renderer), in the order of docs/results.md
 CURRENT = [
     ('Table I with the registration in the reward (egp planned again): 3 planning seeds x 5 realizations',
@@ -484,7 +426,7 @@ CURRENT = [
     ('Fields on a soil that does not repeat: 3 planning seeds x 5 realizations',
      'results/rerun/issue42_fields_soil_combined/fields_combined.json', lambda rel, t: combined_section(rel, t, 'Fields')),
     ('Flights that reconstruct: Table I and the fields before and after the anchored model and ground markers',
-     'results/rerun/issue40_flights_fields/flights_check.json', own_markdown('bench.flights_check')),
+     'results/rerun/issue40_flights_fields/flights_check.json', committed_markdown),
     ('Table I, realistic capture before the anchored model: 3 planning seeds x 5 realizations',
      'results/rerun/table1_combined/table1_combined.json', lambda rel, t: combined_section(rel, t, 'Table I')),
     ('Table I, seed 0: the plans, their rewards, paired differences', 'results/table1.json', table1_seed0_section),
@@ -492,28 +434,28 @@ CURRENT = [
      'results/rerun/fields_combined/fields_combined.json', lambda rel, t: combined_section(rel, t, 'Fields')),
     ('Plan-quality study, realistic capture', 'results/plan_quality.json', plan_quality_section),
     ('Reward candidates against the plan-quality study', 'results/rerun/issue42_reward_candidates/reward_candidates.json',
-     own_markdown('bench.reward_candidates')),
+     committed_markdown),
     ('Real photographs', 'results/rerun/issue42_real/real/romi_real_plant.json', own_markdown('bench.bench_real')),
-    ('Plant masks', 'results/masks.json', own_markdown('bench.bench_masks')),
+    ('Plant masks', 'results/masks.json', committed_markdown),
     ('Second sortie', 'results/bench_sorties.json', sorties_section),
-    ('Coverage of the prior against the Chamfer', 'results/coverage_check.json', own_markdown('bench.coverage_check')),
+    ('Coverage of the prior against the Chamfer', 'results/coverage_check.json', committed_markdown),
     ('Reconstruction stages', 'results/bench_recon.json', recon_stages_section),
-    ('Cheaper reconstruction settings', 'results/bench_recon_speed.json', own_markdown('bench.bench_recon_speed')),
+    ('Cheaper reconstruction settings', 'results/bench_recon_speed.json', committed_markdown),
     ('make run on a soil that does not repeat',
      'results/rerun/issue42_make_run_soil/bench_make_run.json', own_markdown('bench.bench_make_run')),
     ('make run: wall time per setting', 'results/bench_make_run.json', own_markdown('bench.bench_make_run')),
     ('Planners: final reward', 'results/bench_planners.json', planners_section),
     ('Cost of a reward evaluation', 'results/bench_reward.json', reward_cost_section),
     ('The benchmarks on a Dask cluster', 'results/bench_cluster.json', cluster_section),
-    ('Image pairs: exhaustive against pose-chosen', 'results/bench_matching.json', matching_section),
-    ('Fleet images: transport and memory', 'results/bench_fleet_transport.json', fleet_section),
+    ('Image pairs: exhaustive against pose-chosen', 'results/bench_matching.json', committed_markdown),
+    ('Fleet images: transport and memory', 'results/bench_fleet_transport.json', committed_markdown),
     ('Fleet routes', 'results/bench_routes.json', own_markdown('bench.bench_routes')),
-    ('Viewer frame rates', 'results/bench_viewer.json', viewer_section),
+    ('Viewer frame rates', 'results/bench_viewer.json', committed_markdown),
 ]
 IDEAL = [
-    ('Table I, ideal capture', 'results/ideal/table1.json', ideal_table1_section),
+    ('Table I, ideal capture', 'results/ideal/table1.json', table1_seed0_section),
     ('Table I on the procedural plant (not tuned on), ideal capture', 'results/heldout_procedural/table1.json',
-     ideal_table1_section),
+     table1_seed0_section),
     ('Fields, ideal capture', 'results/ideal/bench_fields.json', fields_section),
     ('Plan-quality study, ideal capture', 'results/ideal/plan_quality.json', plan_quality_section),
 ]
@@ -533,7 +475,7 @@ SUPERSEDED = [
      fields_section, 'Superseded by the fields with 3 seeds x 5 realizations.'),
     ('Fields, row rows rerun with every SfM model registered', 'results/rerun/fields_merged_models_row/bench_fields.json',
      fields_section, 'Superseded by the fields with 3 seeds x 5 realizations.'),
-    ('Table I plans flown over the blue screen', 'results/flights_blue_screen/table1_flights.json', flights_section,
+    ('Table I plans flown over the blue screen', 'results/flights_blue_screen/table1_flights.json', committed_markdown,
      'Superseded by Table I under the realistic capture (over the textured soil).'),
     ('Second sortie, three_row and six_rect with every SfM model registered',
      'results/rerun/sorties_merged_models/bench_sorties.json', sorties_section, 'Superseded by the second sortie at a later commit.'),
@@ -580,10 +522,10 @@ SUPERSEDED = [
      'superseded by the study with them.'),
     ('Reward candidates, the anchored model before its last resort',
      'results/rerun/issue42_reward_candidates_before_last_resort/reward_candidates.json',
-     own_markdown('bench.reward_candidates'),
+     committed_markdown,
      'The candidates on the study before its failures were reconstructed again (the failures\' AUC is measured here).'),
     ('Flights that reconstruct: Table I alone', 'results/rerun/issue40_flights/flights_check.json',
-     own_markdown('bench.flights_check'), 'Superseded by the same check with the fields (issue 40).'),
+     committed_markdown, 'Superseded by the same check with the fields (issue 40).'),
     ('make run with the registration in the reward',
      'results/rerun/issue42_make_run/bench_make_run.json', own_markdown('bench.bench_make_run'),
      'Rendered over the soil tiled every 4.1 m; superseded by make run on a soil that does not repeat (its '
