@@ -4,7 +4,7 @@
 Every figure of docs/results.md is read from a JSON file under results/ by this script, never
 copied by hand (tests/test_docs.py regenerates it and compares it with the committed file), and
 every table names the file, the commit and the command it came from: the ``commit`` and
-``command`` the benchmark recorded (``bench.common.write_report``), or for a file written before
+``command`` the benchmark recorded (``bench.publish.publish``), or for a file written before
 benchmarks recorded them the commit that committed it and the command from the README of the time
 (:data:`LEGACY`, a mapping of this script). A Table I file whose plans were planned again and
 found to differ (``python -m bench.reference_plans`` -> results/reference_plans.json) is marked
@@ -24,12 +24,11 @@ import sys
 from pathlib import Path
 from typing import Callable, Optional
 
-import numpy as np
-
 if not __package__:  # python bench/docs.py: as python -m bench.docs (bench/_script.py)
     import _script  # noqa: F401
 from bench import reference_plans  # noqa: E402
 from bench.common import ROOT  # noqa: E402
+from bench.publish import num, table  # noqa: E402
 from bench.stats import describe, describe_difference, summary  # noqa: E402
 
 OUT = ROOT / 'docs' / 'results.md'
@@ -84,13 +83,6 @@ def load(rel: str) -> dict:
     return json.loads((ROOT / rel).read_text())
 
 
-def num(x, digits: int = 2, sign: bool = False) -> str:
-    """A number, '-' for none (null, NaN)."""
-    if x is None or (isinstance(x, float) and not math.isfinite(x)):
-        return '-'
-    return f'{x:+.{digits}f}' if sign else f'{x:.{digits}f}'
-
-
 def source(rel: str, data: dict, derived_command: Optional[str] = None) -> str:
     """The line under a table: file, date, commit and command."""
     parts = [f'Source: [`{rel}`](../{rel})'] + ([str(data['date'])] if data.get('date') else [])
@@ -138,10 +130,6 @@ def record_summary(record: Optional[dict], key: str = 'chamfer') -> dict:
     if not per:
         return {'mean': math.nan, 'std': math.nan, 'n': 0, 'failed': 1}
     return summary({i: p.get(key) for i, p in enumerate(per)})
-
-
-def table(head: list[str], rows: list[list[str]]) -> list[str]:
-    return ['| ' + ' | '.join(head) + ' |', '|' + '---|' * len(head)] + ['| ' + ' | '.join(r) + ' |' for r in rows]
 
 
 def cell_grid(cells: dict, text: Callable[[dict], str], corner: str = 'method') -> list[str]:
@@ -258,81 +246,6 @@ def sorties_section(rel: str, title: str) -> str:
     return '\n'.join(lines) + '\n\n' + source(rel, data) + '\n'
 
 
-def plan_quality_section(rel: str, title: str) -> str:
-    from bench.plan_quality import plan_chamfer
-
-    data = load(rel)
-    variants = data['variants']
-    scen = list(data.get('counts') or data.get('plans'))
-    lines = [f'## {title}', '']
-    counts = data.get('counts') or {}
-    if data.get('records'):  # rewards scored again against a committed study's reconstructions
-        r = data['records']
-        lines += [f'The reconstructions are the per-plan records of `{r["file"]}` (measured {r.get("date")} at '
-                  f'`{r.get("commit")}`, not run again); the rewards are scored at this report\'s commit.', '']
-    if counts:
-        lines += ['Plans: ' + '; '.join(f'{s} {c["planned"]} planned, {c["reconstructed"]} reconstructed, '
-                                        f'{c["failed"]} failed, {c["skipped"]} skipped' for s, c in counts.items())
-                  + f' (a failed plan ranks last; split seed {data.get("split_seed")}).', '']
-    for vname, v in variants.items():
-        check, design = v.get('spearman_check'), v.get('spearman_design')
-        if check:
-            models = list(next(iter(check.values())))
-            head = ['model'] + [f'{s} check (design)' for s in check]
-            body = [[m] + [f'{num(check[s].get(m))} ({num(design[s].get(m))})' for s in check] for m in models]
-            caption = f'Spearman rho of reward against -Chamfer, `{vname}`, check half (design half)'
-            auc, auc_d = v.get('auc_check'), v.get('auc_design')
-            if auc:  # the failures' separation (ROC AUC), beside each scenario's rho
-                head += [f'{s} failed: AUC check (design)' for s in auc]
-                body = [row + [f'{num(auc[s].get(m))} ({num(auc_d[s].get(m))})' for s in auc]
-                        for row, m in zip(body, models)]
-                caption += ('; AUC: how well the reward tells the plans that failed from those that reconstructed '
-                            '(ROC AUC, 1 perfect, 0.5 chance; - where no plan of the half failed)')
-            lines += [caption + ':', '']
-        else:
-            sp = v.get('spearman') or {}
-            models = list(next(iter(sp.values()))) if sp else []
-            spr = v.get('spearman_reconstructed') or {}
-            head = ['model'] + [f'{s} all (reconstructed)' for s in sp]
-            body = [[m] + [f'{num(sp[s].get(m))} ({num(spr.get(s, {}).get(m))})' for s in sp] for m in models]
-            lines += [f'Spearman rho of reward against -Chamfer, `{vname}`, all plans (plans that reconstructed):', '']
-        lines += table(head, body) + ['']
-    main = next(iter(variants), None)
-    if data.get('spearman_check') and main and not variants[main].get('spearman_check'):
-        check, design = data['spearman_check'], data['spearman_design']
-        models = list(next(iter(check.values())))
-        lines += [f'Spearman rho on the design/check split (from the per-plan records, `{main}`), check half '
-                  '(design half):', '']
-        lines += table(['model'] + [f'{s} check (design)' for s in check],
-                       [[m] + [f'{num(check[s].get(m))} ({num(design[s].get(m))})' for s in check]
-                        for m in models]) + ['']
-    rel_ = data.get('reliability') or {}
-    for s, r in rel_.items():
-        if r:
-            lines.append(f'Realizations {r["realizations"][0]} and {r["realizations"][1]} rank the {r["n"]} plans of '
-                         f'{s} alike with rho {num(r["rho_between"])} ({r["failed_in_one_only"]} fail in one only); '
-                         f'a perfect model would reach about {num(r["ceiling_mean"])} against their mean '
-                         '(Spearman-Brown).')
-    dense = next((v for k, v in variants.items() if k.endswith('/dense') and v.get('per_plan')), None)
-    if dense:
-        fams: dict = {}
-        for s, plans in dense['per_plan'].items():
-            for p in plans:
-                failed = not math.isfinite(plan_chamfer({'recon': p['realizations']}))
-                f = fams.setdefault(p['family'], {}).setdefault(s, [0, 0, []])
-                f[0] += 1
-                f[1] += failed
-                if failed:
-                    f[2].append(float(np.median(p.get('elevation_deg') or [math.nan])))
-        lines += ['', 'Plans that failed, by family (failed in any realization reconstructed; in brackets the '
-                  'median camera elevation of each failed plan, degrees):', '']
-        lines += table(['family'] + list(dense['per_plan']),
-                       [[fam] + [f'{v[1]} of {v[0]}' + (' (' + ', '.join(f'{e:.0f}' for e in sorted(v[2])) + ')'
-                                                          if v[2] else '') if (v := by.get(s)) else '-'
-                                 for s in dense['per_plan']] for fam, by in fams.items()])
-    return '\n'.join(lines) + '\n\n' + source(rel, data) + '\n'
-
-
 # ---------------------------------------------------------------- smaller benchmarks
 
 def own_markdown(module: str) -> Callable[[str, str], str]:
@@ -353,72 +266,6 @@ def committed_markdown(rel: str, title: str) -> str:
     return f'## {title}\n\n{md}\n{source(rel, data)}\n'
 
 
-def recon_stages_section(rel: str, title: str) -> str:
-    data = load(rel)
-    body = [[name.replace('_', ' '), s['capture'], '/'.join(map(str, s.get('registered_images') or [])),
-             *(num(s['seconds'].get(k), 1) for k in
-                                                                    ('render', 'sparse', 'dense', 'score', 'total')),
-             num(s.get('chamfer_x100')), num(s.get('chamfer_shape_x100'))]
-            for name, s in data['stages_one_plant'].items()]
-    lines = [f'## {title}', '', f'One plant ({Path(str(data.get("models"))).name or "procedural"}), '
-             f'{data["width"]} x {data["height"]}, a ring of views 30 degrees apart, one realization, seconds per stage '
-             'with the reconstruction on the machine\'s cores.', '']
-    lines += table(['views', 'capture', 'registered', 'render s', 'sparse s', 'dense s', 'score s', 'total s',
-                    'Chamfer x100', 'shape x100'], body)
-    return '\n'.join(lines) + '\n\n' + source(rel, data) + '\n'
-
-
-def planners_section(rel: str, title: str) -> str:
-    data = load(rel)
-    rewards = list(dict.fromkeys(k.split('/')[0] for k in data['cells']))
-    lines = [f'## {title}', '', f'Final reward after {data["evaluations"]} evaluations ({data["initial_evaluations"]} '
-             f'initial for egp), {STD.split(" (n:")[0]} over {data["seeds"]} seeds, plants {data["models"]}; '
-             '"BO beat": seeds whose final plan is better than the best plan of the initial design.', '']
-    for reward in rewards:
-        keys = [k for k in data['cells'] if k.startswith(reward + '/')]
-        scen = list(dict.fromkeys(k.split('/')[1] for k in keys))
-        methods = list(dict.fromkeys(k.split('/')[2] for k in keys))
-        body = []
-        for s in scen:
-            row = [s]
-            for m in methods:
-                c = data['cells'].get(f'{reward}/{s}/{m}')
-                if c is None:
-                    row.append('-')
-                    continue
-                st = summary(dict(enumerate(c['finals'])))
-                row.append(describe(st, 4) + (f', BO beat {c["bo_improved_seeds"]} of {len(c["finals"])}'
-                                              if 'bo_improved_seeds' in c else '') + f', {c["seconds_mean"]:.1f} s')
-            body.append(row)
-        lines += [f'Reward `{reward}`:', ''] + table(['scenario'] + methods, body) + ['']
-    return '\n'.join(lines) + '\n' + source(rel, data) + '\n'
-
-
-def reward_cost_section(rel: str, title: str) -> str:
-    data = load(rel)
-    body = [[m, num(r.get('one_plan_ms'), 1), num(r.get('one_plan_prepared_points_ms'), 1),
-             num(r.get('batch_ms_per_plan'), 1)] for m, r in data['results'].items()]
-    lines = [f'## {title}', '', f'{data["cameras"]} cameras, {data["points"]} points x {data["realizations"]} '
-             f'realizations, {data["threads"]} torch thread; `float64`/`float32`: the paper reward. Best of repeats, '
-             f'ms. The paper reward in float32 differs from float64 by at most {data["max_abs_diff_float32"]:.1e}.', '']
-    lines += table(['model', 'one plan', 'one plan, points prepared', 'per plan in a batch'], body)
-    return '\n'.join(lines) + '\n\n' + source(rel, data) + '\n'
-
-
-def cluster_section(rel: str, title: str) -> str:
-    data = load(rel)
-    body = [[str(r['workers']), str(r['tasks']), num(r['cluster_start_s'], 1), num(r['wall_s'], 1),
-             num(r['task_seconds'], 1), str(r['failed']), num(data['speedup'].get(str(r['workers'])))]
-            for r in data['runs']]
-    lines = [f'## {title}', '', 'A small Table I slice (`python -m bench.table1 ' + shlex.join(data['table1_arguments'])
-             + '`) on 1 and 2 local workers.', '']
-    lines += table(['workers', 'tasks', 'cluster start s', 'wall s', 'task s (sum)', 'failed', 'speedup'], body)
-    lines += ['', f'Same plans on every worker count: {data["same_plans"]}; same reconstruction records: '
-              f'{data["same_records"]} (largest Chamfer x100 difference {data["recon_max_abs_diff_chamfer_x100"]:.1e}); '
-              f'overhead per task {data["overhead_per_task_s"]:.2f} s.']
-    return '\n'.join(lines) + '\n\n' + source(rel, data) + '\n'
-
-
 #: (section title, results file, renderer), in the order of docs/results.md
 CURRENT = [
     ('Table I with the registration in the reward (egp planned again): 3 planning seeds x 5 realizations',
@@ -432,21 +279,21 @@ CURRENT = [
     ('Table I, seed 0: the plans, their rewards, paired differences', 'results/table1.json', table1_seed0_section),
     ('Fields before the anchored model: 3 planning seeds x 5 realizations',
      'results/rerun/fields_combined/fields_combined.json', lambda rel, t: combined_section(rel, t, 'Fields')),
-    ('Plan-quality study, realistic capture', 'results/plan_quality.json', plan_quality_section),
+    ('Plan-quality study, realistic capture', 'results/plan_quality.json', own_markdown('bench.plan_quality')),
     ('Reward candidates against the plan-quality study', 'results/rerun/issue42_reward_candidates/reward_candidates.json',
      committed_markdown),
     ('Real photographs', 'results/rerun/issue42_real/real/romi_real_plant.json', own_markdown('bench.bench_real')),
     ('Plant masks', 'results/masks.json', committed_markdown),
     ('Second sortie', 'results/bench_sorties.json', sorties_section),
     ('Coverage of the prior against the Chamfer', 'results/coverage_check.json', committed_markdown),
-    ('Reconstruction stages', 'results/bench_recon.json', recon_stages_section),
+    ('Reconstruction stages', 'results/bench_recon.json', own_markdown('bench.bench_recon')),
     ('Cheaper reconstruction settings', 'results/bench_recon_speed.json', committed_markdown),
     ('make run on a soil that does not repeat',
      'results/rerun/issue42_make_run_soil/bench_make_run.json', own_markdown('bench.bench_make_run')),
     ('make run: wall time per setting', 'results/bench_make_run.json', own_markdown('bench.bench_make_run')),
-    ('Planners: final reward', 'results/bench_planners.json', planners_section),
-    ('Cost of a reward evaluation', 'results/bench_reward.json', reward_cost_section),
-    ('The benchmarks on a Dask cluster', 'results/bench_cluster.json', cluster_section),
+    ('Planners: final reward', 'results/bench_planners.json', own_markdown('bench.bench_planners')),
+    ('Cost of a reward evaluation', 'results/bench_reward.json', own_markdown('bench.bench_reward')),
+    ('The benchmarks on a Dask cluster', 'results/bench_cluster.json', own_markdown('bench.bench_cluster')),
     ('Image pairs: exhaustive against pose-chosen', 'results/bench_matching.json', committed_markdown),
     ('Fleet images: transport and memory', 'results/bench_fleet_transport.json', committed_markdown),
     ('Fleet routes', 'results/bench_routes.json', own_markdown('bench.bench_routes')),
@@ -457,7 +304,7 @@ IDEAL = [
     ('Table I on the procedural plant (not tuned on), ideal capture', 'results/heldout_procedural/table1.json',
      table1_seed0_section),
     ('Fields, ideal capture', 'results/ideal/bench_fields.json', fields_section),
-    ('Plan-quality study, ideal capture', 'results/ideal/plan_quality.json', plan_quality_section),
+    ('Plan-quality study, ideal capture', 'results/ideal/plan_quality.json', own_markdown('bench.plan_quality')),
 ]
 #: superseded runs: (title, file, renderer, what became of it); docs/history.md tells their story
 SUPERSEDED = [
@@ -486,7 +333,7 @@ SUPERSEDED = [
     ('Second sortie, grid_3x3', 'results/rerun/sorties_grid_3x3/bench_sorties.json', sorties_section,
      'Its records, at the same code, were reused by the current second sortie.'),
     ('Plan-quality study, realistic capture before the anchored model',
-     'results/rerun/plan_quality_before_anchored/plan_quality.json', plan_quality_section,
+     'results/rerun/plan_quality_before_anchored/plan_quality.json', own_markdown('bench.plan_quality'),
      'Superseded by the study rerun under the anchored model and ground markers (issue 42).'),
     ('Fields with the registration in the reward (egp planned again): 3 planning seeds x 5 realizations',
      'results/rerun/issue42_fields_combined/fields_combined.json', lambda rel, t: combined_section(rel, t, 'Fields'),
@@ -513,11 +360,11 @@ SUPERSEDED = [
      'three clusters of 4 whose anchored adjustment drifted in every realization (the points kept at the reported '
      'poses). Not kept; the option stays, and the plan-quality study reports it (coverage-object-cells).'),
     ('Plan-quality study, the rewards before the registration term',
-     'results/rerun/issue42_plan_quality_before_registration/plan_quality.json', plan_quality_section,
+     'results/rerun/issue42_plan_quality_before_registration/plan_quality.json', own_markdown('bench.plan_quality'),
      'The same reconstructions scored by the rewards before coverage weighed the registration (issue 42); '
      'superseded by the study scored again from its records.'),
     ('Plan-quality study, the anchored model before its last resort',
-     'results/rerun/issue42_plan_quality_before_last_resort/plan_quality.json', plan_quality_section,
+     'results/rerun/issue42_plan_quality_before_last_resort/plan_quality.json', own_markdown('bench.plan_quality'),
      'The same reconstructions before a drifting anchored adjustment kept the points at the reported poses; '
      'superseded by the study with them.'),
     ('Reward candidates, the anchored model before its last resort',
@@ -537,7 +384,7 @@ SUPERSEDED = [
      own_markdown('bench.bench_make_run'), 'Superseded by make run with the drones\' camera thread, the images\' '
      'heartbeat and the dense pair budget (issue 40).'),
     ('Planners, one_plant under coverage, rerun', 'results/rerun/bench_planners_one_plant_coverage.json',
-     planners_section, 'A reproduction of the planners table\'s one_plant rows under coverage.'),
+     own_markdown('bench.bench_planners'), 'A reproduction of the planners table\'s one_plant rows under coverage.'),
 ]
 
 

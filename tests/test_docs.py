@@ -12,7 +12,9 @@ import sys
 import pytest
 
 from bench import docs, reference_plans
-from bench.common import ROOT, git_commit, write_json, write_report
+from bench.cache import write_json
+from bench.common import ROOT
+from bench.publish import git_commit, publish
 
 RESULTS = sorted(p for p in (ROOT / "results").rglob("*.json") if "cache" not in p.relative_to(ROOT).parts)
 
@@ -41,12 +43,14 @@ def test_no_results_file_holds_a_nan_literal(path):
     _strict(path.read_text())
 
 
-def test_a_report_is_strict_json_and_says_where_it_came_from(tmp_path):
-    out = tmp_path / "r.json"
-    write_report(out, {"std": float("nan"), "interval": [float("-inf"), 1.5], "n": 1})
-    data = _strict(out.read_text())
+def test_a_report_is_strict_json_and_says_where_it_came_from(tmp_path, capsys):
+    """publish: the result's JSON (strict, with its command and commit), its markdown beside it, printed."""
+    path = publish(tmp_path / "out", "r", {"std": float("nan"), "interval": [float("-inf"), 1.5], "n": 1}, "# R\n")
+    data = _strict(path.read_text())
+    assert path == tmp_path / "out" / "r.json" and (tmp_path / "out" / "r.md").read_text() == "# R\n"
     assert data["std"] is None and data["interval"] == [None, 1.5] and data["n"] == 1
-    assert data["commit"] == git_commit() and data["command"][0] == sys.argv[0] or data["command"][:2] == ["python", "-m"]
+    assert data["commit"] == git_commit() and data["command"] == sys.argv
+    assert capsys.readouterr().out.startswith("# R\nwrote ")
     write_json(tmp_path / "cache.json", {"mean": math.nan})  # cache records too
     assert _strict((tmp_path / "cache.json").read_text()) == {"mean": None}
 
