@@ -72,7 +72,7 @@ view: setup
 bench: setup
 	@$(ENV) python -m bench.table1 $(if $(MODELS),--models $(MODELS))
 
-# docs/results.md from the result files under results/ (README "Development"); never edited by hand
+# docs/results.md and docs/history_results.md from the files under results/ (README "Development"); never edited by hand
 docs: setup
 	@$(ENV) python -m bench.docs
 

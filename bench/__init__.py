@@ -10,7 +10,7 @@ The library the benchmarks are built on:
 - ``options``: the options the benchmarks share (``--models``, ``--out``, the cluster's, ...);
 - ``publish``: a result's JSON with its command and commit, its markdown beside it, printed;
 - ``reference_plans``: do the tables' plans still come out of the planner;
-- ``docs``: docs/results.md from the result files.
+- ``docs``: docs/results.md (current results) and docs/history_results.md (superseded runs).
 
 The benchmarks a user runs: ``table1`` (Table I; ``table1_combine`` joins runs made in slices),
 ``bench_fields`` (fields; ``fields_combine``), ``bench_planners``, ``plan_quality``, ``bench_real``

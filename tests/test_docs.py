@@ -1,7 +1,7 @@
-"""docs/results.md is generated from results/*.json (issue 39, item 5): ``make docs`` gives the
-committed file byte for byte (so it is never edited by hand), every table names its file, commit
-and command, a table whose plans no longer reproduce is marked stale, and no results file holds a
-NaN or Infinity literal (JSON has none; the benchmarks write null)."""
+"""docs/results.md and docs/history_results.md are generated from the files under results/:
+``make docs`` gives the committed files byte for byte (so they are never edited by hand), every
+table names its file, commit and command, a table whose plans no longer reproduce is marked stale,
+and no results file holds a NaN or Infinity literal (JSON has none; the benchmarks write null)."""
 from __future__ import annotations
 
 import json
@@ -25,15 +25,23 @@ def _strict(text: str):
     return json.loads(text, parse_constant=refuse)
 
 
-def test_results_md_is_what_the_results_give():
-    assert docs.OUT.read_text() == docs.render(), "docs/results.md differs from the results: run make docs"
+def test_the_documents_are_what_the_results_give():
+    for name, text in docs.render().items():
+        assert (docs.OUT / name).read_text() == text, f"docs/{name} differs from the results: run make docs"
 
 
-def test_every_table_names_its_file_commit_and_command():
-    text = docs.render()
-    sections = [s for s in text.split("\n## ")[1:] if not s.startswith("Contents")]
-    assert len(sections) == len(docs.CURRENT) + len(docs.IDEAL) + len(docs.SUPERSEDED)
-    for s in sections:
+def test_every_table_names_its_file_commit_and_command_and_superseded_runs_stand_apart():
+    """docs/results.md holds the current results only; every superseded run is in
+    docs/history_results.md, with what superseded it."""
+    def sections(text: str) -> dict:
+        return {s.split("\n", 1)[0]: s for s in text.split("\n## ")[1:] if not s.startswith("Contents")}
+    rendered = docs.render()
+    current, superseded = sections(rendered[docs.RESULTS_MD]), sections(rendered[docs.SUPERSEDED_MD])
+    assert list(current) == [t for t, *_ in docs.CURRENT + docs.IDEAL]
+    assert list(superseded) == [t for t, *_ in docs.SUPERSEDED]
+    for (title, *_, by), s in zip(docs.SUPERSEDED, superseded.values()):
+        assert s.split("\n\n", 2)[1] == by, title
+    for s in [*current.values(), *superseded.values()]:
         assert "Source: [`results/" in s and ("measured at commit `" in s or "committed in `" in s), s[:200]
         assert "command" in s, s[:200]
 
@@ -82,11 +90,11 @@ def test_a_table_whose_plans_differ_is_marked_stale(tmp_path, monkeypatch):
     assert "STALE" not in docs.table1_seed0_section("results/table1.json", "T")
 
 
-def test_make_docs_check_says_when_the_file_is_stale(tmp_path):
-    out = tmp_path / "results.md"
-    out.write_text("edited by hand\n")
-    assert docs.main(["--out", str(out), "--check"]) == 1
-    assert docs.main(["--out", str(out)]) == 0 and docs.main(["--out", str(out), "--check"]) == 0
+def test_make_docs_check_says_when_a_document_is_stale(tmp_path):
+    assert docs.main(["--out", str(tmp_path), "--check"]) == 1  # none written yet
+    assert docs.main(["--out", str(tmp_path)]) == 0 and docs.main(["--out", str(tmp_path), "--check"]) == 0
+    (tmp_path / docs.SUPERSEDED_MD).write_text("edited by hand\n")
+    assert docs.main(["--out", str(tmp_path), "--check"]) == 1
 
 
 def test_the_readme_is_short_and_its_figures_live_in_results_md():
@@ -95,6 +103,6 @@ def test_the_readme_is_short_and_its_figures_live_in_results_md():
 
     readme = (ROOT / "README.md").read_text()
     assert len(readme.splitlines()) <= 700
-    anchors = {docs.anchor(t) for t, *_ in docs.CURRENT + docs.IDEAL + docs.SUPERSEDED}
+    anchors = {docs.anchor(t) for t, *_ in docs.CURRENT + docs.IDEAL}
     links = set(re.findall(r"docs/results\.md#([a-z0-9_-]+)", readme))
     assert links and links <= anchors, links - anchors
