@@ -117,9 +117,8 @@ def capture_from_args(args: argparse.Namespace) -> object:
 def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     from vp_scene.camera import IMAGE_SIDE_RANGE, image_side_arg
 
-    from .config import MATCH_POSES_FROM, MATCHINGS, MAX_CAMERAS, MAX_MEGAPIXELS, ReconConfig
+    from .config import MATCH_POSES_FROM, MATCHINGS, MAX_CAMERAS, MAX_MEGAPIXELS, SPARSE_MODES, ReconConfig
     from .segment import MASK_METHODS
-    from .sparse import MODES
 
     p = _Parser(prog=PROG, description="Render, reconstruct (COLMAP on CPU + SGBM) and score a view plan.")
     what = p.add_mutually_exclusive_group(required=True)
@@ -145,7 +144,7 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
                    help=f"--plan: rendered image height, pixels (default: the plan's, else {ReconConfig.height})")
     p.add_argument("--realizations", default=None, help="comma-separated realization indices (default: all)")
     p.add_argument("--sparse-only", action="store_true", help="score the sparse cloud (no dense stereo)")
-    p.add_argument("--sparse-mode", default="auto", choices=("auto",) + MODES,
+    p.add_argument("--sparse-mode", default="auto", choices=("auto",) + SPARSE_MODES,
                    help="auto (default): anchored for a realistic capture whose attitudes are good to 2 degrees, "
                         "incremental for rougher ones, known_poses for the ideal one; anchored: triangulate at the "
                         "reported poses, bundle-adjust and register on them; incremental: COLMAP's SfM with the "

@@ -66,9 +66,9 @@ from numpy.typing import ArrayLike, NDArray
 from vp_scene.camera import as_poses
 from vp_scene.folders import OwnedFolder
 
-from .config import ANCHOR_MAX_ATTITUDE_DEG, ReconConfig, matching_method
+from .config import ReconConfig, matching_method
 from .errors import EMPTY_PLAN, NO_SCENE, NOTHING_VISIBLE, OUTPUT_NOT_WRITABLE, RECONSTRUCTION_FAILED, UNKNOWN, \
-    ReconError, check_plan_size, check_realizations, check_scene, validate_cameras
+    ReconError, SparseError, check_plan_size, check_realizations, check_scene, validate_cameras
 from .errors import ensure_writable_dir
 from .metrics import EmptyCloudError, chamfer, chamfer_after_icp
 from .progress import ProgressFn, tick
@@ -171,7 +171,7 @@ def reconstruct_views(views: object, config: Optional[ReconConfig] = None, workd
     from .metrics import coverage_of_prior
     from .pairs import select_pairs
     from .segment import flight_masks, image_mask
-    from .sparse import SparseError, sparse_reconstruct
+    from .sparse import sparse_reconstruct
 
     cfg = (config or ReconConfig()).validate()
     set_threads(cfg.num_threads)
@@ -213,21 +213,10 @@ def reconstruct_views(views: object, config: Optional[ReconConfig] = None, workd
         t_pairs = time.perf_counter() - t0
         capture = cfg.capture
         try:
-            mode = cfg.sparse_mode_used
-            priors = None if capture.ideal or mode != "incremental" else reported[:, :3]
-            # Reported attitudes rougher than ANCHOR_MAX_ATTITUDE_DEG (a rig's mount 20 degrees off) are weighed
-            # against the centres by their sigma, and the anchored model, triangulated at them, is no fallback (on
-            # the dev scan's 10 views it "registered" 10 of 10 at poses 20 degrees off, 8 points kept). Good ones
-            # alone give the registration's rotation, as before: weighed by sigma 0.5 they did no better
-            # (4-camera arc, realizations 0 and 1: optical axes 0.52 / 0.25 degrees off against 0.48 / 0.19).
-            rough = not capture.ideal and capture.report_attitude_sigma > ANCHOR_MAX_ATTITUDE_DEG
-            sp = sparse_reconstruct(images, reported, K, wd, mode=mode,
-                                    masks=masks if cfg.sift_masks else None, max_features=cfg.max_features,
-                                    num_threads=cfg.num_threads or -1, pairs=pairs, prior_centres=priors,
-                                    prior_sigma=max(capture.report_position_sigma, 0.01),
-                                    sift_first_octave=cfg.sift_first_octave,
-                                    attitude_sigma=capture.report_attitude_sigma if rough else None,
-                                    fallback=None if rough else "anchored")
+            options = cfg.sparse_options()
+            priors = None if capture.ideal or options.mode != "incremental" else reported[:, :3]
+            sp = sparse_reconstruct(images, reported, K, wd, options, masks=masks if cfg.sift_masks else None,
+                                    pairs=pairs, prior_centres=priors)
         except SparseError as exc:
             raise ReconError(RECONSTRUCTION_FAILED, f"sparse reconstruction failed: {exc}") from exc
         except OSError as exc:
