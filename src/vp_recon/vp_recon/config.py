@@ -21,33 +21,29 @@ __all__ = ["MAX_CAMERAS", "MAX_MEGAPIXELS", "MATCHINGS", "MATCH_POSES_FROM", "AN
 #: The most cameras a plan may have (a second sortie's flown cameras included): ``ReconConfig.
 #: max_cameras``, the recon node's parameter ``max_cameras`` and ``--max-cameras`` of ``make
 #: recon``; a larger plan is refused with PLAN_TOO_LARGE before anything is rendered. Every image
-#: of a realization is held at once: measured peak RSS of ``python -m vp_recon.cli --plan`` (one
-#: realization, 2000 x 1500, realistic capture, one_plant) 1.56 GB with 8 cameras, 2.12 GB with
-#: 32, about 23 MB a camera (a 200-camera plan took 5.8 GB), so 256 cameras need about 7.3 GB.
-#: The planner plans at most 100 cameras a sortie; 256 hold 16 drones over 16 sorties.
+#: of a realization is held at once, so a reconstruction's memory grows with its cameras; the cap
+#: leaves room for several sorties of the planner's (at most 100 cameras a sortie).
 MAX_CAMERAS = 256
 #: The most megapixels the images of a flight folder may have together (``--images``,
 #: ``--max-megapixels``), read from their headers before any is decoded: a folder's memory is
-#: its pixels (about 7.7 MB a megapixel, as above), whatever their number. The memory of
-#: MAX_CAMERAS cameras of 2000 x 1500: hundreds of images of a few megapixels, 64 of 12 MP.
+#: its pixels, whatever their number. The pixels of MAX_CAMERAS cameras of 2000 x 1500: hundreds
+#: of images of a few megapixels, 64 of 12 MP.
 MAX_MEGAPIXELS = MAX_CAMERAS * 2000 * 1500 // 1_000_000
 
 #: ``ReconConfig.matching``: which image pairs SIFT matching compares (see :func:`matching_method`).
 MATCHINGS = ("auto", "exhaustive", "poses")
-#: ``'auto'`` matches pairs chosen from the poses from this many cameras up, all pairs below.
-#: Measured (bench/bench_matching.py, three Corn50 plants in a row): from 8 cameras on exhaustive
-#: matching verifies false pairs over 90 degrees apart (2 of 7 at 8 cameras, 16-25 at 12) that
-#: then become dense stereo partners (dense 5x slower, Chamfer worse); at 4-6 cameras both give
-#: about the same, so today's 4-6 camera plans keep exhaustive matching and their results.
+#: ``'auto'`` matches pairs chosen from the poses from this many cameras up, all pairs below:
+#: on larger plans exhaustive matching verifies false pairs of views far apart, which then become
+#: dense stereo partners (a slower dense step, a worse Chamfer distance); on smaller ones both
+#: matchings give about the same.
 MATCH_POSES_FROM = 8
 
 #: ``sparse_mode='auto'``: reported attitudes good to this many degrees (1 sigma) anchor the model
 #: (a triangulation at poses that far off still finds its tracks with the anchored model's loose
-#: first thresholds); rougher ones leave the poses to the images (incremental SfM).
-#: Measured on Table I's seed-0 flights (2026-11-27): where both modes reconstruct, the anchored
-#: model's map and shape Chamfer are those of the incremental mapper or better (three_row circle:
-#: shape 2.09-2.89 against 3.59-5.50), and where the mapper's model fails its self-check the
-#: anchored one reconstructs (README "Capture model").
+#: first thresholds); rougher ones leave the poses to the images (incremental SfM). Where both
+#: modes reconstruct, the anchored model's map and shape Chamfer distances are the incremental
+#: mapper's or better, and where the mapper's model fails its self-check the anchored one
+#: reconstructs (README "Capture model").
 ANCHOR_MAX_ATTITUDE_DEG = 2.0
 
 #: The sparse step's models (``ReconConfig.sparse_mode`` besides ``'auto'``; :mod:`vp_recon.sparse`).

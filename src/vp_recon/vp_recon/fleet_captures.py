@@ -45,11 +45,10 @@ class FleetCaptures:
     realization and is ignored with a log line. A drone's captures of one trigger are its poses'
     in its route's order (it photographs them as it flies them): the k-th, by stamp, is its k-th pose.
 
-    Memory (issue 20, part 5): an image is converted to its array as it arrives (a view of the
-    message's buffer, which is then the only copy), and at most :data:`CAPTURES_KEPT` captures
-    are kept per drone, or its poses' number (the oldest beyond is dropped with a log line): a capture set of N images
-    costs the node about N images' bytes, not three times that (measured in
-    results/bench_fleet_transport.json, ``recon_node_memory``)."""
+    Memory: an image is converted to its array as it arrives (a view of the message's buffer,
+    which is then the only copy), and at most :data:`CAPTURES_KEPT` captures are kept per drone,
+    or its poses' number (the oldest beyond is dropped with a log line): a capture set of N
+    images costs the node about N images' bytes, not three times that."""
 
     def __init__(self, node: Node, lock: threading.Condition) -> None:
         from vp_interfaces.msg import CaptureTrigger, FleetAssignment

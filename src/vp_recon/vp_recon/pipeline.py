@@ -1,7 +1,7 @@
 """Render a camera plan, reconstruct it and score it against the truth (paper Sec. V-B, Table I).
 
 For each wind realization k of a :class:`vp_scene.wind.NoisyScene`, the plan is *flown* under
-the capture model ``config.capture`` (:mod:`vp_scene.capture`; issue "Flights, not renders"):
+the capture model ``config.capture`` (:mod:`vp_scene.capture`):
 
 1. mesh: the plants' meshes displaced by realization k's wind (:mod:`vp_scene.meshing`),
 2. render: one image per camera at ``width x height`` (:mod:`vp_scene.render`; the simulated
@@ -20,7 +20,7 @@ the capture model ``config.capture`` (:mod:`vp_scene.capture`; issue "Flights, n
    against the centres by their sigma (a rig reporting its attitude roughly is registered on its
    centres), and the SfM's failure is then the step's (no anchored fallback);
    ``'known_poses'``: triangulation with the reported poses (an ablation); then, when the flight
-   has ground control (the realistic capture lays 4 markers), the model placed on the control
+   has ground control (the realistic capture lays its markers), the model placed on the control
    points and the reported centres together (:mod:`vp_recon.gcp`),
 4. dense: SGBM on neighbouring pairs (:mod:`vp_recon.dense`; COLMAP PatchMatch needs CUDA) with
    the poses the sparse step gives (SfM's, in ``map``),
@@ -31,9 +31,9 @@ the capture model ``config.capture`` (:mod:`vp_scene.capture`; issue "Flights, n
    scene's box, points on background in some view dropped) and is always scored too
    (``sparse_score``), so that a plan can be judged on either.
 
-``capture = IDEAL`` (``--capture ideal``) is the reconstruction before the capture model, bit for
-bit: the planned poses flown and known exactly, noise-free images, pairs chosen with realization
-k's true points, triangulation with the planned poses (``sparse_mode`` ``'auto'`` resolves to
+``capture = IDEAL`` (``--capture ideal``) flies the planned poses and knows them exactly:
+noise-free images, pairs chosen with realization k's true points, triangulation with the planned
+poses (``sparse_mode`` ``'auto'`` resolves to
 ``'known_poses'`` there). Background (``ground``; ``None``: by the capture): a flight renders a
 textured soil plane under the plants and segments each (noisy) image alone, by excess green
 (:func:`vp_recon.segment.plant_mask`); the ideal capture keeps the blue screen and the renderer's
@@ -109,7 +109,7 @@ def render_flight(noisy_scene: object, k: int, cameras: ArrayLike, config: Optio
     (:func:`vp_scene.sim_drone.photograph`: the world renders it), as the capture set a flight
     hands to the reconstruction: a :class:`vp_recon.flight.CapturedViews` of the images rendered
     from the actual poses (with sensor noise) and the poses the drones report. The ideal capture
-    keeps the renderer's masks (an oracle: the capture before issue 18); a flight's masks come
+    keeps the renderer's masks (an oracle); a flight's masks come
     from its images alone (:func:`reconstruct_views`). ``views.seconds``: mesh, render.
     ReconError EMPTY_PLAN for bad cameras or indices, UNKNOWN when meshing or rendering fails.
 
@@ -241,7 +241,7 @@ def reconstruct_views(views: object, config: Optional[ReconConfig] = None, workd
 
         t0 = time.perf_counter()
         # the poses the sparse step knows: the reported ones, or SfM's (in map) where registered
-        # (ideal: the planned poses whatever the mode, as before the capture model)
+        # (ideal: the planned poses whatever the mode)
         geo = reported if capture.ideal or mode == "known_poses" else \
             np.where(np.isfinite(sp.cameras), sp.cameras, as_poses(reported))
         if prior is not None:
@@ -319,7 +319,7 @@ def reconstruct_captured(noisy_scene: object, views: object, config: Optional[Re
     try:
         seconds = dict(views.seconds)
         prior = Prior.of_scene(noisy_scene)
-        # pairs: ideal: as before the capture model (realization k's truth); a flight: the planning cloud
+        # pairs: ideal: from realization k's truth; a flight: from the planning cloud
         vr = reconstruct_views(views, cfg, wd / f"realization_{k}", prior=prior,
                                pair_cloud=truth_all[k] if cfg.capture.ideal else None, progress=progress, k=k)
         seconds.update(vr.seconds)

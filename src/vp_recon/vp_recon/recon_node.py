@@ -298,8 +298,8 @@ class ReconNode(Node):
 
     def on_shutdown(self, timeout: float) -> bool:
         """SIGINT/SIGTERM: the worker abandons its plan at the next stage; nothing to wait for.
-        The plan's folder goes with it when nothing was written into it yet (issue 19, item 4:
-        an interrupted recon left an empty ``plan-<time>/``); what was written stays."""
+        The plan's folder goes with it when nothing was written into it yet (no empty
+        ``plan-<time>/`` is left behind); what was written stays."""
         with self._lock:  # (the queue's lock: stopped and the folder read together)
             self._plans.stop()
             run_dir = self._run_dir

@@ -49,10 +49,10 @@ class RealizationResult(Scores):
         sparse_mode: the model the sparse step kept (``'known_poses'``, ``'incremental'`` or
             ``'anchored'``).
         mean_track_length, mean_reprojection_error: of the sparse model (images a point is seen
-            in; pixels): metrics without a ground truth (issue 20, part 4).
+            in; pixels): metrics without a ground truth.
         coverage: :class:`vp_recon.metrics.Coverage` of the planning cloud (no truth read).
         sparse_models: the structure-from-motion models merged, each registered to map on its own
-            reported poses (parts of a plan that share no matches; :func:`vp_recon.sparse._merge_models`).
+            reported poses (parts of a plan that share no matches; :func:`vp_recon.sparse_modes.merge_models`).
         centre_residual: incremental: RMS distance, m, of the registered cameras from the reported
             poses after the registration (the sparse step's self-check; no truth read); else NaN.
         sparse_fallback: why the structure from motion was not kept (the sparse step then made the
