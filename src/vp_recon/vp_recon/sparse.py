@@ -18,7 +18,6 @@ The 3D points come back in the world frame.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Optional, Sequence
 
@@ -30,61 +29,13 @@ from vp_scene.camera import check_poses, world_to_camera
 from .config import SparseOptions
 from .errors import SparseError
 from .pairs import check_pairs
+from .results import SparseResult
 
-__all__ = ["SparseResult", "sparse_reconstruct", "MAX_RESIDUAL_SIGMAS"]
+__all__ = ["sparse_reconstruct", "MAX_RESIDUAL_SIGMAS"]
 
 #: Self-check (:mod:`vp_recon.sparse_modes`): a model whose registered centres lie further than
 #: this many ``prior_sigma`` (RMS) from the poses it was aligned on is inconsistent.
 MAX_RESIDUAL_SIGMAS: float = 10.0
-
-
-@dataclass
-class SparseResult:
-    """Output of :func:`sparse_reconstruct`.
-
-    Attributes:
-        points: (M, 3) float64 world points.
-        colors: (M, 3) uint8 RGB.
-        registered: number of images with a pose in the reconstruction (that observe >= 1 point
-            in ``known_poses`` mode).
-        keypoints: SIFT keypoints per image.
-        verified_pairs: image pairs with geometrically verified matches.
-        mean_track_length: mean number of images observing a point.
-        mean_reprojection_error: mean reprojection error of the model's points, pixels
-            (COLMAP's ``compute_mean_reprojection_error``; a metric without a ground truth).
-        pair_inliers: verified inlier matches per image pair (i, j), i < j (indices of ``images``).
-        matched_pairs: image pairs handed to the matcher (N (N - 1) / 2 when exhaustive).
-        seconds: wall time of ``extract``, ``match`` and ``triangulate`` (the model, either mode).
-        cameras: (N, 7) the poses (x, y, z, qx, qy, qz, qw, :mod:`vp_scene.camera`) of the model's
-            cameras in the world frame, roll kept: the given ones in ``known_poses`` mode; else
-            the registered images' estimated poses after the alignment, NaN rows for images not
-            registered.
-        models: the models merged (``incremental``: every model of >= 3 registered images, each
-            aligned to the world on its own, :func:`vp_recon.sparse_modes.merge_models`; 1 otherwise).
-        centre_residual: ``incremental`` and ``anchored``: RMS distance, m, of the registered images'
-            centres after the alignment from the given (reported) ones (the self-check's figure); NaN
-            for ``known_poses``.
-        mode: the model that was kept: ``'known_poses'``, ``'incremental'`` or ``'anchored'`` (also
-            when the incremental mode fell back to it).
-        fallback: why the structure from motion was not kept (its SparseError's message); '' when
-            it was, or was not tried.
-    """
-
-    points: NDArray[np.float64]
-    colors: NDArray[np.uint8]
-    registered: int
-    keypoints: list[int]
-    verified_pairs: int
-    mean_track_length: float
-    pair_inliers: dict = field(default_factory=dict)
-    matched_pairs: int = 0
-    seconds: dict = field(default_factory=dict)
-    cameras: Optional[NDArray[np.float64]] = None
-    mean_reprojection_error: float = float("nan")
-    models: int = 1
-    centre_residual: float = float("nan")
-    mode: str = "known_poses"
-    fallback: str = ""
 
 
 def sparse_reconstruct(images: Sequence[NDArray[np.uint8]], cameras: NDArray[np.float64], K: NDArray[np.float64],
@@ -159,9 +110,6 @@ def _sparse(images: Sequence[NDArray[np.uint8]], cameras: NDArray[np.float64], K
         raise SparseError(f"no 3D point triangulated ({matched.verified} verified image pairs, keypoints "
                           f"{matched.keypoints})")
     seconds["triangulate"] = time.perf_counter() - t0
-    return SparseResult(points=model.points, colors=model.colors, registered=int(model.registered),
-                        keypoints=[int(k) for k in matched.keypoints], verified_pairs=matched.verified,
-                        mean_track_length=model.mean_track_length, pair_inliers=matched.pair_inliers,
-                        matched_pairs=matched.matched, seconds=seconds, cameras=model.cameras,
-                        mean_reprojection_error=model.mean_reprojection_error, models=model.models,
-                        centre_residual=model.centre_residual, mode=mode, fallback=why)
+    return SparseResult(**vars(model), keypoints=[int(k) for k in matched.keypoints],
+                        verified_pairs=matched.verified, pair_inliers=matched.pair_inliers,
+                        matched_pairs=matched.matched, seconds=seconds, mode=mode, fallback=why)

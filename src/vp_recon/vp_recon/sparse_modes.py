@@ -31,7 +31,7 @@ the points triangulated at the reported poses are kept instead, nothing adjusted
 """
 from __future__ import annotations
 
-from typing import NamedTuple, Optional
+from typing import Optional
 
 import numpy as np
 import pycolmap
@@ -42,8 +42,9 @@ from vp_scene.camera import as_poses, body_from_optical
 from .colmap_io import Matched, log_level, model_at_poses, read_points
 from .errors import SparseError
 from .registration import PoseAnchor, align_model, register_parts
+from .results import SparseModel
 
-__all__ = ["ANCHOR_REPROJECTION_PX", "ANCHOR_ANGLE_DEG", "ANCHOR_ROUNDS", "Model", "build_model",
+__all__ = ["ANCHOR_REPROJECTION_PX", "ANCHOR_ANGLE_DEG", "ANCHOR_ROUNDS", "build_model",
            "known_poses_model", "incremental_model", "anchored_model", "reported_pose_model", "merge_models"]
 
 #: The anchored model's first triangulation: reprojection error (pixels) and ray angle error
@@ -54,22 +55,6 @@ ANCHOR_ANGLE_DEG: float = 8.0
 ANCHOR_ROUNDS: int = 2
 
 
-class Model(NamedTuple):
-    """A sparse model in the world: points (P, 3) and their colours, the mean track length, the
-    (N, 7) camera poses (NaN rows: not registered), the images registered, the mean reprojection
-    error (px; point-weighted over merged models), the number of models merged and the RMS
-    centre residual (m) of their images (NaN for known poses)."""
-
-    points: NDArray[np.float64]
-    colors: NDArray[np.uint8]
-    mean_track_length: float
-    cameras: NDArray[np.float64]
-    registered: int
-    mean_reprojection_error: float
-    models: int
-    centre_residual: float
-
-
 class _AdjustmentDrifted(SparseError):
     """The anchored model's adjustment took the cameras away from the reported poses (a weak model:
     a few dozen points, some of them false tracks, let the poses slide); :func:`build_model`
@@ -78,7 +63,7 @@ class _AdjustmentDrifted(SparseError):
 
 def build_model(matched: Matched, mode: str, cams: NDArray[np.float64], anchor: PoseAnchor,
                 max_residual: float, num_threads: int, use_priors: bool = False,
-                fallback: Optional[str] = "anchored") -> tuple[Model, str, str]:
+                fallback: Optional[str] = "anchored") -> tuple[SparseModel, str, str]:
     """The model of ``mode`` (module docstring), the anchored one in place of a structure from
     motion that failed when ``fallback`` says so: (model, the mode kept, why the SfM was not
     kept or ''). ``cams`` (N, 7): the poses given; ``anchor``: what the models are registered on;
@@ -111,19 +96,19 @@ def build_model(matched: Matched, mode: str, cams: NDArray[np.float64], anchor: 
     return model, "anchored", why
 
 
-def known_poses_model(matched: Matched, cams: NDArray[np.float64], options: object) -> Model:
+def known_poses_model(matched: Matched, cams: NDArray[np.float64], options: object) -> SparseModel:
     """Tracks triangulated at the given poses; an image counts as registered when it observes a point."""
     rec = model_at_poses(matched, cams)
     rec = pycolmap.triangulate_points(rec, matched.database, matched.image_dir, matched.model_dir,
                                       clear_points=True, options=options)
     xyz, rgb, track = read_points(rec)
     seen = sum(1 for im in rec.images.values() if im.has_pose and im.num_points3D > 0)
-    return Model(xyz, rgb, track, as_poses(cams), int(seen), float(rec.compute_mean_reprojection_error()), 1,
+    return SparseModel(xyz, rgb, track, as_poses(cams), int(seen), float(rec.compute_mean_reprojection_error()), 1,
                  float("nan"))
 
 
 def incremental_model(matched: Matched, options: object, anchor: PoseAnchor, use_priors: bool,
-                      max_residual: float) -> Model:
+                      max_residual: float) -> SparseModel:
     """COLMAP's incremental structure from motion of the matched images (its settings set on
     ``options``: intrinsics fixed, thresholds for a small textured plant), every model registered
     on the given poses (:func:`merge_models`); SparseError when it makes nothing usable."""
@@ -146,7 +131,7 @@ def incremental_model(matched: Matched, options: object, anchor: PoseAnchor, use
 
 
 def anchored_model(matched: Matched, options: object, cams: NDArray[np.float64], anchor: PoseAnchor,
-                   max_residual: float) -> Model:
+                   max_residual: float) -> SparseModel:
     """The reconstruction anchored on the given poses (module docstring).
 
     1. the images at the given poses, tracks triangulated from the verified matches with loose
@@ -196,10 +181,10 @@ def anchored_model(matched: Matched, options: object, cams: NDArray[np.float64],
     if not residual <= max_residual:
         raise _AdjustmentDrifted(f"the adjusted model's camera centres lay {residual:.2f} m (RMS) from the reported "
                                  f"ones (more than {max_residual:.2f} m; {len(xyz)} points)")
-    return Model(xyz, rgb, track, est, int(kept.sum()), float(rec.compute_mean_reprojection_error()), 1, residual)
+    return SparseModel(xyz, rgb, track, est, int(kept.sum()), float(rec.compute_mean_reprojection_error()), 1, residual)
 
 
-def reported_pose_model(matched: Matched, options: object, cams: NDArray[np.float64]) -> Model:
+def reported_pose_model(matched: Matched, options: object, cams: NDArray[np.float64]) -> SparseModel:
     """The anchored model's last resort (module docstring): the tracks triangulated at the
     reported poses with the loose thresholds of its first step, nothing adjusted; consistent with
     the reports by construction (centre residual 0), as accurate as they are: a poor model of
@@ -219,11 +204,11 @@ def reported_pose_model(matched: Matched, options: object, cams: NDArray[np.floa
     for im in rec.images.values():
         if im.num_points3D > 0:
             est[idx[im.name]] = poses[idx[im.name]]
-    return Model(xyz, rgb, track, est, int(np.isfinite(est[:, 0]).sum()),
+    return SparseModel(xyz, rgb, track, est, int(np.isfinite(est[:, 0]).sum()),
                  float(rec.compute_mean_reprojection_error()), 1, 0.0)
 
 
-def merge_models(models: list, names: list, anchor: PoseAnchor, max_residual: float = float("inf")) -> Model:
+def merge_models(models: list, names: list, anchor: PoseAnchor, max_residual: float = float("inf")) -> SparseModel:
     """Every model COLMAP's incremental mapper made, each registered to the world on its own
     images' given poses (:func:`vp_recon.registration.align_model`), as one cloud.
 
@@ -272,7 +257,7 @@ def merge_models(models: list, names: list, anchor: PoseAnchor, max_residual: fl
     kept = np.isfinite(est[:, 0])
     seen = int(kept.sum())
     residual = float(np.sqrt(np.mean(np.sum((est[kept, :3] - centres[kept]) ** 2, axis=1))))
-    return Model(np.concatenate(xyz), np.concatenate(rgb), mean(tracks), est, seen,
+    return SparseModel(np.concatenate(xyz), np.concatenate(rgb), mean(tracks), est, seen,
                  mean(errors) if n else float("nan"), len(xyz), residual)
 
 
