@@ -11,7 +11,7 @@ planning seed 0..S-1, one after the other in this process (one torch thread, as 
    scenario and seed and is stopped at T after its call (the objective's ``should_stop``, asked
    between evaluation batches). cmaes and random do not depend on their budget and get the
    registry's bound; sa cools over its budget, so it gets the evaluations that fill T at its
-   rate on this scene, measured just before by a pilot run of ``--pilot`` seconds (not counted).
+   rate on this scene, measured just before by a pilot run of ``--pilot`` evaluations (not counted).
    ``--clock cpu`` gives them egp's CPU time instead (this process's, one thread: what the wall
    time would be on a quiet machine), read on the same egp runs.
 
@@ -99,16 +99,16 @@ def timed_plan(request: Any, points: Any, time_limit: Optional[float] = None, cl
             'load': [load, os.getloadavg()[0]]}
 
 
-def sa_budget(request_of: Any, points: Any, seconds: float, pilot: float, clock: str) -> tuple[int, dict]:
+def sa_budget(request_of: Any, points: Any, seconds: float, pilot: int, clock: str) -> tuple[int, dict]:
     """The evaluations sa makes in ``seconds`` of ``clock`` on this scene: a pilot run of ``pilot``
-    seconds gives the time to its first evaluation and its rate after it. Returns (budget, the
-    pilot's figures)."""
+    evaluations gives the time to its first evaluation and its rate after it. Returns (budget, the
+    pilot's figures; its error when it failed)."""
     from vp_planner.methods import BY_NAME
 
     bound = BY_NAME['sa'].max_evaluations
-    run = timed_plan(request_of(bound), points, pilot, clock)
-    if 'error' in run or run['evaluations'] < 2:
-        return 1, {'pilot': run}
+    run = timed_plan(request_of(pilot), points, clock=clock)
+    if 'error' in run:
+        return 1, {'pilot_error': run['error'], 'pilot_error_msg': run['error_msg']}
     first, last = run['improvements'][0][COLUMN[clock]], run[SECONDS[clock]]
     rate = (run['evaluations'] - 1) / max(last - first, 1e-9)
     budget = int(min(bound, max(1, 1 + rate * (seconds - first))))
@@ -255,15 +255,15 @@ def main(argv=None) -> int:
     ap.add_argument('--seeds', type=int, default=5)
     ap.add_argument('--evaluations', type=int, default=100, help="egp's evaluations (a part's, by parts)")
     ap.add_argument('--initial', type=int, default=50, help="egp's initial design")
-    ap.add_argument('--pilot', type=float, default=2.0, help="seconds of sa's pilot run (its rate)")
+    ap.add_argument('--pilot', type=int, default=100, help="evaluations of sa's pilot run (its rate)")
     ap.add_argument('--clock', default='wall', choices=list(CLOCKS),
                     help="the others get egp's wall time, or its CPU time (a quiet machine's wall time)")
     ap.add_argument('--out', default=str(ROOT / 'results'))
     args = ap.parse_args(argv)
     if REFERENCE not in args.variants:
         ap.error(f'--variants must include {REFERENCE} (its wall time is the others\')')
-    if args.seeds < 1 or args.evaluations < 1 or not 0 <= args.initial <= args.evaluations or args.pilot <= 0:
-        ap.error('--seeds and --evaluations must be >= 1, --initial within 0..--evaluations, --pilot > 0')
+    if args.seeds < 1 or args.evaluations < 1 or not 0 <= args.initial <= args.evaluations or args.pilot < 2:
+        ap.error('--seeds and --evaluations must be >= 1, --initial within 0..--evaluations, --pilot >= 2')
     import torch
 
     torch.set_num_threads(1)  # as the planner node and CLI
