@@ -211,11 +211,15 @@ def summarize(runs: dict, variants: tuple, seeds: int, clock: str = 'wall') -> d
     return out
 
 
+def _seeds(seeds: list) -> str:
+    return f'{seeds[0]}-{seeds[-1]}' if len(seeds) > 1 else str(seeds[0])
+
+
 def markdown(report: dict) -> str:
     load = report['load_1min']
     clock_name = {'wall': 'wall time', 'cpu': 'CPU time'}[report['clock']]
     lines = [f"# The cheap stage at its own speed ({report['date']}, {report['machine']}, plants: {report['models']})",
-             '', f"Best `{report['reward']}` reward reached, mean +- sample std over {report['seeds']} planning seeds, "
+             '', f"Best `{report['reward']}` reward reached, mean +- sample std over planning seeds {_seeds(report['seeds'])}, "
              f"at 10/25/50/100 % of egp's {clock_name} T on the same scenario and seed ({REFERENCE}: "
              f"{report['evaluations']} evaluations, {report['initial']} of them its initial design; row_12 by parts), "
              "and at egp's number of evaluations E. One torch thread; the runs one after the other.", '',
@@ -252,7 +256,8 @@ def main(argv=None) -> int:
     ap.add_argument('--models', default=default_models(), help="PLY folder ('' for procedural plants)")
     ap.add_argument('--scenarios', nargs='+', default=list(CELLS), choices=list(CELLS))
     ap.add_argument('--variants', nargs='+', default=list(VARIANTS), choices=list(VARIANTS))
-    ap.add_argument('--seeds', type=int, default=5)
+    ap.add_argument('--seeds', type=int, default=5, help='planning seeds --seed-from..SEEDS-1')
+    ap.add_argument('--seed-from', type=int, default=0, help='the first seed (processes sharing the cache split the seeds)')
     ap.add_argument('--evaluations', type=int, default=100, help="egp's evaluations (a part's, by parts)")
     ap.add_argument('--initial', type=int, default=50, help="egp's initial design")
     ap.add_argument('--pilot', type=int, default=100, help="evaluations of sa's pilot run (its rate)")
@@ -262,18 +267,24 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if REFERENCE not in args.variants:
         ap.error(f'--variants must include {REFERENCE} (its wall time is the others\')')
-    if args.seeds < 1 or args.evaluations < 1 or not 0 <= args.initial <= args.evaluations or args.pilot < 2:
-        ap.error('--seeds and --evaluations must be >= 1, --initial within 0..--evaluations, --pilot >= 2')
+    for bad, text in ((not 0 <= args.seed_from < args.seeds, f'--seed-from {args.seed_from} must be in 0..{args.seeds - 1}'),
+                      (args.evaluations < 1, f'--evaluations {args.evaluations} must be >= 1'),
+                      (not 0 <= args.initial <= args.evaluations,
+                       f'--initial {args.initial} must be in 0..{args.evaluations} (--evaluations)'),
+                      (args.pilot < 2, f'--pilot {args.pilot} must be >= 2 evaluations')):
+        if bad:
+            ap.error(text)
     import torch
 
     torch.set_num_threads(1)  # as the planner node and CLI
     out = Path(args.out)
     cache = out / 'cache'
     warm_up(args)
+    seeds = range(args.seed_from, args.seeds)
     t0 = time.time()
     runs: dict = {}
     for scenario in args.scenarios:
-        for seed in range(args.seeds):
+        for seed in seeds:
             for v, r in cell_runs(cache, scenario, seed, args).items():
                 runs[(scenario, v, seed)] = r
                 print(f"{scenario} seed {seed} {v}: " + (f"failed ({r['error']}: {r['error_msg']})" if 'error' in r
@@ -281,15 +292,15 @@ def main(argv=None) -> int:
     variants = tuple(v for v in VARIANTS if v in args.variants)
     loads = [x for r in runs.values() for x in r.get('load', [])]
     report = {'machine': machine(), 'date': time.strftime('%Y-%m-%d'), 'models': models_tag(args.models),
-              'reward': variant_request(REFERENCE, num_cameras=4).reward.name, 'seeds': args.seeds,
+              'reward': variant_request(REFERENCE, num_cameras=4).reward.name, 'seeds': list(seeds),
               'evaluations': args.evaluations, 'initial': args.initial, 'variants': list(variants),
               'fractions': list(FRACTIONS), 'torch_threads': 1, 'cores': os.cpu_count(),
               'load_1min': {'min': min(loads, default=math.nan), 'mean': float(np.mean(loads)) if loads else math.nan,
                             'max': max(loads, default=math.nan)},
               'failed': sum(1 for r in runs.values() if 'error' in r), 'runs': len(runs),
               'clock': args.clock,
-              'scenarios': {s: summarize({(v, seed): runs[(s, v, seed)] for v in variants for seed in range(args.seeds)},
-                                         variants, args.seeds, args.clock) for s in args.scenarios},
+              'scenarios': {s: summarize({(v, seed - args.seed_from): runs[(s, v, seed)] for v in variants
+                                          for seed in seeds}, variants, len(seeds), args.clock) for s in args.scenarios},
               'records': {f'{s}/{v}/seed{seed}': r for (s, v, seed), r in runs.items()}}
     name = f"bench_cheap_stage-{models_tag(args.models)}" + ('' if args.clock == 'wall' else f'-{args.clock}')
     write_report(out / f'{name}.json', report)

@@ -42,7 +42,7 @@ def test_failures_and_missing_runs_are_counted_and_pairs_skip_them() -> None:
     assert d['n'] == 2 and d['mean'] == pytest.approx(((0.90 - 0.80) + (0.88 - 0.82)) / 2) and d['both_failed'] == 1
     assert t['paired']['sa']['at_T']['n'] == 1 and t['paired']['sa']['at_T']['missing'] == 0
     assert t['winner_at_T'] == 'cmaes' and t['runner_up'] == 'egp'  # fewest failures first, then the highest mean
-    text = bcs.markdown({'date': 'd', 'machine': 'm', 'models': 'corn50', 'reward': 'coverage', 'seeds': 3,
+    text = bcs.markdown({'date': 'd', 'machine': 'm', 'models': 'corn50', 'reward': 'coverage', 'seeds': [0, 1, 2],
                          'evaluations': 100, 'initial': 50, 'cores': 2, 'clock': 'wall',
                          'load_1min': {'min': 1.0, 'mean': 1.5, 'max': 2.0}, 'scenarios': {'one_plant': t}})
     assert '| cmaes | ' in text and '0.8900 +- 0.0141 (n=2, 1 failed)' in text and '0.8500 (n=1, 2 failed)' in text
