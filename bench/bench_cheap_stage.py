@@ -219,10 +219,11 @@ def markdown(report: dict) -> str:
     load = report['load_1min']
     clock_name = {'wall': 'wall time', 'cpu': 'CPU time'}[report['clock']]
     lines = [f"# The cheap stage at its own speed ({report['date']}, {report['machine']}, plants: {report['models']})",
-             '', f"Best `{report['reward']}` reward reached, mean +- sample std over planning seeds {_seeds(report['seeds'])}, "
-             f"at 10/25/50/100 % of egp's {clock_name} T on the same scenario and seed ({REFERENCE}: "
-             f"{report['evaluations']} evaluations, {report['initial']} of them its initial design; row_12 by parts), "
-             "and at egp's number of evaluations E. One torch thread; the runs one after the other.", '',
+             '', f"Best `{report['reward']}` reward reached, mean +- sample std over planning seeds "
+             f"{_seeds(report['seeds'])}, at 10/25/50/100 % of egp's {clock_name} T on the same scenario and seed "
+             f"({REFERENCE}: {report['evaluations']} evaluations, {report['initial']} of them its initial design; "
+             "row_12 by parts), and at egp's number of evaluations E. One torch thread; a cell's runs one after "
+             "the other.", '',
              f"Machine load (the 1-minute load average before and after each run, this benchmark's own run "
              f"adding about 1; {report['cores']} cores): min {load['min']:.1f}, mean {load['mean']:.1f}, max "
              f"{load['max']:.1f}: "
@@ -257,7 +258,8 @@ def main(argv=None) -> int:
     ap.add_argument('--scenarios', nargs='+', default=list(CELLS), choices=list(CELLS))
     ap.add_argument('--variants', nargs='+', default=list(VARIANTS), choices=list(VARIANTS))
     ap.add_argument('--seeds', type=int, default=5, help='planning seeds --seed-from..SEEDS-1')
-    ap.add_argument('--seed-from', type=int, default=0, help='the first seed (processes sharing the cache split the seeds)')
+    ap.add_argument('--seed-from', type=int, default=0,
+                    help='the first seed (processes sharing the cache split the seeds)')
     ap.add_argument('--evaluations', type=int, default=100, help="egp's evaluations (a part's, by parts)")
     ap.add_argument('--initial', type=int, default=50, help="egp's initial design")
     ap.add_argument('--pilot', type=int, default=100, help="evaluations of sa's pilot run (its rate)")
@@ -267,7 +269,8 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if REFERENCE not in args.variants:
         ap.error(f'--variants must include {REFERENCE} (its wall time is the others\')')
-    for bad, text in ((not 0 <= args.seed_from < args.seeds, f'--seed-from {args.seed_from} must be in 0..{args.seeds - 1}'),
+    for bad, text in ((not 0 <= args.seed_from < args.seeds,
+                       f'--seed-from {args.seed_from} must be in 0..{args.seeds - 1}'),
                       (args.evaluations < 1, f'--evaluations {args.evaluations} must be >= 1'),
                       (not 0 <= args.initial <= args.evaluations,
                        f'--initial {args.initial} must be in 0..{args.evaluations} (--evaluations)'),
@@ -300,7 +303,8 @@ def main(argv=None) -> int:
               'failed': sum(1 for r in runs.values() if 'error' in r), 'runs': len(runs),
               'clock': args.clock,
               'scenarios': {s: summarize({(v, seed - args.seed_from): runs[(s, v, seed)] for v in variants
-                                          for seed in seeds}, variants, len(seeds), args.clock) for s in args.scenarios},
+                                          for seed in seeds}, variants, len(seeds), args.clock)
+                            for s in args.scenarios},
               'records': {f'{s}/{v}/seed{seed}': r for (s, v, seed), r in runs.items()}}
     name = f"bench_cheap_stage-{models_tag(args.models)}" + ('' if args.clock == 'wall' else f'-{args.clock}')
     write_report(out / f'{name}.json', report)
