@@ -60,10 +60,11 @@ class Variant:
 
 #: The planner variants of the benchmarks, the one table they all read: name (the reports' label
 #: and part of every cache name) -> :class:`Variant`. Benchmarks: ``planners`` (bench_planners),
-#: ``fields`` (bench_fields), ``sorties`` (bench_sorties: egp's cases, the baselines' c-cases);
-#: table1's rows name a variant and a reward model each.
+#: ``fields`` (bench_fields), ``sorties`` (bench_sorties: egp's cases, the baselines' c-cases),
+#: ``cheap`` (bench_cheap_stage: egp's wall time given to the others); table1's rows name a variant
+#: and a reward model each.
 VARIANTS = {
-    'egp': Variant({'method': 'egp'}, ('planners', 'fields', 'sorties')),       # the default planner
+    'egp': Variant({'method': 'egp'}, ('planners', 'fields', 'sorties', 'cheap')),  # the default planner
     'egp-random-init': Variant({'method': 'egp', 'structured_init': 0}, ('planners',)),  # the paper's random design
     'egp-paper-config': Variant({'method': 'egp', 'structured_init': 0, 'bo_mode': 'global'}),  # the paper's BO
     'egp-one-space': Variant({'method': 'egp', 'parts': 1}, ('fields',)),       # a field in one 6N-dim space
@@ -72,8 +73,9 @@ VARIANTS = {
     'gp': Variant({'method': 'gp'}),
     'circle': Variant({'method': 'circle'}, ('planners', 'fields', 'sorties')),
     'arc': Variant({'method': 'arc'}, ('planners', 'fields', 'sorties')),
-    'sa': Variant({'method': 'sa'}, ('planners', 'fields')),
-    'random': Variant({'method': 'random'}, ('planners',)),
+    'sa': Variant({'method': 'sa'}, ('planners', 'fields', 'cheap')),
+    'random': Variant({'method': 'random'}, ('planners', 'cheap')),
+    'cmaes': Variant({'method': 'cmaes'}, ('cheap',)),
     'lawnmower': Variant({'method': 'lawnmower'}, ('fields',)),                 # nadir, 70 % overlap
     'lawnmower-oblique': Variant({'method': 'lawnmower', 'lawnmower_tilt': math.radians(30.0)}, ('fields',)),
 }

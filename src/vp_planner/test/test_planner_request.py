@@ -60,7 +60,7 @@ def test_request_round_trips_and_is_frozen(realizations: np.ndarray) -> None:
 
 
 @pytest.mark.parametrize("fields, error, text", [
-    ({"method": "cmaes"}, UnknownMethodError, "unknown method"),
+    ({"method": "nelder-mead"}, UnknownMethodError, "unknown method"),
     ({"num_cameras": 1}, InvalidNumCamerasError, "from 2 to 100"),
     ({"num_cameras": 2.5}, InvalidNumCamerasError, "integer"),
     ({"evaluations": 0}, InvalidBudgetError, "evaluations must be >= 1"),

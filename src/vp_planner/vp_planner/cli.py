@@ -27,7 +27,7 @@ dict) and its top-level ``scenario`` the layout's name.
 Among candidate views (README "From a real flight"): ``--candidates FOLDER --prior PRIOR.ply``
 plans N of the flight folder's poses (poses.csv or COLMAP's text model; a rig's stops, a gantry,
 the images of an earlier flight) on the prior cloud (a PLY in the folder's frame, e.g. a first
-reconstruction), with every method but lawnmower (:mod:`vp_planner.candidates`); the image size
+reconstruction), with every method but cmaes and lawnmower (:mod:`vp_planner.candidates`); the image size
 and the field of view are the folder's camera's unless given. plan.json then names the chosen
 images (``images``, ``selected``: their indices among the folder's poses), the folder
 (``candidates``) and the prior (``prior``), and has no ``scene``; ``python -m vp_recon.cli

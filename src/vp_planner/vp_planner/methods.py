@@ -83,6 +83,8 @@ REGISTRY: tuple[Method, ...] = (
            "vp_planner.baselines:run_sa", candidates=_C + "run_sa"),
     Method("random", "uniformly random feasible plans", "vp_planner.baselines:run_random",
            candidates=_C + "run_random"),
+    Method("cmaes", "CMA-ES (the cma package, IPOP restarts) in the unit cube, from the best structured plan",
+           "vp_planner.cmaes:run_cmaes"),
     Method("lawnmower", "the grid survey farmers fly: flight lines with a set overlap, one evaluation",
            "vp_planner.baselines:run_lawnmower", evaluations=1, settings="lawnmower"),
 )

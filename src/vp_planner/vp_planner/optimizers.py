@@ -29,6 +29,8 @@ the best-so-far reward after every evaluation, and return the best *feasible* pl
   choose N of them by simulated annealing (swap one viewpoint for a nearby candidate,
   Metropolis acceptance, geometric cooling).
 * ``random``: uniformly random feasible plans of the same space.
+* ``cmaes``: CMA-ES (the ``cma`` package, :mod:`vp_planner.cmaes`) in the same space, from the
+  best of its structured plans, with IPOP restarts while the budget lasts.
 * ``lawnmower``: the grid survey farmers fly: flight lines along the field's longer side at the
   lowest height (at least ``min_standoff`` above the canopy) at which the N images cover the
   field with a set overlap, nadir or tilted (oblique); one evaluation, no tuning.
@@ -125,9 +127,11 @@ class PlanResult:
         rewards: (evaluations,) reward of every evaluated plan (0 for infeasible ones).
         reward_model: the reward model the plan maximizes.
         steps: egp/gp: one record per BO step (model drawn, weights, improved, trust region); by
-            parts: the steps of the joint refinement.
+            parts: the steps of the joint refinement; cmaes: one record per CMA-ES run (population,
+            generations, best reward, why it stopped).
         initial_best: egp/gp: the best reward of the initial design (by parts: of the union of
-            the part plans, before the joint refinement).
+            the part plans, before the joint refinement); cmaes: of the structured plans it
+            starts from.
         parts: egp/gp by parts: one record per part (cameras, points, evaluations, the part's own
             reward and its initial design's best); None otherwise.
         fixed_cameras: M, the cameras already flown the reward counted (0: a first sortie).
