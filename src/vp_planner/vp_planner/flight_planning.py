@@ -19,10 +19,13 @@ evaluations, :func:`flight_stage` spends the flight budget F:
    scores worse than the best fixed pattern), then the pool in order, in batches of the
    simulator's workers, one flight a plan (each flight its own wind and capture draw).
 3. **The confirmation.** The last ``confirm`` flights fly the best plans again under new draws
-   (one wind realization decides little between close plans); a plan's score is the mean of its
-   flights' map Chamfer distances, a failed flight counting as +inf (:attr:`FlightScore.value`).
-4. **The choice.** The plan of the lowest score; ties (equal or all failed) go to the higher
-   cheap reward. When every flight failed the cheap reward's best plan is kept and the result says so.
+   (one wind realization decides little between close plans, and the best of many single flights
+   is the luckiest as much as the best); a plan's score is the mean of its flights' map Chamfer
+   distances, a failed flight counting as +inf (:attr:`FlightScore.value`).
+4. **The choice.** Among the plans flown most often (the confirmed ones), the plan of the lowest
+   score; where none of them reconstructed in every flight, among all plans flown; ties go to the
+   higher cheap reward. When every flight failed the cheap reward's best plan is kept and the
+   result says so.
 
 Flights run on whatever the :class:`~vp_scene.flights.FlightSimulator` runs them on (a Dask
 cluster, the recon node); a cancel is seen between batches and inside a batch.
@@ -148,11 +151,11 @@ def flight_stage(space: ViewSpace, obj: Objective, simulator: FlightSimulator, f
         simulator: flies plans (:class:`~vp_scene.flights.FlightSimulator`).
         flights: F >= 1, the flights in all (confirmation included).
         seed: the planning run's seed: the flights' draws (:func:`vp_scene.flights.flight_draws`).
-        evaluations: the cheap budget each pattern is tuned with (the baselines').
+        evaluations: the cheap budget each pattern is tuned with (the run's, as the baselines').
         arc_spacing: the arc pattern's spacing (rad).
         wind_variance: the variance of the flights' n_wind (the scene's wind model).
         confirm: flights re-flying the best plans at the end (default: the simulator's workers,
-            when F leaves room for them after the patterns and one more plan).
+            at least 2, when F leaves room for them after the patterns and one more plan).
 
     Raises:
         PlanningCancelled: ``should_stop()`` became True.
@@ -163,7 +166,7 @@ def flight_stage(space: ViewSpace, obj: Objective, simulator: FlightSimulator, f
     q = max(1, int(getattr(simulator, "workers", 1)))
     patterns = _patterns(space, obj, evaluations, arc_spacing, rng)
     if confirm is None:
-        confirm = q if flights >= len(patterns) + 1 + q else 0
+        confirm = max(2, q) if flights >= len(patterns) + 1 + max(2, q) else 0
     confirm = max(0, min(int(confirm), flights - 1))
     pool = flight_pool(space, obj, patterns, max(len(patterns), flights - confirm))
     draws = iter(flight_draws(seed, flights, wind_variance))
@@ -190,7 +193,9 @@ def flight_stage(space: ViewSpace, obj: Objective, simulator: FlightSimulator, f
         ranked = sorted(range(len(pool)), key=lambda i: (pool[i].score, -pool[i].reward))
         ranked = [i for i in ranked if pool[i].flights and math.isfinite(pool[i].score)] or ranked[:1]
         fly(ranked[:min(q, flights - len(records))])
-    chosen = min(range(len(pool)), key=lambda i: (pool[i].score, -pool[i].reward))
+    most = max(len(p.flights) for p in pool)
+    confirmed = [i for i in range(len(pool)) if len(pool[i].flights) == most and math.isfinite(pool[i].score)]
+    chosen = min(confirmed or range(len(pool)), key=lambda i: (pool[i].score, -pool[i].reward))
     if not math.isfinite(pool[chosen].score):  # nothing reconstructed: the cheap reward decides
         chosen = max(range(len(pool)), key=lambda i: pool[i].reward)
     best = pool[chosen]

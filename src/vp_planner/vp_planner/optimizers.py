@@ -274,7 +274,7 @@ def plan_views(request: PlanRequest, realizations: Any, callback: Optional[Callb
         note = "no flight simulator: the cheap reward chose"
     elif n_flights and not stopped and best is not None:
         try:
-            outcome = flight_stage(space, obj, simulator, n_flights, q.seed, q.evaluations, q.arc.spacing,
+            outcome = flight_stage(space, obj, simulator, n_flights, q.seed, budget, q.arc.spacing,
                                    float(getattr(simulator, "wind_variance")), rng=rng, on_flight=on_flight,
                                    should_stop=should_stop)
         except PlanningCancelled:
