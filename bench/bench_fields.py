@@ -39,6 +39,7 @@ import numpy as np
 
 if not __package__:  # python bench/bench_fields.py: as python -m bench.bench_fields (bench/_script.py)
     import _script  # noqa: F401
+from vp_scene.limits import seed_arg  # noqa: E402
 from bench.cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
 from bench.common import (ROOT, VARIANTS, add_capture, baselines, cached, capture_of, capture_tag,  # noqa: E402
                           chamfer_text, default_models, flight_simulator, flight_tag, known_realizations, machine,
@@ -73,7 +74,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument("--width", type=int, default=IMAGE_SIZE[0])
     ap.add_argument("--height", type=int, default=IMAGE_SIZE[1])
     ap.add_argument("--threads", type=int, default=0, help="reconstruction threads (0: all cores)")
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=seed_arg, default=0)
     ap.add_argument("--out", default=str(ROOT / "results"))
     add_capture(ap)
     add_cluster_args(ap)

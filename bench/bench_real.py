@@ -36,6 +36,7 @@ import numpy as np
 
 if not __package__:  # python bench/bench_real.py: as python -m bench.bench_real (bench/_script.py)
     import _script  # noqa: F401
+from vp_scene.limits import seed_arg  # noqa: E402
 from bench.common import ROOT, cached, machine, write_report  # noqa: E402
 
 NS = (6, 8, 12)
@@ -54,7 +55,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument('--random', type=int, default=20, help='random subsets a size')
     ap.add_argument('--evaluations', type=int, default=100, help='reward evaluations of a plan')
     ap.add_argument('--initial', type=int, default=50, help="egp's initial design")
-    ap.add_argument('--seed', type=int, default=0)
+    ap.add_argument('--seed', type=seed_arg, default=0)
     ap.add_argument('--threads', type=int, default=2, help='threads of COLMAP and OpenCV')
     ap.add_argument('--out', type=Path, default=ROOT / 'results')
     args = ap.parse_args(argv)

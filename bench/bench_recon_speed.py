@@ -32,6 +32,7 @@ import numpy as np
 
 if not __package__:  # python bench/bench_recon_speed.py: as python -m bench.bench_recon_speed (bench/_script.py)
     import _script  # noqa: F401
+from vp_scene.limits import seed_arg  # noqa: E402
 from bench.stats import paired_interval  # noqa: E402
 from bench.common import (ROOT, SCENARIOS, cached, default_models, machine, models_tag, plan_cell,  # noqa: E402
                           write_report)
@@ -133,7 +134,7 @@ def main() -> int:
     ap.add_argument('--scenarios', nargs='+', default=['one_plant', 'three_row'], choices=sorted(SCENARIOS))
     ap.add_argument('--variants', nargs='+', default=list(VARIANTS), choices=list(VARIANTS))
     ap.add_argument('--realizations', type=int, default=5)
-    ap.add_argument('--seed', type=int, default=0, help='planning seed of the egp plans')
+    ap.add_argument('--seed', type=seed_arg, default=0, help='planning seed of the egp plans')
     ap.add_argument('--width', type=int, default=IMAGE_SIZE[0])
     ap.add_argument('--height', type=int, default=IMAGE_SIZE[1])
     ap.add_argument('--threads', type=int, default=1, help='threads of each reconstruction (default 1)')

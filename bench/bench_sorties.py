@@ -36,6 +36,7 @@ import numpy as np
 
 if not __package__:  # python bench/bench_sorties.py: as python -m bench.bench_sorties (bench/_script.py)
     import _script  # noqa: F401
+from vp_scene.limits import seed_arg  # noqa: E402
 from bench.cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
 from bench.stats import rank_key  # noqa: E402
 from vp_planner.reward_models import (DEFAULT_RECONSTRUCTED_WEIGHT, DEFAULT_REWARD_MODEL, DEFAULT_TAU,  # noqa: E402
@@ -66,7 +67,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument('--scenarios', nargs='+', default=list(SORTIES), choices=list(SORTIES))
     ap.add_argument('--evals', type=int, default=100)
     ap.add_argument('--init', type=int, default=50)
-    ap.add_argument('--seed', type=int, default=0)
+    ap.add_argument('--seed', type=seed_arg, default=0)
     ap.add_argument('--realizations', type=int, default=2, help='wind realizations reconstructed')
     ap.add_argument('--width', type=int, default=IMAGE_SIZE[0])
     ap.add_argument('--height', type=int, default=IMAGE_SIZE[1])

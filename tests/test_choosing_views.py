@@ -71,7 +71,8 @@ def test_bad_choices_are_one_line_and_exit_2(flight, tmp_path: Path, capsys) -> 
         assert err.startswith("plan: error:") and text in err and len(err.splitlines()) == 1
         assert not (tmp_path / "p" / "plan.json").exists()
     bad = tmp_path / "bad.json"
-    bad.write_text(json.dumps({"images": ["view_000.png", "nowhere.png"]}))
+    bad.write_text(json.dumps({"cameras": [[0, 0, 1, 1, 0, 0], [1, 0, 1, 1, 0, 0]],
+                               "images": ["view_000.png", "nowhere.png"]}))
     assert recon(["--images", str(folder), "--select", str(bad), "--out", str(tmp_path / "r")]) == 2
     err = capsys.readouterr().err
     assert "recon: error: --select" in err and "nowhere.png" in err and not (tmp_path / "r").exists()

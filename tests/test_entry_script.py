@@ -27,8 +27,10 @@ from node_process import NodeProcess  # tools/, on sys.path through conftest.py
 REPO = Path(__file__).resolve().parents[1]
 SCRIPT = REPO / "tools" / "run_suite.py"
 ECHO = REPO / "tests" / "echo_camera_plan.py"
-SMALL = ["--scenario", "one_plant", "--cameras", "4", "--points-per-plant", "3000", "--realizations", "2",
-         "--width", "800", "--height", "600", "--capture", "ideal"]  # the plumbing; realistic: test_recon_capture
+#: a small mission under the default (realistic) capture: hover and localization errors, ground markers
+SMALL_REALISTIC = ["--scenario", "one_plant", "--cameras", "4", "--points-per-plant", "3000", "--realizations", "2",
+                   "--width", "800", "--height", "600"]
+SMALL = [*SMALL_REALISTIC, "--capture", "ideal"]  # the plumbing; realistic: test_recon_capture, test_two_sorties
 
 
 def alive(pid: int) -> bool:
@@ -96,13 +98,14 @@ def test_end_to_end_small_mission(ros_env, tmp_path) -> None:
 
 
 def test_two_sorties(ros_env, tmp_path) -> None:
-    """Issue 21: --rounds 2 plans a second sortie of M cameras given the N flown and their
-    reconstruction (the goal's fixed_cameras and reconstruction), and the recon reconstructs from
-    all N + M images; summary.json has one record per sortie. As `make run ROUNDS=2`: with
-    drones, whose images the recon takes (source fleet), the first sortie's read back from its
-    capture sets."""
+    """--rounds 2 plans a second sortie of M cameras given the N flown and their reconstruction
+    (the goal's fixed_cameras and reconstruction), and the recon reconstructs from all N + M
+    images; summary.json has one record per sortie. As `make run ROUNDS=2` flies it: the default
+    realistic capture (ground markers), drones whose images the recon takes (source fleet), the
+    first sortie's read back from its capture sets with the field's markers, so that the two
+    sets are one reconstruction placed on the same ground control."""
     out = tmp_path / "run"
-    proc = subprocess.run([sys.executable, str(SCRIPT), *SMALL, "--realizations", "1", "--method", "circle",
+    proc = subprocess.run([sys.executable, str(SCRIPT), *SMALL_REALISTIC, "--realizations", "1", "--method", "circle",
                            "--evals", "16", "--rounds", "2", "--cameras2", "2", "--drones", "4", "--out", str(out),
                            "--timeout", "500"], env=ros_env, capture_output=True, text=True, timeout=560)
     log = proc.stdout + proc.stderr
@@ -111,7 +114,7 @@ def test_two_sorties(ros_env, tmp_path) -> None:
     assert "with 4 cameras already flown" in log  # the planner counted them
     assert "with the 4 images of the cameras already flown" in log  # the recon read sortie 1's back
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["source"] == "fleet"
+    assert summary["source"] == "fleet" and summary["capture"] == "realistic"
     first, second = summary["rounds"]
     assert (first["num_cameras"], first["fixed_cameras"], first["images"]) == (4, 0, 4)
     assert (second["num_cameras"], second["fixed_cameras"], second["images"]) == (2, 4, 6)
@@ -119,6 +122,10 @@ def test_two_sorties(ros_env, tmp_path) -> None:
     for r in (first, second):
         assert 0 < r["reward"] <= 1 and math.isfinite(r["chamfer_mean"]) and r["chamfer_mean"] > 0 and r["seconds"] > 0
     assert summary["chamfer_mean"] == second["chamfer_mean"] and summary["cameras"] == second["cameras"]
+    assert summary["registered_images"] > 4  # one model: images of both sorties registered together
+    sets = sorted(out.glob("plan-*/captures/realization_0"))  # the capture sets, with the field's markers
+    assert [len(list(d.glob("view_*.png"))) for d in sets] == [4, 6], sets
+    assert (sets[0] / "markers.csv").read_text() == (sets[1] / "markers.csv").read_text()
     types, messages, _stats = read_recording(out / "run.mcap")
     infos = messages["/camera_plan/info"]
     assert [len(m.fixed_poses) for m in infos] == [0, 4]  # the second plan names the cameras flown
@@ -159,6 +166,26 @@ def read_recording(path: Path) -> tuple[dict, dict, dict]:
             types[channel.topic] = schema.name
             messages.setdefault(channel.topic, []).append(decoded)
     return types, messages, summary.statistics
+
+
+def standard_reads(path: Path) -> dict:
+    """reader -> topic -> messages of an MCAP file as a user's script reads it: mcap_ros2's
+    ``read_ros2_messages`` (decoded) and mcap's ``make_reader(...).iter_messages()`` (raw); both
+    read the footer at the file's end first, also of a file whose writer was killed."""
+    import warnings
+
+    from mcap.reader import make_reader
+
+    with warnings.catch_warnings():  # mcap_ros2.reader warns that it is deprecated; users still call it
+        warnings.simplefilter("ignore", DeprecationWarning)
+        from mcap_ros2.reader import read_ros2_messages
+    reads: dict = {"read_ros2_messages": {}, "make_reader": {}}
+    for m in read_ros2_messages(str(path)):
+        reads["read_ros2_messages"].setdefault(m.channel.topic, []).append(m.ros_msg)
+    with open(path, "rb") as f:
+        for _schema, channel, message in make_reader(f).iter_messages():
+            reads["make_reader"].setdefault(channel.topic, []).append(message)
+    return reads
 
 
 def check_recording(path: Path, summary: dict, drones: int, realizations: int) -> None:
@@ -227,11 +254,40 @@ def test_killing_the_planner_stops_everything(ros_env, tmp_path) -> None:
     assert not wait_gone(pids, 10.0), text[-3000:]
 
 
-def test_interrupting_the_script_leaves_a_readable_recording(ros_env, tmp_path) -> None:
-    """SIGINT (Ctrl-C) mid-plan: exit 130, the nodes stopped, and run.mcap closed (it has its
-    summary) with what was published so far: the scene, no plan yet."""
+def test_a_running_script_holds_its_folder_and_ctrl_c_leaves_a_readable_recording(ros_env, tmp_path,
+                                                                                   capsys) -> None:
+    """While the script plans, its --out is locked: a second run_suite.py into it (a real second
+    process) is refused in one line naming the first, exit 2, and moves nothing aside (it moved
+    the first run's folder mid-run: two plan folders, one summary, run.mcap of two recorders), and
+    so are the planner's and the recon's CLIs. Then SIGINT (Ctrl-C): exit 130, the nodes stopped,
+    run.mcap closed (it has its summary) with what was published so far (the scene, no plan
+    yet), and the folder free again."""
+    from vp_planner.cli import main as plan_main
+    from vp_recon.cli import main as recon_main
+    from vp_scene.folders import FolderLock
+
     script, pids = planning_started(ros_env, tmp_path)
+    out = tmp_path / "run"
     try:
+        held = sorted(p.name for p in out.iterdir())
+        second = subprocess.run([sys.executable, str(SCRIPT), *SMALL, "--method", "circle", "--out", str(out)],
+                                env=ros_env, capture_output=True, text=True, timeout=120)
+        refusal = f"--out {out} is in use by another run (pid {script.pid}): wait until it ends, or give another --out"
+        assert second.returncode == 2, second.stdout + second.stderr
+        assert (second.stdout + second.stderr).strip().splitlines() == [f"error: {refusal}"], second.stdout + second.stderr
+        capsys.readouterr()
+        assert plan_main(["--scenario", "one_plant", "--method", "circle", "--cameras", "2", "--evals", "2",
+                          "--out", str(out), "--no-progress"]) == 2
+        plan = tmp_path / "plan.json"
+        plan.write_text(json.dumps({"scenario": "one_plant", "method": "ring", "reward": 0.5, "fov": math.pi / 2,
+                                    "cameras": [[1.4, 0, 1.2, -1.4, 0, -0.3], [-1.4, 0, 1.2, 1.4, 0, -0.3]],
+                                    "scene": {"scenario": "one_plant", "models": None, "seed": 0,
+                                              "points_per_plant": 2000, "realizations": 2}}))
+        assert recon_main(["--plan", str(plan), "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert err.splitlines() == [f"plan: error: {refusal}", f"recon: error: {refusal}"], err
+        assert [p.name for p in tmp_path.iterdir() if p.name.startswith("run-")] == []  # nothing moved aside
+        assert set(held) <= {p.name for p in out.iterdir()} and script.alive()
         script.signal(signal.SIGINT)
         code = script.wait(60)
     finally:
@@ -239,17 +295,26 @@ def test_interrupting_the_script_leaves_a_readable_recording(ros_env, tmp_path) 
     text = script.output()
     assert code == 130, text[-3000:]
     assert not wait_gone(pids, 10.0), text[-3000:]
-    types, messages, _stats = read_recording(tmp_path / "run" / "run.mcap")
+    types, messages, _stats = read_recording(out / "run.mcap")
     assert types["/scene/noisy_points"] == "sensor_msgs/msg/PointCloud2" and len(messages["/scene/noisy_points"]) == 1
     assert "/camera_plan" not in messages
+    FolderLock.check(out)
 
 
 def test_sigkill_of_the_script_takes_the_nodes_with_it(ros_env, tmp_path) -> None:
-    """Issue 10, item 3: no orphaned nodes when the supervisor itself is killed."""
+    """No orphaned nodes when the supervisor itself is killed. run.mcap reads with the standard
+    readers (mcap_ros2's read_ros2_messages, mcap's make_reader) at once, while the recorder still
+    finishes it (they raised RecordLengthLimitExceeded: no footer), and once the recorder has
+    ended it is closed with its summary, the scene in it. The folder's lock dies with the run."""
+    from vp_recon.recording import is_closed
+    from vp_scene.folders import FolderLock
+
     script, pids = planning_started(ros_env, tmp_path)
+    bag = tmp_path / "run" / "run.mcap"
     try:
         script.signal(signal.SIGKILL)
         assert script.wait(10) == -signal.SIGKILL
+        at_once = standard_reads(bag)
         t0 = time.monotonic()
         left = wait_gone(pids, 15.0)
     finally:
@@ -257,17 +322,26 @@ def test_sigkill_of_the_script_takes_the_nodes_with_it(ros_env, tmp_path) -> Non
             if alive(pid):
                 os.kill(pid, signal.SIGKILL)
     assert not left, f"still running {time.monotonic() - t0:.1f} s after the script was killed: {left}"
+    assert is_closed(bag)  # the recorder finished it on its parent-death signal
+    closed = standard_reads(bag)
+    for reader, topics in closed.items():
+        assert len(topics["/scene/noisy_points"]) == 1, (reader, sorted(topics))
+        assert all(len(at_once[reader].get(t, [])) <= len(m) for t, m in topics.items()), (reader, at_once, closed)
+    FolderLock.check(tmp_path / "run")  # no lock left behind by the killed run
 
 
 def test_a_dead_node_is_reported_last_without_tracebacks(ros_env, tmp_path) -> None:
-    """Issue 10, item 11: the recon exits at once with a one-line error (bad width); the script
-    stops the other two; its last line names the node and repeats that error, and no node prints
-    a traceback while being stopped."""
-    earlier = tmp_path / "run"  # Hardening III, item 8: make run twice lost (and mixed) the first run
+    """The scene node exits at once with a one-line error (its layout names a plant model that
+    needs a models folder: the script reads the layout, the scene resolves its models); the script
+    stops the others; its last line names the node and repeats that error, and no node prints a
+    traceback while being stopped."""
+    earlier = tmp_path / "run"  # make run twice lost (and mixed) the first run
     earlier.mkdir()
     (earlier / "summary.json").write_text('{"earlier": true}')
     (earlier / "run.mcap").write_bytes(b"the earlier recording")
-    script = start_script(ros_env, tmp_path, "--method", "circle", "--evals", "4", "--width", "4",
+    layout = tmp_path / "field.yaml"
+    layout.write_text("grid:\n  rows: 1\n  columns: 2\n  model: no_such_plant\n")
+    script = start_script(ros_env, tmp_path, "--method", "circle", "--evals", "4", "--scenario", str(layout),
                           "--timeout", "120")
     try:
         code = script.wait(120)
@@ -276,7 +350,7 @@ def test_a_dead_node_is_reported_last_without_tracebacks(ros_env, tmp_path) -> N
     text = script.output()
     assert code == 3, text[-3000:]
     last = text.strip().splitlines()[-1]
-    assert 'node "recon" died (exit code 2)' in last and "width" in last, text[-3000:]
+    assert 'node "scene" died (exit code 2)' in last and "no_such_plant" in last, text[-3000:]
     assert "Traceback" not in text and "KeyboardInterrupt" not in text, text[-6000:]
     # the earlier run was moved aside, whole, before this one started: nothing lost, nothing mixed
     (moved,) = [p for p in tmp_path.iterdir() if re.fullmatch(r"run-\d{8}-\d{6}", p.name)]
@@ -284,6 +358,41 @@ def test_a_dead_node_is_reported_last_without_tracebacks(ros_env, tmp_path) -> N
     assert sorted(p.name for p in moved.iterdir()) == ["run.mcap", "summary.json"]
     assert (moved / "summary.json").read_text() == '{"earlier": true}'
     assert not (earlier / "summary.json").exists() and (earlier / "recon.log").exists()
+
+
+def test_a_run_whose_outputs_are_not_all_written_fails_with_output_not_writable(ros_env, tmp_path) -> None:
+    """The suite on a full disk logged 'could not write the outputs of realization 0', then printed
+    the Chamfer, exited 0 and wrote error_code 0. A realization whose files cannot be written (here
+    a folder stands where its cloud goes, put there as the plan's folder appears) fails the plan:
+    its score and the aggregate say OUTPUT_NOT_WRITABLE naming the file, summary.json records it,
+    the script exits 1 with that as its last line and prints no Chamfer."""
+    out = tmp_path / "run"
+    script = start_script(ros_env, tmp_path, "--method", "circle", "--evals", "16", "--recon-workers", "1",
+                          "--timeout", "300")
+    try:
+        deadline = time.monotonic() + 240
+        while not list(out.glob("plan-*")):
+            assert script.poll() is None and time.monotonic() < deadline, script.output()[-3000:]
+            time.sleep(0.02)
+        (plan_dir,) = out.glob("plan-*")
+        for k in (0, 1):  # the realizations reconstruct one after the other: at least one is blocked
+            try:
+                (plan_dir / f"recon_{k}.ply").mkdir()
+            except FileExistsError:
+                pass
+        code = script.wait(240)
+    finally:
+        script.stop()
+    text = script.output()
+    assert code == 1, text[-3000:]
+    last = text.strip().splitlines()[-1]
+    assert last.startswith("error: reconstruction failed (error_code 6 OUTPUT_NOT_WRITABLE): realization ") and \
+        f"its outputs are not all written: could not write {plan_dir}/recon_" in last, text[-3000:]
+    assert "Chamfer distance x100" not in text
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["error_code"] == 6 and summary["chamfer_mean"] is None and "Is a directory" in summary["error_msg"]
+    failed = [r for r in summary["per_realization"] if r["error_code"] == 6]
+    assert len(failed) == 1 and "could not write" in failed[0]["error_msg"], summary["per_realization"]
 
 
 def test_an_out_of_other_files_is_refused(tmp_path) -> None:
@@ -295,8 +404,33 @@ def test_an_out_of_other_files_is_refused(tmp_path) -> None:
     with pytest.raises(FileExistsError, match="holds other files"):
         run_suite.prepare_out(tmp_path)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
-    assert run_suite.prepare_out(tmp_path / "new") is None and (tmp_path / "new").is_dir()
-    assert run_suite.prepare_out(tmp_path / "new") is None  # empty: used as it is
+    lock, moved = run_suite.prepare_out(tmp_path / "new")
+    assert moved is None and (tmp_path / "new").is_dir()
+    lock.release()
+    lock, moved = run_suite.prepare_out(tmp_path / "new")
+    assert moved is None  # empty: used as it is
+    lock.release()
+
+
+def test_a_domain_id_outside_ros_range_is_a_usage_error(monkeypatch, capsys) -> None:
+    """--domain-id 300 gave Fast DDS's raw port error once the nodes started; the range ROS 2
+    documents (0-232) is checked at parse time, for $ROS_DOMAIN_ID too."""
+    import run_suite
+
+    for argv, env, said in ((["--domain-id", "300"], "7", "--domain-id must be in 0-232, got 300"),
+                            (["--domain-id", "-1"], "7", "--domain-id must be in 0-232, got -1"),
+                            ([], "300", "ROS_DOMAIN_ID (environment) must be an integer in 0-232, got '300'"),
+                            ([], "abc", "ROS_DOMAIN_ID (environment) must be an integer in 0-232, got 'abc'")):
+        monkeypatch.setenv("ROS_DOMAIN_ID", env)
+        with pytest.raises(SystemExit) as exited:
+            run_suite.parse_args(argv)
+        assert exited.value.code == 2
+        assert capsys.readouterr().err.strip().splitlines()[-1].endswith(f"error: {said}"), argv
+    assert run_suite.parse_args(["--domain-id", "232"]).domain_id == 232
+    monkeypatch.setenv("ROS_DOMAIN_ID", "0")
+    assert run_suite.parse_args([]).domain_id == 0
+    monkeypatch.delenv("ROS_DOMAIN_ID")
+    assert 10 <= run_suite.parse_args([]).domain_id < 210
 
 
 def test_layout_file_goes_to_the_scene_node_as_an_absolute_path(monkeypatch) -> None:

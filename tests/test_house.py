@@ -97,7 +97,7 @@ HOMES = {
     "vp_scene.sim_drone": ["fly_toward", "photograph", "Photographs"],
     "vp_scene.render": ["Renderer", "RenderError"],
     "vp_scene.meshing": ["scene_meshes"],
-    "vp_scene.folders": ["ResultFolder", "new_run_folder", "move_aside"],
+    "vp_scene.folders": ["ResultFolder", "new_run_folder", "move_aside", "FolderLock"],
     "vp_planner.designs": ["random_plans", "structured_plans"],
     "vp_recon.errors": ["ReconError", "validate_cameras", "check_plan_size", "ensure_writable_dir"],
     "vp_recon.config": ["ReconConfig", "matching_method"],

@@ -70,7 +70,7 @@ DESCRIBED = {
         "num_cameras": (INT, 2, 100, False), "evaluations": (INT, 1, 100000, False),
         "fov": (DOUBLE, 0.0, math.pi, False), "lawnmower_overlap": (DOUBLE, 0.0, 0.95, False),
         "lawnmower_tilt": (DOUBLE, 0.0, math.radians(60.0), False), "num_threads": (INT, 1, INT64_MAX, True),
-        "min_standoff": (DOUBLE, 0.0, math.inf, False), "method": None,
+        "min_standoff": (DOUBLE, 0.0, math.inf, False), "method": None, "seed": (INT, 0, 2 ** 32 - 1, False),
         "tau": (DOUBLE, 0.0, math.inf, False), "reconstructed_weight": (DOUBLE, 0.0, 1.0, False)},
         ("num_cameras", 101), ("num_threads", 2)),
     "dispatcher": ("vp_planner", "dispatcher", {"drones": ["d0", "d1"]}, {
@@ -78,11 +78,12 @@ DESCRIBED = {
         "drones": (None, None, None, True), "assignment": None},
         ("min_altitude", -0.5), ("drones", ["d0"])),
     "scene": ("vp_scene", "scene", {"points_per_plant": 200, "realizations": 2}, {
-        "realizations": (INT, 1, INT64_MAX, False), "levels": (INT, 1, INT64_MAX, False),
+        "realizations": (INT, 1, 100, False), "points_per_plant": (INT, 1, 1_000_000, False),
+        "seed": (INT, 0, 2 ** 32 - 1, False), "levels": (INT, 1, INT64_MAX, False),
         "wind_variance": (DOUBLE, 0.0, math.inf, False), "scenario": None},
         ("levels", 0), None),
     "recon": ("vp_recon", "recon", {}, {
-        "width": (INT, 16, INT64_MAX, False), "sensor_noise": (DOUBLE, 0.0, 0.5, False),
+        "width": (INT, 16, 16384, False), "sensor_noise": (DOUBLE, 0.0, 0.5, False),
         "hover_attitude_sigma": (DOUBLE, 0.0, 10.0, False), "max_realizations": (INT, 0, INT64_MAX, False),
         "max_cameras": (INT, 2, INT64_MAX, False)},
         ("sensor_noise", 0.9), None),

@@ -36,7 +36,10 @@ def die_with_parent(sig: int = signal.SIGTERM) -> Callable[[], None]:
     """A ``preexec_fn`` for :class:`subprocess.Popen`: the child gets ``sig`` when its parent dies.
 
     The check of the parent's pid after ``prctl`` closes the race of a parent that died between
-    fork and prctl (the child would have been re-parented already and never be signalled).
+    fork and prctl (the child would have been re-parented already and never be signalled). The
+    signal can come more than once: a multi-threaded parent that dies hands the child to another
+    of its threads still alive, and each hand-over signals it (the nodes take a repeated SIGTERM
+    as one, :mod:`vp_scene.node_runtime`).
     """
     parent = os.getpid()
 
@@ -104,17 +107,19 @@ class NodeProcess:
 
     Output (stdout and stderr) goes line by line to ``log_path`` and, when ``echo`` is given, to
     this process's stderr prefixed with ``[echo]`` (:meth:`mute` stops the echo). The child gets
-    SIGTERM when the thread that created this object exits (see the module docstring).
+    SIGTERM when the thread that created this object exits (see the module docstring), and keeps
+    the descriptors ``pass_fds`` open (e.g. its run's folder lock, ``vp_scene.folders.FolderLock``).
     """
 
-    def __init__(self, cmd: list, env: dict, log_path: Path, echo: Optional[str] = None) -> None:
+    def __init__(self, cmd: list, env: dict, log_path: Path, echo: Optional[str] = None,
+                 pass_fds: Iterable[int] = ()) -> None:
         self.cmd, self.log_path, self.echo = list(cmd), Path(log_path), echo
         self._lines: list[str] = []
         self._lock = threading.Lock()
         self._muted = threading.Event()
         self._log = open(self.log_path, "w", errors="replace")
         self.proc = subprocess.Popen(self.cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                     stdin=subprocess.DEVNULL, start_new_session=True,
+                                     stdin=subprocess.DEVNULL, start_new_session=True, pass_fds=tuple(pass_fds),
                                      preexec_fn=die_with_parent(), text=True, errors="replace", bufsize=1)
         self._thread = threading.Thread(target=self._pump, name=f"pump-{echo or self.proc.pid}", daemon=True)
         self._thread.start()

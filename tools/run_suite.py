@@ -27,11 +27,17 @@ reconstruction after it, seconds); its top-level plan fields are the last sortie
 
 Nothing of an earlier run is lost: an ``--out`` that holds one (``make run`` twice) is renamed to
 ``<out>-<YYYYmmdd-HHMMSS>`` (the time it was last written) before the run starts, and the run
-writes into a new, empty ``<out>``; a folder of other files is refused (exit 2). ``run.mcap`` is
-readable up to a few seconds before a kill, also a SIGKILL (:mod:`vp_recon.recording`).
+writes into a new, empty ``<out>``; a folder of other files is refused (exit 2). The run holds
+``<out>`` locked (:class:`vp_scene.folders.FolderLock`; its recorder and recon node hold it too,
+until they end): a second run into it, or a CLI's ``--out`` there, is refused in one line (exit
+2), and the folder is never moved aside under a live run. ``run.mcap`` reads with the standard MCAP readers
+up to a few seconds before a kill, also a SIGKILL (:mod:`vp_recon.recording`; the recorder then
+finishes it when it gets its parent-death signal).
 
-Exit codes: 0 success, 1 the plan or the reconstruction failed (the error is printed),
-2 bad arguments, an ``--out`` of other files or missing build, 3 a node died, 4 timed out, 130 interrupted.
+Exit codes: 0 success, 1 the plan or the reconstruction failed, or its results are not all written
+(the error is printed; ``OUTPUT_NOT_WRITABLE``, a full disk said so), 2 bad arguments (a
+``--domain-id`` or ``$ROS_DOMAIN_ID`` outside 0-232 too), an ``--out`` of other files or in use by
+another run, or missing build, 3 a node died, 4 timed out, 130 interrupted.
 
 Run after ``make setup`` (``make run`` does both)::
 
@@ -53,7 +59,8 @@ from typing import Dict, List, Optional
 
 from node_process import NodeProcess, node_command
 from vp_planner.methods import DEFAULT_METHOD, METHODS  # the registry (torch-free)
-from vp_scene.camera import IMAGE_SIZE
+from vp_scene.camera import IMAGE_SIDE_RANGE, IMAGE_SIZE, image_side_arg
+from vp_scene.limits import MAX_SEED, seed_arg
 
 #: s between the action server being ready and the goal: server_is_ready() sees the request side of
 #: the action's services only; a goal response sent before its reply path is matched is dropped by
@@ -73,6 +80,9 @@ RECORDING = 'run.mcap'
 RECONSTRUCTION_VOXEL = 0.005
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_NODE_DIED, EXIT_TIMEOUT, EXIT_INTERRUPTED = 0, 1, 2, 3, 4, 130
+
+#: ROS_DOMAIN_ID's range (ROS 2's "The ROS_DOMAIN_ID" concept page: Fast DDS's ports overflow above 232)
+DOMAIN_IDS = (0, 232)
 
 #: Entries that make a folder an earlier output of the suite (a run, a plan, a reconstruction): a
 #: run never writes into one (its files would mix), it moves it aside first (:func:`prepare_out`).
@@ -95,13 +105,14 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
     ap.add_argument('--cameras', type=int, default=4)
     ap.add_argument('--evals', type=int, default=100, help='reward evaluations')
     ap.add_argument('--init', type=int, default=50, help='initial random design (egp, gp)')
-    ap.add_argument('--seed', type=int, default=0)
+    ap.add_argument('--seed', type=seed_arg, default=0, help=f'seed of the scene, the wind and the planner (0 to {MAX_SEED})')
     ap.add_argument('--reward', default='', help="reward model: paper | coverage | coverage-graph ('': the planner's default)")
     ap.add_argument('--models', default='', help='folder of PLY plant models (default: procedural)')
     ap.add_argument('--realizations', type=int, default=5, help='K wind realizations')
     ap.add_argument('--points-per-plant', type=int, default=4000)
-    ap.add_argument('--width', type=int, default=IMAGE_SIZE[0], help='rendered image width')
-    ap.add_argument('--height', type=int, default=IMAGE_SIZE[1], help='rendered image height')
+    ap.add_argument('--width', type=image_side_arg, default=IMAGE_SIZE[0],
+                    help=f'rendered image width, pixels ({IMAGE_SIDE_RANGE[0]} to {IMAGE_SIDE_RANGE[1]})')
+    ap.add_argument('--height', type=image_side_arg, default=IMAGE_SIZE[1], help='rendered image height, pixels')
     ap.add_argument('--capture', default='realistic', choices=['realistic', 'ideal'],
                     help="the recon node's capture model (README 'Capture model'): realistic (hover and "
                          "localization errors, sensor noise, SfM with the reported poses) or ideal")
@@ -132,8 +143,10 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
                          'the benchmarks: 1)')
     ap.add_argument('--timeout', type=float, default=3600.0, help='seconds for the whole mission')
     ap.add_argument('--domain-id', type=int, default=None,
-                    help='ROS_DOMAIN_ID of this run (default: $ROS_DOMAIN_ID, else derived from the process id)')
+                    help=f'ROS_DOMAIN_ID of this run, {DOMAIN_IDS[0]}-{DOMAIN_IDS[1]} (default: $ROS_DOMAIN_ID, else '
+                         'derived from the process id)')
     args = ap.parse_args(argv)
+    args.domain_id = domain_id(ap, args.domain_id)
     if args.cameras < 2:
         ap.error('--cameras must be >= 2')
     if args.recon_workers < 1:
@@ -167,21 +180,43 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
     return args
 
 
-def prepare_out(out: Path) -> Optional[Path]:
-    """Make ``out`` the run's folder, empty: made when missing; a folder holding an earlier output
-    (:data:`EARLIER_OUTPUT`: ``make run`` twice) is first renamed to ``<out>-<the time it was last
-    written>`` (returned; nothing is deleted); a folder of other files is refused with
-    FileExistsError (the run's files would mix with them, and a later run would move them aside)."""
-    from vp_scene.folders import move_aside
+def domain_id(ap: argparse.ArgumentParser, given: Optional[int]) -> int:
+    """The run's ROS_DOMAIN_ID: ``--domain-id``, else ``$ROS_DOMAIN_ID``, else one derived from the
+    process id; one outside :data:`DOMAIN_IDS` (or a ``$ROS_DOMAIN_ID`` that is not an integer) is
+    a usage error, before anything starts (Fast DDS would fail at its first participant)."""
+    low, high = DOMAIN_IDS
+    if given is not None:
+        if not low <= given <= high:
+            ap.error(f'--domain-id must be in {low}-{high}, got {given}')
+        return given
+    env = os.environ.get('ROS_DOMAIN_ID', '').strip()
+    if not env:
+        return 10 + os.getpid() % 200
+    if not (env.isdigit() and low <= int(env) <= high):
+        ap.error(f'ROS_DOMAIN_ID (environment) must be an integer in {low}-{high}, got {env!r}')
+    return int(env)
 
-    moved = None
-    if out.is_dir() and any(out.iterdir()):
+
+def prepare_out(out: Path):
+    """Make ``out`` the run's folder, empty and locked: (its :class:`vp_scene.folders.FolderLock`,
+    held for the run; the earlier output's new path or None). Made when missing; one that another
+    live run holds is refused (FolderInUse) and never moved; one holding an earlier output
+    (:data:`EARLIER_OUTPUT`: ``make run`` twice) is renamed, locked, to ``<out>-<the time it was last
+    written>`` (nothing is deleted); a folder of other files is refused with FileExistsError (the
+    run's files would mix with them, and a later run would move them aside)."""
+    from vp_scene.folders import FolderLock, move_aside
+
+    out.mkdir(parents=True, exist_ok=True)
+    lock = FolderLock(out)
+    if not any(out.iterdir()):
+        return lock, None
+    with lock:  # held while the earlier output is looked at and moved: no other run starts in it meanwhile
         if not any(any(out.glob(name)) for name in EARLIER_OUTPUT):
             raise FileExistsError(f'--out {out} holds other files, not an output of the suite: give a new or an '
                                   'empty folder')
         moved = move_aside(out)
-    out.mkdir(parents=True, exist_ok=True)
-    return moved
+        out.mkdir(parents=True, exist_ok=True)
+        return FolderLock(out), moved
 
 
 def check_scenario(ap: argparse.ArgumentParser, scenario: str) -> tuple:
@@ -301,9 +336,12 @@ class Mission:
         self.rclpy.try_shutdown(context=self.context)
 
 
-def start_node(name: str, pkg: str, exe: str, params: Dict[str, object], env, log_dir: Path) -> NodeProcess:
-    """One node as a child process named ``name``, its output streamed with a ``[name]`` prefix."""
-    node = NodeProcess(node_command(pkg, exe, params, name=name), env, log_dir / f'{name}.log', echo=name)
+def start_node(name: str, pkg: str, exe: str, params: Dict[str, object], env, log_dir: Path,
+               lock=None) -> NodeProcess:
+    """One node as a child process named ``name``, its output streamed with a ``[name]`` prefix;
+    it holds the run's folder ``lock`` too (a FolderLock: the folder stays locked until it ends)."""
+    node = NodeProcess(node_command(pkg, exe, params, name=name), env, log_dir / f'{name}.log', echo=name,
+                       pass_fds=() if lock is None else (lock.fd,))
     print(f'started {name} (pid {node.pid}): {exe}', flush=True)
     return node
 
@@ -437,11 +475,13 @@ def fly_sortie(mission: Mission, nodes: List[NodeProcess], deadline: float, args
 
 
 def run(args: argparse.Namespace) -> int:
+    from vp_recon.errors import ERROR_NAMES
+    from vp_scene.folders import write_atomic
     from vp_scene.messages import msgs_to_poses, point_array, pose_array, score_record  # conversions' one home
 
     out = Path(args.out).resolve()
     try:
-        moved = prepare_out(out)
+        lock, moved = prepare_out(out)  # held until this process and its nodes end
     except OSError as exc:
         print(f'error: {exc}', flush=True)
         return EXIT_USAGE
@@ -449,12 +489,7 @@ def run(args: argparse.Namespace) -> int:
         print(f'vp-suite: the earlier output in {out} was moved to {moved}', flush=True)
     env = dict(os.environ)
     env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    if args.domain_id is not None:
-        domain = args.domain_id
-    elif os.environ.get('ROS_DOMAIN_ID', '').isdigit():
-        domain = int(os.environ['ROS_DOMAIN_ID'])
-    else:
-        domain = 10 + os.getpid() % 200
+    domain = args.domain_id
     env['ROS_DOMAIN_ID'] = str(domain)
     os.environ.update({k: env[k] for k in ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_DOMAIN_ID')})
     env.setdefault('PYOPENGL_PLATFORM', 'egl')
@@ -485,9 +520,11 @@ def run(args: argparse.Namespace) -> int:
         # the planner and the recon share the cores: 1 thread for the planner, the rest for the recon
         recon_threads = max(1, (os.cpu_count() or 2) - 1)
         # first, so that it sees every topic from its start; stopped last (the nodes stop in
-        # reverse order), which closes <out>/run.mcap (vp_recon.recording)
+        # reverse order), which closes <out>/run.mcap (vp_recon.recording). The recorder and the
+        # recon write into <out>: they hold its lock too, so that it outlives a SIGKILL of this script
+        # until they have finished their files
         nodes.append(start_node('recorder', 'vp_recon', 'recorder', {'output': str(out / RECORDING)},
-                                {**env, 'OMP_NUM_THREADS': '1'}, out))
+                                {**env, 'OMP_NUM_THREADS': '1'}, out, lock))
         nodes.append(start_node('scene', 'vp_scene', 'scene', scene_params, {**env, 'OMP_NUM_THREADS': '1'}, out))
         nodes.append(start_node('planner', 'vp_planner', 'planner', {
             'num_cameras': args.cameras, 'method': args.method, 'evaluations': args.evals,
@@ -502,7 +539,7 @@ def run(args: argparse.Namespace) -> int:
             'output_folder': str(out), 'width': args.width, 'height': args.height,
             'method': args.method, 'num_threads': recon_threads, 'capture': args.capture, 'source': args.source,
             'sift_first_octave': args.sift_first_octave, 'dense_scale': args.dense_scale, **on_cluster},
-            {**env, 'OMP_NUM_THREADS': str(recon_threads)}, out))
+            {**env, 'OMP_NUM_THREADS': str(recon_threads)}, out, lock))
         if args.drones:
             drones = [f'd{k}' for k in range(args.drones)]
             nodes.append(start_node('dispatcher', 'vp_planner', 'dispatcher', {
@@ -564,9 +601,15 @@ def run(args: argparse.Namespace) -> int:
                 'drones': [{'drone': e.drone, 'pose_index': e.pose_index, 'distance': e.distance,
                             'start': point_array(e.start).tolist(),
                             'goal': pose_array(e.goal).tolist()} for e in fleet.entries]}
-        (out / 'summary.json').write_text(json.dumps(summary, indent=2))
+        text = json.dumps(summary, indent=2)
+        try:
+            write_atomic(out / 'summary.json', lambda tmp: tmp.write_text(text))
+        except OSError as exc:  # a run whose results are not all written failed (a full disk: said so)
+            outcome.append(f'error: [OUTPUT_NOT_WRITABLE] {exc}')
+            return EXIT_FAILED
         if agg.error_code != 0:
-            outcome.append(f'error: reconstruction failed (error_code {agg.error_code}): {agg.error_msg}')
+            outcome.append(f'error: reconstruction failed (error_code {agg.error_code} '
+                           f'{ERROR_NAMES.get(agg.error_code, "UNKNOWN")}): {agg.error_msg}')
             return EXIT_FAILED
         outcome.append(f'Chamfer distance x100: {agg.chamfer:.3f} +- {agg.chamfer_std:.3f} over '
                        f'{agg.realizations} wind realizations; summary: {out / "summary.json"}')
@@ -592,6 +635,7 @@ def run(args: argparse.Namespace) -> int:
             n.mute()
         for n in reversed(nodes):
             n.stop()
+        lock.release()
         for line in outcome:
             print(line, flush=True)
 

@@ -141,11 +141,11 @@ def test_cli_paper_reward_and_score(tmp_path: Path, capsys: pytest.CaptureFixtur
     cov = float(capsys.readouterr().out.split()[-1])
     expected = make_reward("coverage", pts)(np.array(plan["cameras"])[None])[0]
     assert cov == pytest.approx(float(expected), abs=1e-6) and cov != pytest.approx(plan["reward"])
-    # a flight plan given as poses, without a scene: the scene comes from the options
+    # a flight plan given as poses, without a scene: the scene comes from the options, named
     flight = tmp_path / "flight.json"
     flight.write_text(json.dumps({"poses": plan["poses"]}))
-    assert main(["score", "--plan", str(flight), "--reward", "paper", "--points-per-plant", "500",
-                 "--realizations", "2", "--seed", "1"]) == 0
+    assert main(["score", "--plan", str(flight), "--reward", "paper", "--scenario", "one_plant",
+                 "--points-per-plant", "500", "--realizations", "2", "--seed", "1"]) == 0
     assert float(capsys.readouterr().out.split()[-1]) == pytest.approx(plan["reward"], abs=1e-6)
 
 
@@ -187,6 +187,56 @@ def test_cli_score_errors(tmp_path: Path, capsys: pytest.CaptureFixture) -> None
     assert main(["score", "--plan", str(bad)]) == 2
     err = capsys.readouterr().err
     assert "'fov'" in err and "bad.json" in err
+
+
+def test_score_reads_the_plan_as_every_command_and_names_an_infeasible_camera(tmp_path: Path,
+                                                                              capsys: pytest.CaptureFixture) -> None:
+    """`score` of a plan without a scene silently scored one_plant
+    (recon refuses that file); the scene options beside a plan's own scene were ignored; a camera
+    inside the plant scored without a word; a coordinate of 1e300 printed nan and exited 0. Now:
+    a scene is the file's or one named with --scenario, never guessed nor silently replaced; an
+    infeasible camera is named on stderr (the score still printed); 1e300 is refused (exit 2)."""
+    scene = {"scenario": "one_plant", "points_per_plant": 500, "realizations": 2}
+    a = np.radians([0.0, 25.0, 50.0, 75.0])
+    c = np.stack([1.4 * np.cos(a), 1.4 * np.sin(a), np.full(4, 1.2)], axis=1)
+    ring = np.concatenate([c, np.array([0.0, 0.0, 0.9]) - c], axis=1).tolist()
+    path = tmp_path / "plan.json"
+
+    def score(plan: dict, *flags: str) -> tuple[int, str, str]:
+        path.write_text(json.dumps(plan))
+        capsys.readouterr()
+        rc = main(["score", "--plan", str(path), *flags])
+        out, err = capsys.readouterr()
+        return rc, out, err
+
+    rc, out, err = score({"cameras": ring})
+    assert rc == 2 and err.strip().splitlines() == [
+        f"plan: error: {path} has no 'scene': name the scene it was planned for with --scenario (and its other scene "
+        "options); no scene is guessed (vp_recon.cli refuses such a plan)"] and not out
+    rc, out, err = score({"cameras": ring}, "--scenario", "one_plant", "--points-per-plant", "500",
+                         "--realizations", "2")
+    named = float(out.split()[-1])
+    assert rc == 0 and "warning:" not in err and 0 < named < 1, err
+    rc, out, err = score({"cameras": ring, "scene": scene})
+    assert rc == 0 and float(out.split()[-1]) == pytest.approx(named, abs=1e-9)  # the same scene, the same reward
+    rc, out, err = score({"cameras": ring, "scene": scene}, "--scenario", "row_12", "--seed", "3")
+    assert rc == 2 and f"{path} names its scene ('scene'): --scenario, --seed are for a plan without one" in err
+
+    inside = [[0.0, 0.0, 1.0, 1.0, 0.0, 0.0]] + ring[1:]  # camera 0 in the plant's stalk
+    rc, out, err = score({"cameras": inside, "scene": scene})
+    warning = [t for t in err.splitlines() if "warning:" in t]
+    assert rc == 0 and 0 <= float(out.split()[-1]) < 1 and len(warning) == 1, err
+    assert warning[0].startswith(f"plan score: warning: {path} breaks the planner's feasibility rules (scored all the "
+                                 "same): camera 0 at (+0.00, +0.00, +1.00) is 0.0")
+    assert "m from the nearest scene point (min_standoff 0.5 m)" in warning[0]
+    rc, out, err = score({"cameras": inside, "scene": scene, "feasibility": {"min_standoff": 0.0, "min_altitude": 0.3,
+                                                                             "min_separation": 0.5}})
+    assert rc == 0 and "warning:" not in err  # the plan's own rules: planned without a stand-off
+
+    rc, out, err = score({"cameras": [[1e300, 0.0, 1.2, -1.0, 0.0, 0.0]] + ring[1:], "scene": scene})
+    assert rc == 2 and not out and "'cameras' holds 1e+300, outside [-10000, 10000]" in err, err
+    rc, out, err = score({"cameras": ring, "scene": scene}, "--image-width", "100000")
+    assert rc == 2 and "image width must be an integer of 16 to 16384 pixels, got 100000" in err, err
 
 
 def test_cli_refuses_more_cameras_than_it_can_plan(tmp_path: Path) -> None:
@@ -276,6 +326,47 @@ def test_cli_plans_a_field_by_parts_and_flies_a_lawnmower(tmp_path: Path) -> Non
     plan = json.loads((out / "plan.json").read_text())
     assert plan["evaluations"] == 1 and plan["lawnmower"] == {"overlap": 0.7, "tilt": 0.5} and plan["parts"] is None
     assert main(common + ["--method", "lawnmower", "--lawnmower-overlap", "1.2", "--out", str(out)]) == 2
+
+
+def test_a_full_disk_is_one_line_naming_the_file_and_leaves_out_as_it_was(tmp_path: Path) -> None:
+    """numpy's words for a short write ('480128 requested and 65536 written') were the whole
+    message. A plan whose files cannot all be written says the disk is full, naming the file, in
+    one line, exit 2, and OUT keeps what it held (no half plan, no stage). The child's file size
+    is capped (RLIMIT_FSIZE: writes past it stop short, as on a full disk)."""
+    import resource
+
+    def cap() -> None:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (64 << 10, 64 << 10))
+
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "notes.txt").write_text("the user's")
+    p = subprocess.run([sys.executable, "-m", "vp_planner.cli", "--method", "circle", "--cameras", "4", "--evals", "5",
+                        "--out", str(out), "--no-progress"],  # noisy_points.npy: 5 x 4000 x 3 doubles, 480 kB
+                       capture_output=True, text=True, timeout=120, preexec_fn=cap)
+    lines = [ln for ln in p.stderr.splitlines() if ln.strip()]
+    assert p.returncode == 2 and len(lines) == 1, p.stderr[-3000:]
+    assert lines[0].startswith(f"plan: error: could not write {out}/.partial-plan-") and \
+        "noisy_points.npy: the disk is full (a short write: " in lines[0], lines[0]
+    assert sorted(x.name for x in out.iterdir()) == ["notes.txt"]
+
+
+def test_a_refused_request_writes_nothing_and_the_corrected_one_runs(tmp_path: Path, capsys) -> None:
+    """Nothing is written before a request is valid: a refused plan (a missing --fixed file, a
+    bad flag value) leaves OUT as it was, and the corrected run into it is not refused as one
+    that already holds a result."""
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "notes.txt").write_text("the user's")
+    args = ["--scenario", "one_plant", "--method", "circle", "--cameras", "3", "--evals", "4",
+            "--points-per-plant", "300", "--realizations", "2", "--no-progress", "--out", str(out)]
+    for bad in (["--fixed", str(tmp_path / "missing.json")], ["--realizations", "0"]):
+        assert main(args + bad) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("plan: error:") and err.count("\n") == 1, err
+        assert sorted(x.name for x in out.iterdir()) == ["notes.txt"]
+    assert main(args) == 0, capsys.readouterr().err
+    assert sorted(x.name for x in out.iterdir()) == ["noisy_points.npy", "notes.txt", "plan.json"]
 
 
 def test_cli_checks_its_plans_by_simulated_flights_on_a_local_cluster(tmp_path: Path, capsys) -> None:

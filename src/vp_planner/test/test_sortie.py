@@ -20,6 +20,7 @@ from vp_planner.request import InvalidFixedCamerasError, InvalidReconstructionEr
 from vp_planner.reward_models import (CoverageParams, make_reward, point_coverage, reconstructed_mask,
                                       reconstructed_weights)
 from vp_planner.space import ViewSpace
+from vp_scene import limits
 
 
 def ring_camera(azimuth_deg: float, radius: float = 2.0) -> np.ndarray:
@@ -124,10 +125,19 @@ def test_bad_fixed_cameras_are_refused(realizations, fixed, text) -> None:
                    realizations)
 
 
+def test_fixed_cameras_are_bounded_like_cameras() -> None:
+    """10,000 cameras already flown were accepted (a goal grew the planner by gigabytes): at most
+    MAX_FIXED_CAMERAS, a full sortie, checked when the request is made."""
+    PlanRequest.of("random", 2, evaluations=2, fixed_cameras=np.tile(ring_camera(0), (request.MAX_FIXED_CAMERAS, 1)))
+    with pytest.raises(InvalidFixedCamerasError, match=f"10000 cameras already flown are above the bound of "
+                                                       f"{request.MAX_FIXED_CAMERAS}"):
+        PlanRequest.of("random", 2, evaluations=2, fixed_cameras=np.tile(ring_camera(0), (10_000, 1)))
+
+
 def test_fixed_cameras_beyond_the_memory_are_refused(realizations, monkeypatch) -> None:
     plan_views(PlanRequest.of("random", 2, evaluations=2, fixed_cameras=[ring_camera(0)]), realizations)
     need = request.estimate_memory(2 + 50, realizations.shape[0], realizations.shape[1], "coverage")
-    monkeypatch.setattr(request, "available_memory", lambda: int(need))  # the plan alone fits
+    monkeypatch.setattr(limits, "available_memory", lambda: int(need))  # the plan alone fits
     request.check_memory(2, realizations.shape, "coverage")
     with pytest.raises(InvalidFixedCamerasError, match="memory|GiB"):
         plan_views(PlanRequest.of("random", 2, evaluations=2, fixed_cameras=np.tile(ring_camera(0), (50, 1))),
@@ -142,7 +152,7 @@ def test_bad_reconstructions_are_refused(realizations, monkeypatch) -> None:
     with pytest.raises(InvalidReconstructionError, match="reconstructed_weight"):
         plan_views(PlanRequest.of("random", 2, evaluations=2, reconstruction=[[0.0, 0.0, 0.0]],
                                   reconstructed_weight=1.5), realizations)
-    monkeypatch.setattr(request, "available_memory", lambda: 1000)
+    monkeypatch.setattr(limits, "available_memory", lambda: 1000)
     with pytest.raises(InvalidReconstructionError, match="GiB"):
         optimizers.sortie_weights(realizations, np.zeros((100, 3)), 0.03, 0.1)
 

@@ -31,10 +31,14 @@ images (``images``, ``selected``: their indices among the folder's poses), the f
 (``candidates``) and the prior (``prior``), and has no ``scene``; ``python -m vp_recon.cli
 --images FOLDER --select plan.json`` reconstructs those images.
 
-``score`` rebuilds the scene of a plan file (its ``scene``, or ``--scenario``/``--models``/...
-for a flight plan without one; ``cameras`` or ``poses``) and prints the plan's reward under the
-chosen model as the last number on stdout (a second sortie's with its recorded cameras already
-flown and reconstruction, as it was planned).
+``score`` reads the plan file as every command does (:func:`vp_scene.planfile.load_plan`),
+rebuilds its scene and prints the plan's reward under the chosen model as the last number on
+stdout (a second sortie's with its recorded cameras already flown and reconstruction, as it was
+planned). The scene is the file's ``scene``; a flight plan without one is scored only on a scene
+named with ``--scenario`` (and the other scene options), which a plan with its own scene refuses:
+no scene is guessed, none is silently replaced. A camera that breaks the planner's feasibility
+rules (the plan's recorded minima, else the defaults: inside a plant, under the ground, two
+cameras together) is named in a warning on stderr (:func:`vp_planner.fleet.plan_problems`).
 
 Errors: one line on stderr and exit code 2.
 """
@@ -51,6 +55,7 @@ from typing import TYPE_CHECKING, Any, Optional, Sequence
 import numpy as np
 
 from vp_scene.layout import BUILTIN_LAYOUTS, LayoutError, read_scenario
+from vp_scene.limits import MAX_SEED, seed_arg
 
 #: The entries of a plan in OUT: what --overwrite replaces, together.
 RESULT = ("plan.json", "noisy_points.npy")
@@ -83,19 +88,28 @@ def _scenario(text: str) -> Any:
     return text if layout is None else layout.to_dict()
 
 
-def _scene_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--scenario", default="one_plant", type=_scenario, metavar="NAME_OR_FILE",
+#: The scene options (argparse's names) and their defaults.
+SCENE_DEFAULTS = {"scenario": "one_plant", "seed": 0, "models": None, "points_per_plant": 4000, "plant_spacing": 0.6,
+                  "row_spacing": 0.76, "levels": 10, "realizations": 5, "wind_variance": 0.002, "wind_direction": 0.0}
+
+
+def _scene_args(p: argparse.ArgumentParser, given_only: bool = False) -> None:
+    """The scene options; ``given_only`` (score): an option not given is left out of the namespace,
+    so that a scene named on the command line is told from the defaults."""
+    d = {k: argparse.SUPPRESS if given_only else v for k, v in SCENE_DEFAULTS.items()}
+    p.add_argument("--scenario", default=d["scenario"], type=_scenario, metavar="NAME_OR_FILE",
                    help=f"a layout name ({', '.join(SCENARIO_NAMES)}) or a layout file (.yaml, .yml, .json; "
                         f"README 'Your own field')")
-    p.add_argument("--seed", type=int, default=0, help="seed of the scene, the wind and the planner")
-    p.add_argument("--models", default=None, help="folder of PLY plant models (default: procedural corn)")
-    p.add_argument("--points-per-plant", type=int, default=4000)
-    p.add_argument("--plant-spacing", type=float, default=0.6)
-    p.add_argument("--row-spacing", type=float, default=0.76)
-    p.add_argument("--levels", type=int, default=10, help="wind levels L")
-    p.add_argument("--realizations", type=int, default=5, help="wind realizations K")
-    p.add_argument("--wind-variance", type=float, default=0.002)
-    p.add_argument("--wind-direction", type=float, default=0.0, help="rad from +x")
+    p.add_argument("--seed", type=seed_arg, default=d["seed"],
+                   help=f"seed of the scene, the wind and the planner (0 to {MAX_SEED})")
+    p.add_argument("--models", default=d["models"], help="folder of PLY plant models (default: procedural corn)")
+    p.add_argument("--points-per-plant", type=int, default=d["points_per_plant"])
+    p.add_argument("--plant-spacing", type=float, default=d["plant_spacing"])
+    p.add_argument("--row-spacing", type=float, default=d["row_spacing"])
+    p.add_argument("--levels", type=int, default=d["levels"], help="wind levels L")
+    p.add_argument("--realizations", type=int, default=d["realizations"], help="wind realizations K")
+    p.add_argument("--wind-variance", type=float, default=d["wind_variance"])
+    p.add_argument("--wind-direction", type=float, default=d["wind_direction"], help="rad from +x")
 
 
 def _reward_args(p: argparse.ArgumentParser, default: Optional[str]) -> None:
@@ -127,7 +141,7 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
         _reward_args(p, None)
         p.add_argument("--fov", type=float, default=None, help="rad (default: the plan's, else pi/2)")
         p.add_argument("--theta-match", type=float, default=None, help="rad (default: the plan's, else pi/4)")
-        _scene_args(p)
+        _scene_args(p, given_only=True)  # the scene of a plan file without one, named (none is guessed)
     else:
         p = _Parser(prog="plan", description="EGP-VP view planning on a noisy corn scene.")
         _scene_args(p)
@@ -294,6 +308,15 @@ def flight_simulator(args: argparse.Namespace, request: "PlanRequest", noisy: An
                         capture=flight_capture(request), client=client, fov=request.cameras.fov)
 
 
+def memory_beside(shape: Sequence[int]) -> Optional[int]:
+    """Bytes of memory available beside a scene of realizations ``shape`` (K, P) once it is built
+    (:func:`vp_scene.limits.scene_memory`); None where unknown."""
+    from vp_scene.limits import available_memory, scene_memory
+
+    have = available_memory()
+    return None if have is None else max(0, have - scene_memory(shape[1], shape[0]))
+
+
 def _image_size(args: argparse.Namespace, default: Sequence[int]) -> tuple[int, int]:
     """(--image-width, --image-height), each ``default``'s where not given (the request checks them)."""
     w = args.image_width if args.image_width is not None else default[0]
@@ -370,18 +393,23 @@ def request_of(args: argparse.Namespace) -> "PlanRequest":
 def plan(args: argparse.Namespace) -> dict:
     """Plan views; write OUT/plan.json and OUT/noisy_points.npy; return the plan dict."""
     from vp_scene.camera import cameras_to_poses
-    from vp_scene.folders import ResultFolder
+    from vp_scene.build import scene_shape
+    from vp_scene.folders import ResultFolder, write_atomic
     from vp_scene.planfile import write_plan
 
     from .methods import BY_NAME
     from .optimizers import plan_views
-    from .request import FLAT
+    from .request import FLAT, check_plan_memory
 
     request = request_of(args)  # fail before reading files or building the scene
     if args.threads < 1:
         raise CliError(f"--threads must be >= 1, got {args.threads}")
+    scene = None if args.candidates_folder else scene_of(args)
+    shape = None if scene is None else scene_shape(scene)  # the scene's bounds and memory, nothing built
     request = request.replace(fixed_cameras=fixed_cameras_of(args.fixed),
                               reconstruction=reconstruction_of(args.reconstructed))
+    if shape is not None:  # what the plan's cameras multiply, in the memory the scene leaves
+        check_plan_memory(request, shape, memory_beside(shape))
     result_dir = ResultFolder(args.out, RESULT, "plan", args.overwrite).check()  # before the planning
     set_threads(args.threads)
     among = None
@@ -392,7 +420,6 @@ def plan(args: argparse.Namespace) -> dict:
                                   image_size=_image_size(args, among["size"]))
         noisy = None
     else:
-        scene = scene_of(args)
         noisy = build_noisy(scene)
         realizations, layout_name = np.asarray(noisy.points, dtype=np.float64), noisy.scene.scenario
 
@@ -475,37 +502,73 @@ def plan(args: argparse.Namespace) -> dict:
         data.update({"candidates": str(Path(args.candidates_folder).resolve()), "num_candidates": len(among["names"]),
                      "selected": [int(i) for i in res.selected], "images": [among["names"][i] for i in res.selected],
                      "prior": str(Path(args.prior).resolve()), "prior_points": int(realizations.shape[1])})
-    with result_dir:  # both files, together
-        np.save(result_dir.stage / "noisy_points.npy", realizations)
+    def save_realizations(tmp: Path) -> None:
+        with open(tmp, "wb") as f:
+            np.save(f, realizations)
+
+    with result_dir:  # both files, together, whole (OutputError naming the one that cannot be written)
+        write_atomic(result_dir.stage / "noisy_points.npy", save_realizations)
         write_plan(result_dir.stage / "plan.json", data)
         result_dir.commit()
     return data
 
 
-def _sortie_of(data: dict, realizations: np.ndarray) -> tuple[Optional[np.ndarray], Optional[np.ndarray]]:
-    """A second sortie's plan file: its cameras already flown and the point weights of its
-    recorded reconstruction (read again from its PLY), as it was planned; (None, None) else."""
+def _reconstructed_weights(data: dict, realizations: np.ndarray) -> Optional[np.ndarray]:
+    """A second sortie's plan file: the point weights of its recorded reconstruction (read again
+    from its PLY), as it was planned; None without one."""
     from .reward_models import reconstructed_weights
 
-    fixed = np.asarray(data.get("fixed_cameras") or np.zeros((0, 6)), dtype=np.float64)
     rec = data.get("reconstructed")
     if not rec:
-        return fixed, None
+        return None
     try:
         points = reconstruction_of(rec["path"])
-        return fixed, reconstructed_weights(realizations, points, float(rec["tau"]), float(rec["reconstructed_weight"]))
+        return reconstructed_weights(realizations, points, float(rec["tau"]), float(rec["reconstructed_weight"]))
     except (KeyError, TypeError) as exc:
         raise CliError(f"the plan's 'reconstructed' record is malformed ({exc})") from None
 
 
+def _score_scene(args: argparse.Namespace, pf: Any) -> dict:
+    """The scene a plan is scored on: its own (scene options refused beside it), else the one the
+    options name (``--scenario`` required: no scene is guessed)."""
+    given = {k: v for k, v in vars(args).items() if k in SCENE_DEFAULTS}
+    flags = ", ".join("--" + k.replace("_", "-") for k in given)
+    if pf.scene is not None:
+        if given:
+            raise CliError(f"{args.plan} names its scene ('scene'): {flags} are for a plan without one")
+        return pf.scene
+    if "scenario" not in given:
+        raise CliError(f"{args.plan} has no 'scene': name the scene it was planned for with --scenario (and its "
+                       "other scene options); no scene is guessed (vp_recon.cli refuses such a plan)")
+    return scene_of(argparse.Namespace(**{**SCENE_DEFAULTS, **given}))
+
+
+def _feasibility_warning(pf: Any, realizations: np.ndarray) -> Optional[str]:
+    """The planner's feasibility rules broken by the plan's cameras (its recorded minima, else the
+    defaults), as one line; None when it keeps them."""
+    from .feasibility import Feasibility
+    from .fleet import plan_problems
+
+    record = pf.data.get("feasibility") or {}
+    try:
+        rules = Feasibility(**record)
+    except (TypeError, ValueError) as exc:
+        raise CliError(f"{pf.path}: its 'feasibility' record is malformed ({exc})") from None
+    problems = plan_problems(pf.cameras, realizations, rules.min_standoff, rules.min_altitude, rules.min_separation)
+    if not problems:
+        return None
+    return f"{pf.path} breaks the planner's feasibility rules (scored all the same): " + "; ".join(problems)
+
+
 def score(args: argparse.Namespace) -> float:
     """The reward of the plan file under ``--reward`` (default: the file's reward_model, else
-    the default model) on the plan's scene."""
+    the default model) on the plan's scene (:func:`_score_scene`)."""
     from vp_scene.planfile import PlanFileError, load_plan
 
+    from vp_scene.build import scene_shape
     from vp_scene.camera import IMAGE_SIZE, CameraModel
 
-    from .request import FLAT, CameraSpec, InvalidRequestError, RewardSpec
+    from .request import FLAT, CameraSpec, InvalidRequestError, RewardSpec, check_memory
     from .reward_models import DEFAULT_REWARD_MODEL, check_reward_model, make_reward
 
     try:
@@ -514,7 +577,7 @@ def score(args: argparse.Namespace) -> float:
         raise CliError(str(exc)) from None
     if len(pf.cameras) < 2:
         raise CliError(f"{args.plan}: a reward needs at least 2 cameras, the plan has {len(pf.cameras)}")
-    scene = pf.scene if pf.scene is not None else scene_of(args)
+    scene = _score_scene(args, pf)
     model = check_reward_model(args.reward or pf.data.get("reward_model") or DEFAULT_REWARD_MODEL)
     fov = args.fov if args.fov is not None else pf.fov
     theta = args.theta_match if args.theta_match is not None else pf.theta_match
@@ -529,10 +592,15 @@ def score(args: argparse.Namespace) -> float:
                             **{FLAT[k][1]: registration[k] for k in REGISTRATION if k in registration})
     except InvalidRequestError as exc:
         raise CliError(f"{args.plan}: {exc}") from None
+    shape = scene_shape(scene)  # the scene's bounds and memory, then what the cameras multiply
+    check_memory(len(pf.cameras) + len(pf.fixed_cameras), shape, model, memory_beside(shape))
     realizations, layout_name = build_scene(scene)
-    fixed, weights = _sortie_of(pf.data, realizations)
-    value = float(np.asarray(make_reward(reward.model_spec(), realizations, fov, theta, image, fixed_cameras=fixed,
-                                         point_weights=weights)(pf.cameras[None]))[0])
+    weights = _reconstructed_weights(pf.data, realizations)
+    warning = _feasibility_warning(pf, realizations)
+    if warning:
+        print(f"plan score: warning: {warning}", file=sys.stderr)
+    value = float(np.asarray(make_reward(reward.model_spec(), realizations, fov, theta, image,
+                                         fixed_cameras=pf.fixed_cameras, point_weights=weights)(pf.cameras[None]))[0])
     print(f"plan score: {model} reward of {args.plan} ({len(pf.cameras)} cameras, "
           f"{layout_name}):",
           file=sys.stderr)

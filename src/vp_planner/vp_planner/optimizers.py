@@ -59,7 +59,8 @@ paper uses 100-200; a GP's fit costs O(n^3) time and O(n^2) memory in the n eval
 four of them for egp, so 1000 is already hours of fitting) and 100000 for the baselines (each
 evaluation is recorded: a few hundred bytes plus 150 bytes a camera). Planning by parts
 multiplies the budget (:func:`vp_planner.request.total_evaluations`). Beyond the bound, or when
-:func:`vp_planner.request.estimate_run_memory` of the run exceeds 80 % of the memory available, the request is
+:func:`vp_planner.request.estimate_run_memory` of the run exceeds the share of the available memory a request
+may take (:data:`vp_scene.limits.MEMORY_FRACTION`), the request is
 refused before anything is allocated (:class:`vp_planner.request.BudgetTooLargeError`; the planner node's
 ``BUDGET_TOO_LARGE``). Before this bound a goal of 4e9 evaluations grew the planner to 20 GB
 until the kernel killed it.
@@ -78,9 +79,8 @@ from .feasibility import check_realizations
 from .methods import BY_NAME
 from .flight_planning import OnFlight, flight_stage
 from .objective import Objective
-from .request import (InvalidFixedCamerasError, InvalidReconstructionError, PlanRequest, check_budget_memory,
-                      check_memory, check_parts, check_reconstruction, check_reconstruction_memory,
-                      check_sortie_weighting, total_evaluations)
+from .request import (InvalidReconstructionError, PlanRequest, check_budget_memory, check_parts, check_plan_memory,
+                      check_reconstruction, check_reconstruction_memory, check_sortie_weighting, total_evaluations)
 from .reward_models import DEFAULT_REWARD_MODEL
 from .space import Callback, NoFeasiblePlanError, PlanningCancelled, StopCheck, ViewSpace
 
@@ -208,11 +208,11 @@ def plan_views(request: PlanRequest, realizations: Any, callback: Optional[Callb
     Raises:
         TypeError when ``request`` is not a PlanRequest; InvalidSceneError (a ValueError) for bad
         realizations; InvalidNumCamerasError for a plan the memory cannot hold
-        (:func:`vp_planner.request.check_memory`) or more parts than pairs of cameras; BudgetTooLargeError for a run
-        the memory cannot hold (:func:`vp_planner.request.check_budget_memory`); InvalidFixedCamerasError,
-        InvalidReconstructionError when the cameras already flown or the reconstruction do not fit
-        in memory (nothing planned); NoFeasiblePlanError (ValueError) when no feasible plan was
-        found.
+        (:func:`vp_planner.request.check_plan_memory`) or more parts than pairs of cameras; BudgetTooLargeError
+        for a run the memory cannot hold (:func:`vp_planner.request.check_budget_memory`);
+        InvalidFixedCamerasError, InvalidReconstructionError when the cameras already flown or the
+        reconstruction do not fit in memory (nothing planned); NoFeasiblePlanError (ValueError)
+        when no feasible plan was found.
     """
     if not isinstance(request, PlanRequest):
         raise TypeError(f"plan_views takes a vp_planner.request.PlanRequest, got {type(request).__name__}")
@@ -222,13 +222,8 @@ def plan_views(request: PlanRequest, realizations: Any, callback: Optional[Callb
         R = check_realizations(realizations)
     except ValueError as exc:
         raise InvalidSceneError(str(exc)) from None
-    check_memory(num_cameras, R.shape, model)
+    check_plan_memory(q, R.shape)
     F = q.sortie.fixed_cameras
-    if len(F):
-        try:
-            check_memory(num_cameras + len(F), R.shape, model)
-        except ValueError as exc:
-            raise InvalidFixedCamerasError(f"fixed cameras: {exc}") from None
     sortie = q.sortie
     W, done = (None, None) if sortie.reconstruction is None else sortie_weights(
         R, sortie.reconstruction, sortie.tau, sortie.reconstructed_weight)

@@ -15,13 +15,17 @@ than N or lawnmower: INVALID_CANDIDATES). A goal may carry a second sortie's con
 cameras already flown, which every reward model counts with the plan, and ``reconstruction``,
 what they reconstructed (its points mark the scene points within ``tau`` as reconstructed,
 weighed ``reconstructed_weight``); both in ``frame_id`` (else INVALID_FIXED_CAMERAS /
-INVALID_RECONSTRUCTION, as for NaN or more than the memory holds).
+INVALID_RECONSTRUCTION, as for NaN or more than the memory holds; more than
+:data:`vp_planner.request.MAX_FIXED_CAMERAS` cameras already flown: INVALID_FIXED_CAMERAS).
 
 Goals are validated in the execute callback and aborted with a named ``error_code`` and an
 ``error_msg`` (as nav2's planner servers do); one goal runs at a time, a second one while
-planning is rejected. Cancel is honoured within one reward evaluation, and inside the
-feasible-plan search. On SIGINT/SIGTERM a running goal is aborted once (``CANCELED``, "shutting
-down") and its client answered before the node exits (:mod:`vp_scene.node_runtime`).
+planning is rejected. The plan is made in a process of its own (:mod:`vp_planner.plan_process`,
+whose fork server starts when the first scene arrives), so a cancel is answered within
+:data:`vp_planner.plan_process.POLL_S` of the execute callback seeing it, at any stage of the
+plan (an evaluation of a hundred cameras, a GP fit, a KD-tree), and the next goal is served at
+once. On SIGINT/SIGTERM a running goal is aborted once (``CANCELED``, "shutting down") and its
+client answered before the node exits (:mod:`vp_scene.node_runtime`).
 """
 from __future__ import annotations
 
@@ -43,14 +47,17 @@ from vp_interfaces.action import PlanViews
 from vp_interfaces.msg import CameraPlan
 from vp_planner.gp import MODEL_NAMES
 from vp_planner.methods import MAX_EVALUATIONS, METHODS
-from vp_planner.optimizers import InvalidSceneError, PlanResult, plan_views
+from vp_planner.optimizers import InvalidSceneError, PlanResult
+from vp_planner.plan_process import PlanProcessDied, run_plan, warm
 from vp_planner.request import (BO_MODES, DEFAULTS, FLAT, MAX_ATTITUDE_SIGMA, MAX_CAMERAS, MAX_POSITION_SIGMA,
                                 BudgetTooLargeError, InvalidBudgetError, InvalidCandidatesError,
                                 InvalidFixedCamerasError, InvalidNumCamerasError, InvalidReconstructionError,
                                 PlanRequest, UnknownMethodError, UnknownRewardModelError, check_fields)
 from vp_planner.reward_models import REWARD_MODELS
 from vp_planner.space import NoFeasiblePlanError
+from vp_scene.camera import IMAGE_SIDE_RANGE
 from vp_scene.cloud import pointcloud2_to_numpy, realizations_from_cloud
+from vp_scene.limits import MAX_SEED
 from vp_scene.messages import cameras_to_pose_array, camera_plan_msg, frustum_markers, pose_array_to_cameras
 from vp_scene.node_runtime import (INT_MAX, LATCHED, Param, declare_typed, parameter_value, refuse_bad_changes,
                                    run_node, typed_values)
@@ -63,7 +70,7 @@ ERROR_CODES = (
     (BudgetTooLargeError, PlanViews.Result.BUDGET_TOO_LARGE),  # also a run the memory cannot hold
     (InvalidBudgetError, PlanViews.Result.INVALID_BUDGET),
     (UnknownRewardModelError, PlanViews.Result.UNKNOWN_REWARD_MODEL),
-    (InvalidFixedCamerasError, PlanViews.Result.INVALID_FIXED_CAMERAS),  # NaN, or beyond the memory with the plan
+    (InvalidFixedCamerasError, PlanViews.Result.INVALID_FIXED_CAMERAS),  # NaN, above the bound, beyond the memory
     (InvalidReconstructionError, PlanViews.Result.INVALID_RECONSTRUCTION),
     (InvalidCandidatesError, PlanViews.Result.INVALID_CANDIDATES),  # NaN, fewer than N, lawnmower
     (NoFeasiblePlanError, PlanViews.Result.NO_FEASIBLE_PLAN),
@@ -90,11 +97,11 @@ PARAMS = {
     'evaluations': Param(D['evaluations'], 'reward evaluations (goals that leave it 0)', _EVALS, False,
                          'at most ' + ', '.join(f'{m} {n}' for m, n in MAX_EVALUATIONS.items())),
     'initial_evaluations': Param(D['initial_evaluations'], 'initial design of egp/gp (goals that leave it 0)', _EVALS),
-    'seed': Param(D['seed'], 'random seed (goals with seed -1)', (0, INT_MAX)),
+    'seed': Param(D['seed'], 'random seed (goals with seed -1)', (0, MAX_SEED)),
     'reward': Param(D['reward'], 'reward model', None, False, 'one of ' + ', '.join(REWARD_MODELS)),
     'image_width': Param(D['image_size'][0], 'image width of the cameras, pixels (the coverage reward)',
-                         (16, INT_MAX)),
-    'image_height': Param(D['image_size'][1], 'image height of the cameras, pixels', (16, INT_MAX)),
+                         IMAGE_SIDE_RANGE),
+    'image_height': Param(D['image_size'][1], 'image height of the cameras, pixels', IMAGE_SIDE_RANGE),
     'bo_mode': Param(D['bo_mode'], 'egp/gp: search of the acquisition', None, False, 'one of ' + ', '.join(BO_MODES)),
     'structured_init': Param(D['structured_init'],
                              'structured plans in the egp/gp initial design (0: random, as the paper)', (0, INT_MAX)),
@@ -166,7 +173,8 @@ def check_parameters(values: dict) -> dict:
 
 
 class PlannerNode(Node):
-    """ROS 2 adapter: parameters and messages in, :func:`plan_views` calls, plans out."""
+    """ROS 2 adapter: parameters and messages in, plans made in a process of their own
+    (:func:`vp_planner.plan_process.run_plan`), plans out."""
 
     def __init__(self) -> None:
         super().__init__('planner')
@@ -243,6 +251,7 @@ class PlannerNode(Node):
             return
         self._realizations, self._scene_problem = realizations, ''
         self._scene_arrived.set()
+        warm()  # the planning processes' fork server imports the planner while goals may come
         k, p, _ = realizations.shape
         self.get_logger().info(f'scene received: {k} realizations x {p} points')
         if self._param('autostart'):
@@ -256,8 +265,8 @@ class PlannerNode(Node):
         try:
             request = request_of(self._params())
             result = self._plan(request, progress=self._log_progress, should_stop=self._stopping)
-            if result.stopped:
-                self.get_logger().info(f'autostart planning stopped after {result.evaluations} evaluations')
+            if result is None:
+                self.get_logger().info('autostart planning stopped: shutting down')
             else:
                 self._publish_plan(result)
         except Exception as exc:
@@ -266,20 +275,21 @@ class PlannerNode(Node):
             self._leave()
             self._busy.release()
 
-    def _log_progress(self, done: int, total: int, best: float, weights) -> bool:
+    def _log_progress(self, done: int, total: int, best: float, weights) -> None:
         if done == total or done % max(1, total // 10) == 0:
             extra = '' if not weights else ' weights ' + ' '.join(f'{w:.2f}' for w in weights)
             self.get_logger().info(f'planning {done}/{total} best reward {best:.4f}{extra}')
-        return not self._stopping()
 
     # ---------------------------------------------------------------- planning
-    def _plan(self, request: PlanRequest, progress, should_stop) -> PlanResult:
+    def _plan(self, request: PlanRequest, progress, should_stop) -> Optional[PlanResult]:
+        """The plan of ``request`` on the scene, made in a process of its own
+        (:func:`vp_planner.plan_process.run_plan`); None when ``should_stop()`` ended it."""
         realizations = self._realizations
         assert realizations is not None
         self.get_logger().info(f'planning {request.cameras.num_cameras} cameras with {request.method} '
                                f'({request.reward.name} reward): {request.evaluations} evaluations, '
                                f'seed {request.seed}')
-        return plan_views(request, realizations, callback=progress, should_stop=should_stop)
+        return run_plan(request, realizations, progress, should_stop, threads=self._param('num_threads'))
 
     def _publish_plan(self, result: PlanResult, fixed: Optional[np.ndarray] = None,
                       candidates: Optional[PoseArray] = None) -> PoseArray:
@@ -404,24 +414,26 @@ class PlannerNode(Node):
         def should_stop() -> bool:
             return goal_handle.is_cancel_requested or self._stopping()
 
-        def progress(done: int, total: int, best: float, weights) -> bool:
+        made = [0]  # evaluations the plan has made
+
+        def progress(done: int, total: int, best: float, weights) -> None:
+            made[0] = done
             if should_stop():
-                return False
+                return
             fb = PlanViews.Feedback()
             fb.evaluations_done, fb.evaluations_total, fb.best_reward = done, total, float(best)
             if weights:
                 fb.ensemble_weights = [float(w) for w in weights]
                 fb.ensemble_models = list(MODEL_NAMES)
             goal_handle.publish_feedback(fb)
-            return True
 
         try:
             start = time.monotonic()
             plan = self._plan(request, progress, should_stop)
-            if plan.stopped:
+            if plan is None:
                 why = 'cancelled' if goal_handle.is_cancel_requested else 'the planner is shutting down'
-                text = f'{why} after {plan.evaluations} evaluations'
-                result.evaluations = int(plan.evaluations)
+                text = f'{why} after {made[0]} evaluations'
+                result.evaluations = int(made[0])
                 self.get_logger().info(text)
                 return finish(PlanViews.Result.CANCELED, text)
             msg = self._publish_plan(plan, fixed, goal.candidates if candidates is not None else None)
@@ -439,6 +451,8 @@ class PlannerNode(Node):
         except ValueError as exc:  # the library's refusals that need the scene or the memory
             code = error_code(exc)
             return abort(code, str(exc) if code != PlanViews.Result.PLANNER_FAILED else f'{type(exc).__name__}: {exc}')
+        except PlanProcessDied as exc:
+            return abort(PlanViews.Result.PLANNER_FAILED, str(exc))
         except Exception as exc:  # keep serving whatever happened inside the optimizer
             return abort(PlanViews.Result.PLANNER_FAILED, f'{type(exc).__name__}: {exc}')
         finally:

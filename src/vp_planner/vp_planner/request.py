@@ -36,7 +36,8 @@ every default):
                             and <= :data:`vp_planner.methods.MAX_EVALUATIONS` [method] (BudgetTooLargeError)
 ``initial_evaluations``     egp/gp: initial design size, an integer >= 1 (InvalidBudgetError), <= E for
                             egp/gp (InvalidBudgetError)
-``seed``                    random seed of numpy and torch, an integer >= 0
+``seed``                    random seed of numpy and torch, an integer from 0 to
+                            :data:`vp_scene.limits.MAX_SEED`
 ``min_standoff``            m from every scene point, finite >= 0 (feasibility, :mod:`vp_planner.feasibility`)
 ``min_altitude``            m above the ground, finite >= 0
 ``min_separation``          m between cameras, finite >= 0
@@ -46,15 +47,16 @@ every default):
                             None (automatic) or finite > 0
 ``structured_init``         egp/gp: structured plans in the initial design, an integer >= 0 (0: random)
 ``reward``                  one of :data:`vp_planner.reward_models.REWARD_MODELS` (UnknownRewardModelError)
-``image_size``              (width, height) of the cameras' images, pixels, integers >= 16
+``image_size``              (width, height) of the cameras' images, pixels, integers in
+                            :data:`vp_scene.camera.IMAGE_SIDE_RANGE`
 ``bo_mode``                 egp/gp: ``'trust_region'`` or ``'global'`` (the paper's)
 ``arc_spacing``             arc: rad between neighbouring cameras, in (0, 2 pi)
 ``parts``                   egp/gp: parts a field is planned by, an integer >= 0 (0: automatic)
 ``lawnmower_overlap``       lawnmower: image overlap, in [0, 0.95]
 ``lawnmower_tilt``          lawnmower: camera tilt from nadir, rad, in [0, 60 degrees]
 ``fixed_cameras``           (M, 6) cameras already flown [cx cy cz vx vy vz] (m; viewing vector),
-                            finite, non-zero viewing vectors (InvalidFixedCamerasError); stored
-                            read-only, (0, 6) for none
+                            finite, non-zero viewing vectors, M <= :data:`MAX_FIXED_CAMERAS`
+                            (InvalidFixedCamerasError); stored read-only, (0, 6) for none
 ``reconstruction``          (Q, 3) points (m) an earlier sortie reconstructed, finite, or None
                             (InvalidReconstructionError); stored read-only
 ``tau``                     m: a scene point this close to the reconstruction counts as
@@ -83,9 +85,13 @@ Other bad fields raise :class:`InvalidRequestError` (the feasibility minima: Val
 :class:`~vp_planner.feasibility.Feasibility`); ``from_dict`` refuses names that are not fields.
 
 The checks of a request against the scene and the machine live here too, run by ``plan_views``
-before anything is allocated: :func:`check_memory` (one evaluation of N cameras),
-:func:`check_budget_memory` (the run's records and GPs), :func:`check_reconstruction_memory`,
-:func:`check_parts` (the parts a field is planned by) and :func:`total_evaluations`.
+before anything is allocated: :func:`check_plan_memory` (one evaluation of the plan's N cameras
+and of N + M with the cameras already flown: :func:`check_memory`), :func:`check_budget_memory`
+(the run's records and GPs), :func:`check_reconstruction_memory`, :func:`check_parts` (the parts
+a field is planned by) and :func:`total_evaluations`. Each refuses an estimate beyond the share of
+the available memory a request may take (:func:`vp_scene.limits.check_memory_need`, the one
+home of that limit); a caller that knows the scene's shape before building it (the CLI) runs
+:func:`check_plan_memory` first.
 """
 from __future__ import annotations
 
@@ -97,7 +103,8 @@ from typing import Any, Mapping, Optional
 import numpy as np
 from numpy.typing import NDArray
 
-from vp_scene.camera import IMAGE_SIZE
+from vp_scene import limits
+from vp_scene.camera import IMAGE_SIZE, check_image_side
 from vp_scene.flights import FlightSettings
 
 from .feasibility import Feasibility
@@ -108,6 +115,7 @@ from .reward_models import (DEFAULT_RECONSTRUCTED_WEIGHT, DEFAULT_REWARD_MODEL, 
 
 __all__ = [
     "MAX_CAMERAS",
+    "MAX_FIXED_CAMERAS",
     "PlanRequest",
     "CameraSpec",
     "RewardSpec",
@@ -141,7 +149,7 @@ __all__ = [
     "check_memory",
     "check_budget_memory",
     "check_reconstruction_memory",
-    "available_memory",
+    "check_plan_memory",
     "check_parts",
     "total_evaluations",
     "MAX_POSITION_SIGMA",
@@ -152,6 +160,9 @@ __all__ = [
 
 #: The largest number of cameras N of a plan (:mod:`vp_planner.optimizers` says why).
 MAX_CAMERAS: int = 100
+#: The most cameras already flown a request may carry: a full sortie of MAX_CAMERAS. The reward
+#: scores a plan together with them, so an evaluation costs what a plan of N + M cameras does.
+MAX_FIXED_CAMERAS: int = MAX_CAMERAS
 #: Reward precisions a request may ask for.
 DTYPES: tuple[str, ...] = ("float64", "float32")
 #: egp/gp searches of the acquisition.
@@ -189,8 +200,9 @@ class BudgetTooLargeError(InvalidBudgetError):
 
 
 class InvalidFixedCamerasError(ValueError):
-    """Cameras already flown that are not finite (M, 6) cameras with a viewing direction, or
-    more than the memory holds together with the plan (:func:`check_memory` of N + M)."""
+    """Cameras already flown that are not finite (M, 6) cameras with a viewing direction, more
+    than :data:`MAX_FIXED_CAMERAS`, or more than the memory holds together with the plan
+    (:func:`check_memory` of N + M)."""
 
 
 class InvalidReconstructionError(ValueError):
@@ -315,7 +327,11 @@ class CameraSpec:
             width, height = self.image_size
         except (TypeError, ValueError):
             raise InvalidRequestError(f"image_size must be (width, height), got {self.image_size!r}") from None
-        _put(self, "image_size", (_integer("image width", width, 16), _integer("image height", height, 16)))
+        try:  # the suite's one range of image sides (vp_scene.camera.IMAGE_SIDE_RANGE)
+            _put(self, "image_size", (check_image_side("image width", width),
+                                      check_image_side("image height", height)))
+        except ValueError as exc:
+            raise InvalidRequestError(str(exc)) from None
 
 
 @dataclass(frozen=True)
@@ -416,6 +432,9 @@ class Sortie:
             _put(self, "fixed_cameras", _read_only(check_fixed_cameras(self.fixed_cameras)))
         except ValueError as exc:
             raise InvalidFixedCamerasError(f"fixed cameras: {exc}") from None
+        if len(self.fixed_cameras) > MAX_FIXED_CAMERAS:
+            raise InvalidFixedCamerasError(f"fixed cameras: {len(self.fixed_cameras)} cameras already flown are "
+                                           f"above the bound of {MAX_FIXED_CAMERAS} (a full sortie)")
         if self.reconstruction is not None:
             _put(self, "reconstruction", _read_only(check_reconstruction(self.reconstruction)))
         check_sortie_weighting(self.tau, self.reconstructed_weight)
@@ -494,7 +513,7 @@ def _check_design(method: str, evaluations: int, bo: BOSpec) -> None:
 
 
 def _check_seed(seed: Any) -> int:
-    return _integer("seed", seed, 0)
+    return _integer("seed", seed, 0, limits.MAX_SEED)
 
 
 def _check_candidates_for(method: str, num_cameras: int, candidates: "CandidateSet") -> None:
@@ -659,12 +678,10 @@ RECONSTRUCTION_POINT_BYTES = 64
 
 def check_reconstruction_memory(num_points: int, available: Optional[int] = None) -> None:
     """InvalidReconstructionError when a reconstruction of ``num_points`` points needs more than
-    80 % of the available memory (``available`` bytes; default: :func:`available_memory`)."""
-    need = int(num_points) * RECONSTRUCTION_POINT_BYTES
-    have = available_memory() if available is None else int(available)
-    if have is not None and need > 0.8 * have:
-        raise InvalidReconstructionError(f"the reconstruction's {num_points} points need about "
-                                         f"{need / 2**30:.1f} GiB; {have / 2**30:.1f} GiB are available")
+    a request may take of the available memory (``available`` bytes; default:
+    :func:`vp_scene.limits.available_memory`)."""
+    limits.check_memory_need(int(num_points) * RECONSTRUCTION_POINT_BYTES, f"the reconstruction's {num_points} points",
+                             InvalidReconstructionError, available)
 
 
 def estimate_memory(num_cameras: int, num_realizations: int, num_points: int, reward: str) -> int:
@@ -703,39 +720,37 @@ def estimate_run_memory(method: str, num_cameras: int, evaluations: int) -> int:
 
 def check_budget_memory(method: str, num_cameras: int, evaluations: int,
                         available: Optional[int] = None) -> None:
-    """BudgetTooLargeError when :func:`estimate_run_memory` exceeds 80 % of the available memory
-    (``available`` bytes; default: :func:`available_memory`), before anything is allocated."""
-    need = estimate_run_memory(method, num_cameras, evaluations)
-    have = available_memory() if available is None else int(available)
-    if have is not None and need > 0.8 * have:
-        raise BudgetTooLargeError(
-            f"{evaluations} evaluations of {num_cameras} cameras with {method} need about {need / 2**30:.1f} GiB; "
-            f"{have / 2**30:.1f} GiB are available: use a smaller budget")
-
-
-def available_memory() -> Optional[int]:
-    """MemAvailable of /proc/meminfo in bytes (None where unknown)."""
-    try:
-        with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    return None
+    """BudgetTooLargeError when :func:`estimate_run_memory` exceeds what a request may take of
+    the available memory (``available`` bytes; default: :func:`vp_scene.limits.available_memory`),
+    before anything is allocated."""
+    limits.check_memory_need(estimate_run_memory(method, num_cameras, evaluations),
+                             f"{evaluations} evaluations of {num_cameras} cameras with {method}", BudgetTooLargeError,
+                             available, "use a smaller budget")
 
 
 def check_memory(num_cameras: int, realizations_shape: tuple, reward: str,
                  available: Optional[int] = None) -> None:
-    """InvalidNumCamerasError when :func:`estimate_memory` exceeds 80 % of the available memory
-    (``available`` bytes; default: :func:`available_memory`), before anything is allocated."""
+    """InvalidNumCamerasError when :func:`estimate_memory` exceeds what a request may take of the
+    available memory (``available`` bytes; default: :func:`vp_scene.limits.available_memory`),
+    before anything is allocated."""
     K, P = int(realizations_shape[0]), int(realizations_shape[1])
-    need = estimate_memory(num_cameras, K, P, reward)
-    have = available_memory() if available is None else int(available)
-    if have is not None and need > 0.8 * have:
-        raise InvalidNumCamerasError(
-            f"num_cameras = {num_cameras} on {K} x {P} points needs about {need / 2**30:.1f} GiB for the "
-            f"{reward} reward; {have / 2**30:.1f} GiB are available: use fewer cameras or points")
+    limits.check_memory_need(estimate_memory(num_cameras, K, P, reward),
+                             f"num_cameras = {num_cameras} on {K} x {P} points with the {reward} reward",
+                             InvalidNumCamerasError, available, "use fewer cameras or points")
+
+
+def check_plan_memory(request: "PlanRequest", realizations_shape: tuple, available: Optional[int] = None) -> None:
+    """:func:`check_memory` of the request's N cameras on realizations of ``realizations_shape``
+    (K, P, ...), and, with cameras already flown, of the N + M cameras every evaluation scores
+    (InvalidFixedCamerasError)."""
+    n, model = request.cameras.num_cameras, request.reward.name
+    check_memory(n, realizations_shape, model, available)
+    m = len(request.sortie.fixed_cameras)
+    if m:
+        try:
+            check_memory(n + m, realizations_shape, model, available)
+        except ValueError as exc:
+            raise InvalidFixedCamerasError(f"fixed cameras: {m} with the plan's {n}: {exc}") from None
 
 
 def check_parts(parts: int, method: str, realizations: NDArray[np.float64], num_cameras: int) -> int:

@@ -160,6 +160,90 @@ def test_register_recovers_a_model_displaced_from_map_from_single_views() -> Non
     assert before > 0.02 and after < 0.008, (before, after)  # measured 0.040 -> 0.0052 (the 2 cm reports pull)
 
 
+def _ring_of_markers(n: int = 6):
+    """n cameras on a circle, each seeing the n markers around the plant (exact pixels): the
+    cameras, their names, K and the observations."""
+    from vp_scene.camera import intrinsics, project
+
+    az = np.radians(np.arange(n) * 360.0 / n)
+    c = np.stack([1.8 * np.cos(az), 1.8 * np.sin(az), np.full(n, 1.6)], axis=1)
+    cams = np.concatenate([c, np.array([0.0, 0.0, 0.0]) - c], axis=1)
+    markers = np.stack([1.1 * np.cos(az + 0.3), 1.1 * np.sin(az + 0.3), np.zeros(n)], axis=1)
+    K = intrinsics(1000, 750, math.pi / 2)
+    from vp_scene.ground_control import GcpObservation
+
+    obs = []
+    for i in range(n):
+        uv, inside = project(markers, cams[i], 1000, 750)
+        obs += [GcpObservation(name=str(j), image=f"im{i}", u=float(uv[j, 0]), v=float(uv[j, 1]))
+                for j in np.flatnonzero(inside)]
+    return cams, [f"im{i}" for i in range(n)], K, markers, tuple(obs)
+
+
+def test_control_points_that_do_not_fit_the_reported_poses_are_rejected_and_named() -> None:
+    """Control points far off (a file in another frame, a wrong survey) were
+    fitted silently. The gate rejects a point whose rays miss it by more than what the poses and
+    the survey explain, names it with its distance; the others place the model. When none fits,
+    the model stays where the poses put it and the record says why."""
+    import re
+
+    from vp_recon.gcp import describe
+
+    cams, names, K, markers, obs = _ring_of_markers()
+    pts = np.random.default_rng(0).normal(scale=0.2, size=(100, 3)) + [0.0, 0.0, 0.6]
+    positions = {str(j): tuple(m) for j, m in enumerate(markers)}
+    positions["2"] = (markers[2][0] + 1000.0, markers[2][1], 0.0)  # 1 km off
+    positions["4"] = (markers[4][0], markers[4][1] + 0.05, 0.0)  # 5 cm off: a survey error, kept
+    control = GroundControl(positions=positions, sigma=0.01, observations=obs)
+    out, _, reg = register(pts, cams, names, [], K, cams, control, 0.02)
+    assert reg.applied and reg.listed == 6 and reg.used == 5 and list(reg.rejected) == ["2"], reg
+    assert re.fullmatch(r"lies 998 m from the rays of the 6 image\(s\) that see it \(the gate: [\d.]+ m; its survey, "
+                        r"id or frame is not the flight's\)", reg.rejected["2"]), reg.rejected
+    assert np.abs(out - pts).max() < 0.05  # the 1 km point did not drag the model
+    line = describe(reg.to_dict())
+    assert line.startswith("ground control: 5 of 6 control points placed the model") and "rejected: 2 lies" in line
+    for shift, kept in ((0.15, True), (0.6, False)):  # the gate at 2 m deep: 10 x 2.2 cm + 2 degrees, 0.29 m
+        moved = dict(positions, **{"2": (markers[2][0], markers[2][1] + shift, 0.0)})
+        reg_moved = register(pts, cams, names, [], K, cams, GroundControl(moved, 0.01, obs), 0.02)[2]
+        assert ("2" not in reg_moved.rejected) == kept, (shift, reg_moved)
+
+    far = GroundControl(positions={k: (x + 1000.0, y, z) for k, (x, y, z) in positions.items()}, observations=obs)
+    out, _, reg = register(pts, cams, names, [], K, cams, far, 0.02)
+    assert not reg.applied and out is pts and sorted(reg.rejected) == [str(j) for j in range(6)], reg
+    assert reg.reason == ("0 of the 6 control points seen in the registered images fit the reported poses "
+                          "(3 are needed)")
+    assert describe(reg.to_dict()).startswith("ground control not used: 0 of the 6 control points")
+    assert reg.to_dict()["rejected"] == reg.rejected
+
+
+def test_a_flight_folders_ground_control_is_reported_in_recon_json_and_the_log(flown, tmp_path, capsys) -> None:
+    """``--images`` with a markers.csv one marker of which is listed 1 km from where it lies:
+    recon.json's ``control`` (there was none) and the log say what placed the model and which
+    marker was rejected and why; exit 0, the others used."""
+    import json
+
+    from vp_recon.cli import main
+    from vp_recon.flight import write_flight
+
+    cfg, views = flown
+    folder = write_flight(views, tmp_path / "flight")
+    rows = (folder / "markers.csv").read_text().splitlines()
+    cells = rows[1].split(",")
+    cells[1] = repr(float(cells[1]) + 1000.0)
+    rows[1] = ",".join(cells)
+    (folder / "markers.csv").write_text("\n".join(rows) + "\n")
+    capsys.readouterr()
+    rc = main(["--images", str(folder), "--out", str(tmp_path / "out"), "--sparse-only", "--sift-first-octave", "0",
+               "--threads", "1", "--no-progress"])
+    err = capsys.readouterr().err
+    assert rc == 0, err
+    ctl = json.loads((tmp_path / "out" / "recon.json").read_text())["control"]
+    assert ctl["listed"] == 4 and list(ctl["rejected"]) == [cells[0]], ctl
+    assert ctl["rejected"][cells[0]].startswith("lies ") and ctl["applied"] and ctl["used"] == 3, ctl
+    line = next(t for t in err.splitlines() if t.startswith("recon: ground control"))
+    assert "3 of 4 control points placed the model" in line and f"rejected: {cells[0]} lies" in line, err
+
+
 def test_register_leaves_the_model_when_too_few_control_points_are_seen() -> None:
     pts = np.zeros((5, 3))
     cams = arc(3)

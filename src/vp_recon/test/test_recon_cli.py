@@ -28,11 +28,13 @@ def _plan(tmp_path: Path, cameras=None, **extra) -> Path:
 
 
 def test_cli_writes_outputs(tmp_path: Path) -> None:
+    """(The plan's image_size is the rendered size, as `score` reads it: no --width here.)"""
     out = tmp_path / "out"
-    rc = main(["--plan", str(_plan(tmp_path)), "--out", str(out), "--width", "640", "--height", "480", "--capture", "ideal",
+    rc = main(["--plan", str(_plan(tmp_path, image_size=[640, 480])), "--out", str(out), "--capture", "ideal",
                "--realizations", "1", "--no-progress"])
     assert rc == 0
     data = json.loads((out / "recon.json").read_text())
+    assert (data["width"], data["height"]) == (640, 480)
     for key in ("chamfer_mean", "chamfer_std", "per_realization", "seconds", "units", "method", "reward"):
         assert key in data, key
     assert "x 100" in data["units"]
@@ -104,7 +106,6 @@ def test_cli_unwritable_out_and_bad_args(tmp_path: Path, capsys) -> None:
     _fails(tmp_path, capsys, ["--plan", str(_plan(tmp_path)), "--out", str(f)], "not writable")
     _fails(tmp_path, capsys, ["--plan", str(_plan(tmp_path)), "--out", str(tmp_path), "--realizations", "a"],
            "comma-separated")
-    _fails(tmp_path, capsys, ["--plan", str(_plan(tmp_path)), "--out", str(tmp_path), "--width", "3"], "width")
     _fails(tmp_path, capsys, ["--plan", str(_plan(tmp_path)), "--out", str(tmp_path), "--dense-scale", "0"],
            "dense_scale must be in (0, 1]")
 
@@ -234,3 +235,100 @@ def test_sigterm_after_colmap_ran_exits_quietly(tmp_path: Path) -> None:
     assert proc.returncode == 130, err[-2000:]
     assert "Aborted" not in err and "Traceback" not in err and err.rstrip().endswith("recon: interrupted")
     assert not (tmp_path / "o").exists()  # Hardening III, item 11: no empty (or half-written) OUT
+
+
+_QUICK = ["--capture", "ideal", "--width", "640", "--height", "480", "--sparse-only", "--no-progress"]
+
+
+def test_a_refused_realization_writes_nothing_and_the_corrected_run_is_accepted(tmp_path: Path, capsys) -> None:
+    """`--realizations 99` exited 2 but left a recon.json in OUT, so the corrected run was refused
+    as 'already holds a result'. The realizations are checked against the scene before OUT is
+    touched: OUT keeps what it held, and the corrected run goes through."""
+    out = tmp_path / "out"
+    plan = _plan(tmp_path)
+    out.mkdir()
+    (out / "plan.json").write_bytes(plan.read_bytes())
+    before = _entries(out)
+    for bad, words in (("99", "realization(s) [99] do not exist (the scene has 2: 0..1)"),
+                       ("1,1", "duplicate realizations in [1, 1]")):
+        _fails(tmp_path, capsys, ["--plan", str(plan), "--out", str(out), "--realizations", bad] + _QUICK,
+               f"--realizations: {words}")
+        assert _entries(out) == before
+    assert main(["--plan", str(plan), "--out", str(out), "--realizations", "1"] + _QUICK) == 0, capsys.readouterr().err
+    assert {"plan.json", "recon.json", "recon_1.ply"} <= set(_entries(out))
+
+
+def test_a_full_disk_fails_the_run_with_output_not_writable_and_keeps_out(tmp_path: Path, capsys, monkeypatch) -> None:
+    """A run whose results cannot all be written (the disk fills as the cloud is written: ENOSPC
+    from the OS call) is a failure: [OUTPUT_NOT_WRITABLE] naming the file and the full disk, one
+    line, exit 2, no Chamfer printed, and OUT as it was (no half result, no stage)."""
+    import errno
+
+    out = tmp_path / "out"
+    plan = _plan(tmp_path)
+    out.mkdir()
+    (out / "plan.json").write_bytes(plan.read_bytes())
+    before = _entries(out)
+    write_bytes = Path.write_bytes
+
+    def full(self: Path, data) -> int:
+        if self.name.startswith(".recon_"):  # the cloud's temporary file
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return write_bytes(self, data)
+
+    monkeypatch.setattr(Path, "write_bytes", full)
+    rc = main(["--plan", str(plan), "--out", str(out), "--realizations", "0"] + _QUICK)
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("\n") == 1 and "chamfer" not in err, err
+    assert err.startswith(f"recon: error: [OUTPUT_NOT_WRITABLE] could not write {out}/.partial-recon-") and \
+        "recon_0.ply: the disk is full (No space left on device)" in err, err
+    assert _entries(out) == before
+
+
+def test_what_a_killed_run_left_is_removed_by_the_next_but_a_live_runs_is_kept(tmp_path: Path, capsys,
+                                                                              monkeypatch) -> None:
+    """A recon SIGKILLed mid-run left its stage (OUT/.partial-recon-*) and its COLMAP workspace
+    (<temp>/vp_recon_*, 20-25 MB) for ever. Both name their owner's pid and hold its lock: the
+    next run removes those whose owner is gone, never those of a run still going (here: a live
+    process holding a stage and a workspace)."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import tempfile
+    import time
+
+    temp, out = tmp_path / "temp", tmp_path / "out"
+    temp.mkdir()
+    out.mkdir()
+    plan = _plan(tmp_path)
+    env = {**os.environ, "TMPDIR": str(temp)}
+    hold = ("import sys\nfrom vp_scene.folders import OwnedFolder\n"
+            f"a, b = OwnedFolder('vp_recon_'), OwnedFolder('.partial-recon-', {str(out)!r})\n"
+            "print(a.path, b.path, flush=True)\nsys.stdin.read()\n")
+    live = subprocess.Popen([sys.executable, "-c", hold], env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            text=True)
+    kept = [Path(p) for p in live.stdout.readline().split()]
+    killed = subprocess.Popen([sys.executable, "-m", "vp_recon.cli", "--plan", str(plan), "--out", str(out),
+                               "--realizations", "0"] + _QUICK, env=env, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 120
+        while not (list(out.glob(f".partial-recon-{killed.pid}-*")) and list(temp.glob(f"vp_recon_{killed.pid}-*"))):
+            assert killed.poll() is None and time.monotonic() < deadline, "the run made no stage and workspace"
+            time.sleep(0.02)
+        killed.send_signal(signal.SIGKILL)
+    finally:
+        killed.kill()
+        killed.wait(30)
+    left = list(out.glob(f".partial-recon-{killed.pid}-*")) + list(temp.glob(f"vp_recon_{killed.pid}-*"))
+    assert len(left) == 2 and len(kept) == 2 and all(p.is_dir() for p in kept), (left, kept)  # what the kill left, the live run's
+    try:
+        monkeypatch.setattr(tempfile, "tempdir", str(temp))
+        assert main(["--plan", str(plan), "--out", str(out), "--realizations", "0"] + _QUICK) == 0, \
+            capsys.readouterr().err
+        assert not any(p.exists() for p in left) and all(p.is_dir() for p in kept)
+        assert sorted(p.name for p in out.iterdir() if p.name.startswith(".")) == [kept[1].name]
+        assert [p.name for p in temp.iterdir()] == [kept[0].name]  # this run's own workspace went with it
+    finally:
+        live.stdin.close()
+        live.wait(30)

@@ -14,6 +14,7 @@ import pytest
 
 from vp_scene.camera import as_poses, poses_to_cameras, world_to_camera
 from vp_scene.capture import IDEAL
+from vp_scene.ground_control import GroundControl
 
 from vp_recon.cli import main
 from vp_recon.config import ReconConfig
@@ -209,10 +210,11 @@ def test_an_oversize_or_truncated_image_is_refused_before_anything_is_decoded(tm
         tripwire.setattr(cv2, "imdecode", lambda *a, **k: pytest.fail("an image was decoded"))
         tripwire.setattr(cv2, "imread", lambda *a, **k: pytest.fail("an image was decoded"))
         _refused(tmp_path, f, capsys, "im1.png", "30000x30000 pixels (900 MP); an image may have at most 150 MP")
-        for row in (1, 2, 3):  # the size declared in poses.csv as well
+        for row in (1, 2, 3):  # the size declared in poses.csv as well: beyond any image's side
             _edit_poses(f, row, "width", "30000")
             _edit_poses(f, row, "height", "30000")
-        _refused(tmp_path, f, capsys, "im1.png", "30000x30000 pixels (900 MP)")
+        _refused(tmp_path, f, capsys, "poses.csv", "the image width must be an integer of 16 to 16384 pixels, "
+                 "got 30000")
         f = _small_flight(tmp_path)  # 3 images of 64 x 48
         _refused(tmp_path, f, capsys, f"{f}: its 3 images have 0.009216 megapixels; at most 0.009 are reconstructed "
                  "at once (--max-megapixels", args=("--max-megapixels", "0.009"))
@@ -228,6 +230,69 @@ def test_an_oversize_or_truncated_image_is_refused_before_anything_is_decoded(tm
     _refused(tmp_path, f, capsys, "im1.jpg", "corrupt or truncated JPEG")
     with pytest.raises(FlightError, match=r"im1.jpg: corrupt or truncated JPEG"):
         read_flight(f)
+
+
+def test_a_pose_file_is_bounded_its_byte_order_mark_read_and_its_rows_counted_as_read(tmp_path: Path,
+                                                                                         capsys) -> None:
+    """A poses.csv coordinate of 1e300 ended in an OverflowError traceback of the
+    dense step; a UTF-8 byte-order mark (a spreadsheet's CSV) made the header wrong while the error
+    printed one that looked the same; a 400,000-row poses.csv was read whole, each name looked up
+    in a list (20,000 rows: 5 s). Now: every position and quaternion within MAX_COORDINATE (exit 2,
+    the line named), the mark read as one, at most MAX_POSES rows counted as they are read."""
+    from vp_scene.flight_poses import MAX_POSES, read_pose_files
+
+    f = _small_flight(tmp_path)
+    _edit_poses(f, 1, "x", "1e300")
+    _refused(tmp_path, f, capsys, "poses.csv line 2 (im0.png): the pose holds 1e+300, outside [-10000, 10000]")
+    f = _small_flight(tmp_path)
+    _edit_poses(f, 2, "qw", "-2e4")
+    _refused(tmp_path, f, capsys, "poses.csv line 3 (im1.png): the pose holds -20000")
+    f = _small_flight(tmp_path)  # COLMAP's text model: the centre -R^T t of a translation 1e300
+    (f / POSES_FILE).unlink()
+    lines = (f / "images.txt").read_text().splitlines()
+    i = next(n for n, t in enumerate(lines) if t.endswith(" im1.png"))
+    lines[i] = " ".join(lines[i].split()[:5] + ["1e300"] + lines[i].split()[6:])
+    (f / "images.txt").write_text("\n".join(lines) + "\n")
+    _refused(tmp_path, f, capsys, f"images.txt line {i + 1} (im1.png): the pose holds 1e+300")
+
+    f = _small_flight(tmp_path)
+    (f / POSES_FILE).write_bytes(b"\xef\xbb\xbf" + (f / POSES_FILE).read_bytes())
+    assert read_flight(f).names == ["im0.png", "im1.png", "im2.png"]
+    text = (f / POSES_FILE).read_text(encoding="utf-8-sig")
+    (f / POSES_FILE).write_text(text.replace("image,", "image\u200b,", 1))  # a header that looks the same
+    _refused(tmp_path, f, capsys, "the first line must be the header", "got 'image\\u200b,x,y,z")
+
+    # rows past MAX_POSES are not read: what follows the limit (here: no row at all) is never parsed
+    rows = text.splitlines()
+    big = tmp_path / "big"
+    big.mkdir()
+    (big / POSES_FILE).write_text("\n".join([rows[0]] + [rows[1].replace("im0.png", f"v{i}.png")
+                                                          for i in range(MAX_POSES + 1)]
+                                            + ["not a row"] * 1000) + "\n")
+    with pytest.raises(FlightError, match=rf"poses.csv: more than {MAX_POSES} images; a pose file lists at most "
+                                          rf"{MAX_POSES} \(the rest of the file was not read\)"):
+        read_pose_files(big)
+    (big / POSES_FILE).write_text("\n".join([rows[0]] + [rows[1].replace("im0.png", f"v{i}.png")
+                                                          for i in range(MAX_POSES)]) + "\n")
+    names, poses, cams, _ = read_pose_files(big)  # the limit itself: read
+    assert len(names) == len(set(names)) == MAX_POSES and poses.shape == (MAX_POSES, 7)
+    _refused(tmp_path, big, capsys, "v0.png: missing (listed in poses.csv)")
+
+
+def test_ground_control_in_another_frame_is_refused_naming_the_line(tmp_path: Path, capsys) -> None:
+    """A gcp_list.txt in UTM (its points 500 km from the flight's poses, in
+    map) was taken and gave nothing in recon.json. A control point is in the poses' frame, within
+    MAX_COORDINATE of map's origin: refused before anything is read, naming the line and the
+    coordinate system the file gives (not converted). Nearer ones that do not fit the poses are
+    rejected by the registration (test_recon_anchored)."""
+    f = _small_flight(tmp_path)
+    (f / "gcp_list.txt").write_text("+proj=utm +zone=15 +datum=WGS84 +units=m +no_defs\n"
+                                    "500123.5 4980456.25 280.0 31.5 23.5 im0.png gcp1\n")
+    _refused(tmp_path, f, capsys, "gcp_list.txt, line 2: geo_x, geo_y, geo_z holds 500124, outside [-10000, 10000]",
+             "(the poses' frame, metres; the coordinate system '+proj=utm +zone=15")
+    (f / "gcp_list.txt").unlink()
+    (f / "markers.csv").write_text("id,x,y,z\n0,1.0,2.0,0.0\n3,0.5,-20000,0.0\n")
+    _refused(tmp_path, f, capsys, "markers.csv, line 3: marker 3 holds -20000", "(markers.csv is in the poses' frame)")
 
 
 def test_a_truncated_png_is_refused_in_one_line(tmp_path: Path, capfd) -> None:
@@ -269,19 +334,23 @@ def test_coverage_of_prior_per_plant_in_the_best_covered_realization() -> None:
 
 
 def test_a_second_sortie_reads_the_flown_cameras_images_back_from_the_first_plans_capture_sets(tmp_path) -> None:
-    """Issue 21 with the fleet: the cameras a second sortie names as flown are found in the
-    capture sets of the earlier plan that flew them (newest first, to 1e-6), read back for
-    realization k in the order named and put before the new images; a camera no sortie flew,
-    a realization not kept and a capture set of another camera are named errors."""
+    """With the fleet: the cameras a second sortie names as flown are found in the capture sets
+    of the earlier plan that flew them (newest first, to 1e-6), read back for realization k in
+    the order named, with the field's ground markers their capture sets kept, and put before the
+    new images (the new sortie photographs the same markers: one set); a camera no sortie flew,
+    a realization not kept, a capture set of another camera and one of other ground control
+    (other markers, or none) are named errors."""
     from vp_recon.flight import capture_folder, flown_views, join_views, locate_flown
+    from vp_scene.capture import REALISTIC
 
     rng = np.random.default_rng(1)
     K = np.array([[32.0, 0, 31.5], [0, 32.0, 23.5], [0, 0, 1]])
+    markers = REALISTIC.lay_markers(ring(6)[:, :3] * 0.3)[1]  # as the capture model surveys them
 
-    def views(cams, k, size=(48, 64)):
+    def views(cams, k, size=(48, 64), control=markers):
         return CapturedViews(names=[f"view_{i:03d}.png" for i in range(len(cams))],
                              images=[rng.integers(0, 255, (*size, 3), dtype=np.uint8) for _ in cams],
-                             reported=cams + rng.normal(0.0, 0.01, cams.shape), K=K, realization=k)
+                             reported=cams + rng.normal(0.0, 0.01, cams.shape), K=K, realization=k, control=control)
 
     first, other = ring(4), ring(6)[4:]
     plans = {"plan-a": first, "plan-b": other}
@@ -301,8 +370,10 @@ def test_a_second_sortie_reads_the_flown_cameras_images_back_from_the_first_plan
     np.testing.assert_allclose(poses_to_cameras(old.reported[0]), np.r_[v[:3], v[3:] / np.linalg.norm(v[3:])],
                                atol=1e-9)  # read back as a pose
     new = views(ring(6)[:2], 1)
+    assert old.control == markers  # read back from each capture set's markers.csv
     both = join_views([old, new]).validate()
     assert both.names == [f"view_{i:03d}.png" for i in range(5)] and both.realization == 1
+    assert both.control == markers
     np.testing.assert_array_equal(both.images[3], new.images[0])
     np.testing.assert_allclose(both.reported[3:], as_poses(new.reported), atol=1e-12)  # one set: all poses
 
@@ -314,3 +385,29 @@ def test_a_second_sortie_reads_the_flown_cameras_images_back_from_the_first_plan
         join_views([old, views(ring(6)[:2], 1, size=(60, 80))])
     with pytest.raises(FlightError, match="realizations 1 and 0"):
         join_views([old, views(ring(6)[:2], 0)])
+    moved = GroundControl(positions={**markers.positions, "0": (9.0, 9.0, 0.0)}, sigma=markers.sigma)
+    for other, words in ((moved, "4 points, sigma 0.01 m and 4 points"), (None, "4 points, sigma 0.01 m and none")):
+        with pytest.raises(FlightError, match=rf"different ground control \({words}.*cannot be reconstructed together"):
+            join_views([old, views(ring(6)[:2], 1, control=other)])
+
+
+def test_a_capture_set_is_written_with_its_ground_control(tmp_path) -> None:
+    """write_flight keeps a set's ground control, read back equal: ArUco markers as markers.csv,
+    control points with their observations (a user's gcp_list.txt) as gcp_list.txt."""
+    from vp_scene.ground_control import GcpObservation
+    from vp_recon.flight import GCP_LIST_FILE, MARKERS_FILE
+
+    rng = np.random.default_rng(2)
+    cams = ring(3)
+    K = np.array([[32.0, 0, 31.5], [0, 32.0, 23.5], [0, 0, 1]])
+    names = [f"view_{i:03d}.png" for i in range(3)]
+    markers = GroundControl(positions={"0": (0.1, -0.7, 0.0), "7": (1.25, 0.3, 0.001)}, sigma=0.02)
+    points = GroundControl(positions={"a": (0.1, -0.7, 0.0), "b": (1.25, 0.3, 0.001)},
+                           observations=(GcpObservation("a", names[0], 10.5, 20.25),
+                                         GcpObservation("b", names[2], 3.0, 4.0)))
+    for control, written in ((markers, MARKERS_FILE), (points, GCP_LIST_FILE)):
+        views = CapturedViews(names=names, images=[rng.integers(0, 255, (48, 64, 3), dtype=np.uint8) for _ in names],
+                              reported=cams, K=K, realization=0, control=control)
+        folder = write_flight(views, tmp_path / written)
+        assert (folder / written).is_file() and not (folder / ({MARKERS_FILE, GCP_LIST_FILE} - {written}).pop()).exists()
+        assert read_flight(folder).control == control

@@ -39,7 +39,11 @@ Nothing is lost or mixed: these files (:data:`RESULT`, with ``work/``) are writt
 folder in OUT and moved into OUT together when the run ends; an error or an interrupt leaves OUT
 as it was (and no OUT when there was none). An OUT that holds a reconstruction is refused (exit
 2) unless ``--overwrite``, which replaces it as a whole when the run succeeds (a run that fails
-keeps it and writes nothing). Other files in OUT (the plan) are never touched.
+keeps it and writes nothing). Other files in OUT (the plan) are never touched. A request refused
+(exit 2: a realization the scene does not have, ...) writes nothing; a file that cannot be
+written (a full disk) fails the run with ``[OUTPUT_NOT_WRITABLE]`` naming it. The stage and the
+COLMAP workspaces name their owner's pid and hold its lock (:class:`vp_scene.folders.OwnedFolder`):
+those a killed run left are removed by the next run.
 
 With ``--scheduler`` the realizations reconstruct in parallel on a Dask cluster
 (:mod:`vp_scene.cluster`; the same records as in this process). An address where no scheduler
@@ -53,7 +57,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import math
 import os
 import signal
@@ -82,6 +85,7 @@ def add_capture_arguments(p: argparse.ArgumentParser) -> None:
     """``--capture realistic|ideal`` and one flag per figure of :class:`vp_scene.capture.
     CaptureModel` (default: the realistic model's; the CLI, the benchmarks)."""
     from vp_scene.capture import CAPTURES, REALISTIC
+    from vp_scene.limits import MAX_SEED, seed_arg
 
     p.add_argument("--capture", default="realistic", choices=CAPTURES,
                    help="realistic: hover and localization errors and sensor noise of an RTK multirotor "
@@ -91,7 +95,8 @@ def add_capture_arguments(p: argparse.ArgumentParser) -> None:
                        ("sensor_noise", "of full scale")):
         p.add_argument("--" + name.replace("_", "-"), type=float, default=None,
                        help=f"capture figure, {unit} (default {getattr(REALISTIC, name):.4g}; ideal: 0)")
-    p.add_argument("--capture-seed", type=int, default=None, help="seed of the capture draws (default 0)")
+    p.add_argument("--capture-seed", type=seed_arg, default=None,
+                   help=f"seed of the capture draws, 0 to {MAX_SEED} (default 0)")
     p.add_argument("--gcp-markers", type=int, default=None,
                    help=f"ground markers laid around the plants and surveyed (default {REALISTIC.gcp_markers}; "
                         "0: none, the drones' reported poses alone place the model; README 'Capture model')")
@@ -110,6 +115,8 @@ def capture_from_args(args: argparse.Namespace) -> object:
 
 
 def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
+    from vp_scene.camera import IMAGE_SIDE_RANGE, image_side_arg
+
     from .config import MATCH_POSES_FROM, MATCHINGS, MAX_CAMERAS, MAX_MEGAPIXELS, ReconConfig
     from .segment import MASK_METHODS
     from .sparse import MODES
@@ -131,10 +138,11 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
                                                   "the end; one that holds a reconstruction is refused)")
     p.add_argument("--overwrite", action="store_true",
                    help="replace the reconstruction OUT holds (when this run succeeds; a failed run keeps it)")
-    p.add_argument("--width", type=int, default=None,
-                   help=f"--plan: rendered image width, pixels (default and paper: {ReconConfig.width})")
-    p.add_argument("--height", type=int, default=None,
-                   help=f"--plan: rendered image height, pixels (default and paper: {ReconConfig.height})")
+    p.add_argument("--width", type=image_side_arg, default=None,
+                   help=f"--plan: rendered image width, pixels, {IMAGE_SIDE_RANGE[0]} to {IMAGE_SIDE_RANGE[1]} "
+                        f"(default: the plan's image_size, else {ReconConfig.width}, the paper's)")
+    p.add_argument("--height", type=image_side_arg, default=None,
+                   help=f"--plan: rendered image height, pixels (default: the plan's, else {ReconConfig.height})")
     p.add_argument("--realizations", default=None, help="comma-separated realization indices (default: all)")
     p.add_argument("--sparse-only", action="store_true", help="score the sparse cloud (no dense stereo)")
     p.add_argument("--sparse-mode", default="auto", choices=("auto",) + MODES,
@@ -203,7 +211,8 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     if (args.prior or args.select or args.reference) and not args.images:
         p.error("--prior, --select and --reference go with --images (a plan brings its own scene)")
     if args.images:  # a flight folder has its own images: the options of rendering a plan do not apply
-        given = [f for f, v in (("--width", args.width), ("--height", args.height), ("--realizations", args.realizations),
+        given = [f for f, v in (("--width", args.width), ("--height", args.height),
+                                ("--realizations", args.realizations),
                                 ("--mesh-cache", args.mesh_cache), ("--scheduler", args.scheduler),
                                 ("--max-cameras", args.max_cameras)) if v]
         if given:
@@ -227,7 +236,7 @@ def run(args: argparse.Namespace) -> dict:
 
     from vp_scene.folders import ResultFolder
     from .config import MAX_CAMERAS, ReconConfig
-    from .errors import ReconError, check_plan_size, ensure_writable_dir, validate_cameras
+    from .errors import ReconError, check_plan_size, check_realizations, ensure_writable_dir, validate_cameras
 
     result_dir = ResultFolder(args.out, RESULT, PROG, args.overwrite).check()
     try:
@@ -242,8 +251,10 @@ def run(args: argparse.Namespace) -> dict:
     except ReconError as exc:
         raise CliError(f"{args.plan}: {exc}") from None
     try:
-        config = ReconConfig(width=args.width or ReconConfig.width, height=args.height or ReconConfig.height,
-                             fov=plan.fov, dense=not args.sparse_only,
+        size = plan.image_size or (ReconConfig.width, ReconConfig.height)  # the plan's cameras, as score has them
+        config = ReconConfig(width=size[0] if args.width is None else args.width,
+                             height=size[1] if args.height is None else args.height, fov=plan.fov,
+                             dense=not args.sparse_only,
                              sparse_mode=args.sparse_mode, fscore_threshold=args.fscore_threshold,
                              voxel=args.voxel, mesh_cache=args.mesh_cache, keep_workdir=args.keep_workdir,
                              ground=args.ground, num_threads=args.threads, matching=args.matching,
@@ -255,6 +266,10 @@ def run(args: argparse.Namespace) -> dict:
         noisy, _ = build_noisy_scene(**plan.scene)
     except (TypeError, ValueError, OSError) as exc:
         raise CliError(f"cannot rebuild the scene of {args.plan}: {exc}") from None
+    try:  # the realizations asked for, against the scene: the request is whole before OUT is touched
+        check_realizations(ks, noisy.points.shape[0])
+    except ReconError as exc:
+        raise CliError(f"--realizations: {exc}") from None
     ensure_writable_dir(args.out)
     with result_dir:  # an error or an interrupt leaves OUT as it was
         return _reconstruct_plan(args, result_dir, plan, noisy, cams, config, ks)
@@ -328,15 +343,17 @@ def _record_failure(result_dir: Any, info: dict, exc: Exception) -> Exception:
     scheduler lost, :class:`vp_scene.cluster.SchedulerLost`, becomes one, ``UNKNOWN``, naming it)
     is recorded in a recon.json that says what failed (batch tools: Table I counts failed plans),
     which becomes OUT's result; with --overwrite over an earlier result that one is kept and the
-    failure only reported. Any other exception is returned as it is, nothing recorded."""
+    failure only reported. A request error (:data:`vp_recon.errors.REQUEST_ERRORS`: exit 2, an
+    output folder that cannot be written among them) and any other exception are returned as
+    they are, nothing recorded: OUT stays as it was."""
     from vp_scene.cluster import SchedulerLost
 
-    from .errors import UNKNOWN, ReconError
+    from .errors import REQUEST_ERRORS, UNKNOWN, ReconError
     from .outputs import write_json
 
     if isinstance(exc, SchedulerLost):
         exc = ReconError(UNKNOWN, str(exc))
-    if not isinstance(exc, ReconError):
+    if not isinstance(exc, ReconError) or exc.code in REQUEST_ERRORS:
         return exc
     if result_dir.earlier():
         return ReconError(exc.code, f"{exc} (nothing written: {result_dir.out} keeps its earlier result)",
@@ -376,12 +393,15 @@ def _cloud(path: str, flag: str) -> np.ndarray:
 
 
 def _selection(path: str) -> tuple[list, Optional[str]]:
-    """The image names a plan among a folder's views chose (``images``) and its prior PLY."""
+    """The image names a plan among a folder's views chose (``images``) and its prior PLY (the
+    plan file read as every command reads it, :func:`vp_scene.planfile.load_plan`)."""
+    from vp_scene.planfile import PlanFileError, load_plan
+
     try:
-        data = json.loads(Path(path).read_text())
-    except (OSError, ValueError) as exc:
-        raise CliError(f"--select: cannot read {path}: {exc}") from None
-    names = data.get("images") if isinstance(data, dict) else None
+        data = load_plan(path, require_scene=False).data
+    except PlanFileError as exc:
+        raise CliError(f"--select: {exc}") from None
+    names = data.get("images")
     if not isinstance(names, list) or len(names) < 2 or not all(isinstance(n, str) for n in names) \
             or len(set(names)) != len(names):
         raise CliError(f"--select: {path} names no list of 2 or more distinct images ('images': a plan made with "
@@ -466,6 +486,11 @@ def run_images(args: argparse.Namespace) -> dict:
             if failure is exc:
                 raise
             raise failure from None
+        control = vr.control.to_dict() if vr.control is not None else None
+        if control is not None:  # what the ground control did, and what it refused and why
+            from .gcp import describe
+
+            print(f"{PROG}: {describe(control)}", file=sys.stderr)
         write_ply(out / "recon.ply", vr.points, vr.colors)
         write_image(out / "views.png", contact_sheet(views.images))
         sp = vr.sparse
@@ -473,7 +498,7 @@ def run_images(args: argparse.Namespace) -> dict:
                                            len(vr.points), vr.coverage, sp.centre_residual),
                 "cloud": vr.source, "chamfer_mean": None, "sparse_points": len(sp.points), "sparse_models": sp.models,
                 "sparse_mode": sp.mode, "sparse_fallback": sp.fallback,  # the model kept (incremental may fall back)
-                "mask": vr.mask.to_dict() if vr.mask is not None else None,
+                "mask": vr.mask.to_dict() if vr.mask is not None else None, "control": control,
                 "seconds": {k: round(float(v), 3) for k, v in {**views.seconds, **vr.seconds}.items()}}
         if vr.coverage is not None:
             write_image(out / "uncovered.png", uncovered_image(prior.points if noisy is None else noisy.points,
@@ -498,11 +523,16 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         os.environ.setdefault("LP_NUM_THREADS", str(args.threads))
     import pycolmap  # noqa: F401  (first: it installs glog's SIGTERM handler, replaced below)
 
-    from .errors import EMPTY_PLAN, NO_SCENE, OUTPUT_NOT_WRITABLE, PLAN_TOO_LARGE, ReconError
+    from vp_scene.folders import OutputError
+
+    from .errors import OUTPUT_NOT_WRITABLE, REQUEST_ERRORS, ReconError
 
     signal.signal(signal.SIGTERM, _terminate)  # SIGTERM ends the run as Ctrl-C does: exit 130
     try:
-        data = run_images(args) if args.images else run(args)
+        try:
+            data = run_images(args) if args.images else run(args)
+        except OutputError as exc:  # a result file not written (a full disk): the run failed, OUT as it was
+            raise ReconError(OUTPUT_NOT_WRITABLE, str(exc)) from None
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted", file=sys.stderr)
         return 130
@@ -511,7 +541,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return 2
     except ReconError as exc:
         print(f"{PROG}: error: [{exc.name}] {' '.join(str(exc).split())}", file=sys.stderr)
-        return 2 if exc.code in (EMPTY_PLAN, NO_SCENE, OUTPUT_NOT_WRITABLE, PLAN_TOO_LARGE) else 1
+        return 2 if exc.code in REQUEST_ERRORS else 1
     except (ValueError, OSError) as exc:
         print(f"{PROG}: error: {' '.join(str(exc).split())}", file=sys.stderr)
         return 2

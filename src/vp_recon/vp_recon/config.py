@@ -9,7 +9,7 @@ from typing import Optional
 
 import numpy as np
 
-from vp_scene.camera import IMAGE_SIZE
+from vp_scene.camera import IMAGE_SIZE, check_image_side
 from vp_scene.capture import CaptureModel, REALISTIC
 from vp_scene.sim_drone import ground_under
 
@@ -56,7 +56,8 @@ class ReconConfig:
     """Reconstruction settings.
 
     Attributes:
-        width, height: rendered image size (paper: 2000 x 1500).
+        width, height: rendered image size (paper: 2000 x 1500), each side in
+            :data:`vp_scene.camera.IMAGE_SIDE_RANGE`.
         fov: horizontal field of view, rad (the planner's, default pi/2).
         sparse_mode: ``'known_poses'`` (triangulate with the reported poses), ``'anchored'``
             (the model anchored on the reported poses: triangulated from them, adjusted and
@@ -141,8 +142,9 @@ class ReconConfig:
 
         for name in ("width", "height"):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 16:
-                raise ValueError(f"{name} must be an integer >= 16 pixels, got {v!r}")
+            if not isinstance(v, (int, np.integer)):
+                raise ValueError(f"{name} must be an integer of pixels, got {v!r}")
+            check_image_side(name, v)
         if not (isinstance(self.fov, (int, float)) and 0 < self.fov < math.pi):
             raise ValueError(f"fov must be in (0, pi) rad, got {self.fov!r}")
         if self.sparse_mode not in ("auto",) + MODES:

@@ -8,7 +8,7 @@ from __future__ import annotations
 import os
 import tempfile
 from pathlib import Path
-from typing import Optional, Union
+from typing import Optional, Sequence, Union
 
 import numpy as np
 from numpy.typing import NDArray
@@ -17,7 +17,8 @@ from .config import MAX_CAMERAS
 
 __all__ = ["NONE", "UNKNOWN", "EMPTY_PLAN", "NO_SCENE", "NOTHING_VISIBLE", "RECONSTRUCTION_FAILED",
            "OUTPUT_NOT_WRITABLE", "WRONG_FRAME", "CAPTURE_MISSING", "PLAN_TOO_LARGE", "ERROR_NAMES", "ReconError",
-           "validate_cameras", "check_plan_size", "check_scene", "ensure_writable_dir"]
+           "REQUEST_ERRORS", "validate_cameras", "check_plan_size", "check_scene", "check_realizations",
+           "ensure_writable_dir"]
 
 NONE = 0
 UNKNOWN = 1
@@ -33,6 +34,10 @@ ERROR_NAMES = {NONE: "NONE", UNKNOWN: "UNKNOWN", EMPTY_PLAN: "EMPTY_PLAN", NO_SC
                NOTHING_VISIBLE: "NOTHING_VISIBLE", RECONSTRUCTION_FAILED: "RECONSTRUCTION_FAILED",
                OUTPUT_NOT_WRITABLE: "OUTPUT_NOT_WRITABLE", WRONG_FRAME: "WRONG_FRAME",
                CAPTURE_MISSING: "CAPTURE_MISSING", PLAN_TOO_LARGE: "PLAN_TOO_LARGE"}
+
+#: The codes of a request that cannot be run as given (the plan, the scene, the output folder, the
+#: size): the CLI's usage errors (exit 2), which leave its output folder as it was.
+REQUEST_ERRORS = (EMPTY_PLAN, NO_SCENE, OUTPUT_NOT_WRITABLE, PLAN_TOO_LARGE)
 
 
 class ReconError(Exception):
@@ -91,6 +96,20 @@ def check_scene(noisy_scene: object) -> NDArray[np.float64]:
     if pts.ndim != 3 or pts.shape[0] == 0 or pts.shape[1] == 0 or pts.shape[2] != 3:
         raise ReconError(NO_SCENE, f"the scene has no points (realizations array of shape {pts.shape})")
     return pts
+
+
+def check_realizations(realizations: Optional[Sequence[int]], count: int) -> list[int]:
+    """The wind realizations to reconstruct of a scene of ``count`` (None: all of them), in the
+    order given; ReconError(NO_SCENE) for none, one the scene does not have, or a duplicate."""
+    ks = list(range(count)) if realizations is None else [int(x) for x in realizations]
+    if not ks:
+        raise ReconError(NO_SCENE, "no realization selected")
+    bad = [x for x in ks if not 0 <= x < count]
+    if bad:
+        raise ReconError(NO_SCENE, f"realization(s) {bad} do not exist (the scene has {count}: 0..{count - 1})")
+    if len(set(ks)) != len(ks):
+        raise ReconError(NO_SCENE, f"duplicate realizations in {ks}")
+    return ks
 
 
 def ensure_writable_dir(path: Union[str, os.PathLike]) -> Path:

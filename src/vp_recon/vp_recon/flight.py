@@ -16,8 +16,8 @@ pinhole camera (COLMAP's undistorter, ``pycolmap.undistort_camera`` / ``undistor
 blank pixels, the image size may change by a few pixels); everything after works on pinhole
 images. :func:`write_flight` writes both files (pinhole: what it writes is undistorted; and an
 empty ``points3D.txt``, so that COLMAP reads the model), plus ``flight.json`` (what is known of
-a simulated flight: its wind realization and capture model). Every problem of a folder is a
-:class:`FlightError` with one line naming the file.
+a simulated flight: its wind realization and capture model) and the set's ground control. Every
+problem of a folder is a :class:`FlightError` with one line naming the file.
 
 Ground control (optional, :mod:`vp_scene.ground_control`): ``DIR/markers.csv`` (``id,x,y,z[,sigma]``:
 ArUco markers of OpenCV's ``DICT_4X4_50`` surveyed on the ground, found in the images by
@@ -38,18 +38,19 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Optional, Sequence, Union
 
-import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
 from vp_scene.ground_control import GroundControl, GroundControlError, read_gcp_list, read_markers_csv, \
-    write_markers_csv
-from vp_scene.camera import as_poses, principal_point_gl, world_to_camera
+    write_gcp_list, write_markers_csv
+from vp_scene.camera import as_poses, check_image_side, principal_point_gl, world_to_camera
+from vp_scene.folders import write_atomic
 from vp_scene.flight_poses import FRAME, POSES_FILE, FlightCamera, FlightError, read_pose_files, write_poses_csv
 from vp_scene.images import ImageError, image_size, read_image
 
 from .config import MAX_MEGAPIXELS
+from .outputs import write_image
 
 __all__ = ["MARKERS_FILE", "GCP_LIST_FILE", "IMAGE_SUFFIXES", "CapturedViews", "write_flight", "read_flight",
            "capture_folder", "locate_flown", "flown_views", "join_views"]
@@ -149,8 +150,10 @@ def _undistorter(cam: FlightCamera) -> tuple[object, FlightCamera]:
 def write_flight(views: CapturedViews, folder: PathLike, meta: Optional[dict] = None) -> Path:
     """Write a capture set as a flight folder (module docstring): the images (PNG, lossless),
     ``poses.csv``, COLMAP's ``cameras.txt`` / ``images.txt`` / ``points3D.txt`` and
-    ``flight.json`` (``meta`` and the realization). Every file is written under a temporary
-    name and renamed, the pose files last: a folder that has poses.csv is complete."""
+    ``flight.json`` (``meta`` and the realization) and the ground control (``markers.csv``, or
+    ``gcp_list.txt`` for control points with observations). Every file is written whole or not at
+    all (:func:`vp_scene.folders.write_atomic`: OutputError naming it), the pose file last: a
+    folder that has poses.csv is complete."""
     views.validate()
     out = Path(folder)
     out.mkdir(parents=True, exist_ok=True)
@@ -158,20 +161,10 @@ def write_flight(views: CapturedViews, folder: PathLike, meta: Optional[dict] = 
     K = np.asarray(views.K, dtype=np.float64)
 
     def atomic(name: str, write) -> None:
-        tmp = out / f".{name}.tmp"
-        write(tmp)
-        tmp.replace(out / name)
+        write_atomic(out / name, write)
 
     for name, im in zip(views.names, views.images):
-        suffix = Path(name).suffix or ".png"
-
-        def write_image(tmp: Path, im=im, suffix=suffix) -> None:
-            ok, buf = cv2.imencode(suffix, cv2.cvtColor(np.asarray(im, np.uint8), cv2.COLOR_RGB2BGR))
-            if not ok:
-                raise OSError(f"cannot encode {name}")
-            tmp.write_bytes(buf.tobytes())
-
-        atomic(name, write_image)
+        write_image(out / name, im)
     R, t = world_to_camera(views.reported)
     cx, cy = principal_point_gl(K)
     meta = {**(meta or {}), "realization": views.realization, "frame": FRAME, "images": list(views.names)}
@@ -186,10 +179,11 @@ def write_flight(views: CapturedViews, folder: PathLike, meta: Optional[dict] = 
         lines += [" ".join([str(i + 1)] + [repr(float(v)) for v in (qw, qx, qy, qz, *t[i])] + ["1", name]), ""]
     atomic("images.txt", lambda p: p.write_text("\n".join(lines) + "\n"))
     atomic("points3D.txt", lambda p: p.write_text("# 3D point list (empty: poses only)\n"))
-    if views.control is not None:
+    if views.control is not None:  # ArUco markers, or control points with their observations
         if views.control.observations:
-            raise FlightError("write_flight writes ArUco markers (markers.csv), not observed control points")
-        atomic(MARKERS_FILE, lambda p: write_markers_csv(views.control, p))
+            atomic(GCP_LIST_FILE, lambda p: write_gcp_list(views.control, p))
+        else:
+            atomic(MARKERS_FILE, lambda p: write_markers_csv(views.control, p))
     atomic(POSES_FILE, lambda p: write_poses_csv(p, views.names, views.reported, K, (w, h)))
     return out
 
@@ -216,8 +210,13 @@ def read_flight(folder: PathLike, max_megapixels: float = MAX_MEGAPIXELS) -> Cap
         raise FlightError(f"{source} ({names[i]}): intrinsics differ from {names[0]}'s (one camera per flight)")
     cam = cams[0]
     w, h = cam.width, cam.height
-    if not (cam.fx > 0 and cam.fy > 0 and w >= 16 and h >= 16 and w == int(w) and h == int(h)):
-        raise FlightError(f"{source}: bad intrinsics fx {cam.fx} fy {cam.fy} size {w}x{h}")
+    try:
+        check_image_side("the image width", w)
+        check_image_side("the image height", h)
+    except ValueError as exc:
+        raise FlightError(f"{source}: {exc}") from None
+    if not (cam.fx > 0 and cam.fy > 0):
+        raise FlightError(f"{source}: bad intrinsics fx {cam.fx} fy {cam.fy}")
     pixels = 0
     for name in names:  # the headers first: nothing is decoded of a folder that is refused
         path = d / name
@@ -316,8 +315,10 @@ def locate_flown(flown: Sequence[tuple], cameras: NDArray[np.float64], tol: floa
 def flown_views(located: Sequence[tuple[Path, int]], k: int) -> CapturedViews:
     """Realization ``k``'s images and reported poses of the cameras :func:`locate_flown` found,
     read back from each plan folder's capture set (:func:`capture_folder`, :func:`read_flight`),
-    in the order given (joined by :func:`join_views`, which checks they share one camera).
-    FlightError naming a folder that is missing or does not hold the camera."""
+    in the order given, with the ground control their capture sets kept (the field's markers:
+    :func:`join_views` checks that every part shares one camera and one ground control, so that
+    the new sortie's images join them). FlightError naming a folder that is missing or does not
+    hold the camera."""
     sets: dict = {}  # plan folder -> its capture set of realization k, read once
     single = []
     for folder, j in located:
@@ -331,7 +332,7 @@ def flown_views(located: Sequence[tuple[Path, int]], k: int) -> CapturedViews:
         if j >= len(v.images):
             raise FlightError(f"{capture_folder(folder, k)}: {len(v.images)} images, camera {j} is not among them")
         single.append(CapturedViews(names=[v.names[j]], images=[v.images[j]], reported=v.reported[j:j + 1], K=v.K,
-                                    realization=int(k)))
+                                    realization=int(k), control=v.control))
     return join_views(single)
 
 
@@ -344,12 +345,21 @@ def _joined_poses(parts: Sequence[ArrayLike]) -> NDArray[np.float64]:
     return np.concatenate(arrays)
 
 
+def _control_text(control: Optional[GroundControl]) -> str:
+    """A capture set's ground control in a few words (join_views' refusal)."""
+    if control is None:
+        return "none"
+    return f"{len(control.positions)} points, sigma {control.sigma:g} m"
+
+
 def join_views(parts: Sequence[CapturedViews]) -> CapturedViews:
     """One capture set of several (the sorties of a flight, in order): images renamed
     ``view_000.png``... in that order; masks kept only when every part has them.
 
     Raises:
-        FlightError: the parts differ in image size, intrinsics or realization.
+        FlightError: the parts differ in image size, intrinsics, realization or ground control
+            (one field's sorties share its markers; sets of other control points, or one with
+            control and one without, are not one flight).
     """
     parts = [p for p in parts if len(p.images)]
     if not parts:
@@ -362,7 +372,8 @@ def join_views(parts: Sequence[CapturedViews]) -> CapturedViews:
         if p.realization != first.realization:
             raise FlightError(f"capture sets of realizations {first.realization} and {p.realization}")
         if p.control != first.control:
-            raise FlightError("capture sets of different ground control cannot be reconstructed together")
+            raise FlightError(f"capture sets of different ground control ({_control_text(first.control)} and "
+                              f"{_control_text(p.control)}) cannot be reconstructed together")
     images = [im for p in parts for im in p.images]
     masks = [m for p in parts for m in p.masks] if all(p.masks is not None for p in parts) else None
     return CapturedViews(names=[f"view_{i:03d}.png" for i in range(len(images))], images=images,

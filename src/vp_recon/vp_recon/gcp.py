@@ -20,14 +20,23 @@ where the plant is. :func:`register` places the model on both:
    (triangulating the markers first placed none of 4 of 5 such flights);
 3. with fewer than 3 control points seen (or 3 in a line) the model stays where the poses put it.
 
+Before the fit every control point seen is checked against the model the reported poses placed
+(the gate): the rays of the images that see it must pass (the median of them) within
+:data:`GATE_SIGMAS` sigmas of the reported centres' and the survey's errors plus
+:data:`GATE_ANGLE` at its depth (the model's attitude) of its surveyed position. A point farther
+off (its id misread, its survey wrong, its file in another frame: markers.csv 1 km off) is
+rejected and named with its distance, never fitted: a correction of centimetres cannot reach it,
+and a robust fit would be dragged by it.
+
 The similarity is a correction of a model already in ``map`` (a few centimetres and a percent
 of scale); it is applied to the points and cameras, and :class:`Registration` says what was
-used and the residuals (no truth read). ROS-free: numpy, scipy, OpenCV.
+used, what was rejected and why, and the residuals (no truth read; :func:`describe` is its one
+line for a log). ROS-free: numpy, scipy, OpenCV.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Optional, Sequence
 
 import numpy as np
@@ -36,10 +45,18 @@ from numpy.typing import NDArray
 from vp_scene.camera import as_poses, world_to_camera
 from vp_scene.ground_control import ARUCO_DICTIONARY, GcpObservation, GroundControl
 
-__all__ = ["DETECTION_SIGMA_PX", "Registration", "detect_markers", "register"]
+__all__ = ["DETECTION_SIGMA_PX", "GATE_SIGMAS", "GATE_ANGLE", "Registration", "describe", "detect_markers",
+           "register"]
 
 #: pixels: the detection error of a marker's centre (its survey error is added at its depth).
 DETECTION_SIGMA_PX: float = 1.0
+#: The gate (module docstring): sigmas of the reported centres' and the survey's errors a control
+#: point may lie from the rays that see it ...
+GATE_SIGMAS: float = 10.0
+#: ... plus this angle (rad) at its depth: the model's attitude, four times the 0.5 degrees an RTK
+#: drone reports. At a marker 2 m deep under RTK's 2 cm and a 1 cm survey the gate is 0.29 m; at
+#: 100 m, 3.7 m.
+GATE_ANGLE: float = math.radians(2.0)
 
 
 @dataclass
@@ -47,8 +64,11 @@ class Registration:
     """What :func:`register` did (distances m; no truth read).
 
     Attributes:
-        used: control points seen in the registered images (their observations placed the model).
+        listed: control points given (a file's, or the capture's markers).
+        used: control points seen in the registered images that passed the gate (their
+            observations placed the model).
         observations: their observations (point, image).
+        rejected: {control point: why} of those seen that the gate rejected (module docstring).
         applied: whether the model was moved (3 or more control points seen, not in a line).
         scale: the correction's scale (1: none); shift: its translation at the points' centre, m;
             turn: its rotation, degrees.
@@ -57,8 +77,10 @@ class Registration:
         reason: why the model was not moved ('' when it was).
     """
 
+    listed: int = 0
     used: int = 0
     observations: int = 0
+    rejected: dict = field(default_factory=dict)
     applied: bool = False
     scale: float = 1.0
     shift: float = 0.0
@@ -70,6 +92,48 @@ class Registration:
     def to_dict(self) -> dict:
         """JSON form (recon.json); NaN as None."""
         return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in self.__dict__.items()}
+
+
+def describe(control: dict) -> str:
+    """One line of a :meth:`Registration.to_dict` for a log: what was used, rejected and why."""
+    rejected = control.get("rejected") or {}
+    unseen = control.get("listed", 0) - control.get("used", 0) - len(rejected)
+    if control.get("applied"):
+        text = (f"ground control: {control['used']} of {control.get('listed', 0)} control points placed the model "
+                f"({control['observations']} observations, {control['reprojection_px']:.2f} px RMS; moved "
+                f"{control['shift']:.3f} m, scale {control['scale']:.4f}, turned {control['turn']:.2f} degrees)")
+    else:
+        text = f"ground control not used: {control.get('reason', '')}; the reported poses alone placed the model"
+    if rejected:
+        text += "; rejected: " + "; ".join(f"{n} {why}" for n, why in sorted(rejected.items()))
+    if unseen > 0:
+        text += f"; {unseen} not seen in the registered images"
+    return text
+
+
+def _gate(obs: list, control: GroundControl, cams: NDArray[np.float64], index: dict, K: NDArray[np.float64],
+          camera_sigma: float) -> dict:
+    """{control point: why} of the points seen whose surveyed position the rays of their
+    observations miss by more than the gate (module docstring), in the model's cameras."""
+    by_point: dict = {}
+    Kinv = np.linalg.inv(K)
+    for o in obs:
+        i = index[o.image]
+        R_cw = world_to_camera(cams[i])[0]
+        ray = R_cw.T @ (Kinv @ np.array([o.u, o.v, 1.0]))
+        ray /= np.linalg.norm(ray)
+        w = np.asarray(control.positions[o.name], dtype=np.float64) - cams[i, :3]
+        along = float(w @ ray)
+        miss = float(np.linalg.norm(w - along * ray)) if along > 0 else float(np.linalg.norm(w))  # behind: all of it
+        gate = GATE_SIGMAS * math.hypot(camera_sigma, control.sigma) + max(along, 0.0) * math.tan(GATE_ANGLE)
+        by_point.setdefault(o.name, []).append((miss, gate))
+    out = {}
+    for name, rows in by_point.items():
+        miss, gate = (float(np.median([r[j] for r in rows])) for j in (0, 1))
+        if miss > gate:
+            out[name] = (f"lies {miss:.3g} m from the rays of the {len(rows)} image(s) that see it (the gate: "
+                         f"{gate:.2g} m; its survey, id or frame is not the flight's)")
+    return out
 
 
 def detect_markers(images: Sequence[NDArray[np.uint8]], names: Sequence[str],
@@ -118,10 +182,14 @@ def register(points: NDArray[np.float64], cameras: NDArray[np.float64], names: S
     index = {n: i for i, n in enumerate(names)}
     obs = [o for o in (list(control.observations) or detect_markers(images, names, set(control.positions)))
            if o.name in control.positions and o.image in index and ok[index[o.image]]]
+    rejected = _gate(obs, control, cams, index, np.asarray(K, dtype=np.float64), camera_sigma)
+    obs = [o for o in obs if o.name not in rejected]
     seen = sorted({o.name for o in obs})
-    reg = Registration(used=len(seen), observations=len(obs))
+    reg = Registration(listed=len(control.positions), used=len(seen), observations=len(obs), rejected=rejected)
     if len(seen) < 3:
-        reg.reason = f"{len(seen)} control point(s) seen in the registered images (3 are needed)"
+        reg.reason = (f"{len(seen)} of the {len(seen) + len(rejected)} control points seen in the registered images "
+                      "fit the reported poses (3 are needed)" if rejected else
+                      f"{len(seen)} control point(s) seen in the registered images (3 are needed)")
         return points, cams, reg
     world = np.array([control.positions[n] for n in seen])
     if np.linalg.svd(world - world.mean(axis=0), compute_uv=False)[1] < 0.05:

@@ -16,6 +16,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from vp_scene.folders import write_atomic
+
 __all__ = ["TABLE_SCALE", "write_ply", "contact_sheet", "write_image", "summary", "write_json",
            "no_truth_metrics", "uncovered_image"]
 
@@ -27,8 +29,8 @@ PathLike = Union[str, os.PathLike]
 
 def write_ply(path: PathLike, points: NDArray[np.float64], colors: Optional[NDArray[np.uint8]] = None) -> None:
     """Binary PLY (trimesh's writer: float32 x, y, z; uchar red, green, blue, alpha when coloured),
-    written atomically (a temporary file renamed over ``path``). Read it back with
-    ``vp_scene.ply.load_ply`` or ``trimesh.load``."""
+    written whole or not at all (:func:`vp_scene.folders.write_atomic`: OutputError naming the
+    file). Read it back with ``vp_scene.ply.load_ply`` or ``trimesh.load``."""
     import trimesh
 
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
@@ -42,10 +44,7 @@ def write_ply(path: PathLike, points: NDArray[np.float64], colors: Optional[NDAr
     else:
         cloud = trimesh.PointCloud(p)
     data = trimesh.exchange.ply.export_ply(cloud, encoding="binary")
-    path = Path(path)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_bytes(data)
-    tmp.replace(path)
+    write_atomic(path, lambda tmp: tmp.write_bytes(data))
 
 
 def contact_sheet(images: Sequence[NDArray[np.uint8]], thumb_width: int = 480, columns: int = 0,
@@ -71,9 +70,12 @@ def contact_sheet(images: Sequence[NDArray[np.uint8]], thumb_width: int = 480, c
 
 
 def write_image(path: PathLike, rgb: NDArray[np.uint8]) -> None:
-    """Write an RGB image (PNG/JPEG by extension); OSError when it cannot be written."""
-    if not cv2.imwrite(str(path), cv2.cvtColor(np.asarray(rgb, np.uint8), cv2.COLOR_RGB2BGR)):
-        raise OSError(f"cannot write image {path}")
+    """Write an RGB image (PNG/JPEG by extension), whole or not at all (encoded in memory, then
+    :func:`vp_scene.folders.write_atomic`: OutputError naming the file)."""
+    ok, data = cv2.imencode(Path(path).suffix or ".png", cv2.cvtColor(np.asarray(rgb, np.uint8), cv2.COLOR_RGB2BGR))
+    if not ok:
+        raise ValueError(f"cannot encode the image {path}")
+    write_atomic(path, lambda tmp: tmp.write_bytes(data.tobytes()))
 
 
 def no_truth_metrics(registered: int, mean_reprojection_error: float, mean_track_length: float, points: int,
@@ -171,8 +173,6 @@ def _mean_no_truth(per: Sequence[dict]) -> dict:
 
 
 def write_json(path: PathLike, data: dict) -> None:
-    """Atomically write JSON (tmp file + rename)."""
-    path = Path(path)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=1))
-    tmp.replace(path)
+    """Write JSON whole or not at all (:func:`vp_scene.folders.write_atomic`)."""
+    text = json.dumps(data, indent=1)
+    write_atomic(path, lambda tmp: tmp.write_text(text))

@@ -64,10 +64,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vp_scene.camera import as_poses
+from vp_scene.folders import OwnedFolder
 
 from .config import ANCHOR_MAX_ATTITUDE_DEG, ReconConfig, matching_method
 from .errors import EMPTY_PLAN, NO_SCENE, NOTHING_VISIBLE, OUTPUT_NOT_WRITABLE, RECONSTRUCTION_FAILED, UNKNOWN, \
-    ReconError, check_plan_size, check_scene, validate_cameras
+    ReconError, check_plan_size, check_realizations, check_scene, validate_cameras
 from .errors import ensure_writable_dir
 from .metrics import EmptyCloudError, chamfer, chamfer_after_icp
 from .progress import ProgressFn, tick
@@ -128,6 +129,20 @@ def render_flight(noisy_scene: object, k: int, cameras: ArrayLike, config: Optio
                          seconds=shot.seconds, control=shot.control)
 
 
+#: The temporary COLMAP workspaces: ``<temp dir>/vp_recon_<pid>-<random>`` (vp_scene.folders.OwnedFolder).
+WORK_PREFIX = "vp_recon_"
+
+
+def _scratch() -> OwnedFolder:
+    """A temporary COLMAP workspace owned by this process (removed by the caller; one a killed run
+    left is removed as the next is made); ReconError(OUTPUT_NOT_WRITABLE) when none can be made."""
+    try:
+        return OwnedFolder(WORK_PREFIX)
+    except OSError as exc:
+        raise ReconError(OUTPUT_NOT_WRITABLE, f"cannot make a work folder in {tempfile.gettempdir()}: "
+                         f"{exc.strerror or exc}") from None
+
+
 def reconstruct_views(views: object, config: Optional[ReconConfig] = None, workdir: Optional[PathLike] = None,
                       prior: Optional[Prior] = None, pair_cloud: Optional[NDArray[np.float64]] = None,
                       progress: Optional[ProgressFn] = None, k: int = 0) -> ViewsResult:
@@ -180,8 +195,8 @@ def reconstruct_views(views: object, config: Optional[ReconConfig] = None, workd
         raise ReconError(NOTHING_VISIBLE, f"only camera {int(seeing[0])} of {n} sees a plant; "
                                           "a reconstruction needs at least 2 views of it")
     tick(progress, "render", k)
-    temp = workdir is None
-    wd = Path(tempfile.mkdtemp(prefix="vp_recon_")) if temp else Path(workdir)
+    scratch = _scratch() if workdir is None else None
+    wd = scratch.path if scratch is not None else Path(workdir)
     seconds: dict = {}
     try:
         t0 = time.perf_counter()
@@ -255,8 +270,8 @@ def reconstruct_views(views: object, config: Optional[ReconConfig] = None, workd
         seconds["dense"] = time.perf_counter() - t0
         tick(progress, "dense", k)
     finally:
-        if temp:
-            shutil.rmtree(wd, ignore_errors=True)
+        if scratch is not None:
+            scratch.remove()
     coverage = coverage_of_prior(points, prior.points, prior.plant, realizations=prior.realizations) \
         if prior is not None and len(points) else None
     return ViewsResult(points=points, colors=colors, source=source, sparse=sp, sparse_clean=clean, dense=dn,
@@ -303,8 +318,8 @@ def reconstruct_captured(noisy_scene: object, views: object, config: Optional[Re
     if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 0 <= int(k) < truth_all.shape[0]:
         raise ReconError(NO_SCENE, f"realization {k!r} does not exist (the scene has {truth_all.shape[0]})")
     k = int(k)
-    temp = workdir is None
-    wd = Path(tempfile.mkdtemp(prefix="vp_recon_")) if temp else ensure_writable_dir(workdir)
+    scratch = _scratch() if workdir is None else None
+    wd = scratch.path if scratch is not None else ensure_writable_dir(workdir)
     try:
         seconds = dict(views.seconds)
         prior = Prior.of_scene(noisy_scene)
@@ -325,10 +340,10 @@ def reconstruct_captured(noisy_scene: object, views: object, config: Optional[Re
         seconds["score"] = time.perf_counter() - t0
         tick(progress, "score", k)
     finally:
-        if temp or not cfg.keep_workdir:
+        if scratch is not None:
+            scratch.remove()
+        elif not cfg.keep_workdir:
             shutil.rmtree(wd / f"realization_{k}", ignore_errors=True)
-            if temp:
-                shutil.rmtree(wd, ignore_errors=True)
     sp, dn = vr.sparse, vr.dense
     return RealizationResult(
         realization=k, chamfer=score.chamfer, accuracy=score.accuracy, completeness=score.completeness,
@@ -345,7 +360,7 @@ def reconstruct_captured(noisy_scene: object, views: object, config: Optional[Re
         control=vr.control.to_dict() if vr.control is not None else None,
         mask=vr.mask.to_dict() if vr.mask is not None else None,
         reported=np.asarray(views.reported, dtype=np.float64),
-        K=np.asarray(views.K, dtype=np.float64))
+        K=np.asarray(views.K, dtype=np.float64), ground_control=views.control)
 
 
 def reconstruct_plan(noisy_scene: object, cameras: ArrayLike, config: Optional[ReconConfig] = None,
@@ -382,16 +397,7 @@ def reconstruct_plan(noisy_scene: object, cameras: ArrayLike, config: Optional[R
     cfg = (config or ReconConfig()).validate()
     cams = validate_cameras(cameras)
     check_plan_size(len(cams), cfg.max_cameras)
-    pts = check_scene(noisy_scene)
-    K = pts.shape[0]
-    ks = list(range(K)) if realizations is None else [int(x) for x in realizations]
-    if not ks:
-        raise ReconError(NO_SCENE, "no realization selected")
-    bad = [x for x in ks if not 0 <= x < K]
-    if bad:
-        raise ReconError(NO_SCENE, f"realization(s) {bad} do not exist (the scene has {K}: 0..{K - 1})")
-    if len(set(ks)) != len(ks):
-        raise ReconError(NO_SCENE, f"duplicate realizations in {ks}")
+    ks = check_realizations(realizations, check_scene(noisy_scene).shape[0])
     work_root = None
     if out_dir is not None:
         out = ensure_writable_dir(out_dir)

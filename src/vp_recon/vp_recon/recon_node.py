@@ -44,7 +44,9 @@ plan in progress is finished; of the plans that arrive meanwhile only the newest
 (it replaces an older queued one, which is logged), because a newer plan supersedes older ones.
 Bad input (an empty plan, cameras that see no plant, nothing reconstructed, an unwritable output
 folder, no scene yet, a wrong frame, more than ``max_cameras`` cameras: refused as it arrives)
-gives a score message with an error code and message and a log line; the node keeps running.
+gives a score message with an error code and message and a log line; the node keeps running. A
+realization whose files cannot all be written (a full disk) fails the plan with
+``OUTPUT_NOT_WRITABLE``, its score and the aggregate naming the file.
 Signals, exit codes and parameter types follow :mod:`vp_scene.node_runtime`.
 """
 from __future__ import annotations
@@ -69,17 +71,19 @@ from vp_recon.errors import ReconError, check_plan_size, ensure_writable_dir
 from vp_recon.fleet_captures import IMAGE_TRANSPORTS, FleetCaptures
 from vp_scene.flight_poses import FlightError
 from vp_recon.flight import flown_views, join_views, locate_flown, write_flight
+from vp_recon.gcp import describe
 from vp_recon.metrics import DEFAULT_FSCORE_THRESHOLD
 from vp_recon.outputs import contact_sheet, write_image, write_ply
 from vp_recon.pipeline import reconstruct_captured, reconstruct_plan
 from vp_recon.progress import STAGES, ReconCancelled
 from vp_recon.results import RealizationResult, plan_result
 from vp_recon.tasks import worker_call, worker_result
-from vp_scene.camera import IMAGE_SIZE
+from vp_scene.camera import IMAGE_SIDE_RANGE, IMAGE_SIZE
 from vp_scene.capture import IDEAL, REALISTIC, CaptureModel
 from vp_scene.cloud import numpy_to_pointcloud2, realizations_from_cloud
 from vp_scene.cluster import KeptLocalCluster
 from vp_scene.folders import new_run_folder, remove_if_empty
+from vp_scene.limits import MAX_SEED
 from vp_scene.messages import (aggregate_score, error_score, plan_key, pose_array_to_cameras, realization_score,
                                scene_of_description, score_msg)
 from vp_scene.node_runtime import (INT_MAX, LATCHED, NewestWins, Param, declare_typed, parameter_value,
@@ -99,8 +103,8 @@ _M = (0.0, math.inf)
 PARAMS = {
     'output_folder': Param(str(Path.home() / '.ros' / 'vp_recon'), 'a plan-<time> folder per plan goes here', None,
                            False, 'not empty'),
-    'width': Param(IMAGE_SIZE[0], 'rendered image width, pixels', (16, INT_MAX)),
-    'height': Param(IMAGE_SIZE[1], 'rendered image height, pixels', (16, INT_MAX)),
+    'width': Param(IMAGE_SIZE[0], 'rendered image width, pixels', IMAGE_SIDE_RANGE),
+    'height': Param(IMAGE_SIZE[1], 'rendered image height, pixels', IMAGE_SIDE_RANGE),
     'fov': Param(math.pi / 2, 'horizontal field of view, rad (the planner\'s)', (0.0, math.pi), False,
                  'the ends are excluded'),
     'sparse_mode': Param('auto', 'auto (anchored for a realistic capture, known_poses for the ideal one) | '
@@ -116,7 +120,7 @@ PARAMS = {
                                                 'none, the reported poses alone place the model)', (0, 50)),
     'gcp_sigma': Param(REALISTIC.gcp_sigma, "capture: the markers' survey error, m per axis", (0.0, 1.0), False,
                        'above 0'),
-    'capture_seed': Param(0, 'capture: seed of the draws', (0, INT_MAX)),
+    'capture_seed': Param(0, 'capture: seed of the draws', (0, MAX_SEED)),
     'ground_control': Param('', 'source fleet: the field\'s ground control, a markers.csv or gcp_list.txt (README "From a '
                                 'real flight"); \'\': the capture model\'s markers (the simulated drones render them)'),
     'dense': Param(True, 'CPU dense stereo (else the sparse cloud is scored)'),
@@ -448,7 +452,7 @@ class ReconNode(Node):
 
         def on_realization(res: RealizationResult) -> None:
             k = res.realization
-            try:
+            try:  # a realization whose outputs are not all written failed: its score says so
                 write_ply(run_dir / f'recon_{k}.ply', res.points, res.colors)
                 if res.rendered:
                     write_image(run_dir / f'views_{k}.png', contact_sheet(res.rendered))
@@ -456,13 +460,17 @@ class ReconNode(Node):
                     write_flight(res.captured_views(), run_dir / 'captures' / f'realization_{k}',
                                  meta={'capture': res.capture})
             except (OSError, ValueError) as exc:
-                self.get_logger().error(f'could not write the outputs of realization {k}: {exc}')
+                raise ReconError(Score.OUTPUT_NOT_WRITABLE, f'its outputs are not all written: {exc}', k) from None
             done.append(res)
             msg = realization_score(self._score(k, K, n_cams, plan), res)
             self.score_pub.publish(msg)
             self._publish_clouds(done, frame)
             self.get_logger().info(f'realization {k}: Chamfer x100 {msg.chamfer:.3f}, {msg.num_points} points '
                                    f'({time.monotonic() - started[0]:.1f} s)')
+            if res.control is not None:  # what the ground control did; a warning when some was refused
+                log = self.get_logger().info if res.control['applied'] and not res.control['rejected'] \
+                    else self.get_logger().warning
+                log(f'realization {k}: {describe(res.control)}')
             started[0] = time.monotonic()
 
         try:

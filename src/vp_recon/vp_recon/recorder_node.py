@@ -5,10 +5,11 @@ subscribes, once, to each one that matches a pattern of ``topics`` and has a pub
 serialized subscription (``raw=True``: the CDR bytes are written as they arrive, never decoded),
 with QoS adapted to the publishers as rosbag2 does (reliable when all of them are, transient local
 when all of them are, so latched messages published before the recorder started are recorded
-too). On SIGINT/SIGTERM the messages still arriving are written (until none came for 0.5 s, at
-most the shutdown grace), then the file is closed (summary and footer written) and the counts logged;
-signals, exit codes and parameter types follow :mod:`vp_scene.node_runtime` (a bad parameter or
-an unwritable file: one line, exit 2).
+too). On SIGINT/SIGTERM (also its parent's death: ``tools/node_process.py``) the messages still
+arriving are written (until none came for 0.5 s, at most the shutdown grace), then the file is
+closed (summary and footer written) and the counts logged; until then it reads as a file without
+a summary (:mod:`vp_recon.recording`). Signals, exit codes and parameter types follow
+:mod:`vp_scene.node_runtime` (a bad parameter or an unwritable file: one line, exit 2).
 
     ros2 run vp_recon recorder --ros-args -p output:=out/run/run.mcap
 """

@@ -14,12 +14,20 @@ The schema of a channel is the type's full message definition as rosbag2 builds 
 come from the interface packages' share folders (``<prefix>/share/<pkg>/msg/<Type>.msg``: the
 ament prefixes, then the Python prefix, where the PyPI Jazzy wheels install them).
 
-Closing: :meth:`RunRecording.close` writes the summary and footer. Until then the messages go to
-the file in chunks, each one finished and handed to the OS at most :data:`FLUSH_S` after its
-first message (mcap's ``Writer.flush``; before, nothing reached the disk before 1 MiB or the
-close, and a SIGKILLed run left a 0-byte run.mcap): a file whose writer was killed lacks the
-summary and footer, and MCAP's streaming reader reads every message up to FLUSH_S before the
-kill (:func:`read_messages`).
+Closing: :meth:`RunRecording.close` writes the summary (schemas, channels, statistics, chunk
+indexes) and the footer. Until then the file is a complete MCAP file without a summary after each
+chunk: mcap's writer writes into memory (:class:`_OpenEnd`), and each finished chunk goes to the
+file in one ``pwrite`` with an end (a DataEnd record, a footer whose ``summary_start`` is 0, the
+magic) that the next chunk overwrites. A chunk is finished when it reaches mcap's chunk size, or
+at most :data:`FLUSH_S` after its first message. Why: a seeking reader (mcap's ``make_reader`` on
+a file, which ``mcap_ros2.reader.read_ros2_messages`` uses) reads the footer at the end of the
+file first; a file whose writer was killed ended inside a chunk, read as a footer it raised
+``RecordLengthLimitExceeded``, and the streaming reader raised ``EndOfFile`` after the last
+complete chunk. A footer without a summary makes the seeking readers scan the data section to
+its end (rosbag2's and Foxglove's fall back to such a scan too). A SIGKILL of the writer loses
+the chunk in progress (at most FLUSH_S of messages); only a kill inside the one ``pwrite``
+leaves a cut last chunk, which the streaming reader reads up to (:func:`read_messages`) and the
+seeking readers refuse.
 """
 from __future__ import annotations
 
@@ -32,7 +40,7 @@ from pathlib import Path
 from typing import Callable, Dict, Iterable, List, Optional
 
 __all__ = ["RunRecording", "RecordingError", "message_definition", "find_msg_file", "qos_profiles_yaml",
-           "RUN_TOPICS", "FLUSH_S", "read_messages"]
+           "RUN_TOPICS", "FLUSH_S", "read_messages", "is_closed"]
 
 #: s at most between a message being written and its reaching the file (what a SIGKILL loses)
 FLUSH_S = 2.0
@@ -140,6 +148,63 @@ def qos_profiles_yaml(reliable: bool, transient_local: bool, depth: int) -> str:
             "  avoid_ros_namespace_conventions: false\n")
 
 
+def _open_end() -> bytes:
+    """The end of a recording still being written: a DataEnd record, a footer without a summary
+    (``summary_start`` 0: readers scan the data section) and the closing magic."""
+    from mcap.data_stream import RecordBuilder
+    from mcap.records import DataEnd, Footer
+    from mcap.writer import MCAP0_MAGIC
+
+    builder = RecordBuilder()
+    DataEnd(data_section_crc=0).write(builder)  # 0: no data CRC (mcap's writer computes none either)
+    Footer(summary_start=0, summary_offset_start=0, summary_crc=0).write(builder)
+    return builder.end() + MCAP0_MAGIC
+
+
+class _OpenEnd:
+    """The file under mcap's ``Writer``: what the writer writes is kept in memory until
+    :meth:`flush` writes it, followed by :func:`_open_end`, in one ``pwrite`` over the previous
+    end, so that the file on disk is a complete MCAP file between any two writes. :meth:`close`
+    writes the rest (the writer's own summary and footer) without that end."""
+
+    def __init__(self, path: Path) -> None:
+        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        self._end = _open_end()
+        self._written = 0  # bytes of the writer's on disk; the open end follows them
+        self._pending = bytearray()
+
+    def write(self, data: bytes) -> int:
+        self._pending += data
+        return len(data)
+
+    def tell(self) -> int:
+        return self._written + len(self._pending)
+
+    @property
+    def pending(self) -> bool:
+        """Whether the writer wrote bytes that are not on disk yet."""
+        return bool(self._pending)
+
+    def _pwrite(self, tail: bytes) -> int:
+        data = memoryview(bytes(self._pending) + tail)
+        at = self._written
+        while data:  # a regular file's write is short only on a signal or a full disk
+            n = os.pwrite(self._fd, data, at)
+            data, at = data[n:], at + n
+        self._written += len(self._pending)
+        self._pending.clear()
+        return at
+
+    def flush(self) -> None:
+        self._pwrite(self._end)
+
+    def close(self) -> None:
+        try:
+            os.ftruncate(self._fd, self._pwrite(b""))  # the writer's end is never shorter than the open one
+        finally:
+            os.close(self._fd)
+
+
 class RunRecording:
     """One MCAP file being written; thread-safe. ``add_topic`` once per topic, then ``write``
     serialized messages; ``close`` (idempotent) finishes the file."""
@@ -151,12 +216,12 @@ class RunRecording:
         self.path = Path(path)
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._file = open(self.path, "wb")
+            self._file = _OpenEnd(self.path)
         except OSError as exc:
             raise RecordingError(f"cannot write {self.path}: {exc.strerror or exc}") from exc
         self._writer = Writer(self._file, compression=CompressionType.ZSTD)
         self._writer.start(profile="ros2", library=f"vp_recon recording (mcap-ros2-support {mcap_ros2_version})")
-        self._writer.flush()  # the header: a recording killed before its first message is still MCAP
+        self._writer.flush()  # the header and the open end: a recording killed before its first message is MCAP
         self._dirty = False  # messages not flushed yet
         self._definition = definition
         self._schemas: Dict[str, int] = {}
@@ -174,8 +239,8 @@ class RunRecording:
             self.flush()
 
     def flush(self) -> None:
-        """Finish the chunk in progress and hand the file's bytes to the OS (a SIGKILL of this
-        process then loses none of them; no fsync: an OS crash may)."""
+        """Finish the chunk in progress and hand it to the OS with the open end (a SIGKILL of this
+        process then loses none of it; no fsync: an OS crash may)."""
         with self._lock:
             if self._closed or not self._dirty:
                 return
@@ -208,6 +273,9 @@ class RunRecording:
             self._sequence[topic] += 1
             self.counts[topic] += 1
             self._dirty = True
+            if self._file.pending:  # the message filled a chunk, which the writer finished: to the file now
+                self._file.flush()
+                self._dirty = False
 
     def total(self) -> int:
         """Messages written so far, all topics."""
@@ -223,7 +291,7 @@ class RunRecording:
             try:
                 self._writer.finish()
             finally:
-                self._file.close()
+                self._file.close()  # what finish wrote: the last chunk, the summary and the footer
 
     def __enter__(self) -> "RunRecording":
         return self
@@ -234,11 +302,26 @@ class RunRecording:
 
 def read_messages(path: os.PathLike, decoder_factories: Iterable = ()) -> Iterable[tuple]:
     """(schema, channel, message, decoded) of every message of an MCAP file, in file order, with
-    MCAP's streaming reader: a file whose writer was killed (no summary, its end cut) gives the
-    messages of its complete chunks, then :class:`mcap.exceptions.EndOfFile` (the caller says
-    the recording was cut). Other McapErrors: a file that is not a recording."""
+    MCAP's streaming reader: a file whose writer was killed is read to its end (see the module
+    docstring; :func:`is_closed` tells it from a closed one), one cut inside a write up to its
+    last complete chunk, then :class:`mcap.exceptions.EndOfFile`. Other McapErrors: a file that
+    is not a recording."""
     from mcap.reader import NonSeekingReader
 
     with open(path, "rb") as f:
         yield from NonSeekingReader(f, decoder_factories=list(decoder_factories)).iter_decoded_messages(
             log_time_order=False)
+
+
+def is_closed(path: os.PathLike) -> bool:
+    """Whether an MCAP file ends with its summary, as :meth:`RunRecording.close` leaves it; False
+    for one whose writer was killed (a footer without a summary, or a cut end) or that cannot be
+    read."""
+    from mcap.exceptions import McapError
+    from mcap.reader import SeekingReader
+
+    try:
+        with open(path, "rb") as f:
+            return SeekingReader(f).get_summary() is not None
+    except (McapError, OSError, EOFError, ValueError):
+        return False

@@ -63,6 +63,8 @@ class RealizationResult(Scores):
             the renderer's masks or the blue screen's colour key).
         reported, K: the poses the drones reported ((N, 6) [c, v] or (N, 7) poses) and the
             intrinsics: with ``rendered``, the capture set (:meth:`captured_views`).
+        ground_control: the capture set's ground control points
+            (:class:`vp_scene.ground_control.GroundControl`: the field's markers), None without.
     """
 
     realization: int
@@ -96,17 +98,19 @@ class RealizationResult(Scores):
     mask: Optional[dict] = None
     reported: Optional[NDArray[np.float64]] = field(default=None, repr=False)
     K: Optional[NDArray[np.float64]] = field(default=None, repr=False)
+    ground_control: object = field(default=None, repr=False)
 
     def captured_views(self) -> object:
         """The capture set this realization was reconstructed from
-        (:class:`vp_recon.flight.CapturedViews`: its images, the poses reported, K), for
-        :func:`vp_recon.flight.write_flight`; None when its images were not kept."""
+        (:class:`vp_recon.flight.CapturedViews`: its images, the poses reported, K, the ground
+        control), for :func:`vp_recon.flight.write_flight`; None when its images were not kept."""
         from .flight import CapturedViews
 
         if not self.rendered or self.reported is None:
             return None
         return CapturedViews(names=[f"view_{i:03d}.png" for i in range(len(self.rendered))], images=self.rendered,
-                             reported=self.reported, K=self.K, realization=self.realization)
+                             reported=self.reported, K=self.K, realization=self.realization,
+                             control=self.ground_control)
 
 
 #: on_realization(result) as soon as a realization is reconstructed (e.g. to publish it).

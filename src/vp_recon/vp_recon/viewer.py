@@ -300,7 +300,7 @@ def _last_messages(path: Path) -> tuple[Dict[str, object], bool]:
     from mcap.exceptions import EndOfFile, McapError
     from mcap_ros2.decoder import DecoderFactory
 
-    from .recording import read_messages
+    from .recording import is_closed, read_messages
 
     last: Dict[str, object] = {}
     try:
@@ -314,7 +314,7 @@ def _last_messages(path: Path) -> tuple[Dict[str, object], bool]:
         raise ViewerError(f"{path}: not a readable MCAP recording ({type(exc).__name__}: {exc})") from exc
     except Exception as exc:  # noqa: BLE001 - a corrupt file can fail anywhere in the decoders
         raise ViewerError(f"{path}: not a readable MCAP recording ({type(exc).__name__}: {exc})") from exc
-    return last, False
+    return last, not is_closed(path)
 
 
 def _poses(msg) -> np.ndarray:

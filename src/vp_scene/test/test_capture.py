@@ -70,7 +70,8 @@ def test_sensor_noise() -> None:
     (dict(report_attitude_sigma=float("nan")), "report_attitude_sigma"),
     (dict(hover_attitude_sigma=45.0), "at most 10 degrees"),
     (dict(sensor_noise=2.0), "sensor_noise must be at most 0.5"),
-    (dict(seed=-1), "seed must be an integer >= 0"),
+    (dict(seed=-1), "seed must be an integer from 0 to 4294967295"),
+    (dict(seed=2 ** 32), "seed must be an integer from 0 to 4294967295"),
 ])
 def test_bad_figures_are_one_line(kw, text) -> None:
     with pytest.raises(ValueError, match=text):

@@ -285,6 +285,15 @@ BAD_FILES = [
     ("field.yaml", "plants: [{x: 0, y: -100.5}]", "field.yaml: plant 0 stands at x = 0, y = -100.5 m, outside"),
     ("field.yaml", "grid: {rows: 1, columns: 10, plant_spacing: 25}",
      "field.yaml: plant 0 stands at x = -112.5, y = 0 m, outside the field's extent"),
+    # a key given twice was taken, the last one silently winning
+    ("field.yaml", "grid:\n  rows: 1\n  columns: 2\ngrid:\n  rows: 3\n  columns: 3\n",
+     "field.yaml is not valid YAML (line 4, column 1: duplicate key 'grid' (first on line 1;"),
+    ("field.yaml", "plants:\n  - x: 0\n    y: 0\n    x: 1\n", "field.yaml is not valid YAML (line 4, column 5: "
+     "duplicate key 'x' (first on line 2;"),
+    ("field.yaml", "plants: [{x: 0, x: 1, y: 0}]", "(line 1, column 17: duplicate key 'x' (first on line 1;"),
+    ("field.json", '{"grid": {"rows": 1, "columns": 2},\n "grid": {"rows": 3, "columns": 3}}',
+     "field.json is not valid JSON (line 2, column 8: duplicate key 'grid'"),
+    ("field.json", '{"plants": [{"x": 0, "y": 0,\n  "x": 1}]}', "(line 2, column 6: duplicate key 'x'"),
 ]
 
 

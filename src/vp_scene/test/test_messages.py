@@ -43,6 +43,10 @@ def test_cameras_through_a_pose_array() -> None:
         bad.poses[0].orientation.w = bad.poses[0].orientation.x = 0.0
         bad.poses[0].orientation.y = bad.poses[0].orientation.z = 0.0
         m.pose_array_to_cameras(bad.poses)
+    far = m.cameras_to_pose_array(CAMERAS, "map")  # a plan's message is bounded as its file is
+    far.poses[1].position.y = 1e300
+    with pytest.raises(ValueError, match=r"the poses holds 1e\+300, outside \[-10000, 10000\]"):
+        m.pose_array_to_cameras(far.poses)
 
 
 def test_camera_plan_and_plan_key() -> None:

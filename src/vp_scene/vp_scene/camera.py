@@ -40,12 +40,22 @@ Square pixels, principal point at the image centre, no distortion, horizontal fi
 with OpenCV pixel centres at integer coordinates (u right, v down). OpenGL and COLMAP put pixel
 centres at +0.5, so their principal point is (W/2, H/2) (:func:`principal_point_gl`).
 
+Bounds of what a user gives (one home)
+--------------------------------------
+Every coordinate read from a file or a flag (a plan's cameras and poses, a flight's poses, ground
+control points) lies within :data:`MAX_COORDINATE` m of the origin of ``map`` on each axis
+(:func:`check_coordinates`): a field flown from one launch point, far inside what float64 squares
+and float32 renders keep exact to a millimetre (1e300 overflows the reward's squares; a point in
+UTM, 500 km out, is another frame). An image has sides of :data:`IMAGE_SIDE_RANGE` pixels
+(:func:`check_image_side`, :func:`image_side_arg` for the command lines).
+
 Quaternions go through :class:`scipy.spatial.transform.Rotation`. Everything is vectorized
 over leading dimensions and works on numpy arrays, except :func:`optical_axes`, the same axes
 for torch tensors (the planner's batched rewards; torch is imported only there). ROS-free.
 """
 from __future__ import annotations
 
+import argparse
 import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -60,6 +70,11 @@ if TYPE_CHECKING:
 __all__ = [
     "OPTICAL_IN_BODY",
     "IMAGE_SIZE",
+    "IMAGE_SIDE_RANGE",
+    "MAX_COORDINATE",
+    "check_coordinates",
+    "check_image_side",
+    "image_side_arg",
     "CameraModel",
     "rotation_matrix",
     "cameras_to_poses",
@@ -280,6 +295,51 @@ def azimuth_elevation(directions: ArrayLike) -> tuple[NDArray[np.float64], NDArr
 #: (width, height) of the cameras' images, pixels, by default (the paper's): the one home of the
 #: suite's default image size (planner, simulated drones, reconstruction, entry script, benchmarks).
 IMAGE_SIZE: tuple[int, int] = (2000, 1500)
+#: Pixels a side of an image may have, [lo, hi], wherever a size is given (flags, parameters, plan
+#: files, a flight's intrinsics): below 16 SIFT finds nothing; 16384 is OpenGL's largest render
+#: buffer on Mesa's llvmpipe (GL_MAX_RENDERBUFFER_SIZE; a 100000-pixel render failed with a
+#: GLError) and above the side of any survey camera's sensor.
+IMAGE_SIDE_RANGE: tuple[int, int] = (16, 16384)
+#: m: every coordinate a user gives lies in [-MAX_COORDINATE, MAX_COORDINATE] on each axis of
+#: ``map`` (module docstring).
+MAX_COORDINATE: float = 10_000.0
+
+
+def check_image_side(name: str, value: object) -> int:
+    """``value`` as an image side in :data:`IMAGE_SIDE_RANGE` pixels (an integer; bools refused),
+    else ValueError naming ``name``, the value and the range."""
+    lo, hi = IMAGE_SIDE_RANGE
+    try:
+        ok = not isinstance(value, (bool, np.bool_)) and int(value) == value and lo <= int(value) <= hi
+    except (TypeError, ValueError, OverflowError):
+        ok = False
+    if not ok:
+        raise ValueError(f"{name} must be an integer of {lo} to {hi} pixels, got {value!r}")
+    return int(value)
+
+
+def image_side_arg(text: str) -> int:
+    """argparse type of an image side flag (``--width``, ``--image-height``, ...): checked at parse
+    time against :data:`IMAGE_SIDE_RANGE` (argparse names the flag)."""
+    try:
+        return check_image_side("an image side", int(text))
+    except ValueError as exc:
+        lo, hi = IMAGE_SIDE_RANGE
+        raise argparse.ArgumentTypeError(f"must be an integer of {lo} to {hi} pixels, got {text!r}") from exc
+
+
+def check_coordinates(values: ArrayLike, what: str) -> NDArray[np.float64]:
+    """``values`` (any shape: positions in metres of ``map``, and the viewing directions or
+    quaternions beside them) as float64 when every one is finite and within
+    [-:data:`MAX_COORDINATE`, :data:`MAX_COORDINATE`], else ValueError naming ``what``, the first
+    value out and the range."""
+    a = np.asarray(values, dtype=np.float64)
+    bad = ~(np.abs(a) <= MAX_COORDINATE)  # NaN too
+    if bad.any():
+        v = float(a.reshape(-1)[np.flatnonzero(bad.reshape(-1))[0]])
+        raise ValueError(f"{what} holds {v:g}, outside [-{MAX_COORDINATE:g}, {MAX_COORDINATE:g}]: positions are "
+                         f"metres of map within {MAX_COORDINATE / 1000:g} km of its origin (the field's own frame)")
+    return a
 
 
 @dataclass(frozen=True)

@@ -53,6 +53,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
 from .camera import check_cameras
+from .limits import check_seed
 
 __all__ = ["CAPTURES", "CaptureModel", "IDEAL", "REALISTIC", "Flight"]
 
@@ -130,8 +131,7 @@ class CaptureModel:
             raise ValueError(f"capture sensor_noise must be at most 0.5 of full scale, got {self.sensor_noise!r}")
         if self.kind == "ideal" and any(getattr(self, n) for n in self._FIGURES):
             raise ValueError("capture 'ideal' has no error: its figures must all be 0")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
-            raise ValueError(f"capture seed must be an integer >= 0, got {self.seed!r}")
+        check_seed("capture seed", self.seed)
         from .ground_control import MAX_MARKERS
 
         m = self.gcp_markers

@@ -27,7 +27,10 @@ photogrammetry tools; read when there is no poses.csv): cameras of the models
 :data:`COLMAP_MODELS` (COLMAP's pixel convention: centres at +0.5), image poses as COLMAP's
 ``cam_from_world`` (QW QX QY QZ TX TY TZ, optical frame), in ``map``.
 
-Every problem is a :class:`FlightError` with one line naming the file. ROS-free: numpy, scipy.
+Both are read line by line, a UTF-8 byte-order mark (a spreadsheet's CSV) read as such, at most
+:data:`MAX_POSES` images (counted as they are read: the rest of a longer file is not read), every
+position and quaternion within :data:`vp_scene.camera.MAX_COORDINATE`. Every problem is a
+:class:`FlightError` with one line naming the file. ROS-free: numpy, scipy.
 """
 from __future__ import annotations
 
@@ -42,14 +45,18 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
-from vp_scene.camera import as_poses, body_from_optical
+from vp_scene.camera import as_poses, body_from_optical, check_coordinates
 
-__all__ = ["POSES_FILE", "POSES_COLUMNS", "DISTORTION_COLUMNS", "COLMAP_MODELS", "OPENCV_COEFFS", "FRAME",
+__all__ = ["POSES_FILE", "MAX_POSES", "POSES_COLUMNS", "DISTORTION_COLUMNS", "COLMAP_MODELS", "OPENCV_COEFFS", "FRAME",
            "FlightError", "FlightCamera", "write_poses_csv", "colmap_camera", "read_pose_files", "read_poses"]
 
 PathLike = Union[str, os.PathLike]
 
 POSES_FILE = "poses.csv"
+#: The most images a pose file may list, counted as it is read (a 400,000-row poses.csv, 829 MB, was
+#: read whole before its size mattered). Its readers take far fewer: the planner chooses among at
+#: most 2000 candidate views, a reconstruction reads at most 768 megapixels of images.
+MAX_POSES = 10_000
 POSES_COLUMNS = ("image", "x", "y", "z", "qx", "qy", "qz", "qw", "frame", "fx", "fy", "cx", "cy", "width", "height")
 #: Optional columns of poses.csv after :data:`POSES_COLUMNS`: OpenCV's (and CameraInfo plumb_bob's) distortion.
 DISTORTION_COLUMNS = ("k1", "k2", "p1", "p2", "k3")
@@ -130,43 +137,63 @@ def _number(text: str, where: str, what: str) -> float:
     return v
 
 
-def _read_poses_csv(path: Path) -> tuple[list, NDArray[np.float64], list]:
-    """(names, poses (N, 7), cameras (:class:`FlightCamera`)) of poses.csv."""
-    names, poses, cams = [], [], []
+def _checked_pose(pose: list, what: str) -> list:
+    """A pose's numbers (or a centre's), each within :data:`vp_scene.camera.MAX_COORDINATE`."""
     try:
-        with open(path, newline="") as f:
-            rows = list(csv.reader(f))
+        check_coordinates(pose, what)
+    except ValueError as exc:
+        raise FlightError(str(exc)) from None
+    return pose
+
+
+def _too_many(path: Path) -> FlightError:
+    return FlightError(f"{path}: more than {MAX_POSES} images; a pose file lists at most {MAX_POSES} "
+                       "(the rest of the file was not read)")
+
+
+def _read_poses_csv(path: Path) -> tuple[list, NDArray[np.float64], list]:
+    """(names, poses (N, 7), cameras (:class:`FlightCamera`)) of poses.csv, read row by row."""
+    names, poses, cams = [], [], []
+    seen: set = set()
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as f:  # -sig: a byte-order mark is not the header's
+            reader = csv.reader(f)
+            header = [c.strip() for c in next(reader, [])]
+            extra = header[len(POSES_COLUMNS):]
+            if header[:len(POSES_COLUMNS)] != list(POSES_COLUMNS) or len(set(extra)) != len(extra) \
+                    or not set(extra) <= set(DISTORTION_COLUMNS):
+                raise FlightError(f"{path}: the first line must be the header {','.join(POSES_COLUMNS)}, then "
+                                  f"optionally any of the distortion columns {','.join(DISTORTION_COLUMNS)}; got "
+                                  f"{','.join(header)[:300]!r}")
+            columns = tuple(header)
+            for line, row in enumerate(reader, start=2):
+                if not row or not "".join(row).strip():
+                    continue
+                where = f"{path} line {line}"
+                if len(names) == MAX_POSES:
+                    raise _too_many(path)
+                if len(row) != len(columns):
+                    raise FlightError(f"{where}: {len(row)} columns, expected {len(columns)} ({','.join(columns)})")
+                row = [c.strip() for c in row]
+                name = row[0]
+                if not name or Path(name).name != name:
+                    raise FlightError(f"{where}: image {name!r} must be a file name in the folder")
+                if name in seen:
+                    raise FlightError(f"{where}: duplicate image name {name}")
+                pose = _checked_pose([_number(v, f"{where} ({name})", c) for v, c in zip(row[1:8], columns[1:8])],
+                                     f"{where} ({name}): the pose")
+                if row[8] != FRAME:
+                    raise FlightError(f"{where} ({name}): frame {row[8]!r}; poses must be in {FRAME!r}")
+                k = [_number(v, f"{where} ({name})", c) for v, c in zip(row[9:], columns[9:])]
+                if np.linalg.norm(pose[3:]) < 1e-9:
+                    raise FlightError(f"{where} ({name}): the quaternion is zero")
+                given = dict(zip(columns[15:], k[6:]))
+                seen.add(name)
+                names.append(name)
+                poses.append(pose)
+                cams.append(FlightCamera(*k[:6], dist=tuple(given.get(c, 0.0) for c in OPENCV_COEFFS)))
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise FlightError(f"{path}: cannot read: {exc}") from None
-    header = [c.strip() for c in rows[0]] if rows else []
-    extra = header[len(POSES_COLUMNS):]
-    if header[:len(POSES_COLUMNS)] != list(POSES_COLUMNS) or len(set(extra)) != len(extra) \
-            or not set(extra) <= set(DISTORTION_COLUMNS):
-        raise FlightError(f"{path}: the first line must be the header {','.join(POSES_COLUMNS)}, then optionally "
-                          f"any of the distortion columns {','.join(DISTORTION_COLUMNS)}")
-    columns = tuple(header)
-    for line, row in enumerate(rows[1:], start=2):
-        if not row or not "".join(row).strip():
-            continue
-        where = f"{path} line {line}"
-        if len(row) != len(columns):
-            raise FlightError(f"{where}: {len(row)} columns, expected {len(columns)} ({','.join(columns)})")
-        row = [c.strip() for c in row]
-        name = row[0]
-        if not name or Path(name).name != name:
-            raise FlightError(f"{where}: image {name!r} must be a file name in the folder")
-        if name in names:
-            raise FlightError(f"{where}: duplicate image name {name}")
-        pose = [_number(v, f"{where} ({name})", c) for v, c in zip(row[1:8], columns[1:8])]
-        if row[8] != FRAME:
-            raise FlightError(f"{where} ({name}): frame {row[8]!r}; poses must be in {FRAME!r}")
-        k = [_number(v, f"{where} ({name})", c) for v, c in zip(row[9:], columns[9:])]
-        if np.linalg.norm(pose[3:]) < 1e-9:
-            raise FlightError(f"{where} ({name}): the quaternion is zero")
-        given = dict(zip(columns[15:], k[6:]))
-        names.append(name)
-        poses.append(pose)
-        cams.append(FlightCamera(*k[:6], dist=tuple(given.get(c, 0.0) for c in OPENCV_COEFFS)))
     return names, np.array(poses, dtype=np.float64).reshape(-1, 7), cams
 
 
@@ -178,15 +205,26 @@ def colmap_camera(model: str, w: float, h: float, p: list) -> FlightCamera:
                    dist=tuple(named.get(c, 0.0) for c in OPENCV_COEFFS))
 
 
+def _text_lines(path: Path):
+    """(line number, text) of a COLMAP text file, one at a time (a model's 2D points make long files)."""
+    try:
+        with open(path, encoding="utf-8-sig", errors="replace") as f:
+            yield from enumerate(f, start=1)
+    except OSError as exc:
+        raise FlightError(f"{path}: cannot read: {exc.strerror or exc}") from None
+
+
 def _read_colmap_text(folder: Path) -> tuple[list, NDArray[np.float64], list]:
     """(names, poses (N, 7) in the suite's body convention, cameras) of COLMAP's text model."""
     cams: dict = {}
     path = folder / "cameras.txt"
-    for line, text in enumerate(path.read_text(errors="replace").splitlines(), start=1):
+    for line, text in _text_lines(path):
         f = text.split()
         if not f or f[0].startswith("#"):
             continue
         where = f"{path} line {line}"
+        if len(cams) == MAX_POSES:
+            raise _too_many(path)
         if len(f) < 5 or f[1] not in COLMAP_MODELS:
             raise FlightError(f"{where}: camera model {' '.join(f[1:2])!r} is not read; the models read are "
                               f"{', '.join(COLMAP_MODELS)}")
@@ -198,27 +236,30 @@ def _read_colmap_text(folder: Path) -> tuple[list, NDArray[np.float64], list]:
         cams[f[0]] = colmap_camera(f[1], w, h, p)
     path = folder / "images.txt"
     names, poses, used = [], [], []
-    data = [(n, t) for n, t in enumerate(path.read_text(errors="replace").splitlines(), start=1)
-            if t.strip() and not t.lstrip().startswith("#")]
-    # two lines an image (the second, its 2D points, may be empty and then was dropped above)
-    for line, text in data:
+    seen: set = set()
+    # two lines an image (the second, its 2D points, may be empty)
+    for line, text in _text_lines(path):
         f = text.split()
-        if len(f) != 10 or not f[0].isdigit():
-            continue  # a POINTS2D line
+        if len(f) != 10 or not f[0].isdigit() or text.lstrip().startswith("#"):
+            continue  # a comment, an empty or a POINTS2D line
         where = f"{path} line {line}"
         name = f[9]
+        if len(names) == MAX_POSES:
+            raise _too_many(path)
         if Path(name).name != name:
             raise FlightError(f"{where}: image {name!r} must be a file name in the folder")
-        if name in names:
+        if name in seen:
             raise FlightError(f"{where}: duplicate image name {name}")
-        qw, qx, qy, qz, tx, ty, tz = (_number(v, f"{where} ({name})", "pose") for v in f[1:8])
+        qw, qx, qy, qz, tx, ty, tz = _checked_pose([_number(v, f"{where} ({name})", "pose") for v in f[1:8]],
+                                                   f"{where} ({name}): the pose")
         if f[8] not in cams:
             raise FlightError(f"{where} ({name}): camera {f[8]} is not in cameras.txt")
         if math.hypot(qw, qx, qy, qz) < 1e-9:
             raise FlightError(f"{where} ({name}): the quaternion is zero")
         R_cw = Rotation.from_quat([qx, qy, qz, qw]).as_matrix()
-        c = -R_cw.T @ np.array([tx, ty, tz])
+        c = _checked_pose(list(-R_cw.T @ np.array([tx, ty, tz])), f"{where} ({name}): the camera centre")
         poses.append(np.concatenate([c, body_from_optical(R_cw)]))
+        seen.add(name)
         names.append(name)
         used.append(cams[f[8]])
     return names, np.array(poses, dtype=np.float64).reshape(-1, 7), used

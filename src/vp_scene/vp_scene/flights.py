@@ -33,6 +33,8 @@ from typing import Any, Callable, Optional, Protocol, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
+from .camera import check_image_side
+
 __all__ = ["FlightSettings", "FlightDraw", "FlightScore", "FlightSimulator", "flight_draws", "FLIGHT_STREAM",
            "FLIGHT_CAPTURE_SEEDS", "ENTRY_POINTS", "load_simulator", "FlightSimulatorMissing"]
 
@@ -57,9 +59,7 @@ class FlightSettings:
 
     def __post_init__(self) -> None:
         for name in ("width", "height"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 16 <= v <= 8192:
-                raise ValueError(f"flight image {name} must be an integer in [16, 8192], got {v!r}")
+            check_image_side(f"flight image {name}", getattr(self, name))
         if isinstance(self.sift_first_octave, bool) or self.sift_first_octave not in (-1, 0):
             raise ValueError(f"flight sift_first_octave must be -1 or 0, got {self.sift_first_octave!r}")
         s = self.dense_scale

@@ -1,20 +1,144 @@
 """Result folders of the suite's commands and nodes (the planner's and the recon's CLIs, the recon
 node, ``make run``): a new run folder that is never shared (:func:`new_run_folder`), a folder
 moved aside (:func:`move_aside`), a command's result replaced as a whole or not at all
-(:class:`ResultFolder`, :class:`OutputExists`), an empty folder removed (:func:`remove_if_empty`)."""
+(:class:`ResultFolder`, :class:`OutputExists`), an empty folder removed (:func:`remove_if_empty`),
+a folder in use by a live run locked against every other (:class:`FolderLock`, :class:`FolderInUse`),
+every result file written whole or not at all (:func:`write_atomic`; a file that cannot be
+written is an :class:`OutputError`: one line naming it and why, "the disk is full" for a full
+disk or a short write), and scratch folders that a killed run leaves are removed by the next
+(:class:`OwnedFolder`, :func:`remove_abandoned`: only those whose owner process is gone)."""
 from __future__ import annotations
 
+import errno
+import fcntl
 import fnmatch
 import os
+import re
 import shutil
 import tempfile
 import time
 from pathlib import Path
-from typing import Optional, Sequence, Union
+from typing import Callable, Optional, Sequence, Union
 
-__all__ = ["new_run_folder", "remove_if_empty", "OutputExists", "ResultFolder", "move_aside"]
+__all__ = ["new_run_folder", "remove_if_empty", "OutputExists", "ResultFolder", "move_aside", "FolderLock",
+           "FolderInUse", "OutputError", "write_atomic", "OwnedFolder", "remove_abandoned"]
 
 PathLike = Union[str, os.PathLike]
+
+
+class OutputError(OSError):
+    """A result that could not be written: one line naming the file or folder and why."""
+
+
+def _why(exc: OSError) -> str:
+    """Why a write failed, in words: a full disk (ENOSPC, or a write that stopped short, as numpy's
+    ``N requested and M written``) is named so, whatever the library's words for it."""
+    text = " ".join(str(exc).split())
+    if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+        return f"the disk is full ({exc.strerror})"
+    if exc.errno == errno.EFBIG:
+        return f"the file is larger than the disk or the process's file size limit allows ({exc.strerror})"
+    if exc.errno is None and re.search(r"\d+ requested and \d+ written", text):
+        return f"the disk is full (a short write: {text})"
+    return exc.strerror or text
+
+
+def write_atomic(path: PathLike, write: Callable[[Path], object]) -> Path:
+    """Write the file ``path`` whole or not at all: ``write(tmp)`` writes a hidden temporary
+    sibling, which is then renamed over ``path`` (a reader never sees half a file; a failed write
+    leaves no temporary). OutputError naming ``path`` when anything fails (the folder missing, a
+    full disk, a folder where the file goes)."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp")
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    except OSError as exc:
+        try:
+            tmp.unlink()
+        except OSError:
+            pass
+        raise OutputError(f"could not write {path}: {_why(exc)}") from None
+    return path
+
+
+def _process_alive(pid: int) -> bool:
+    """Whether a process of this id runs here (a zombie has ended: its files and locks are closed)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's
+        return True
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return True
+
+
+def remove_abandoned(parent: PathLike, prefix: str) -> list[Path]:
+    """Remove the folders ``parent/<prefix><pid>-*`` (:class:`OwnedFolder`) whose owner is gone:
+    no process of that pid runs here and none holds the folder's lock (an owner on another host
+    or in another container, which this pid check cannot see, holds it); the folders removed.
+    A folder of a live owner is never touched; one that cannot be removed stays."""
+    parent = Path(parent)
+    pattern = re.compile(re.escape(prefix) + r"(\d+)-[^-]+\Z")
+    removed = []
+    try:
+        entries = list(parent.iterdir())
+    except OSError:
+        return removed
+    for entry in entries:
+        m = pattern.match(entry.name)
+        if m is None or int(m.group(1)) == os.getpid() or _process_alive(int(m.group(1))):
+            continue
+        try:
+            fd = os.open(entry, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW)
+        except OSError:  # gone meanwhile, or not a folder
+            continue
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:  # held: its owner lives elsewhere
+            os.close(fd)
+            continue
+        try:
+            shutil.rmtree(entry, ignore_errors=True)
+        finally:
+            os.close(fd)
+        if not entry.exists():
+            removed.append(entry)
+    return removed
+
+
+class OwnedFolder:
+    """A new folder ``parent/<prefix><pid>-<random>`` (default parent: the temporary directory)
+    that this process owns: the name carries the owner's pid, and the process holds an OS lock
+    (flock) on the folder until :meth:`remove` or :meth:`release`, or until it dies (the kernel
+    drops the lock, SIGKILL included). Making one first removes the folders of the same prefix
+    whose owner is gone (:func:`remove_abandoned`): what a killed run left, the next run cleans
+    up. OSError when the folder cannot be made."""
+
+    def __init__(self, prefix: str, parent: Optional[PathLike] = None) -> None:
+        parent = Path(tempfile.gettempdir() if parent is None else parent)
+        remove_abandoned(parent, prefix)
+        self.path = Path(tempfile.mkdtemp(prefix=f"{prefix}{os.getpid()}-", dir=parent))
+        try:
+            self._fd: Optional[int] = os.open(self.path, os.O_RDONLY | os.O_DIRECTORY)
+            fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            shutil.rmtree(self.path, ignore_errors=True)
+            raise
+
+    def release(self) -> None:
+        """Give up the lock (the folder itself stays, e.g. renamed or emptied by its user)."""
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+
+    def remove(self) -> None:
+        """Delete the folder and what it holds, then give up the lock."""
+        shutil.rmtree(self.path, ignore_errors=True)
+        self.release()
 
 
 def new_run_folder(root: PathLike, prefix: str = "plan", now: Optional[float] = None) -> Path:
@@ -49,6 +173,72 @@ def remove_if_empty(folder: Optional[PathLike]) -> bool:
     return True
 
 
+class FolderInUse(OSError):
+    """An output folder that another live run holds (:class:`FolderLock`; the CLIs and ``make
+    run``: one line, exit 2)."""
+
+
+def _lock_holder(st: os.stat_result) -> Optional[int]:
+    """The live process that took the flock on the file of ``st`` (Linux's /proc/locks), or None."""
+    key = f"{os.major(st.st_dev):02x}:{os.minor(st.st_dev):02x}:{st.st_ino}"
+    try:
+        lines = Path("/proc/locks").read_text().splitlines()
+    except OSError:
+        return None
+    for fields in (line.split() for line in lines):
+        if len(fields) > 5 and fields[1] == "FLOCK" and fields[5] == key and fields[4].isdigit():
+            pid = int(fields[4])
+            return pid if pid > 0 and Path(f"/proc/{pid}").exists() else None
+    return None
+
+
+class FolderLock:
+    """An exclusive lock on an existing folder, for as long as a run writes into it: ``flock`` on the
+    folder's own descriptor (:attr:`fd`). The kernel releases it when the last process holding the
+    descriptor ends, by a SIGKILL too, and nothing is written into the folder: a crash leaves no
+    lock behind, unlike a marker file. A child process given :attr:`fd` (``pass_fds``) holds the
+    lock with its parent. The lock goes with the folder when it is renamed; a path that names
+    another folder once the lock is taken (moved aside meanwhile by the run that held it) is locked
+    again. :class:`FolderInUse` when another run holds it (the message names the folder as the
+    option ``flag`` that gave it, and the holder's pid), FileNotFoundError when it is missing."""
+
+    def __init__(self, folder: PathLike, flag: str = "--out") -> None:
+        self.folder = Path(folder)
+        while True:
+            fd = os.open(self.folder, os.O_RDONLY | os.O_DIRECTORY)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                holder = _lock_holder(os.fstat(fd))
+                os.close(fd)
+                by = f" (pid {holder})" if holder is not None else ""
+                raise FolderInUse(f"{flag} {self.folder} is in use by another run{by}: wait until it ends, "
+                                  f"or give another {flag}") from None
+            held, now = os.fstat(fd), os.stat(self.folder)
+            if (held.st_dev, held.st_ino) == (now.st_dev, now.st_ino):
+                self.fd: Optional[int] = fd
+                return
+            os.close(fd)  # the path names another folder now: lock that one
+
+    @staticmethod
+    def check(folder: PathLike, flag: str = "--out") -> None:
+        """FolderInUse when another run holds ``folder`` (a missing folder is held by none)."""
+        if Path(folder).is_dir():
+            FolderLock(folder, flag).release()
+
+    def release(self) -> None:
+        """Give the lock up (idempotent); children given :attr:`fd` keep holding it until they end."""
+        if self.fd is not None:
+            os.close(self.fd)
+            self.fd = None
+
+    def __enter__(self) -> "FolderLock":
+        return self
+
+    def __exit__(self, *_exc) -> None:
+        self.release()
+
+
 class OutputExists(FileExistsError):
     """An output folder that already holds the result a command would write there (the CLIs: one
     line, exit 2, the hint ``--overwrite``)."""
@@ -60,12 +250,15 @@ class ResultFolder:
     ``names`` (fnmatch patterns) are the entries of the command's result (e.g. ``recon.json``,
     ``recon_*.ply``); other entries of ``out`` (the plan beside its reconstruction) are never
     touched. :meth:`check` refuses an ``out`` that holds an earlier result (any entry named so:
-    :class:`OutputExists`) unless ``overwrite``. The command writes into :attr:`stage`, a hidden
+    :class:`OutputExists`) unless ``overwrite``, and one that another live run holds
+    (:class:`FolderInUse`); from :attr:`stage` on, this one holds ``out`` (:class:`FolderLock`) until
+    the commit or the discard. The command writes into :attr:`stage`, a hidden
     folder ``out/.partial-<tool>-<random>``; :meth:`commit` moves the earlier result's entries
     into a hidden folder, the new ones into ``out``, then deletes the earlier ones: ``out`` holds
     one result or the other, never a mix. Leaving a ``with`` block without a commit (an error, an
     interrupt) removes the stage, and ``out`` when it did not exist before and is empty. A run
-    killed with SIGKILL leaves its stage (hidden; a later run ignores it).
+    killed with SIGKILL leaves its stage, which the next run into ``out`` removes when it makes
+    its own (:class:`OwnedFolder`: only a stage whose owner process is gone).
     """
 
     def __init__(self, out: PathLike, names: Sequence[str], tool: str, overwrite: bool = False) -> None:
@@ -74,7 +267,8 @@ class ResultFolder:
         self.tool = tool
         self.overwrite = bool(overwrite)
         self._made = not os.path.lexists(self.out)  # removed again when nothing is committed
-        self._stage: Optional[Path] = None
+        self._stage: Optional[OwnedFolder] = None
+        self._lock: Optional[FolderLock] = None
         self.committed = False
 
     def _named(self, name: str) -> bool:
@@ -87,7 +281,9 @@ class ResultFolder:
         return sorted(p.name for p in self.out.iterdir() if self._named(p.name))
 
     def check(self) -> "ResultFolder":
-        """OutputExists when ``out`` holds an earlier result and ``overwrite`` is not set."""
+        """FolderInUse when another run holds ``out``; OutputExists when it holds an earlier result
+        and ``overwrite`` is not set."""
+        FolderLock.check(self.out)
         found = self.earlier()
         if found and not self.overwrite:
             shown = ", ".join(found[:3]) + (", ..." if len(found) > 3 else "")
@@ -97,12 +293,25 @@ class ResultFolder:
 
     @property
     def stage(self) -> Path:
-        """The folder the command writes into (made, with ``out``, on first use; OSError when it
-        cannot be)."""
+        """The folder the command writes into (made, with ``out``, on first use, ``out`` then locked;
+        FolderInUse when another run holds it, OutputError when it cannot be made)."""
         if self._stage is None:
-            self.out.mkdir(parents=True, exist_ok=True)
-            self._stage = Path(tempfile.mkdtemp(prefix=f".partial-{self.tool}-", dir=self.out))
-        return self._stage
+            try:
+                self.out.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise OutputError(f"could not make a folder in {self.out}: {_why(exc)}") from None
+            if self._lock is None:
+                self._lock = FolderLock(self.out)
+            try:
+                self._stage = OwnedFolder(f".partial-{self.tool}-", self.out)
+            except OSError as exc:
+                raise OutputError(f"could not make a folder in {self.out}: {_why(exc)}") from None
+        return self._stage.path
+
+    def _release(self) -> None:
+        if self._lock is not None:
+            self._lock.release()
+            self._lock = None
 
     def commit(self) -> Path:
         """Move the staged result into ``out``, replacing an earlier one as a whole; ``out``."""
@@ -112,24 +321,30 @@ class ResultFolder:
         if stray:  # a bug of the command: it could replace a file that is not its own
             raise ValueError(f"{', '.join(stray)} in {stage} is not part of a {self.tool} result")
         old = self.earlier()
-        trash = Path(tempfile.mkdtemp(prefix=f".replaced-{self.tool}-", dir=self.out)) if old else None
-        for name in old:
-            os.replace(self.out / name, trash / name)
-        for p in new:
-            os.replace(p, self.out / p.name)
-        stage.rmdir()
+        try:  # renames within one folder: no data is written, but the folder may have gone
+            trash = Path(tempfile.mkdtemp(prefix=f".replaced-{self.tool}-", dir=self.out)) if old else None
+            for name in old:
+                os.replace(self.out / name, trash / name)
+            for p in new:
+                os.replace(p, self.out / p.name)
+            stage.rmdir()
+        except OSError as exc:
+            raise OutputError(f"could not move the result into {self.out}: {_why(exc)}") from None
+        self._stage.release()
         self._stage, self.committed = None, True
         if trash is not None:
             shutil.rmtree(trash, ignore_errors=True)
+        self._release()
         return self.out
 
     def discard(self) -> None:
         """Remove the stage (what was written so far), and ``out`` when this made it and it is empty."""
         if self._stage is not None:
-            shutil.rmtree(self._stage, ignore_errors=True)
+            self._stage.remove()
             self._stage = None
         if self._made:
             remove_if_empty(self.out)
+        self._release()
 
     def __enter__(self) -> "ResultFolder":
         return self

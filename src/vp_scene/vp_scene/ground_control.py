@@ -32,8 +32,11 @@ from typing import Optional, Union
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .camera import check_coordinates
+
 __all__ = ["ARUCO_DICTIONARY", "MAX_MARKERS", "MARKER_MARGIN", "GroundControl", "GcpObservation", "GroundControlError",
-           "marker_layout", "marker_image", "read_markers_csv", "read_gcp_list", "write_markers_csv"]
+           "marker_layout", "marker_image", "read_markers_csv", "read_gcp_list", "write_markers_csv",
+           "write_gcp_list"]
 
 #: The ArUco dictionary of the markers (OpenCV ``cv2.aruco.DICT_4X4_50``: 50 markers of 4 x 4
 #: bits, the most robust to blur and small size of OpenCV's dictionaries).
@@ -76,6 +79,16 @@ class GroundControl:
             p = np.asarray(p, dtype=np.float64)
             if p.shape != (3,) or not np.all(np.isfinite(p)):
                 raise GroundControlError(f"control point {name!r} needs a finite (x, y, z), got {p.tolist()}")
+            _in_map(p, f"control point {name!r}")
+
+
+def _in_map(xyz: ArrayLike, what: str, note: str = "") -> tuple:
+    """``xyz`` as a tuple when within :data:`vp_scene.camera.MAX_COORDINATE`, else
+    GroundControlError naming ``what`` (and ``note``)."""
+    try:
+        return tuple(float(v) for v in check_coordinates(xyz, what))
+    except ValueError as exc:
+        raise GroundControlError(f"{exc}{note}") from None
 
 
 def marker_layout(points: ArrayLike, count: int, margin: Optional[float] = None) -> NDArray[np.float64]:
@@ -138,7 +151,8 @@ def read_markers_csv(path: Union[str, Path], sigma: float = 0.01) -> GroundContr
     ``sigma``: the survey sigma, m, the same for all). GroundControlError naming the line."""
     path = Path(path)
     try:
-        lines = [ln.strip() for ln in path.read_text().splitlines() if ln.strip() and not ln.startswith("#")]
+        lines = [ln.strip() for ln in path.read_text(encoding="utf-8-sig").splitlines()
+                 if ln.strip() and not ln.startswith("#")]
     except (OSError, UnicodeDecodeError) as exc:
         raise GroundControlError(f"{path}: cannot read: {exc}") from None
     if not lines:
@@ -161,7 +175,8 @@ def read_markers_csv(path: Union[str, Path], sigma: float = 0.01) -> GroundContr
             raise GroundControlError(f"{where}: marker id {mid} is not in {ARUCO_DICTIONARY} (0-{MAX_MARKERS - 1})")
         if str(mid) in positions:
             raise GroundControlError(f"{where}: marker {mid} is listed twice")
-        positions[str(mid)] = tuple(_number(row[a], a, where) for a in "xyz")
+        positions[str(mid)] = _in_map([_number(row[a], a, where) for a in "xyz"], f"{where}: marker {mid}",
+                                      " (markers.csv is in the poses' frame)")
         if "sigma" in row:
             sigmas.add(_number(row["sigma"], "sigma", where))
     if len(sigmas) > 1:
@@ -183,11 +198,12 @@ def read_gcp_list(path: Union[str, Path], sigma: float = 0.01) -> GroundControl:
     per observation ``geo_x geo_y geo_z im_x im_y image_name [gcp_name]`` (whitespace separated;
     pixels from the image's top-left corner). The coordinates must be the flight's own (the
     frame of its poses, metres): the first line is kept as a note, not converted (a projected
-    CRS such as UTM, with poses.csv in the same CRS less an offset, is the user's to align).
+    CRS such as UTM, with poses.csv in the same CRS less an offset, is the user's to align); a
+    point beyond :data:`vp_scene.camera.MAX_COORDINATE` (UTM's 500 km) is refused, naming that.
     Points without a name are named by their coordinates. GroundControlError naming the line."""
     path = Path(path)
     try:
-        lines = [ln.strip() for ln in path.read_text().splitlines()]
+        lines = [ln.strip() for ln in path.read_text(encoding="utf-8-sig").splitlines()]
     except (OSError, UnicodeDecodeError) as exc:
         raise GroundControlError(f"{path}: cannot read: {exc}") from None
     body = [(n, ln) for n, ln in enumerate(lines[1:], start=2) if ln and not ln.startswith("#")]
@@ -201,7 +217,9 @@ def read_gcp_list(path: Union[str, Path], sigma: float = 0.01) -> GroundControl:
         where = f"{path}, line {n}"
         if len(cells) < 6:
             raise GroundControlError(f"{where}: expected geo_x geo_y geo_z im_x im_y image_name [gcp_name], got {ln!r}")
-        xyz = tuple(_number(c, a, where) for c, a in zip(cells[:3], ("geo_x", "geo_y", "geo_z")))
+        xyz = _in_map([_number(c, a, where) for c, a in zip(cells[:3], ("geo_x", "geo_y", "geo_z"))],
+                      f"{where}: geo_x, geo_y, geo_z",
+                      f" (the poses' frame, metres; the coordinate system {lines[0][:60]!r} is not converted)")
         u, v = (_number(c, a, where) for c, a in zip(cells[3:5], ("im_x", "im_y")))
         name = cells[6] if len(cells) > 6 else "{:.3f}_{:.3f}_{:.3f}".format(*xyz)
         if name in positions and not np.allclose(positions[name], xyz, atol=1e-6):
@@ -211,3 +229,15 @@ def read_gcp_list(path: Union[str, Path], sigma: float = 0.01) -> GroundControl:
         # a pixel, well under a marker's detection error
         observations.append(GcpObservation(name=name, image=cells[5], u=u, v=v))
     return GroundControl(positions=positions, sigma=sigma, observations=tuple(observations))
+
+
+def write_gcp_list(control: GroundControl, path: Union[str, Path]) -> Path:
+    """:func:`read_gcp_list`'s file of ``control``'s observations, each point named (its first
+    line notes the frame: the flight's own, metres; the survey sigma is not part of the format)."""
+    path = Path(path)
+    rows = ["# the flight's frame (its poses' frame), metres"]
+    for o in control.observations:
+        x, y, z = control.positions[o.name]
+        rows.append(f"{x!r} {y!r} {z!r} {o.u!r} {o.v!r} {o.image} {o.name}")
+    path.write_text("\n".join(rows) + "\n")
+    return path

@@ -41,15 +41,19 @@ Limits: a file of at most :data:`MAX_LAYOUT_BYTES` (checked before it is parsed)
 :data:`MAX_PLANTS` plants, at least :data:`MIN_PLANT_DISTANCE` m apart (before
 jitter), every plant within :data:`MAX_EXTENT` m of the origin of ``map`` in x and in y (a field
 of 200 m x 200 m; beyond, a plan is not a drone sortie: a plant at x = 1e9 was planned with
-cameras 1e9 m up), scale in (0, :data:`MAX_SCALE`]. Every error is a :class:`LayoutError` of one line that
-names the source (the file) and the field, e.g.
-``field.yaml: grid.rows must be an integer >= 1, got 'three'``.
+cameras 1e9 m up), scale in (0, :data:`MAX_SCALE`], no key given twice in one mapping (YAML and
+JSON would keep the last silently; :func:`parse_json`, and a YAML loader that refuses them, name
+the key and its line). Every error is a :class:`LayoutError` of one line that names the source
+(the file) and the field, e.g. ``field.yaml: grid.rows must be an integer >= 1, got 'three'``.
 
 ROS-free: numpy, and PyYAML for .yaml files.
 """
 from __future__ import annotations
 
+import functools
 import json
+import json.decoder
+import json.scanner
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -59,7 +63,7 @@ import numpy as np
 
 __all__ = ["LayoutError", "PlantSpec", "Layout", "BUILTIN_LAYOUTS", "LAYOUT_SUFFIXES", "MAX_PLANTS", "MAX_LAYOUT_BYTES",
            "MIN_PLANT_DISTANCE", "MAX_SCALE", "MAX_EXTENT", "grid_layout", "builtin_layout", "layout_from_dict",
-           "load_layout", "read_scenario", "resolve_layout", "is_layout_file"]
+           "load_layout", "read_scenario", "resolve_layout", "is_layout_file", "parse_json"]
 
 #: Built-in layouts: name -> (rows, columns) of a grid with the caller's plant and row spacing.
 BUILTIN_LAYOUTS: dict[str, tuple[int, int]] = {
@@ -383,27 +387,106 @@ def is_layout_file(scenario: str) -> bool:
     return scenario.lower().endswith(LAYOUT_SUFFIXES)
 
 
+def _unique_object(s_and_end: tuple, strict: bool, scan_once, object_hook, object_pairs_hook, memo=None,
+                   _w=json.decoder.WHITESPACE.match):
+    """json's object parser, refusing a key given twice (the decoder's ``parse_object``): each
+    value's position is recorded as it is scanned, so the duplicate's line is known."""
+    starts: list = []
+
+    def value(text: str, at: int):
+        starts.append(at)
+        return scan_once(text, at)
+
+    pairs, end = json.decoder.JSONObject(s_and_end, strict, value, None, list, memo, _w)
+    seen: set = set()
+    for (key, _), at in zip(pairs, starts):
+        if key in seen:
+            text = s_and_end[0]  # the error points at the colon after the key
+            raise json.JSONDecodeError(f"duplicate key {key!r} (JSON would keep the last one silently)",
+                                       text, max(text.rfind(":", 0, at), 0))
+        seen.add(key)
+    return dict(pairs), end
+
+
+@functools.lru_cache(maxsize=None)
+def _json_decoder() -> json.JSONDecoder:
+    decoder = json.JSONDecoder()
+    decoder.parse_object = _unique_object
+    decoder.scan_once = json.scanner.py_make_scanner(decoder)  # the pure-Python scanner calls parse_object
+    return decoder
+
+
+class _KeyTwice(Exception):
+    """A JSON object gave a key twice (found by the fast parser; the slow one names its line)."""
+
+
+def _unique_pairs(pairs: list) -> dict:
+    out = dict(pairs)
+    if len(out) != len(pairs):
+        raise _KeyTwice
+    return out
+
+
+def parse_json(text: str, source: str) -> object:
+    """``text`` parsed as JSON, a key given twice in one object refused; LayoutError naming
+    ``source``, the line and the problem (a layout file's JSON and a plan file's)."""
+    try:
+        try:
+            return json.loads(text, object_pairs_hook=_unique_pairs)
+        except _KeyTwice:  # again with the pure-Python parser, which knows where the key is
+            return _json_decoder().decode(text)
+    except json.JSONDecodeError as exc:
+        raise LayoutError(f"{source} is not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})") from None
+    except RecursionError:
+        raise LayoutError(f"{source} is not valid JSON (nested too deeply)") from None
+
+
+@functools.lru_cache(maxsize=None)
+def _yaml_loader() -> type:
+    """PyYAML's SafeLoader refusing a key given twice in one mapping (naming it and both lines)."""
+    import yaml
+
+    class UniqueKeyLoader(yaml.SafeLoader):
+        pass
+
+    def mapping(loader: yaml.SafeLoader, node: yaml.MappingNode, deep: bool = False) -> dict:
+        first: dict = {}
+        for key_node, _ in node.value:
+            key = loader.construct_object(key_node, deep=True)
+            try:
+                again = key in first
+            except TypeError:
+                continue  # an unhashable key: SafeLoader's own error below
+            if again:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"duplicate key {key!r} (first on line {first[key] + 1}; YAML would keep the last "
+                    "one silently)", key_node.start_mark)
+            first[key] = key_node.start_mark.line
+        return loader.construct_mapping(node, deep=deep)
+
+    UniqueKeyLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, mapping)
+    return UniqueKeyLoader
+
+
 def _read(path: Path) -> object:
     """The parsed content of a .json or .yaml/.yml file of at most :data:`MAX_LAYOUT_BYTES`
-    (LayoutError naming the file; a larger one is refused before it is parsed)."""
+    (LayoutError naming the file; a larger one is refused before it is parsed; a key given twice
+    in one mapping is refused, naming it and its line)."""
     try:
         with open(path, "rb") as f:
             data = f.read(MAX_LAYOUT_BYTES + 1)  # no more than that is read, whatever the file
         if len(data) > MAX_LAYOUT_BYTES:
             raise LayoutError(f"{path}: larger than {MAX_LAYOUT_BYTES // 1024} KiB; a layout file of at most "
                               f"{MAX_PLANTS} plants is smaller")
-        text = data.decode("utf-8")
+        text = data.decode("utf-8-sig")
     except (OSError, UnicodeDecodeError) as exc:
         raise LayoutError(f"cannot read layout file {path}: {getattr(exc, 'strerror', None) or exc}") from None
     if path.suffix.lower() == ".json":
-        try:
-            return json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise LayoutError(f"{path} is not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})") from None
+        return parse_json(text, str(path))
     import yaml
 
     try:
-        return yaml.safe_load(text)
+        return yaml.load(text, Loader=_yaml_loader())  # noqa: S506 (a SafeLoader)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         problem = " ".join(str(getattr(exc, "problem", None) or exc).split())

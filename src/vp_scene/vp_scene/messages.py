@@ -37,7 +37,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from vp_interfaces.msg import CameraPlan, PlantPlacement, ReconstructionScore, SceneDescription
 
-from .camera import cameras_to_poses, poses_to_cameras, rotation_matrix, tan_half_fov
+from .camera import cameras_to_poses, check_coordinates, poses_to_cameras, rotation_matrix, tan_half_fov
 
 __all__ = [
     "point_msg", "point_array", "pose_msg", "pose_array", "poses_to_msgs", "msgs_to_poses", "position_of",
@@ -141,8 +141,9 @@ def fleet_assignment_msg(plan_stamp_sec: int, drones: Sequence[str], cameras: Ar
 
 
 def pose_array_to_cameras(poses: Sequence[Pose]) -> NDArray[np.float64]:
-    """Cameras (N, 6) = [c, v] of a PoseArray's poses (ValueError for unusable quaternions)."""
-    return poses_to_cameras(msgs_to_poses(poses))
+    """Cameras (N, 6) = [c, v] of a PoseArray's poses (ValueError for unusable quaternions or a
+    number beyond :data:`vp_scene.camera.MAX_COORDINATE`)."""
+    return poses_to_cameras(check_coordinates(msgs_to_poses(poses), "the poses"))
 
 
 def camera_plan_msg(plan: PoseArray, reward: float, reward_model: str, method: str, evaluations: int,

@@ -3,7 +3,10 @@
 Process contract of ``scene``, ``planner`` and ``recon``:
 
 * SIGINT or SIGTERM: the node winds down and exits 0, quietly (no traceback), within
-  :data:`SHUTDOWN_DEADLINE` seconds, always; a second signal exits at once. A signal that arrives
+  :data:`SHUTDOWN_DEADLINE` seconds, always; a second SIGINT (Ctrl-C twice) exits at once, a
+  repeated SIGTERM changes nothing: a supervisor killed with SIGKILL sends its parent-death
+  SIGTERM (``tools/node_process.py``) once per thread of it that the node is handed to as they
+  end, and taken as "exit now" it cut the recorder's file short of its summary. A signal that arrives
   while Python is still importing the node's modules, or while the node is being constructed,
   ends the process at once with exit 0 (the console entry, :mod:`vp_scene.node_entry`, answers
   signals before the first heavy import; nothing has started yet that could be lost).
@@ -297,8 +300,10 @@ def run_node(name: str, make_node: Callable[[], Any], args: Optional[list] = Non
 
     def on_signal(signum: int, _frame: Any) -> None:
         # no lock here, not even an Event's (see the module docstring)
-        if signalled_at:  # a second signal: no more waiting
-            _exit(EXIT_OK)
+        if signalled_at:  # a second Ctrl-C: no more waiting; a repeated SIGTERM: the deadline holds
+            if signum == signal.SIGINT:
+                _exit(EXIT_OK)
+            return
         if constructing[0]:  # nothing runs yet that could be lost
             _exit(EXIT_OK)
         signalled_at.append(time.monotonic())

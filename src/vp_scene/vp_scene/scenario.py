@@ -19,6 +19,7 @@ import numpy as np
 import trimesh
 
 from .layout import BUILTIN_LAYOUTS, Layout, LayoutError, PlantSpec, resolve_layout
+from .limits import check_seed
 from .plants import PlantModel
 from .ply import load_models
 from .procedural import procedural_corn, procedural_name_seed, procedural_seed
@@ -153,10 +154,11 @@ def make_scene(scenario: Union[str, dict, Layout], models: Union[None, str, Path
                seed: int = 0, points_per_plant: int = 4000, plant_spacing: float = 0.6,
                row_spacing: float = 0.76) -> Scene:
     """Build a scene (paper Sec. V-A) after a layout (:func:`vp_scene.layout.resolve_layout`:
-    a built-in name with these spacings, a layout file path, a layout dict or a Layout). The one
-    place a scene's layout is resolved (:func:`vp_scene.build.build_noisy_scene` forwards it);
-    ``models`` may be a folder of PLY plants ('' or None: procedural corn), loaded after the
-    layout and the counts are checked (a bad layout is reported before any model file is read).
+    a built-in name with these spacings, a layout file path or a layout dict; a Layout is taken
+    as it is: :func:`vp_scene.build.build_noisy_scene` resolves the layout once, checks the
+    scene's size and passes it here); ``models`` may be a folder of PLY plants ('' or None:
+    procedural corn), loaded after the layout and the counts are checked (a bad layout is
+    reported before any model file is read).
 
     Each plant gets yaw ~ U[0, 2 pi) and scale ~ U[0.9, 1.1]; its model is drawn among
     ``models`` (seeded choice) or, when ``models`` is None, is a distinct procedural corn plant
@@ -179,12 +181,12 @@ def make_scene(scenario: Union[str, dict, Layout], models: Union[None, str, Path
 
     Raises:
         ValueError (LayoutError for the layout) naming the problem: unknown scenario, a bad
-        layout file, an unknown model name, points_per_plant < 1, spacing <= 0, negative seed,
-        or an empty ``models`` list.
+        layout file, an unknown model name, points_per_plant < 1, spacing <= 0, a seed outside
+        0 to :data:`vp_scene.limits.MAX_SEED`, or an empty ``models`` list.
     """
-    lay = resolve_layout(scenario, plant_spacing, row_spacing)
+    lay = scenario if isinstance(scenario, Layout) else resolve_layout(scenario, plant_spacing, row_spacing)
     n_pts = _check_int("points_per_plant", points_per_plant, 1)
-    seed = _check_int("seed", seed, 0)
+    seed = check_seed("seed", seed)
     if isinstance(models, (str, Path)):
         models = load_models(models) if str(models) else None
     if models is not None:

@@ -11,7 +11,9 @@ position, from which another node rebuilds the identical scene without the file.
 
 A bad configuration at start logs the problem in one line and exits with status 2 before
 publishing anything; a bad parameter change at run time is refused with the reason, keeping the
-old scene. A valid change is validated by building the new scene (in the set-parameters
+old scene. A scene above its bounds or beyond the memory (:mod:`vp_scene.limits`: realizations,
+points per plant, their product with the plants) is such a configuration, refused before any of
+it is allocated. A valid change is validated by building the new scene (in the set-parameters
 callback) and published once the parameters are set (in the post-set callback). Signals, exit
 codes and parameter types follow :mod:`vp_scene.node_runtime`.
 """
@@ -31,6 +33,7 @@ from vp_interfaces.msg import SceneDescription
 
 from .build import build_noisy_scene
 from .cloud import numpy_to_pointcloud2
+from .limits import MAX_POINTS_PER_PLANT, MAX_REALIZATIONS, MAX_SEED, check_seed
 from .messages import scene_description_msg
 from .node_runtime import INT_MAX, LATCHED, Param, declare_typed, run_node, typed_values
 from .wind import NoisyScene
@@ -65,11 +68,11 @@ _DESCRIPTIONS = {
 #: The ranges the scene enforces (its layout, wind and sampling rules); every parameter is read
 #: again on a change (the scene is rebuilt), none is read_only.
 _RANGES = {
-    "seed": (0, INT_MAX),
+    "seed": (0, MAX_SEED),
     "levels": (1, INT_MAX),
-    "realizations": (1, INT_MAX),
+    "realizations": (1, MAX_REALIZATIONS),
     "wind_variance": (0.0, math.inf),
-    "points_per_plant": (1, INT_MAX),
+    "points_per_plant": (1, MAX_POINTS_PER_PLANT),
     "plant_spacing": (0.0, math.inf),
     "row_spacing": (0.0, math.inf),
 }
@@ -81,8 +84,7 @@ SPECS = {name: Param(default, _DESCRIPTIONS[name], _RANGES.get(name), False, _CO
 def check_params(values: dict[str, Any]) -> dict[str, Any]:
     """Type-check and normalize the node's parameter values (ints as int, numbers as float)."""
     out = {**dict(values), **typed_values(SPECS, values)}
-    if out["seed"] < 0:
-        raise ValueError(f"parameter 'seed' must be >= 0, got {out['seed']}")
+    check_seed("parameter 'seed'", out["seed"])
     if not out["frame_id"]:
         raise ValueError("parameter 'frame_id' must not be empty")
     if out["models_folder"]:

@@ -43,7 +43,8 @@ import numpy as np
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
 
-from .camera import IMAGE_SIZE
+from .camera import IMAGE_SIDE_RANGE, IMAGE_SIZE
+from .limits import MAX_SEED
 from .messages import (POSE_TYPES, camera_info_msg, compressed_image_msg, drone_topic, image_msg, pose_array, pose_report,
                        scene_of_description)
 from .node_runtime import LATCHED, Param, declare_typed, run_node, typed_values
@@ -70,11 +71,11 @@ PARAMS = {
     'camera': Param(False, 'take pictures on /fleet/capture (README "From a real flight")', None, True),
     'camera_topic': Param('/{drone}/camera', 'camera topics template: image_raw, image_raw/compressed, '
                                              'camera_info, pose', None, True),
-    'width': Param(IMAGE_SIZE[0], 'camera image width, pixels', (16, 100000), True),
-    'height': Param(IMAGE_SIZE[1], 'camera image height, pixels', (16, 100000), True),
+    'width': Param(IMAGE_SIZE[0], 'camera image width, pixels', IMAGE_SIDE_RANGE, True),
+    'height': Param(IMAGE_SIZE[1], 'camera image height, pixels', IMAGE_SIDE_RANGE, True),
     'fov': Param(math.pi / 2, 'camera horizontal field of view, rad', (0.0, math.pi), True, 'the ends are excluded'),
     'capture': Param('realistic', 'capture model: realistic (RTK multirotor defaults) | ideal', None, True),
-    'capture_seed': Param(0, 'seed of the capture draws (as the recon node\'s)', (0, 2 ** 31 - 1), True),
+    'capture_seed': Param(0, 'seed of the capture draws (as the recon node\'s)', (0, MAX_SEED), True),
 }
 
 

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .limits import check_seed
 from .scenario import Scene
 
 __all__ = ["WindConfig", "NoisyScene", "draw_n_wind", "levels_of", "displace", "make_noisy_scene", "noisy_scene_of"]
@@ -60,9 +61,7 @@ class WindConfig:
 def draw_n_wind(config: WindConfig, seed: int) -> np.ndarray:
     """The K values n_wind ~ N(0, variance) (paper Sec. V-A), from ``default_rng([seed, 1])``
     (independent of the scene-layout stream ``[seed, 0]``)."""
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
-    rng = np.random.default_rng([int(seed), 1])
+    rng = np.random.default_rng([check_seed("seed", seed), 1])
     return rng.normal(0.0, math.sqrt(config.variance), size=config.realizations)
 
 
