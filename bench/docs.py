@@ -507,6 +507,7 @@ CURRENT = [
     ('The benchmarks on a Dask cluster', 'results/bench_cluster.json', cluster_section),
     ('Image pairs: exhaustive against pose-chosen', 'results/bench_matching.json', matching_section),
     ('Fleet images: transport and memory', 'results/bench_fleet_transport.json', fleet_section),
+    ('Fleet routes', 'results/bench_routes.json', own_markdown('bench.bench_routes')),
     ('Viewer frame rates', 'results/bench_viewer.json', viewer_section),
 ]
 IDEAL = [

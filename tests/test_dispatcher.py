@@ -6,7 +6,6 @@ listens to /fleet/assignment, the goals and the drones' poses. Every wait has a 
 """
 from __future__ import annotations
 
-import itertools
 import math
 
 import numpy as np
@@ -14,12 +13,15 @@ import pytest
 
 from geometry_msgs.msg import Pose, PoseArray, PoseStamped
 from nav_msgs.msg import Odometry
+from nav_msgs.msg import Path as PathMsg
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from vp_interfaces.msg import FleetAssignment
 
 from vp_planner.fleet import FleetTransform, goal_orientations
+from vp_planner.dispatcher_node import PARAMS
+from vp_planner.routes import FlightModel, plan_routes
 from vp_scene.camera import cameras_to_poses, look_at
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -49,14 +51,6 @@ def plan_msg(cameras: np.ndarray, stamp: int, frame: str = "map") -> PoseArray:
 def pose7(p: Pose) -> np.ndarray:
     return np.array([p.position.x, p.position.y, p.position.z,
                      p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w])
-
-
-def brute_force(starts: np.ndarray, goals: np.ndarray) -> tuple[float, float]:
-    """(min total distance, min longest distance) over every injective map poses -> drones."""
-    cost = np.linalg.norm(starts[:, None] - goals[None], axis=-1)
-    m = goals.shape[0]
-    flights = [cost[list(perm), np.arange(m)] for perm in itertools.permutations(range(len(starts)), m)]
-    return min(f.sum() for f in flights), min(f.max() for f in flights)
 
 
 class Fleet:
@@ -101,86 +95,131 @@ def start_drones(start_node, env, starts: dict, **params) -> dict:
             for d, p in starts.items()}
 
 
+#: a quick flight model for the tests: the simulated drones fly at the same speeds
+FAST = {"cruise_speed": 8.0, "climb_rate": 4.0, "hover_s": 0.3}
+
+
+def route_of(ans: FleetAssignment, drone: str):
+    return next(r for r in ans.routes if r.drone == drone)
+
+
 def check_dispatch(fleet: Fleet, ans: FleetAssignment, cameras: np.ndarray, transform: FleetTransform,
-                   orientation: str) -> np.ndarray:
-    """The answer is a complete, optimal, one-pose-per-drone assignment whose goals are the plan's
-    poses in the fleet frame; returns the goals (M, 7) in pose order."""
+                   orientation: str, model: FlightModel = FlightModel(**FAST), separation: float = 0.5,
+                   objective: str = "min_max", scene=None) -> dict:
+    """The answer holds every pose once, each drone's route is the library's (vp_planner.routes)
+    from the starts it reports, the goals are the plan's poses in the fleet frame; returns
+    {drone: route path poses (m, 7)}."""
     m = len(cameras)
     assert ans.error_code == FleetAssignment.NONE, ans.error_msg
     assert [e.pose_index for e in ans.entries] == list(range(m))
-    assert len({e.drone for e in ans.entries}) == m  # no two drones get the same pose
     expected = transform.poses_to_fleet(cameras_to_poses(cameras))
     expected[:, 3:] = goal_orientations(expected[:, 3:], orientation)
     for e in ans.entries:
         np.testing.assert_allclose(pose7(e.goal), expected[e.pose_index], atol=1e-9)
-        assert e.distance == pytest.approx(np.linalg.norm(pose7(e.goal)[:3] - [e.start.x, e.start.y, e.start.z]))
     starts = {e.drone: [e.start.x, e.start.y, e.start.z] for e in ans.entries}
     for d in fleet.drones:  # the spare drones' starts are their reported positions
         starts.setdefault(d, fleet.position(d)[:3])
-    best_total, best_max = brute_force(np.array([starts[d] for d in fleet.drones]), expected[:, :3])
-    if ans.assignment == "min_total":
-        assert ans.total_distance == pytest.approx(best_total, rel=1e-9)
-    else:
-        assert ans.max_distance == pytest.approx(best_max, rel=1e-9)
-    assert ans.total_distance == pytest.approx(sum(e.distance for e in ans.entries))
-    assert sorted(ans.spare_drones) == sorted(set(fleet.drones) - {e.drone for e in ans.entries})
-    return expected
+    homes = transform.points_to_map(np.array([starts[d] for d in fleet.drones]))
+    want = plan_routes(cameras, homes, model, separation, obstacles=scene, objective=objective)
+    assert ans.time_on_site == pytest.approx(want.time_on_site, abs=1e-9)
+    assert ans.min_separation == pytest.approx(want.min_separation, abs=1e-9) and ans.min_separation >= separation
+    assert ans.budget == pytest.approx(model.budget_s)
+    paths = {}
+    for r in want.routes:
+        name = fleet.drones[r.drone]
+        if not len(r.views):
+            assert name in ans.spare_drones
+            continue
+        got = route_of(ans, name)
+        assert list(got.pose_indices) == r.views.tolist()
+        np.testing.assert_allclose(got.arrival, r.arrival, atol=1e-9)
+        np.testing.assert_allclose(got.departure, r.departure, atol=1e-9)
+        assert got.flight_time == pytest.approx(r.flight_time) and got.path.header.frame_id == transform_frame(ans)
+        path = np.array([pose7(p.pose) for p in got.path.poses])
+        np.testing.assert_allclose(path[:, :3], transform.points_to_fleet(r.points), atol=1e-9)
+        for order, j in enumerate(r.views):
+            e = ans.entries[int(j)]
+            assert (e.drone, e.order) == (name, order)
+            assert e.eta == pytest.approx(r.eta()[order])
+        paths[name] = path
+    return paths
 
 
-def wait_at_goals(fleet: Fleet, ans: FleetAssignment, timeout: float = TIMEOUT) -> None:
-    """Each drone's goal topic holds its entry's goal, and the drone ends there."""
-    for e in ans.entries:
-        assert fleet.client.spin_until(lambda: fleet.goals[e.drone] and
-                                       pose7(fleet.goals[e.drone][-1].pose)[0] == e.goal.position.x, timeout)
-        np.testing.assert_allclose(pose7(fleet.goals[e.drone][-1].pose), pose7(e.goal), atol=1e-12)
-
-    def arrived() -> bool:
-        return all(np.allclose(fleet.position(e.drone), pose7(e.goal), atol=1e-9) for e in ans.entries)
-    assert fleet.client.spin_until(arrived, timeout), {e.drone: fleet.position(e.drone) for e in ans.entries}
+def transform_frame(ans: FleetAssignment) -> str:
+    return ans.header.frame_id
 
 
-def test_drones_fly_to_their_poses_and_a_new_plan_redispatches(ros_env, start_node, ros_node) -> None:
-    """Four drones in a fleet frame turned and shifted from map: the goals are the plan's poses in
-    that frame, the assignment is the brute-force optimum, every drone ends at its pose. A new
-    plan (after switching to min_max and optical goals at run time) re-dispatches from where the
-    drones are now."""
-    drones = ["d0", "d1", "d2", "d3"]
+def wait_for_sortie(fleet: Fleet, paths: dict, timeout: float = TIMEOUT) -> None:
+    """Each drone gets its route's waypoints one at a time, in order, and lands where it started."""
+    def done() -> bool:
+        return all(len(fleet.goals[d]) >= len(p) - 1 for d, p in paths.items()) and \
+            all(np.allclose(fleet.position(d)[:3], p[-1, :3], atol=1e-9) for d, p in paths.items())
+    assert fleet.client.spin_until(done, timeout), {d: (len(fleet.goals[d]), fleet.position(d)) for d in paths}
+    for d, path in paths.items():
+        sent = np.array([pose7(g.pose) for g in fleet.goals[d][-(len(path) - 1):]])
+        np.testing.assert_allclose(sent, path[1:], atol=1e-12)
+
+
+def test_two_drones_fly_routes_through_eight_poses(ros_env, start_node, ros_node) -> None:
+    """Two drones for eight poses, in a fleet frame turned and shifted from map: each drone's route
+    is the library's from where it stands, its waypoints come one at a time as it arrives, it
+    lands where it started. A new plan (after switching to min_total and optical goals at run
+    time) is routed again from there; the drones' names are read-only."""
+    drones = ["d0", "d1"]
     transform = FleetTransform(x=1.0, y=-2.0, z=0.0, yaw=0.4)
     start_node("vp_scene", "scene", SCENE, ros_env)
     dispatcher = start_node("vp_planner", "dispatcher", {
         "drones": drones, "fleet_frame": "plot", "fleet_x": transform.x, "fleet_y": transform.y,
-        "fleet_z": transform.z, "fleet_yaw": transform.yaw}, ros_env)
-    starts = {d: [float(k), -6.0 + 0.3 * k * k, 0.0] for k, d in enumerate(drones)}  # a launch row
-    start_drones(start_node, ros_env, starts, frame_id="plot", speed=4.0)
+        "fleet_z": transform.z, "fleet_yaw": transform.yaw, **FAST}, ros_env)
+    starts = {"d0": [0.0, -4.0, 0.0], "d1": [1.5, -4.5, 0.0]}
+    start_drones(start_node, ros_env, starts, frame_id="plot", speed=FAST["cruise_speed"],
+                 climb_rate=FAST["climb_rate"])
     fleet = Fleet(ros_node(ros_env), drones)
+    routes = {d: fleet.client.subscribe(PathMsg, f"/{d}/route", ANSWERS) for d in drones}
     assert fleet.wait_for_poses(dispatcher), dispatcher.output()
 
-    first = ring(4)
+    first = ring(8)
     ans = fleet.send(first, stamp=101)
-    assert ans.header.frame_id == "plot" and ans.plan_frame_id == "map" and ans.num_poses == 4
-    assert ans.standoff_checked and ans.assignment == "min_total" and ans.orientation == "body"
+    assert ans.header.frame_id == "plot" and ans.plan_frame_id == "map" and ans.num_poses == 8
+    assert ans.standoff_checked and ans.assignment == "min_max" and ans.orientation == "body"
+    assert len(ans.routes) == 2 and not ans.spare_drones  # both drones fly: the longest flight is shorter
     for e in ans.entries:  # the drones were still at their starts
         np.testing.assert_allclose([e.start.x, e.start.y, e.start.z], starts[e.drone], atol=1e-9)
-    check_dispatch(fleet, ans, first, transform, "body")
-    wait_at_goals(fleet, ans)
-    assert "plan 101.000000000 dispatched (min_total" in dispatcher.output()
+    paths = check_dispatch(fleet, ans, first, transform, "body", scene=scene_points())
+    for d in drones:  # the route on /<drone>/route: stamped with the arrivals
+        assert fleet.client.spin_until(lambda: routes[d], TIMEOUT)
+        path = routes[d][-1]
+        t0 = path.header.stamp.sec * 10 ** 9 + path.header.stamp.nanosec
+        arrivals = [1e-9 * (p.header.stamp.sec * 10 ** 9 + p.header.stamp.nanosec - t0) for p in path.poses]
+        np.testing.assert_allclose(arrivals, route_of(ans, d).arrival, atol=1e-9)
+    wait_for_sortie(fleet, paths)
+    assert "plan 101.000000000 dispatched (min_max" in dispatcher.output()
+    assert fleet.client.spin_until(lambda: all(f"{d} landed" in dispatcher.output() for d in drones), 10)
 
     params = AsyncParameterClient(fleet.client.node, "dispatcher")
     assert params.wait_for_services(timeout_sec=TIMEOUT)
-    set_ = fleet.client.call(lambda: params.set_parameters([Parameter("assignment", value="min_max"),
+    set_ = fleet.client.call(lambda: params.set_parameters([Parameter("assignment", value="min_total"),
                                                           Parameter("orientation", value="optical")]), TIMEOUT)
     assert all(r.successful for r in set_.results), [r.reason for r in set_.results]
     refused = fleet.client.call(lambda: params.set_parameters([Parameter("drones", value=["d0"])]), TIMEOUT)
     assert not refused.results[0].successful and "read-only parameter: drones" in refused.results[0].reason
 
-    second = ring(4, radius=3.0, height=1.6, phase=0.9)
+    second = ring(3, radius=3.0, height=1.6, phase=0.9)
+    for d in drones:
+        fleet.goals[d].clear()
     ans2 = fleet.send(second, stamp=102)
-    assert ans2.assignment == "min_max" and ans2.orientation == "optical"
-    goals_first = {e.drone: pose7(e.goal)[:3] for e in ans.entries}
-    for e in ans2.entries:  # re-dispatched from where the first plan left the drones
-        np.testing.assert_allclose([e.start.x, e.start.y, e.start.z], goals_first[e.drone], atol=1e-9)
-    check_dispatch(fleet, ans2, second, transform, "optical")
-    wait_at_goals(fleet, ans2)
+    assert ans2.assignment == "min_total" and ans2.orientation == "optical"
+    for e in ans2.entries:  # routed again from where the first sortie left the drones: their starts
+        np.testing.assert_allclose([e.start.x, e.start.y, e.start.z], starts[e.drone], atol=1e-9)
+    wait_for_sortie(fleet, check_dispatch(fleet, ans2, second, transform, "optical", objective="min_total",
+                                          scene=scene_points()))
+
+
+def scene_points() -> np.ndarray:
+    """The scene node's realizations (the same build as the node's, in the cloud's float32)."""
+    from vp_scene.build import build_noisy_scene
+
+    return np.asarray(build_noisy_scene(**SCENE)[0].points, dtype=np.float32).astype(np.float64)
 
 
 def test_a_silent_drone_is_named_and_nothing_is_dispatched(ros_env, start_node, ros_node) -> None:
@@ -190,9 +229,10 @@ def test_a_silent_drone_is_named_and_nothing_is_dispatched(ros_env, start_node, 
     drones = ["d0", "d1", "d2"]
     start_node("vp_scene", "scene", SCENE, ros_env)
     dispatcher = start_node("vp_planner", "dispatcher", {"drones": drones, "pose_timeout": 1.0,
-                                                          "pose_type": "odometry"}, ros_env)
+                                                          "pose_type": "odometry", **FAST}, ros_env)
     starts = {"d0": [0.0, -4.0, 0.0], "d1": [1.0, -4.0, 0.0], "d2": [2.0, -4.0, 0.0]}
-    sims = start_drones(start_node, ros_env, {d: starts[d] for d in ("d0", "d1")}, pose_type="odometry")
+    fast = dict(pose_type="odometry", speed=FAST["cruise_speed"], climb_rate=FAST["climb_rate"])
+    sims = start_drones(start_node, ros_env, {d: starts[d] for d in ("d0", "d1")}, **fast)
     fleet = Fleet(ros_node(ros_env), drones, odometry=True)
     assert fleet.client.spin_until(lambda: fleet.poses["d0"] and fleet.poses["d1"] and all(
         f"drone {d} reporting" in dispatcher.output() for d in ("d0", "d1")), TIMEOUT), dispatcher.output()
@@ -220,12 +260,14 @@ def test_a_silent_drone_is_named_and_nothing_is_dispatched(ros_env, start_node, 
     assert ans.error_code == FleetAssignment.DRONE_SILENT and list(ans.silent_drones) == ["d2"], ans.error_msg
     assert "d2 (reports a non-finite pose: (nan, 0, 0))" in ans.error_msg, ans.error_msg
 
-    sims.update(start_drones(start_node, ros_env, {"d2": starts["d2"]}, pose_type="odometry"))
+    sims.update(start_drones(start_node, ros_env, {"d2": starts["d2"]}, **fast))
     assert fleet.wait_for_poses(dispatcher), dispatcher.output()
     ans = fleet.send(ring(2), stamp=202)
-    check_dispatch(fleet, ans, ring(2), FleetTransform(), "body")
-    assert len(ans.spare_drones) == 1
-    wait_at_goals(fleet, ans)
+    for d in drones:
+        fleet.goals[d].clear()
+    paths = check_dispatch(fleet, ans, ring(2), FleetTransform(), "body", scene=scene_points())
+    assert len(ans.routes) + len(ans.spare_drones) == 3
+    wait_for_sortie(fleet, paths)
 
     assert sims["d1"].stop() == 0, sims["d1"].output()[-2000:]  # SIGTERM: a quiet exit 0
     fleet.client.spin_until(lambda: False, 1.5)
@@ -237,12 +279,14 @@ def test_a_silent_drone_is_named_and_nothing_is_dispatched(ros_env, start_node, 
 
 def test_refused_plans_and_the_missing_scene(ros_env, start_node, ros_node) -> None:
     """No scene: refused (stand-off could not be checked), or dispatched with a warning once
-    require_scene is false. With the scene: too many poses, a pose inside the plant, too low,
-    too close to another, in another frame, no poses: each refused with its error code and
-    nothing sent; then a good plan goes out. SIGTERM ends the node with exit 0."""
+    require_scene is false. With the scene: a pose inside the plant, too low, too close to another,
+    in another frame, no poses, routes over the battery's budget, drones nearer than the
+    separation: each refused with its error code and nothing sent; then three poses go out to the
+    two drones. SIGTERM ends the node with exit 0."""
     drones = ["d0", "d1"]
-    dispatcher = start_node("vp_planner", "dispatcher", {"drones": drones, "scene_timeout": 0.5}, ros_env)
-    start_drones(start_node, ros_env, {"d0": [0.0, -4.0, 0.0], "d1": [1.0, -4.0, 0.0]})
+    dispatcher = start_node("vp_planner", "dispatcher", {"drones": drones, "scene_timeout": 0.5, **FAST}, ros_env)
+    start_drones(start_node, ros_env, {"d0": [0.0, -4.0, 0.0], "d1": [1.0, -4.0, 0.0]},
+                 speed=FAST["cruise_speed"], climb_rate=FAST["climb_rate"])
     fleet = Fleet(ros_node(ros_env), drones)
     assert fleet.wait_for_poses(dispatcher), dispatcher.output()
 
@@ -254,6 +298,7 @@ def test_refused_plans_and_the_missing_scene(ros_env, start_node, ros_node) -> N
     ans = fleet.send(ring(2), stamp=302)
     assert ans.error_code == FleetAssignment.NONE and not ans.standoff_checked, ans.error_msg
     assert "stand-off not checked" in dispatcher.output()
+    assert fleet.client.spin_until(lambda: all(f"{r.drone} landed" in dispatcher.output() for r in ans.routes), TIMEOUT)
     fleet.client.call(lambda: params.set_parameters([Parameter("require_scene", value=True)]), TIMEOUT)
     start_node("vp_scene", "scene", SCENE, ros_env)
     assert fleet.client.spin_until(lambda: "scene received" in dispatcher.output(), TIMEOUT), dispatcher.output()
@@ -267,7 +312,6 @@ def test_refused_plans_and_the_missing_scene(ros_env, start_node, ros_node) -> N
     close = ring(2)
     close[1, :3] = close[0, :3] + [0.0, 0.3, 0.0]
     cases = [
-        (ring(3), "map", FleetAssignment.TOO_FEW_DRONES, "3 poses but there are only 2 drones"),
         (inside, "map", FleetAssignment.INFEASIBLE_PLAN, "camera 1 at"),
         (inside, "map", FleetAssignment.INFEASIBLE_PLAN, "min_standoff 0.5 m"),
         (low, "map", FleetAssignment.INFEASIBLE_PLAN, "camera 0 at (+2.20, +0.00, +0.10) is 0.100 m above the ground"),
@@ -278,11 +322,75 @@ def test_refused_plans_and_the_missing_scene(ros_env, start_node, ros_node) -> N
     for k, (cams, frame, code, text) in enumerate(cases):
         ans = fleet.send(cams, stamp=310 + k, frame=frame)
         assert ans.error_code == code and text in ans.error_msg, (k, ans.error_code, ans.error_msg)
-        assert not ans.entries and math.isnan(ans.total_distance)
+        assert not ans.entries and not ans.routes and math.isnan(ans.total_distance)
+    for k, (name, value, code, text) in enumerate([
+            ("flight_time_s", 1.0, FleetAssignment.DOES_NOT_FIT, "s short"),
+            ("separation", 1.5, FleetAssignment.DRONES_TOO_CLOSE, "are 1.00 m apart, less than the separation")]):
+        fleet.client.call(lambda: params.set_parameters([Parameter(name, value=value)]), TIMEOUT)
+        ans = fleet.send(ring(2), stamp=320 + k)
+        assert ans.error_code == code and text in ans.error_msg and "\n" not in ans.error_msg, ans.error_msg
+        assert not ans.entries and not ans.routes
+        fleet.client.call(lambda: params.set_parameters([Parameter(name, value=PARAMS[name].default)]), TIMEOUT)
     fleet.client.spin_until(lambda: False, 0.5)
     assert not any(fleet.goals[d] for d in drones)  # nothing was sent for a refused plan
-    ans = fleet.send(ring(2, phase=0.5), stamp=330)
-    check_dispatch(fleet, ans, ring(2, phase=0.5), FleetTransform(), "body")
-    assert ans.standoff_checked
+    ans = fleet.send(ring(3, phase=0.5), stamp=330)  # more poses than drones
+    check_dispatch(fleet, ans, ring(3, phase=0.5), FleetTransform(), "body", scene=scene_points())
+    assert ans.standoff_checked and len(ans.entries) == 3
     assert dispatcher.alive()
     assert dispatcher.stop() == 0 and "Traceback" not in dispatcher.output(), dispatcher.output()[-3000:]
+
+
+def test_capture_triggers_fly_sorties_and_the_missions_are_written(ros_env, start_node, ros_node, tmp_path) -> None:
+    """``fly_on:=capture``: nothing flies until a /fleet/capture trigger of the plan, then one sortie a
+    trigger; with an origin each goal also comes as a NavSatFix (pymap3d's), and ~/write_missions
+    writes the plan's missions (NO_ROUTES before a plan, OUTPUT_EXISTS the second time)."""
+    from rclpy.qos import QoSProfile as Qos
+    from sensor_msgs.msg import NavSatFix
+    from vp_interfaces.msg import CaptureTrigger
+    from vp_interfaces.srv import WriteMissions
+
+    from vp_scene.geo import GeoOrigin
+
+    origin = "47.397742,8.545594,488.0"
+    start_node("vp_scene", "scene", SCENE, ros_env)
+    dispatcher = start_node("vp_planner", "dispatcher", {"drones": ["d0"], "fly_on": "capture", "origin": origin,
+                                                          "map_yaw": 0.3, **FAST}, ros_env)
+    start_drones(start_node, ros_env, {"d0": [0.0, -4.0, 0.0]}, speed=FAST["cruise_speed"],
+                 climb_rate=FAST["climb_rate"])
+    fleet = Fleet(ros_node(ros_env), ["d0"])
+    fixes = fleet.client.subscribe(NavSatFix, "/d0/goal_fix", Qos(depth=50, reliability=ReliabilityPolicy.RELIABLE,
+                                                                  durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    missions = fleet.client.node.create_client(WriteMissions, "/dispatcher/write_missions")
+    assert missions.wait_for_service(timeout_sec=TIMEOUT) and fleet.wait_for_poses(dispatcher), dispatcher.output()
+
+    def write(folder):
+        return fleet.client.call(lambda: missions.call_async(WriteMissions.Request(folder=str(folder))), TIMEOUT)
+    assert write(tmp_path / "early").error_code == WriteMissions.Response.NO_ROUTES
+    assert not (tmp_path / "early").exists()
+
+    ans = fleet.send(ring(3), stamp=401)
+    paths = check_dispatch(fleet, ans, ring(3), FleetTransform(), "body", scene=scene_points())
+    fleet.client.spin_until(lambda: False, 1.0)
+    assert not fleet.goals["d0"]  # no trigger yet: nothing flies
+    triggers = fleet.client.node.create_publisher(CaptureTrigger, "/fleet/capture", LATCHED)
+    geo = GeoOrigin.parse(origin, yaw=0.3)
+    for k in range(2):  # one sortie a trigger
+        fleet.goals["d0"].clear()
+        fixes.clear()
+        trigger = CaptureTrigger(realization=k)
+        trigger.plan_stamp.sec = 401
+        trigger.header.stamp = fleet.client.node.get_clock().now().to_msg()
+        triggers.publish(trigger)
+        wait_for_sortie(fleet, paths)
+        assert fleet.client.spin_until(lambda: len(fixes) >= len(paths["d0"]) - 1, 10)
+        got = np.array([[f.latitude, f.longitude, f.altitude] for f in fixes[-(len(paths["d0"]) - 1):]])
+        np.testing.assert_allclose(got, geo.to_geodetic(paths["d0"][1:, :3]), rtol=0, atol=1e-9)
+        assert f"sortie of plan 401.000000000 for capture {k}" in dispatcher.output()
+
+    out = tmp_path / "missions"
+    answer = write(out)
+    assert answer.error_code == WriteMissions.Response.NONE, answer.error_msg
+    assert sorted(p.name for p in out.iterdir()) == ["d0.plan", "fleet.json", "fleet.kml"]
+    assert sorted(answer.files) == sorted(str(out / n) for n in ("d0.plan", "fleet.kml", "fleet.json"))
+    again = write(out)
+    assert again.error_code == WriteMissions.Response.OUTPUT_EXISTS and "already holds" in again.error_msg

@@ -1,7 +1,7 @@
 """The entry script (tools/run_suite.py): the three real nodes as processes, one mission, over DDS.
 
 End-to-end on a small configuration, with a separate subscriber process on /camera_plan and a
-fleet of simulated drones that the dispatcher sends to the plan's poses; and the
+fleet of simulated drones, fewer than the poses, that the dispatcher routes through them; and the
 fault cases: the planner killed mid-run makes the script stop the others and exit non-zero; a
 node that exits with a one-line error gets that line reported last, without tracebacks from the
 nodes the script stops; the script killed with SIGKILL takes its nodes with it. Every wait has a
@@ -54,7 +54,7 @@ def test_end_to_end_small_mission(ros_env, tmp_path) -> None:
     echo = NodeProcess([sys.executable, str(ECHO), str(echo_out), "600"], ros_env, tmp_path / "echo.log")
     try:
         proc = subprocess.run([sys.executable, str(SCRIPT), *SMALL, "--method", "egp", "--evals", "16",
-                               "--init", "10", "--drones", "5", "--out", str(out), "--timeout", "500"],
+                               "--init", "10", "--drones", "3", "--out", str(out), "--timeout", "500"],
                               env=ros_env, capture_output=True, text=True, timeout=560)
         log = proc.stdout + proc.stderr
         assert proc.returncode == 0, log[-6000:]
@@ -82,17 +82,19 @@ def test_end_to_end_small_mission(ros_env, tmp_path) -> None:
     echoed = json.loads(echo_out.read_text())
     assert echoed["frame_id"] == "map"
     np.testing.assert_allclose(echoed["poses"], summary["poses"], atol=1e-9)
-    # the fleet: which drone goes where is printed, one pose per drone, one drone spare
-    assert "fleet (min_total): 4 drones to 4 poses" in proc.stdout, proc.stdout[-3000:]
-    lines = re.findall(r"^  (d\d) -> cam (\d): ", proc.stdout, re.M)
-    assert sorted(int(c) for _, c in lines) == [0, 1, 2, 3] and len({d for d, _ in lines}) == 4, lines
-    assert re.search(r"^  spare: d\d$", proc.stdout, re.M), proc.stdout[-3000:]
+    # the fleet: each drone's route is printed, three drones for the four poses, each pose once
+    assert re.search(r"^fleet \(min_max\): 3 drones to 4 poses, time on site", proc.stdout, re.M), proc.stdout[-3000:]
+    lines = re.findall(r"^  (d\d) -> cams ([\d, ]+): ", proc.stdout, re.M)
+    assert sorted(int(c) for _, cs in lines for c in cs.split(", ")) == [0, 1, 2, 3], lines
     fleet = summary["fleet"]
     for entry in fleet["drones"]:  # fleet frame = map here: the goals are the plan's poses
         np.testing.assert_allclose(entry["goal"], summary["poses"][entry["pose_index"]], atol=1e-9)
+    assert len(fleet["routes"]) == 3 and fleet["min_separation"] >= fleet["separation"]
+    assert fleet["time_on_site"] == pytest.approx(max(r["flight_time"] for r in fleet["routes"]))
+    assert all(r["flight_time"] <= fleet["budget"] for r in fleet["routes"])
     pids = started_pids(proc.stdout)
-    assert {"recorder", "dispatcher", "sim_d0", "sim_d4"} <= set(pids), pids
-    check_recording(out / "run.mcap", summary, drones=5, realizations=2)
+    assert {"recorder", "dispatcher", "sim_d0", "sim_d2"} <= set(pids), pids
+    check_recording(out / "run.mcap", summary, drones=3, realizations=2)
     for pid in pids.values():
         assert not alive(pid)
 
@@ -131,6 +133,20 @@ def test_two_sorties(ros_env, tmp_path) -> None:
     assert [len(m.fixed_poses) for m in infos] == [0, 4]  # the second plan names the cameras flown
     np.testing.assert_allclose([[p.position.x, p.position.y, p.position.z] for p in infos[1].fixed_poses],
                                np.asarray(first["cameras"])[:, :3], atol=1e-9)
+
+
+def test_the_script_drives_managed_lifecycle_nodes(ros_env, tmp_path) -> None:
+    """--managed: the planner and the dispatcher start unconfigured (managed:=true) and the script
+    configures and activates them, as a lifecycle manager would, before the mission flies."""
+    proc = subprocess.run([sys.executable, str(SCRIPT), *SMALL, "--realizations", "1", "--method", "circle",
+                           "--evals", "16", "--drones", "2", "--managed", "--out", str(tmp_path / "run"),
+                           "--timeout", "400"], env=ros_env, capture_output=True, text=True, timeout=460)
+    log = proc.stdout + proc.stderr
+    assert proc.returncode == 0, log[-6000:]
+    for node in ("planner", "dispatcher"):
+        assert f"{node}: configured and activated (lifecycle)" in proc.stdout, proc.stdout[-3000:]
+        assert log.index(f"{node} configured") < log.index(f"{node} ready"), log[-3000:]
+    assert "Chamfer distance x100" in proc.stdout
 
 
 def test_the_reconstruction_goes_to_the_planner_thinned() -> None:

@@ -35,7 +35,11 @@ PKG = {"planner": "vp_planner", "recon": "vp_recon", "dispatcher": "vp_planner"}
     ("dispatcher", {"drones": "d0"}, "'drones' must be a list of strings"),
     ("dispatcher", {"drones": ["d0", "d1", "d0"]}, "drones names a drone twice: ['d0']"),
     ("dispatcher", {"drones": ["d0", "drone-1"]}, "drone names must start with a letter"),
-    ("dispatcher", {"drones": ["d0"], "assignment": "fastest"}, "assignment must be one of min_total, min_max"),
+    ("dispatcher", {"drones": ["d0"], "assignment": "fastest"}, "assignment must be one of min_max, min_total"),
+    ("dispatcher", {"drones": ["d0"], "origin": "91,8,400"},
+     "[INVALID_ORIGIN] origin latitude must be in [-90, 90] deg, got 91.0"),
+    ("dispatcher", {"drones": ["d0"], "cruise_speed": 0.0},
+     "[INVALID_FLIGHT_MODEL] cruise_speed must be in (0, 30] m/s, got 0.0"),
     ("dispatcher", {"drones": ["d0"], "goal_topic": "/goal"}, "goal_topic must contain {drone}"),
     ("dispatcher", {"drones": ["d0"], "pose_timeout": 0}, "pose_timeout must be > 0"),
     ("dispatcher", {"drones": ["d0"], "fleet_yaw": 0.5}, "fleet_frame is frame_id ('map')"),
@@ -75,7 +79,8 @@ DESCRIBED = {
         ("num_cameras", 101), ("num_threads", 2)),
     "dispatcher": ("vp_planner", "dispatcher", {"drones": ["d0", "d1"]}, {
         "pose_timeout": (DOUBLE, 0.0, math.inf, False), "min_separation": (DOUBLE, 0.0, math.inf, False),
-        "drones": (None, None, None, True), "assignment": None},
+        "drones": (None, None, None, True), "assignment": None, "cruise_speed": (DOUBLE, 0.0, 30.0, False),
+        "reserve": (DOUBLE, 0.0, 0.9, False), "route_topic": (None, None, None, True)},
         ("min_altitude", -0.5), ("drones", ["d0"])),
     "scene": ("vp_scene", "scene", {"points_per_plant": 200, "realizations": 2}, {
         "realizations": (INT, 1, 100, False), "points_per_plant": (INT, 1, 1_000_000, False),

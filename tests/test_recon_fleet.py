@@ -145,6 +145,45 @@ def test_the_fleet_captures_keep_arrays_and_a_bounded_number_per_drone(ros_env, 
     assert "capture of d0 stamped 1000000000 ns dropped" in err and "stamped 2000000000 ns dropped" in err, err
 
 
+def test_a_drones_captures_are_its_poses_in_its_routes_order(ros_env, ros_node) -> None:
+    """Two drones with two poses each (d0 flies pose 2 then 0, d1 pose 1 then 3): each drone's
+    captures after the trigger, oldest first, are its route's poses; the capture set holds every
+    pose's image and reported pose in pose order. A drone with four poses keeps four captures."""
+    import threading
+
+    from vp_recon.fleet_captures import FleetCaptures
+    from vp_scene.camera import intrinsics
+    from vp_scene.messages import camera_info_msg, image_msg, stamp_after
+
+    client = ros_node(ros_env)
+    fleet = FleetCaptures(client.node, threading.Condition())
+    cams = ring(4)
+    plan = fleet_assignment_msg(7, ["d0", "d1", "d0", "d1"], cams)
+    for e in plan.entries:
+        e.order = {0: 1, 1: 0, 2: 0, 3: 1}[e.pose_index]
+    fleet._on_assignment(plan)
+    got: dict = {}
+    worker = threading.Thread(target=lambda: got.update(views=fleet.capture(
+        plan.plan_stamp, 4, 0, 30.0, "/{drone}/camera", lambda: False)))
+    worker.start()
+    base = stamp_after(client.node.get_clock().now().to_msg(), 5.0)  # after the trigger
+    K = intrinsics(8, 6)
+    for n, (drone, j) in enumerate((("d0", 2), ("d1", 1), ("d0", 0), ("d1", 3))):
+        stamp = stamp_after(base, 0.1 * n)
+        fleet._on(drone, "image", image_msg(np.full((6, 8, 3), 10 * j, np.uint8), f"{drone}/camera_optical", stamp))
+        fleet._on(drone, "info", camera_info_msg(K, 8, 6, f"{drone}/camera_optical", stamp))
+        pose = PoseStamped(pose=pose_msg(cameras_to_poses(cams[j])))
+        pose.header.stamp, pose.header.frame_id = stamp, "map"
+        fleet._on(drone, "pose", pose)
+    worker.join(30.0)
+    views = got["views"]
+    assert views.names == [f"view_{j:03d}.png" for j in range(4)]
+    assert [int(im[0, 0, 0]) for im in views.images] == [0, 10, 20, 30]
+    np.testing.assert_allclose(views.reported, cameras_to_poses(cams), atol=1e-12)
+    fleet._on_assignment(fleet_assignment_msg(8, ["d0"] * 4, cams))
+    assert fleet._keep["d0"] == 4
+
+
 def test_compressed_images_on_a_dask_cluster_give_the_raw_in_process_reconstruction(
         ros_env, start_node, ros_node, tmp_path) -> None:
     """``image_transport: compressed``: the recon node takes the drones' image_raw/compressed

@@ -29,7 +29,8 @@ def test_a_settled_drone_publishes_the_image_its_camera_of_the_plan_gets(ros_env
     """Drone d0 holds pose 2 of a plan, sits at its goal; a trigger for another plan is ignored
     once that plan's assignment comes, a trigger before its plan's assignment waits for it; the plan's
     trigger (realization 1) gives one image (raw and PNG), camera_info and reported
-    pose with one stamp: exactly the render source's camera 2 (realistic capture, same seeds)."""
+    pose with one stamp: exactly the render source's camera 2 (realistic capture, same seeds). A
+    route of two poses gives one picture at each, in the route's order."""
     cams = look_at(np.array([[1.6, 0.0, 1.2], [0.0, 1.6, 1.2], [-1.2, 1.0, 1.3]]), np.tile([0.0, 0.0, 0.9], (3, 1)))
     goal = cameras_to_poses(cams[2])
     start_node("vp_scene", "scene", SCENE, ros_env)
@@ -98,7 +99,7 @@ def test_a_settled_drone_publishes_the_image_its_camera_of_the_plan_gets(ros_env
     assignment_pub.publish(fleet)
     trigger.plan_stamp.sec = 8
     trigger_pub.publish(trigger)
-    assert client.spin_until(lambda: "capture of plan (8, 0), pose 0" in drone.output(), TIMEOUT), drone.output()
+    assert client.spin_until(lambda: "capture of plan (8, 0), pose(s) [0]" in drone.output(), TIMEOUT), drone.output()
     client.spin_until(lambda: received["image_raw"], 3.0)  # at plan 7's goal: no picture
     assert not received["image_raw"], "photographed plan 8 from plan 7's pose"
     g = PoseStamped(pose=pose_msg(cameras_to_poses(cams[0])))
@@ -108,3 +109,24 @@ def test_a_settled_drone_publishes_the_image_its_camera_of_the_plan_gets(ros_env
     np.testing.assert_allclose(pose_array(received["pose"][0].pose), cameras_to_poses(expected.reported[0]),
                                atol=1e-9)
     np.testing.assert_array_equal(image_array(received["image_raw"][0]), expected.images[0])
+
+    # plan 9 gives d0 a route of two poses, 2 then 1: one picture at each, as it settles there, in that order
+    for r in received.values():
+        r.clear()
+    fleet.plan_stamp.sec = 9
+    fleet.entries = [DroneAssignment(drone="d0", pose_index=j, order=k, goal=pose_msg(cameras_to_poses(cams[j])))
+                     for k, j in enumerate((2, 1))]
+    assignment_pub.publish(fleet)
+    trigger.plan_stamp.sec = 9
+    trigger_pub.publish(trigger)
+    assert client.spin_until(lambda: "capture of plan (9, 0), pose(s) [2, 1]" in drone.output(), TIMEOUT), \
+        drone.output()
+    for n, j in enumerate((2, 1), 1):
+        g = PoseStamped(pose=pose_msg(cameras_to_poses(cams[j])))
+        g.header.frame_id = "map"
+        goal_pub.publish(g)
+        assert client.spin_until(lambda: len(received["image_raw"]) >= n and len(received["pose"]) >= n, TIMEOUT), \
+            drone.output()[-3000:]
+        np.testing.assert_array_equal(image_array(received["image_raw"][n - 1]), expected.images[j])
+        np.testing.assert_allclose(pose_array(received["pose"][n - 1].pose), cameras_to_poses(expected.reported[j]),
+                                   atol=1e-9)

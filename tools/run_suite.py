@@ -6,9 +6,11 @@ and streams their logs, asks the planner for a plan through the ``/plan_views`` 
 progress bar from its feedback), waits for the recon node's aggregate score on
 ``/reconstruction/score`` and writes ``<out>/summary.json``. With ``--drones N`` it also starts
 the dispatcher with drones d0..d<N-1> and N simulated drones (``vp_scene sim_drone``, on a
-launch row 5 m south of the plot) and prints which drone goes where (``/fleet/assignment``);
-the drones then photograph the plan and the recon node reconstructs their images
-(``--source fleet``, the default with drones; ``--source render``: it renders the plan itself).
+launch row 5 m south of the plot; any N >= 1 for any number of cameras) and prints each drone's
+route (``/fleet/assignment``); with ``--source fleet`` (the default with drones) the dispatcher
+flies the routes once per wind realization the recon node asks for (``fly_on: capture``), the
+drones photograph each of their poses and the recon node reconstructs their images
+(``--source render``: it renders the plan itself).
 A ``recorder`` node (vp_recon) writes the run's topics to ``<out>/run.mcap`` (a ROS 2 bag that
 ``ros2 bag info``/``play`` and Foxglove open); it is started first and stopped last. Everything is shut down on success,
 on Ctrl-C and when any node dies; the nodes die with this script even when it is killed with
@@ -49,6 +51,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import signal
 import sys
@@ -118,12 +121,12 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
                          "localization errors, sensor noise, SfM with the reported poses) or ideal")
     ap.add_argument('--out', default='out/run', help='output folder')
     ap.add_argument('--drones', type=int, default=0,
-                    help='start the dispatcher and this many simulated drones (0: none; else at least --cameras)')
+                    help='start the dispatcher and this many simulated drones (0: none; any number for any cameras)')
     ap.add_argument('--source', choices=('render', 'fleet'), default=None,
                     help='what the recon node reconstructs: fleet (the simulated drones photograph the plan; the '
                          'default with --drones) or render (it renders the plan itself; the default without)')
-    ap.add_argument('--assignment', default='min_total', choices=['min_total', 'min_max'],
-                    help="the dispatcher's assignment objective")
+    ap.add_argument('--assignment', default='min_max', choices=['min_max', 'min_total'],
+                    help="the dispatcher's routes' objective: the longest flight or the total")
     ap.add_argument('--rounds', type=int, default=1, choices=(1, 2),
                     help="sorties: 2 plans a second one given the first one's cameras and reconstruction")
     ap.add_argument('--cameras2', type=int, default=0,
@@ -141,6 +144,9 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
     ap.add_argument('--dense-scale', type=float, default=0.7,
                     help='recon: dense stereo on the images resized by this factor, (0, 1] (default 0.7; '
                          'the benchmarks: 1)')
+    ap.add_argument('--managed', action='store_true',
+                    help='start the planner and the dispatcher as managed lifecycle nodes (managed:=true) and drive '
+                         'their transitions here (configure, activate), as a lifecycle manager does')
     ap.add_argument('--timeout', type=float, default=3600.0, help='seconds for the whole mission')
     ap.add_argument('--domain-id', type=int, default=None,
                     help=f'ROS_DOMAIN_ID of this run, {DOMAIN_IDS[0]}-{DOMAIN_IDS[1]} (default: $ROS_DOMAIN_ID, else '
@@ -160,10 +166,6 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
     if args.cameras2 < 0 or args.cameras2 == 1:
         ap.error('--cameras2 must be 0 (half of --cameras) or >= 2')
     args.cameras2 = args.cameras2 or max(2, args.cameras // 2)
-    if args.drones and args.rounds == 2 and args.drones < args.cameras2:
-        ap.error(f'--drones must be 0 or at least --cameras2 ({args.cameras2}): every camera pose needs a drone')
-    if args.drones and args.drones < args.cameras:
-        ap.error(f'--drones must be 0 or at least --cameras ({args.cameras}): every camera pose needs a drone')
     if args.drones < 0:
         ap.error('--drones must be >= 0')
     if args.source is None:
@@ -231,6 +233,10 @@ def check_scenario(ap: argparse.ArgumentParser, scenario: str) -> tuple:
     except LayoutError as exc:
         ap.error(f'--scenario: {exc}')
     return (scenario, None) if layout is None else (layout.name, str(Path(scenario).resolve()))
+
+
+class LifecycleRefused(RuntimeError):
+    """A lifecycle node (``--managed``) refused a transition."""
 
 
 class Mission:
@@ -321,6 +327,31 @@ class Mission:
         goal_id = UUID(uuid=list(uuid.uuid4().bytes))
         return self.client.send_goal_async(goal, feedback_callback=self.on_feedback, goal_uuid=goal_id), goal_id
 
+    def activate(self, name: str, nodes: List[NodeProcess], deadline: float) -> None:
+        """Drive the lifecycle node ``name`` from unconfigured to active (configure, then activate),
+        as a lifecycle manager does; a transition whose answer is lost in DDS discovery
+        (ros2/rmw_fastrtps#390) is read back from the node's state. LifecycleRefused when it refuses."""
+        from lifecycle_msgs.msg import State, Transition
+        from lifecycle_msgs.srv import ChangeState, GetState
+
+        change = self.node.create_client(ChangeState, f'/{name}/change_state')
+        get = self.node.create_client(GetState, f'/{name}/get_state')
+        wait_for(lambda: change.service_is_ready() and get.service_is_ready(), nodes, deadline,
+                 f'the lifecycle services of {name}')
+        for transition, label, target in ((Transition.TRANSITION_CONFIGURE, 'configure', State.PRIMARY_STATE_INACTIVE),
+                                          (Transition.TRANSITION_ACTIVATE, 'activate', State.PRIMARY_STATE_ACTIVE)):
+            asked = change.call_async(ChangeState.Request(transition=Transition(id=transition)))
+            answer_by = min(deadline, time.monotonic() + 5.0)
+            wait_for(lambda: asked.done() or time.monotonic() > answer_by, nodes, deadline, f'{name} to {label}')
+            if asked.done() and not asked.result().success:
+                raise LifecycleRefused(f'the {name} node refused to {label}')
+            if not asked.done():  # the answer was lost: the node's state says whether it happened
+                state = get.call_async(GetState.Request())
+                wait_for(state.done, nodes, deadline, f'the lifecycle state of {name}')
+                if state.result().current_state.id != target:
+                    raise LifecycleRefused(f'the {name} node did not {label}')
+        print(f'{name}: configured and activated (lifecycle)', flush=True)
+
     def accepted_handle(self, goal_id):
         """A handle for a goal the planner accepted (its feedback arrives) whose acceptance never
         reached us, so that its result can be asked for."""
@@ -346,20 +377,15 @@ def start_node(name: str, pkg: str, exe: str, params: Dict[str, object], env, lo
     return node
 
 
-def launch_row(n: int, south: float = 5.0, spacing: float = 1.0) -> List[List[float]]:
-    """Start positions of n simulated drones: on the ground, in a row along x, ``south`` m south
-    (-y) of the plot's centre, ``spacing`` m apart."""
-    return [[(k - (n - 1) / 2.0) * spacing, -south, 0.0] for k in range(n)]
-
-
 def assignment_lines(msg) -> List[str]:
     """What /fleet/assignment says, for the terminal: one line per drone."""
-    lines = [f'fleet ({msg.assignment}): {len(msg.entries)} drones to {msg.num_poses} poses, total '
-             f'{msg.total_distance:.2f} m, longest {msg.max_distance:.2f} m']
-    for e in msg.entries:
-        lines.append(f'  {e.drone} -> cam {e.pose_index}: ({e.goal.position.x:+.2f}, {e.goal.position.y:+.2f}, '
-                     f'{e.goal.position.z:+.2f}) m, {e.distance:.2f} m from ({e.start.x:+.2f}, {e.start.y:+.2f}, '
-                     f'{e.start.z:+.2f})')
+    lines = [f'fleet ({msg.assignment}): {len(msg.routes)} drones to {msg.num_poses} poses, time on site '
+             f'{msg.time_on_site:.1f} s, total {msg.total_distance:.2f} m, '
+             + (f'drones at least {msg.min_separation:.2f} m apart (separation {msg.separation:g} m)'
+                if math.isfinite(msg.min_separation) else 'one drone')]
+    for r in msg.routes:
+        lines.append(f'  {r.drone} -> cams {", ".join(str(i) for i in r.pose_indices)}: {r.flight_time:.1f} s flight '
+                     f'(budget {msg.budget:.0f} s), {r.distance:.2f} m')
     if msg.spare_drones:
         lines.append(f'  spare: {", ".join(msg.spare_drones)}')
     return lines
@@ -475,9 +501,10 @@ def fly_sortie(mission: Mission, nodes: List[NodeProcess], deadline: float, args
 
 
 def run(args: argparse.Namespace) -> int:
+    from vp_planner.routes import FlightModel, launch_row
     from vp_recon.errors import ERROR_NAMES
     from vp_scene.folders import write_atomic
-    from vp_scene.messages import msgs_to_poses, point_array, pose_array, score_record  # conversions' one home
+    from vp_scene.messages import msgs_to_poses, path_poses, point_array, pose_array, score_record  # conversions' one home
 
     out = Path(args.out).resolve()
     try:
@@ -528,7 +555,8 @@ def run(args: argparse.Namespace) -> int:
         nodes.append(start_node('scene', 'vp_scene', 'scene', scene_params, {**env, 'OMP_NUM_THREADS': '1'}, out))
         nodes.append(start_node('planner', 'vp_planner', 'planner', {
             'num_cameras': args.cameras, 'method': args.method, 'evaluations': args.evals,
-            'initial_evaluations': min(args.init, args.evals), 'seed': args.seed, 'num_threads': 1},
+            'initial_evaluations': min(args.init, args.evals), 'seed': args.seed, 'num_threads': 1,
+            'managed': args.managed},
             {**env, 'OMP_NUM_THREADS': '1'}, out))
         # the realizations reconstruct after the plan is made (the planner idle): on a local Dask
         # cluster of one-thread workers, all cores (issue 18, part 4: make run's time)
@@ -542,14 +570,21 @@ def run(args: argparse.Namespace) -> int:
             {**env, 'OMP_NUM_THREADS': str(recon_threads)}, out, lock))
         if args.drones:
             drones = [f'd{k}' for k in range(args.drones)]
+            # with the fleet's images: one sortie a wind realization the recon node asks for
             nodes.append(start_node('dispatcher', 'vp_planner', 'dispatcher', {
-                'drones': drones, 'assignment': args.assignment}, {**env, 'OMP_NUM_THREADS': '1'}, out))
-            for name, (x, y, z) in zip(drones, launch_row(args.drones)):
+                'drones': drones, 'assignment': args.assignment, 'managed': args.managed,
+                'fly_on': 'capture' if args.source == 'fleet' else 'plan'}, {**env, 'OMP_NUM_THREADS': '1'}, out))
+            model = FlightModel()  # the dispatcher's: the simulated drones fly as its routes are timed
+            for name, (x, y, z) in zip(drones, launch_row(args.drones).tolist()):
                 camera = {'camera': True, 'width': args.width, 'height': args.height, 'capture': args.capture} \
                     if args.source == 'fleet' else {}
                 nodes.append(start_node(f'sim_{name}', 'vp_scene', 'sim_drone', {
-                    'drone': name, 'x': x, 'y': y, 'z': z, **camera}, {**env, 'OMP_NUM_THREADS': '1'}, out))
+                    'drone': name, 'x': x, 'y': y, 'z': z, 'speed': model.cruise_speed, 'climb_rate': model.climb_rate,
+                    **camera}, {**env, 'OMP_NUM_THREADS': '1'}, out))
         mission = Mission(args)
+        if args.managed:
+            for name in ('planner', 'dispatcher')[:2 if args.drones else 1]:
+                mission.activate(name, nodes, deadline)
 
         wait_for(mission.scene_ready.is_set, nodes, deadline, 'the scene on /scene/noisy_points')
         wait_for(lambda: mission.client.server_is_ready(), nodes, deadline, 'the /plan_views server')
@@ -595,11 +630,18 @@ def run(args: argparse.Namespace) -> int:
                                   'coverage_tau')},
         }
         if fleet is not None:
+            def finite(x):
+                return x if math.isfinite(x) else None
             summary['fleet'] = {
-                'assignment': fleet.assignment, 'total_distance': fleet.total_distance,
-                'max_distance': fleet.max_distance, 'spare_drones': list(fleet.spare_drones),
-                'drones': [{'drone': e.drone, 'pose_index': e.pose_index, 'distance': e.distance,
-                            'start': point_array(e.start).tolist(),
+                'assignment': fleet.assignment, 'time_on_site': fleet.time_on_site, 'budget': fleet.budget,
+                'separation': fleet.separation, 'min_separation': finite(fleet.min_separation),
+                'total_distance': fleet.total_distance, 'max_distance': fleet.max_distance,
+                'spare_drones': list(fleet.spare_drones),
+                'routes': [{'drone': r.drone, 'poses': list(r.pose_indices), 'flight_time': r.flight_time,
+                            'distance': r.distance, 'path': path_poses(r.path).tolist(), 'arrival': list(r.arrival),
+                            'departure': list(r.departure)} for r in fleet.routes],
+                'drones': [{'drone': e.drone, 'pose_index': e.pose_index, 'order': e.order, 'eta': e.eta,
+                            'distance': e.distance, 'start': point_array(e.start).tolist(),
                             'goal': pose_array(e.goal).tolist()} for e in fleet.entries]}
         text = json.dumps(summary, indent=2)
         try:
@@ -621,6 +663,9 @@ def run(args: argparse.Namespace) -> int:
     except TimeoutError as exc:
         outcome.append(f'error: {exc}')
         return EXIT_TIMEOUT
+    except LifecycleRefused as exc:
+        outcome.append(f'error: {exc}')
+        return EXIT_FAILED
     except FileNotFoundError as exc:
         outcome.append(f'error: {exc}')
         return EXIT_USAGE

@@ -1,95 +1,16 @@
-"""vp_planner.fleet: assignments against brute force, the map -> fleet transform, goal
-orientations, the feasibility check (ViewSpace's rules, explained) and the simulated flight."""
+"""vp_planner.fleet: the map -> fleet transform, goal orientations, the feasibility check
+(ViewSpace's rules, explained) and the simulated flight."""
 from __future__ import annotations
 
-import itertools
 import math
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from vp_planner.fleet import (AssignmentError, FleetTransform, assign, bottleneck_assignment, distance_matrix,
-                              goal_orientations, min_total_assignment, plan_problems)
+from vp_planner.fleet import FleetTransform, goal_orientations, plan_problems
 from vp_planner.space import ViewSpace
 from vp_scene.camera import OPTICAL_IN_BODY, cameras_to_poses, look_at, rotation_matrix
-
-
-def brute_force(cost: np.ndarray) -> tuple[float, float, float]:
-    """(min total, min max, min total among the min-max assignments) over every injective map
-    poses -> drones (itertools.permutations)."""
-    d, m = cost.shape
-    best_total, best_max, best_total_at_max = math.inf, math.inf, math.inf
-    rows = np.arange(m)
-    for perm in itertools.permutations(range(d), m):
-        flights = cost[list(perm), rows]
-        total, longest = flights.sum(), flights.max()
-        best_total = min(best_total, total)
-        if longest < best_max:
-            best_max, best_total_at_max = longest, total
-        elif longest == best_max:
-            best_total_at_max = min(best_total_at_max, total)
-    return best_total, best_max, best_total_at_max
-
-
-def random_fleet(rng, d: int, m: int) -> tuple[np.ndarray, np.ndarray]:
-    return rng.uniform(-5, 5, (d, 3)), rng.uniform(-3, 3, (m, 3))
-
-
-@pytest.mark.parametrize("d, m", [(1, 1), (2, 2), (3, 2), (4, 4), (5, 3), (6, 6), (7, 4)])
-def test_assignments_equal_brute_force(d: int, m: int) -> None:
-    rng = np.random.default_rng(10 * d + m)
-    for _ in range(15):
-        drones, goals = random_fleet(rng, d, m)
-        cost = distance_matrix(drones, goals)
-        total, longest, total_at_longest = brute_force(cost)
-        a = assign(drones, goals, "min_total")
-        b = assign(drones, goals, "min_max")
-        for res in (a, b):
-            assert len(set(res.drone_of_pose.tolist())) == m  # no drone gets two poses
-            np.testing.assert_allclose(res.distances, cost[res.drone_of_pose, np.arange(m)])
-        assert a.total == pytest.approx(total, rel=1e-12, abs=1e-12)
-        assert b.max_distance == longest  # an entry of the matrix: exact
-        assert b.total == pytest.approx(total_at_longest, rel=1e-12, abs=1e-12)
-        assert b.max_distance <= a.max_distance and a.total <= b.total + 1e-12
-        assert sorted(a.spare(d) + a.drone_of_pose.tolist()) == list(range(d))
-
-
-def test_min_max_picks_the_cheapest_of_its_optima() -> None:
-    """Drones on a line at 0 and 2, poses at 1 and 3: both assignments cost 4 m in total, but
-    only one keeps every flight at 1 m; min_max must return it (the tie-break by total)."""
-    b = assign(np.array([[0.0, 0, 0], [2.0, 0, 0]]), np.array([[1.0, 0, 0], [3.0, 0, 0]]), "min_max")
-    assert b.drone_of_pose.tolist() == [0, 1] and b.max_distance == 1.0 and b.total == 2.0
-    # three drones, the bottleneck 5 is reached by several assignments; the cheapest is 1 + 5 + 0
-    cost = np.array([[1.0, 5.0, 9.0], [2.0, 5.0, 0.0], [0.0, 5.0, 8.0]])
-    sol = bottleneck_assignment(cost)
-    assert cost[sol, np.arange(3)].max() == 5.0 and cost[sol, np.arange(3)].sum() == pytest.approx(5.0)
-
-
-def test_bottleneck_beats_min_total_on_the_longest_flight() -> None:
-    """min_total: 0 + 10 = 10, longest 10; min_max: 6 + 6 = 12, longest 6."""
-    cost = np.array([[0.0, 6.0], [6.0, 10.0]])
-    assert min_total_assignment(cost).tolist() == [0, 1]
-    assert bottleneck_assignment(cost).tolist() == [1, 0]
-
-
-def test_ties_and_identical_drones() -> None:
-    drones = np.zeros((4, 3))
-    goals = np.array([[1.0, 0, 0], [0, 2.0, 0], [0, 0, 3.0]])
-    for objective in ("min_total", "min_max"):
-        res = assign(drones, goals, objective)
-        assert len(set(res.drone_of_pose.tolist())) == 3
-        assert res.total == pytest.approx(6.0) and res.max_distance == 3.0
-
-
-def test_assignment_errors() -> None:
-    with pytest.raises(AssignmentError, match="3 poses but only 2 drones"):
-        assign(np.zeros((2, 3)), np.ones((3, 3)))
-    with pytest.raises(AssignmentError, match="unknown assignment"):
-        assign(np.zeros((2, 3)), np.ones((1, 3)), "fastest")
-    with pytest.raises(AssignmentError, match="NaN"):
-        assign(np.array([[0.0, np.nan, 0]]), np.ones((1, 3)))
-    assert assign(np.zeros((2, 3)), np.zeros((0, 3))).drone_of_pose.size == 0
 
 
 def test_fleet_transform() -> None:

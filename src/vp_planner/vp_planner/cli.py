@@ -3,6 +3,8 @@
     python -m vp_planner.cli [plan] --scenario one_plant --method egp --cameras 4 --evals 100 \\
         --init 50 --seed 0 --out out/run [--overwrite] [--reward coverage] [--models FOLDER] [...]
     python -m vp_planner.cli score --plan out/run/plan.json [--reward paper]
+    python -m vp_planner.cli mission --plan out/run/plan.json --drones 2 --origin 47.3977,8.5456,488 \\
+        --out out/run/missions [--map-yaw 0] [--cruise-speed 5 ...] [--homes X,Y;X,Y] [--overwrite]
 
 A second sortie: ``--fixed PLAN.json`` (repeatable) gives the cameras already flown, which every
 reward model counts with the plan, and ``--reconstructed PLY`` what they reconstructed (points of
@@ -39,6 +41,15 @@ named with ``--scenario`` (and the other scene options), which a plan with its o
 no scene is guessed, none is silently replaced. A camera that breaks the planner's feasibility
 rules (the plan's recorded minima, else the defaults: inside a plant, under the ground, two
 cameras together) is named in a warning on stderr (:func:`vp_planner.fleet.plan_problems`).
+
+``mission`` routes a plan's views over N drones (:mod:`vp_planner.routes`: the longest flight
+minimized within the battery's budget, the drones kept ``--separation`` apart, the legs clear of
+the plan's scene when it has one) and writes OUT/<drone>.plan for every drone with views (a
+QGroundControl plan: take-off, a waypoint per view with its heading, the gimbal's pitch, a
+photograph, return to launch; :mod:`vp_planner.missions`), OUT/fleet.kml and OUT/fleet.json,
+together. The drones' homes are ``--homes`` (map x,y[,z] each) or a row 1 m apart, 5 m south of
+the views. A plan whose routes cannot fit, a bad origin or a flight-model value out of its range is
+one line with its code (``[DOES_NOT_FIT] ... s short``) and exit 2, nothing written.
 
 Errors: one line on stderr and exit code 2.
 """
@@ -133,8 +144,10 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     from .request import BO_MODES, DEFAULTS as D
 
     argv = list(sys.argv[1:] if argv is None else argv)
-    command = argv.pop(0) if argv and argv[0] in ("plan", "score") else "plan"
-    if command == "score":
+    command = argv.pop(0) if argv and argv[0] in ("plan", "score", "mission") else "plan"
+    if command == "mission":
+        p = _mission_parser()
+    elif command == "score":
         p = _Parser(prog="plan score",
                     description="The reward of an existing plan on its scene (the last number on stdout).")
         p.add_argument("--plan", required=True, help="plan.json (cameras or poses; its scene, or the scene options)")
@@ -229,6 +242,86 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
         p.error("--candidates and --prior go together (the poses to choose among and the cloud they are scored on)")
     args.command = command
     return args
+
+
+def _mission_parser() -> argparse.ArgumentParser:
+    from dataclasses import fields
+
+    from .feasibility import Feasibility
+    from .routes import FlightModel
+
+    p = _Parser(prog="plan mission", description="Each drone's route through a plan's views, as QGroundControl "
+                                                 "missions and KML.")
+    p.add_argument("--plan", required=True, help="plan.json (cameras or poses; its scene, when it has one, is avoided)")
+    p.add_argument("--drones", type=int, required=True, help="number of drones, 1 to 100")
+    p.add_argument("--origin", required=True, metavar="LAT,LON,HEIGHT",
+                   help="the map origin: WGS84 latitude and longitude (degrees), ellipsoidal height (m)")
+    p.add_argument("--map-yaw", type=float, default=0.0, help="rad: the map's x axis from east, counter-clockwise")
+    p.add_argument("--out", required=True, help="output folder (one that holds missions is refused)")
+    p.add_argument("--overwrite", action="store_true", help="replace the missions OUT holds (when this run succeeds)")
+    p.add_argument("--homes", default=None, metavar="X,Y[,Z];...",
+                   help="the drones' homes in map, one per drone (default: a row 1 m apart, 5 m south of the views)")
+    p.add_argument("--separation", type=float, default=Feasibility.min_separation,
+                   help="m between two drones at every moment (%(default)s)")
+    p.add_argument("--standoff", type=float, default=Feasibility.min_standoff,
+                   help="m the legs keep from the plan's scene (%(default)s)")
+    for f in fields(FlightModel):
+        p.add_argument(f"--{f.name.replace('_', '-')}", type=float, default=f.default,
+                       help=f"{f.metadata['help']}, {FlightModel.range_text(f.name)} (%(default)s)")
+    return p
+
+
+def _homes(text: Optional[str], n: int, views: np.ndarray) -> np.ndarray:
+    from .routes import launch_row
+
+    if text is None:
+        c = views[:, :2]
+        return launch_row(n, centre=(0.5 * (c[:, 0].min() + c[:, 0].max()), c[:, 1].min()), south=5.0)
+    try:
+        rows = [[float(x) for x in part.split(",")] for part in text.split(";") if part.strip()]
+    except ValueError:
+        raise CliError(f"--homes must be X,Y[,Z] numbers separated by ';', got {text!r}") from None
+    if len(rows) != n or any(len(r) not in (2, 3) for r in rows):
+        raise CliError(f"--homes must give {n} homes of 2 or 3 numbers (one per drone), got {text!r}")
+    return np.array([r + [0.0] * (3 - len(r)) for r in rows])
+
+
+def mission(args: argparse.Namespace) -> list:
+    """``mission``: the routes and their files (module docstring); the files written."""
+    from dataclasses import fields
+
+    from vp_scene.folders import ResultFolder
+    from vp_scene.geo import GeoOrigin
+    from vp_scene.planfile import PlanFileError, load_plan
+
+    from .missions import MISSION_FILES, write_missions
+    from .routes import FlightModel, plan_routes
+
+    origin = GeoOrigin.parse(args.origin, yaw=args.map_yaw)
+    model = FlightModel(**{f.name: getattr(args, f.name) for f in fields(FlightModel)})
+    if not 1 <= args.drones <= 100:
+        raise CliError(f"--drones must be 1 to 100, got {args.drones}")
+    try:
+        pf = load_plan(args.plan, require_scene=False)
+    except PlanFileError as exc:
+        raise CliError(str(exc)) from None
+    homes = _homes(args.homes, args.drones, pf.cameras)
+    result_dir = ResultFolder(args.out, MISSION_FILES, "mission", args.overwrite).check()
+    obstacles = build_scene(pf.scene)[0] if pf.scene is not None else None
+    fleet = plan_routes(pf.cameras, homes, model, args.separation, obstacles=obstacles, standoff=args.standoff)
+    names = [f"d{k}" for k in range(args.drones)]
+    with result_dir:
+        written = write_missions(result_dir.stage, fleet, pf.cameras, names, origin)
+        result_dir.commit()
+    for r in fleet.routes:
+        if len(r.views):
+            print(f"plan mission: {names[r.drone]}: {len(r.views)} views, {r.flight_time:.1f} s flight "
+                  f"(budget {model.budget_s:.0f} s), {r.distance:.1f} m -> {Path(args.out) / (names[r.drone] + '.plan')}",
+                  file=sys.stderr)
+    print(f"plan mission: time on site {fleet.time_on_site:.1f} s, drones at least {fleet.min_separation:.2f} m apart "
+          f"(separation {fleet.separation:g} m){'' if obstacles is not None else ', the plan has no scene to avoid'}"
+          f" -> {Path(args.out) / 'fleet.kml'}", file=sys.stderr)
+    return [Path(args.out) / p.name for p in written]
 
 
 def set_threads(n: int) -> None:
@@ -613,6 +706,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     try:
         if args.command == "score":
             score(args)
+            return 0
+        if args.command == "mission":
+            mission(args)
             return 0
         data = plan(args)
     except KeyboardInterrupt:

@@ -1,25 +1,7 @@
-"""From a plan to a fleet: which drone flies to which camera pose, in the fleet's frame (ROS-free).
+"""From a plan to a fleet: the fleet's frame, the goals' orientation and the plan's check (ROS-free).
 
-The dispatcher node (:mod:`vp_planner.dispatcher_node`) is a thin adapter around this module.
-
-Assignment
-----------
-D drones at positions a_1..a_D and M <= D poses with positions g_1..g_M (same frame). The cost
-of sending drone i to pose j is the straight-line distance d_ij = |a_i - g_j| (metres). An
-assignment is an injective map sigma: {1..M} -> {1..D} (pose j goes to drone sigma(j); the D - M
-drones outside its image are spare and get nothing).
-
-* ``min_total`` minimizes the total travel  sum_j d_{sigma(j) j}: the linear sum assignment
-  problem on the D x M distance matrix (:func:`scipy.optimize.linear_sum_assignment`, the
-  Jonker-Volgenant algorithm, O(D M^2)).
-* ``min_max`` minimizes the longest single flight  max_j d_{sigma(j) j}, which bounds the time
-  until the whole fleet is in place: the linear *bottleneck* assignment problem. Its optimum t*
-  is one of the entries of the matrix; the smallest entry t for which the bipartite graph
-  {(i, j): d_ij <= t} has a matching that covers every pose is found by binary search over the
-  sorted distinct entries (Hopcroft-Karp, :func:`scipy.sparse.csgraph.maximum_bipartite_matching`,
-  for each test: O(E sqrt(V) log(DM))). Among the bottleneck-optimal assignments the one with
-  the least total travel is returned (a linear sum assignment with the entries above t*
-  forbidden), so that no drone flies further than needed.
+The dispatcher node (:mod:`vp_planner.dispatcher_node`) is a thin adapter around this module and
+:mod:`vp_planner.routes` (which drone flies to which poses, in which order and when).
 
 Frames
 ------
@@ -50,9 +32,6 @@ from typing import Optional, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import linear_sum_assignment
-from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import maximum_bipartite_matching
 from scipy.spatial.transform import Rotation
 
 from vp_scene.camera import check_cameras, express_poses, optical_orientation
@@ -60,134 +39,14 @@ from vp_scene.camera import check_cameras, express_poses, optical_orientation
 from .feasibility import Feasibility, FeasibilityRules
 
 __all__ = [
-    "ASSIGNMENTS",
     "ORIENTATIONS",
-    "Assignment",
-    "AssignmentError",
     "FleetTransform",
-    "distance_matrix",
-    "min_total_assignment",
-    "bottleneck_assignment",
-    "assign",
     "goal_orientations",
     "plan_problems",
 ]
 
-#: Assignment objectives: total travel, or the longest single flight.
-ASSIGNMENTS: tuple[str, ...] = ("min_total", "min_max")
 #: Goal orientations: the plan's body convention (+x = optical axis) or the REP-103 optical frame.
 ORIENTATIONS: tuple[str, ...] = ("body", "optical")
-
-
-class AssignmentError(ValueError):
-    """The poses cannot be assigned (more poses than drones, bad positions)."""
-
-
-@dataclass(frozen=True)
-class Assignment:
-    """Drone ``drone_of_pose[j]`` flies to pose j; ``distances[j]`` is that flight (metres)."""
-
-    drone_of_pose: NDArray[np.int64]
-    distances: NDArray[np.float64]
-
-    @property
-    def total(self) -> float:
-        """Sum of the flights, m."""
-        return float(self.distances.sum())
-
-    @property
-    def max_distance(self) -> float:
-        """The longest flight, m (0 for no poses)."""
-        return float(self.distances.max()) if self.distances.size else 0.0
-
-    def spare(self, num_drones: int) -> list[int]:
-        """Indices of the drones that got no pose."""
-        used = set(int(i) for i in self.drone_of_pose)
-        return [i for i in range(num_drones) if i not in used]
-
-
-def _points(x: ArrayLike, what: str) -> NDArray[np.float64]:
-    p = np.asarray(x, dtype=np.float64)
-    if p.ndim == 1 and p.size == 3:
-        p = p[None]
-    if p.ndim != 2 or p.shape[1] != 3:
-        raise AssignmentError(f"{what} must have shape (n, 3), got {p.shape}")
-    if not np.all(np.isfinite(p)):
-        raise AssignmentError(f"{what} contain NaN or infinite coordinates")
-    return p
-
-
-def distance_matrix(drones: ArrayLike, goals: ArrayLike) -> NDArray[np.float64]:
-    """d_ij = |drones_i - goals_j| (D, M), Euclidean, for positions (D, 3) and (M, 3)."""
-    a, g = _points(drones, "drone positions"), _points(goals, "goal positions")
-    return np.linalg.norm(a[:, None, :] - g[None, :, :], axis=-1)
-
-
-def _check_cost(cost: ArrayLike) -> NDArray[np.float64]:
-    c = np.asarray(cost, dtype=np.float64)
-    if c.ndim != 2:
-        raise AssignmentError(f"the cost matrix must be 2-D (drones x poses), got shape {c.shape}")
-    if not np.all(np.isfinite(c)):
-        raise AssignmentError("the cost matrix contains NaN or infinite entries")
-    d, m = c.shape
-    if m > d:
-        raise AssignmentError(f"{m} poses but only {d} drones: every pose needs its own drone")
-    return c
-
-
-def min_total_assignment(cost: ArrayLike) -> NDArray[np.int64]:
-    """Drone per pose (M,) minimizing sum_j cost[sigma(j), j], sigma injective (D >= M).
-
-    The linear sum assignment problem, solved exactly by :func:`scipy.optimize.linear_sum_assignment`
-    on the transposed (poses x drones) matrix."""
-    c = _check_cost(cost)
-    if c.shape[1] == 0:
-        return np.zeros(0, dtype=np.int64)
-    rows, cols = linear_sum_assignment(c.T)
-    out = np.empty(c.shape[1], dtype=np.int64)
-    out[rows] = cols
-    return out
-
-
-def _covers_all_poses(allowed: NDArray[np.bool_]) -> bool:
-    """Whether the bipartite graph (poses x drones) ``allowed.T`` has a matching covering every pose."""
-    match = maximum_bipartite_matching(csr_matrix(allowed.T.astype(np.int8)), perm_type="column")
-    return bool(np.all(match >= 0))
-
-
-def bottleneck_assignment(cost: ArrayLike) -> NDArray[np.int64]:
-    """Drone per pose (M,) minimizing max_j cost[sigma(j), j], then the total among those optima.
-
-    Linear bottleneck assignment: binary search for the smallest distinct entry t* of the matrix
-    whose threshold graph {cost <= t*} covers every pose with a matching; then a linear sum
-    assignment with every entry above t* forbidden (it exists: that graph has such a matching)."""
-    c = _check_cost(cost)
-    if c.shape[1] == 0:
-        return np.zeros(0, dtype=np.int64)
-    values = np.unique(c)  # sorted; the largest always admits a matching (D >= M)
-    lo, hi = 0, len(values) - 1
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if _covers_all_poses(c <= values[mid]):
-            hi = mid
-        else:
-            lo = mid + 1
-    t = values[lo]
-    rows, cols = linear_sum_assignment(np.where(c <= t, c, np.inf).T)
-    out = np.empty(c.shape[1], dtype=np.int64)
-    out[rows] = cols
-    return out
-
-
-def assign(drones: ArrayLike, goals: ArrayLike, objective: str = "min_total") -> Assignment:
-    """Assign goal positions (M, 3) to drone positions (D, 3), D >= M, by ``objective``
-    (:data:`ASSIGNMENTS`); AssignmentError for fewer drones than goals or bad positions."""
-    if objective not in ASSIGNMENTS:
-        raise AssignmentError(f"unknown assignment {objective!r}; one of {', '.join(ASSIGNMENTS)}")
-    cost = distance_matrix(drones, goals)
-    solve = min_total_assignment if objective == "min_total" else bottleneck_assignment
-    drone_of_pose = solve(cost)
-    return Assignment(drone_of_pose, cost[drone_of_pose, np.arange(cost.shape[1])])
 
 
 @dataclass(frozen=True)

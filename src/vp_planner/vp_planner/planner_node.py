@@ -26,6 +26,11 @@ whose fork server starts when the first scene arrives), so a cancel is answered 
 plan (an evaluation of a hundred cameras, a GP fit, a KD-tree), and the next goal is served at
 once. On SIGINT/SIGTERM a running goal is aborted once (``CANCELED``, "shutting down") and its
 client answered before the node exits (:mod:`vp_scene.node_runtime`).
+
+A lifecycle node (rclpy.lifecycle; ``managed:=true`` waits unconfigured for a manager, the
+default configures and activates itself at start): configure makes the topics and the action
+server, activate accepts goals, deactivate rejects them (a running goal finishes), cleanup
+destroys what configure made.
 """
 from __future__ import annotations
 
@@ -39,7 +44,7 @@ import torch
 from geometry_msgs.msg import PoseArray
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
-from rclpy.node import Node
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import PointCloud2
 from visualization_msgs.msg import MarkerArray
 
@@ -59,8 +64,8 @@ from vp_scene.camera import IMAGE_SIDE_RANGE
 from vp_scene.cloud import pointcloud2_to_numpy, realizations_from_cloud
 from vp_scene.limits import MAX_SEED
 from vp_scene.messages import cameras_to_pose_array, camera_plan_msg, frustum_markers, pose_array_to_cameras
-from vp_scene.node_runtime import (INT_MAX, LATCHED, Param, declare_typed, parameter_value, refuse_bad_changes,
-                                   run_node, typed_values)
+from vp_scene.node_runtime import (INT_MAX, LATCHED, MANAGED, Param, declare_typed, parameter_value,
+                                   refuse_bad_changes, run_node, start_lifecycle, typed_values)
 
 
 #: The library's refusals and the action's error codes (the first class a refusal is an instance of).
@@ -114,6 +119,7 @@ PARAMS = {
                             (0.0, math.radians(60.0))),
     'num_threads': Param(1, 'torch threads (set at start)', (1, INT_MAX), True),
     'autostart': Param(False, 'plan with the parameters as soon as a scene arrives'),
+    'managed': MANAGED,
     'min_standoff': Param(D['min_standoff'], 'm from every scene point', (0.0, math.inf)),
     'min_altitude': Param(D['min_altitude'], 'm above the ground', (0.0, math.inf)),
     'min_separation': Param(D['min_separation'], 'm between cameras', (0.0, math.inf)),
@@ -172,9 +178,11 @@ def check_parameters(values: dict) -> dict:
     return v
 
 
-class PlannerNode(Node):
+class PlannerNode(LifecycleNode):
     """ROS 2 adapter: parameters and messages in, plans made in a process of their own
-    (:func:`vp_planner.plan_process.run_plan`), plans out."""
+    (:func:`vp_planner.plan_process.run_plan`), plans out. A lifecycle node (``managed``): its
+    topics and the action exist once configured; it accepts goals (and autostarts) only while
+    active; a goal running at a deactivation finishes."""
 
     def __init__(self) -> None:
         super().__init__('planner')
@@ -190,16 +198,48 @@ class PlannerNode(Node):
         self._running = 0  # goals inside the execute callback (+ an autostart plan)
         self._running_lock = threading.Lock()
         self._cb = ReentrantCallbackGroup()
-        self.plan_pub = self.create_publisher(PoseArray, '/camera_plan', LATCHED)
-        self.info_pub = self.create_publisher(CameraPlan, '/camera_plan/info', LATCHED)
-        self.marker_pub = self.create_publisher(MarkerArray, '/camera_plan/markers', LATCHED)
-        self.create_subscription(PointCloud2, '/scene/noisy_points', self._on_scene, LATCHED,
-                                 callback_group=MutuallyExclusiveCallbackGroup())
+        self._active = False
+        self._made: list = []  # what on_configure made, to destroy on cleanup
+        start_lifecycle(self, self._param('managed'))
+
+    # ---------------------------------------------------------------- lifecycle
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.plan_pub = self.create_lifecycle_publisher(PoseArray, '/camera_plan', LATCHED)
+        self.info_pub = self.create_lifecycle_publisher(CameraPlan, '/camera_plan/info', LATCHED)
+        self.marker_pub = self.create_lifecycle_publisher(MarkerArray, '/camera_plan/markers', LATCHED)
+        scene = self.create_subscription(PointCloud2, '/scene/noisy_points', self._on_scene, LATCHED,
+                                         callback_group=MutuallyExclusiveCallbackGroup())
         self._server = ActionServer(
             self, PlanViews, '/plan_views', execute_callback=self._execute,
             goal_callback=self._on_goal, cancel_callback=lambda _g: CancelResponse.ACCEPT,
             callback_group=self._cb)
+        self._made = [(self.destroy_lifecycle_publisher, p) for p in (self.plan_pub, self.info_pub, self.marker_pub)]
+        self._made += [(self.destroy_subscription, scene), (lambda server: server.destroy(), self._server)]
+        self.get_logger().info('planner configured')
+        return super().on_configure(state)
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._active = True
         self.get_logger().info('planner ready: waiting for /scene/noisy_points, serving /plan_views')
+        if self._param('autostart') and self._realizations is not None:
+            threading.Thread(target=self._autostart, daemon=True).start()
+        return super().on_activate(state)
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._active = False
+        self.get_logger().info('planner inactive: goals are rejected')
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        for destroy, entity in reversed(self._made):
+            destroy(entity)
+        self._made = []
+        self.get_logger().info('planner cleaned up: no topics and no /plan_views until configured again')
+        return super().on_cleanup(state)
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._shutting_down.set()
+        return super().on_shutdown(state)
 
     # ---------------------------------------------------------------- parameters
     def _param(self, name: str):
@@ -217,7 +257,7 @@ class PlannerNode(Node):
         with self._running_lock:
             self._running -= 1
 
-    def on_shutdown(self, timeout: float) -> bool:
+    def wind_down(self, timeout: float) -> bool:
         """SIGINT/SIGTERM: stop planning, let a running goal be aborted and its client answered;
         True when that happened within ``timeout`` seconds (node_runtime then tears down)."""
         self._shutting_down.set()
@@ -254,7 +294,7 @@ class PlannerNode(Node):
         warm()  # the planning processes' fork server imports the planner while goals may come
         k, p, _ = realizations.shape
         self.get_logger().info(f'scene received: {k} realizations x {p} points')
-        if self._param('autostart'):
+        if self._param('autostart') and self._active:
             threading.Thread(target=self._autostart, daemon=True).start()
 
     def _autostart(self) -> None:
@@ -315,6 +355,9 @@ class PlannerNode(Node):
 
     # ---------------------------------------------------------------- action
     def _on_goal(self, goal: PlanViews.Goal) -> GoalResponse:
+        if not self._active:
+            self.get_logger().warn('rejecting goal: the planner is inactive (lifecycle)')
+            return GoalResponse.REJECT
         if self._stopping():
             self.get_logger().warn('rejecting goal: shutting down')
             return GoalResponse.REJECT

@@ -1,6 +1,7 @@
 """The fleet's capture sets (the recon node's ``source: fleet``; README "From a real flight"): a
 capture trigger sent on ``/fleet/capture`` and, from every drone of the plan's ``/fleet/assignment``,
-its image, ``camera_info`` and reported pose with one stamp, gathered into a
+for each of its poses (in its route's ``order``) an image, ``camera_info`` and reported pose with
+one stamp, gathered into a
 :class:`vp_recon.flight.CapturedViews`. The recon node (:mod:`vp_recon.recon_node`) owns one
 :class:`FleetCaptures` and reconstructs what it gathers."""
 from __future__ import annotations
@@ -24,8 +25,9 @@ __all__ = ["IMAGE_TRANSPORTS", "CAPTURES_KEPT", "FleetCaptures"]
 IMAGE_TRANSPORTS = {'raw': 'image_raw', 'compressed': 'image_raw/compressed'}
 #: /fleet/assignment messages remembered to find the one of a plan.
 _ASSIGNMENTS_KEPT = 16
-#: captures (stamps) kept per drone until a capture set takes them; beyond, the oldest is dropped
-#: with a log line (memory: a 2000 x 1500 image is 9 MB; a drone that sends unasked would grow it).
+#: captures (stamps) kept per drone until a capture set takes them, at least (a drone with more poses
+#: in the latest assignment: as many as its poses); beyond, the oldest is dropped with a log line
+#: (memory: a 2000 x 1500 image is 9 MB; a drone that sends unasked would grow it).
 CAPTURES_KEPT = 2
 
 
@@ -38,11 +40,12 @@ class FleetCaptures:
     ``pose`` (the reported PoseStamped). Every message received is kept by its stamp until a
     capture set takes it (nothing received is lost, also what arrives while a set is being
     reconstructed); a capture older than the trigger asking for it belongs to an older plan or
-    realization and is ignored with a log line.
+    realization and is ignored with a log line. A drone's captures of one trigger are its poses'
+    in its route's order (it photographs them as it flies them): the k-th, by stamp, is its k-th pose.
 
     Memory (issue 20, part 5): an image is converted to its array as it arrives (a view of the
     message's buffer, which is then the only copy), and at most :data:`CAPTURES_KEPT` captures
-    are kept per drone (the oldest beyond is dropped with a log line): a capture set of N images
+    are kept per drone, or its poses' number (the oldest beyond is dropped with a log line): a capture set of N images
     costs the node about N images' bytes, not three times that (measured in
     results/bench_fleet_transport.json, ``recon_node_memory``)."""
 
@@ -53,6 +56,7 @@ class FleetCaptures:
         self._assignments: OrderedDict = OrderedDict()  # plan stamp key -> FleetAssignment
         self._got: dict = {}  # drone -> {stamp ns: {kind: msg}}
         self._subscribed: set = set()
+        self._keep: dict = {}  # drone -> captures kept (its poses in the latest assignment, at least CAPTURES_KEPT)
         self._topic = ''
         self._trigger = node.create_publisher(CaptureTrigger, '/fleet/capture', LATCHED)
         self._trigger_type = CaptureTrigger
@@ -65,6 +69,8 @@ class FleetCaptures:
     def _on_assignment(self, msg) -> None:
         with self._lock:
             self._assignments[self._ns(msg.plan_stamp)] = msg
+            for d in {e.drone for e in msg.entries}:
+                self._keep[d] = max(CAPTURES_KEPT, sum(e.drone == d for e in msg.entries))
             while len(self._assignments) > _ASSIGNMENTS_KEPT:
                 self._assignments.popitem(last=False)
             self._lock.notify_all()
@@ -96,20 +102,22 @@ class FleetCaptures:
         with self._lock:
             got = self._got.setdefault(drone, {})
             got.setdefault(stamp, {})[kind] = msg
-            dropped = sorted(got)[:-CAPTURES_KEPT]
+            dropped = sorted(got)[:-self._keep.get(drone, CAPTURES_KEPT)]
             for t in dropped:
                 del got[t]
             self._lock.notify_all()
         for t in dropped:
-            self._node.get_logger().warning(f'capture of {drone} stamped {t} ns dropped: {CAPTURES_KEPT} newer '
-                                            'ones are waiting for a capture set (memory)')
+            self._node.get_logger().warning(f'capture of {drone} stamped {t} ns dropped: '
+                                            f'{self._keep.get(drone, CAPTURES_KEPT)} newer ones are waiting for a '
+                                            'capture set (memory)')
 
     def capture(self, plan_stamp, num_poses: int, k: int, timeout: float, topic: str, stopped,
                 transport: str = 'raw') -> object:
-        """The capture set of realization ``k`` of the plan: trigger, then one image, camera_info
-        and pose with one stamp (not older than the trigger) from every drone of the plan's
-        assignment, as :class:`vp_recon.flight.CapturedViews` in pose order; None when
-        ``stopped()``. ReconError CAPTURE_MISSING naming the drones that sent nothing."""
+        """The capture set of realization ``k`` of the plan: trigger, then for every pose of the
+        plan's assignment one image, camera_info and pose with one stamp (not older than the
+        trigger) from its drone (a drone's k-th capture by stamp is its k-th pose in route order),
+        as :class:`vp_recon.flight.CapturedViews` in pose order; None when ``stopped()``.
+        ReconError CAPTURE_MISSING naming the drones that sent too few."""
         key = self._ns(plan_stamp)
         deadline = time.monotonic() + timeout
         with self._lock:
@@ -123,7 +131,10 @@ class FleetCaptures:
             raise ReconError(CAPTURE_MISSING, f'the dispatcher sent no drone to {num_poses - len(fleet.entries)} of '
                                               f'the {num_poses} poses: {fleet.error_msg or "no assignment"}')
         entries = sorted(fleet.entries, key=lambda e: e.pose_index)
-        drones = [e.drone for e in entries]
+        route = {}  # drone -> its poses' entries in flying order
+        for e in sorted(fleet.entries, key=lambda e: (e.drone, e.order)):
+            route.setdefault(e.drone, []).append(e)
+        drones = list(route)
         for d in drones:
             self._subscribe(d, topic, transport)
         asked = self.now_ns()
@@ -133,43 +144,46 @@ class FleetCaptures:
         self._trigger.publish(trigger)
         self._node.get_logger().info(f'capture {k} of the plan asked of {", ".join(drones)}')
 
-        def complete(d: str):
-            sets = [(t, m) for t, m in self._got.get(d, {}).items() if t >= asked and len(m) == 3]
-            return min(sets)[1] if sets else None
+        def complete(d: str) -> list:
+            """The drone's complete captures since the trigger, oldest first (its poses' order)."""
+            return [m for t, m in sorted(self._got.get(d, {}).items()) if t >= asked and len(m) == 3]
 
         with self._lock:
-            self._lock.wait_for(lambda: stopped() or all(complete(d) for d in drones),
+            self._lock.wait_for(lambda: stopped() or all(len(complete(d)) >= len(route[d]) for d in drones),
                                 timeout=max(0.0, deadline - time.monotonic()))
             if stopped():
                 return None
-            sets = {d: complete(d) for d in drones}
+            taken = {d: complete(d)[:len(route[d])] for d in drones}
             for d in drones:  # older captures: another plan or realization's
                 for t in [t for t in self._got.get(d, {}) if t < asked]:
                     self._node.get_logger().info(f'capture of {d} stamped {t} ns is older than capture {k} '
                                                  'of this plan: ignored')
                     del self._got[d][t]
-                for t in [t for t, m in self._got.get(d, {}).items() if sets[d] is m]:
+                for t in [t for t, m in self._got.get(d, {}).items() if any(m is x for x in taken[d])]:
                     del self._got[d][t]  # taken
-        missing = [d for d in drones if sets[d] is None]
+        missing = [f'{d} ({len(taken[d])} of {len(route[d])})' if len(route[d]) > 1 else d
+                   for d in drones if len(taken[d]) < len(route[d])]
         if missing:
             raise ReconError(CAPTURE_MISSING, f'no capture from drone(s) {", ".join(missing)} within capture_timeout '
                                               f'{timeout:g} s (capture {k})')
+        sets = {e.pose_index: taken[d][n] for d in drones for n, e in enumerate(route[d])}
         try:
-            intr = [camera_info_intrinsics(sets[d]['info']) for d in drones]
+            intr = [camera_info_intrinsics(sets[e.pose_index]['info']) for e in entries]
             if any(not np.allclose(a[0], intr[0][0]) or a[1:] != intr[0][1:] for a in intr):
                 raise ValueError('the drones\' cameras differ (one camera model per flight)')
-            bad = [(d, sets[d]['image']) for d in drones if isinstance(sets[d]['image'], Exception)]
+            bad = [(e.drone, sets[e.pose_index]['image']) for e in entries
+                   if isinstance(sets[e.pose_index]['image'], Exception)]
             if bad:
                 raise ValueError(f'the image of {bad[0][0]}: {bad[0][1]}')
-            for d, (_, w, h) in zip(drones, intr):  # K is the camera_info's size's: another size is another camera
-                im = sets[d]['image']
+            for e, (_, w, h) in zip(entries, intr):  # K is the camera_info's size's: another size is another camera
+                im = sets[e.pose_index]['image']
                 if (im.shape[1], im.shape[0]) != (w, h):
-                    raise ValueError(f'the image of {d} is {im.shape[1]}x{im.shape[0]} pixels, its camera_info '
+                    raise ValueError(f'the image of {e.drone} is {im.shape[1]}x{im.shape[0]} pixels, its camera_info '
                                      f'says {w}x{h}')
             return CapturedViews(
                 names=[f'view_{e.pose_index:03d}.png' for e in entries],
-                images=[sets[d]['image'] for d in drones],
-                reported=np.array([pose_array(sets[d]['pose'].pose) for d in drones]),  # any attitude, roll kept
+                images=[sets[e.pose_index]['image'] for e in entries],
+                reported=np.array([pose_array(sets[e.pose_index]['pose'].pose) for e in entries]),  # roll kept
                 K=intr[0][0], realization=int(k)).validate()
         except (ValueError, FlightError) as exc:
             raise ReconError(CAPTURE_MISSING, f'capture {k} from the fleet is unusable: {exc}') from None

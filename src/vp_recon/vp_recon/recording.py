@@ -49,7 +49,7 @@ FLUSH_S = 2.0
 #: plan and its info and markers, the fleet's assignment, every drone's pose and goal, the
 #: reconstruction's score and points.
 RUN_TOPICS = ("/scene/noisy_points", "/scene/description", "/camera_plan", "/camera_plan/info",
-              "/camera_plan/markers", "/fleet/assignment", "/*/pose", "/*/goal_pose",
+              "/camera_plan/markers", "/fleet/assignment", "/*/pose", "/*/goal_pose", "/*/route",
               "/reconstruction/score", "/reconstruction/points")
 
 _SEPARATOR = "=" * 80

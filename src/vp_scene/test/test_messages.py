@@ -80,6 +80,15 @@ def test_drone_reports(pose_type: str) -> None:
     assert m.drone_topic("/{drone}/pose", "d3") == "/d3/pose"
 
 
+def test_navsatfix_round_trip() -> None:
+    from sensor_msgs.msg import NavSatFix, NavSatStatus
+
+    fix = m.navsatfix_msg([47.3977421, 8.5455941, 488.25], "map", PoseStamped().header.stamp)
+    assert isinstance(fix, NavSatFix) and fix.header.frame_id == "map" and fix.status.status == NavSatStatus.STATUS_FIX
+    assert fix.position_covariance_type == NavSatFix.COVARIANCE_TYPE_UNKNOWN
+    assert m.navsatfix_geodetic(fix).tolist() == [47.3977421, 8.5455941, 488.25]
+
+
 def test_scores() -> None:
     res = [SimpleNamespace(chamfer=0.01, accuracy=0.004, completeness=0.006, chamfer_shape=0.008, images=4,
                            fscore=0.7, points=np.zeros((100, 3)), mean_reprojection_error=0.5, mean_track_length=3.0,

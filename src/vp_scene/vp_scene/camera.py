@@ -337,6 +337,8 @@ def check_coordinates(values: ArrayLike, what: str) -> NDArray[np.float64]:
     bad = ~(np.abs(a) <= MAX_COORDINATE)  # NaN too
     if bad.any():
         v = float(a.reshape(-1)[np.flatnonzero(bad.reshape(-1))[0]])
+        if not math.isfinite(v):
+            raise ValueError(f"{what} holds {v:g}, which is not finite")
         raise ValueError(f"{what} holds {v:g}, outside [-{MAX_COORDINATE:g}, {MAX_COORDINATE:g}]: positions are "
                          f"metres of map within {MAX_COORDINATE / 1000:g} km of its origin (the field's own frame)")
     return a

@@ -12,8 +12,11 @@ modules never see a message).
 * scores: a reconstruction's figures (one realization, the aggregate, or an error) ->
   ``vp_interfaces/ReconstructionScore`` (distances x 100, as the message says), and back to a
   plain record (:func:`score_record`);
+* routes: timed poses (m, 7) <-> ``nav_msgs/Path`` (each pose stamped with its time);
 * drones: a pose report (``PoseStamped`` or ``nav_msgs/Odometry``, :data:`POSE_TYPES`) <-> a
-  position (3,) and a pose (7,); per-drone topics from a template (:func:`drone_topic`);
+  position (3,) and a pose (7,); per-drone topics from a template (:func:`drone_topic`); a
+  geodetic position (latitude, longitude in degrees, ellipsoidal height; :mod:`vp_scene.geo`)
+  <-> ``sensor_msgs/NavSatFix`` (whose altitude is above the WGS84 ellipsoid);
 * images: an RGB image (H, W, 3) uint8 <-> ``sensor_msgs/Image`` (``rgb8``; ``bgr8`` and
   ``mono8`` read too) and ``sensor_msgs/CompressedImage`` (PNG or JPEG, the image_transport
   convention), intrinsics K (3x3, OpenCV pixel convention) and the image size <->
@@ -29,8 +32,8 @@ from typing import Any, Optional, Sequence
 
 import numpy as np
 from geometry_msgs.msg import Point, Pose, PoseArray, PoseStamped
-from nav_msgs.msg import Odometry
-from sensor_msgs.msg import CameraInfo, CompressedImage, Image
+from nav_msgs.msg import Odometry, Path
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image, NavSatFix, NavSatStatus
 from numpy.typing import ArrayLike, NDArray
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
@@ -45,7 +48,8 @@ __all__ = [
     "scene_description_msg", "placements_of", "scene_of_description", "POSE_TYPES", "drone_topic", "pose_report",
     "score_msg", "realization_score", "aggregate_score", "error_score", "score_record",
     "image_msg", "image_array", "compressed_image_msg", "compressed_image_array", "camera_info_msg",
-    "camera_info_intrinsics",
+    "camera_info_intrinsics", "navsatfix_msg", "navsatfix_geodetic", "stamp_after", "path_msg", "path_poses",
+    "fleet_assignment_msg",
 ]
 
 
@@ -112,6 +116,47 @@ def pose_report(pose_type: str, pose: ArrayLike, frame_id: str, stamp: Any, chil
     else:
         msg.pose = pose_msg(pose)
     return msg
+
+
+def stamp_after(stamp: Any, seconds: float) -> Any:
+    """The ``builtin_interfaces/Time`` ``seconds`` after ``stamp``."""
+    from builtin_interfaces.msg import Time
+
+    ns = int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec) + int(round(float(seconds) * 1e9))
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def path_msg(poses: ArrayLike, seconds: ArrayLike, frame_id: str, stamp: Any) -> Path:
+    """``nav_msgs/Path`` of poses (m, 7), pose k stamped ``seconds[k]`` after ``stamp`` (the header's)."""
+    msg = Path()
+    msg.header.stamp, msg.header.frame_id = stamp, frame_id
+    for pose, t in zip(np.asarray(poses, dtype=np.float64).reshape(-1, 7), np.asarray(seconds, dtype=np.float64)):
+        ps = PoseStamped(pose=pose_msg(pose))
+        ps.header.stamp, ps.header.frame_id = stamp_after(stamp, t), frame_id
+        msg.poses.append(ps)
+    return msg
+
+
+def path_poses(msg: Path) -> NDArray[np.float64]:
+    """(m, 7) poses of a ``nav_msgs/Path``."""
+    return msgs_to_poses([p.pose for p in msg.poses])
+
+
+def navsatfix_msg(geodetic: ArrayLike, frame_id: str, stamp: Any) -> NavSatFix:
+    """``sensor_msgs/NavSatFix`` of a geodetic position (3,) = latitude, longitude (deg),
+    ellipsoidal height (m): status fix, service GPS, covariance unknown."""
+    g = np.asarray(geodetic, dtype=np.float64).reshape(3)
+    msg = NavSatFix()
+    msg.header.stamp, msg.header.frame_id = stamp, frame_id
+    msg.status.status, msg.status.service = NavSatStatus.STATUS_FIX, NavSatStatus.SERVICE_GPS
+    msg.latitude, msg.longitude, msg.altitude = (float(x) for x in g)
+    msg.position_covariance_type = NavSatFix.COVARIANCE_TYPE_UNKNOWN
+    return msg
+
+
+def navsatfix_geodetic(msg: NavSatFix) -> NDArray[np.float64]:
+    """(3,) latitude, longitude (deg), ellipsoidal height (m) of a ``NavSatFix``."""
+    return np.array([msg.latitude, msg.longitude, msg.altitude], dtype=np.float64)
 
 
 # ---------------------------------------------------------------- plans

@@ -63,7 +63,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 __all__ = ["SHUTDOWN_DEADLINE", "EXIT_OK", "EXIT_CRASHED", "EXIT_BAD_PARAMETERS", "INT_MAX", "LATCHED", "Param", "coerce",
            "declare_typed", "descriptor", "typed_values", "parameter_value", "refuse_bad_changes", "NewestWins",
-           "run_node"]
+           "MANAGED", "start_lifecycle", "run_node"]
 
 #: The QoS of the suite's latched topics (scene, plans, fleet assignment and captures): reliable,
 #: TRANSIENT_LOCAL, depth 1: a subscriber that joins late still gets the last message.
@@ -280,6 +280,20 @@ def _exit(code: int) -> None:
     os._exit(code)
 
 
+#: The ``managed`` parameter of the lifecycle nodes (the planner, the dispatcher).
+MANAGED = Param(False, 'false: configure and activate at start (a plain start); true: start unconfigured and wait '
+                       'for a lifecycle manager (configure, activate, deactivate, cleanup, shutdown: nav2\'s '
+                       'convention)', None, True)
+
+
+def start_lifecycle(node: Any, managed: bool) -> None:
+    """A lifecycle node's start: unless ``managed``, it configures and activates itself now (the
+    transitions a manager would drive), so that a plain start serves at once."""
+    if not managed:
+        node.trigger_configure()
+        node.trigger_activate()
+
+
 def run_node(name: str, make_node: Callable[[], Any], args: Optional[list] = None, num_threads: int = 1,
              grace: float = SHUTDOWN_GRACE, deadline: float = SHUTDOWN_DEADLINE,
              error_prefix: str = "bad parameters") -> int:
@@ -288,8 +302,9 @@ def run_node(name: str, make_node: Callable[[], Any], args: Optional[list] = Non
     ``make_node`` raises ValueError (or OSError) naming a bad parameter or configuration: that
     is logged as one line (``<error_prefix>: <message>``) and the exit code is 2.
     ``num_threads`` > 1 spins a MultiThreadedExecutor. A node may define
-    ``on_shutdown(timeout) -> bool`` (True: it wound down within ``timeout`` seconds); it is
-    called after the signal, before the executor stops.
+    ``on_shutdown(timeout) -> bool`` (True: it wound down within ``timeout`` seconds; a lifecycle
+    node, whose ``on_shutdown`` is a transition, names it ``wind_down``); it is called after the
+    signal, before the executor stops.
     """
     import rclpy
     from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
@@ -353,7 +368,8 @@ def run_node(name: str, make_node: Callable[[], Any], args: Optional[list] = Non
         logger.error("the executor crashed; exiting")
         _exit(EXIT_CRASHED)
     wound_down = True
-    on_shutdown = getattr(node, "on_shutdown", None)
+    # a lifecycle node's on_shutdown is its lifecycle transition: it names the hook wind_down
+    on_shutdown = getattr(node, "wind_down", None) or getattr(node, "on_shutdown", None)
     if on_shutdown is not None:
         try:
             wound_down = bool(on_shutdown(grace))

@@ -27,16 +27,23 @@ from .ground_control import GroundControl
 __all__ = ["fly_toward", "ground_under", "Photographs", "photograph", "warm_up"]
 
 
-def fly_toward(position: ArrayLike, goal: ArrayLike, speed: float, dt: float) -> NDArray[np.float64]:
-    """One step of a simulated drone: ``speed * dt`` metres straight toward ``goal``, arriving
-    exactly when the goal is nearer than that."""
+def fly_toward(position: ArrayLike, goal: ArrayLike, speed: float, dt: float,
+               climb_rate: Optional[float] = None) -> NDArray[np.float64]:
+    """One step of a simulated drone straight toward ``goal``, arriving exactly when it is nearer
+    than a step: ``speed * dt`` metres, or with a ``climb_rate`` (m/s) the drone flies the line at
+    the constant velocity whose horizontal part is at most ``speed`` and vertical part at most
+    ``climb_rate`` (the line takes max(horizontal / speed, vertical / climb_rate) seconds, as
+    :func:`vp_planner.routes.leg_times` times it)."""
     p, g = np.asarray(position, dtype=np.float64), np.asarray(goal, dtype=np.float64)
-    step = max(0.0, float(speed) * float(dt))
     gap = g - p
-    dist = float(np.linalg.norm(gap))
-    if dist <= step:
+    if climb_rate is None:
+        need = float(np.linalg.norm(gap)) / float(speed)
+    else:
+        need = max(float(np.linalg.norm(gap[:2])) / float(speed), abs(float(gap[2])) / float(climb_rate))
+    step = max(0.0, float(dt))
+    if need <= step:
         return g.copy()
-    return p + gap * (step / dist)
+    return p + gap * (step / need)
 
 
 def ground_under(capture: CaptureModel, ground: Optional[bool] = None) -> bool:

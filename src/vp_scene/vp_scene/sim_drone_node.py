@@ -4,15 +4,17 @@ publishes its pose (the tests, ``make run`` and the cross-host test run one proc
 Subscribes ``goal_topic`` (geometry_msgs/PoseStamped, reliable, TRANSIENT_LOCAL: a goal
 published before the drone started still reaches it) and publishes ``pose_topic``
 (geometry_msgs/PoseStamped, or nav_msgs/Odometry with ``pose_type:=odometry``) ``rate`` times a
-second, in ``frame_id``: its position (:func:`vp_scene.sim_drone.fly_toward`, exactly the goal on
-arrival) and the goal's orientation (identity before the first goal). A goal in another frame
+second, in ``frame_id``: its position (:func:`vp_scene.sim_drone.fly_toward` at ``speed``
+horizontally and ``climb_rate`` vertically, as the dispatcher's flight model times its legs;
+exactly the goal on arrival) and the goal's orientation (identity before the first goal). A goal in another frame
 is ignored with a log line. Signals, exit codes and parameter types follow
 :mod:`vp_scene.node_runtime`.
 
 With ``camera:=true`` the drone also takes pictures (issue 20, part 1): on a
 ``vp_interfaces/CaptureTrigger`` on ``/fleet/capture`` for a plan in which ``/fleet/assignment``
-gives it pose i, once it has settled at that assignment's goal (not at an earlier plan's: a
-trigger can arrive before the new goal), it flies camera i of the plan under the
+gives it poses (its route's, in their ``order``), each time it settles at the next of those
+poses' goals (not at an earlier plan's: a trigger can arrive before the new goal), it flies
+that camera i of the plan under the
 capture model (``capture``: realistic | ideal, seeded by ``capture_seed``, realization and i:
 :func:`vp_scene.sim_drone.photograph` with ``indices=[i]``, so its image and reported pose are
 exactly those the recon node's render source gives camera i), renders the scene of
@@ -26,7 +28,7 @@ all with one stamp,
 * ``{camera_topic}/pose`` (geometry_msgs/PoseStamped, ``frame_id``): the pose it reports.
 
 A trigger for a plan that gives it no pose is ignored with a log line, one that comes before its plan's
-assignment waits for it (the latest such); one trigger, one capture.
+assignment waits for it (the latest such); one trigger, one capture of each of its poses.
 The camera works in its own thread (one, which owns the OpenGL context), so the drone keeps
 reporting its pose while it renders, as a real drone's autopilot does beside its camera; it
 builds the scene and renders once as soon as ``/scene/description`` arrives (while the planner
@@ -66,7 +68,8 @@ PARAMS = {
     'x': Param(0.0, 'm, start position', None, True),
     'y': Param(0.0, 'm, start position', None, True),
     'z': Param(0.0, 'm, start position', None, True),
-    'speed': Param(2.0, 'm/s', (0.0, math.inf), True, '> 0'),
+    'speed': Param(2.0, 'm/s, horizontal', (0.0, math.inf), True, '> 0'),
+    'climb_rate': Param(2.0, 'm/s, vertical, up and down', (0.0, math.inf), True, '> 0'),
     'rate': Param(20.0, 'Hz, pose reports', (0.0, math.inf), True, '> 0'),
     'camera': Param(False, 'take pictures on /fleet/capture (README "From a real flight")', None, True),
     'camera_topic': Param('/{drone}/camera', 'camera topics template: image_raw, image_raw/compressed, '
@@ -84,8 +87,8 @@ def check_parameters(values: dict) -> dict:
     v = typed_values(PARAMS, values)
     if v.get('pose_type', 'pose') not in POSE_TYPES:
         raise ValueError(f"pose_type must be one of {', '.join(POSE_TYPES)}, got {v['pose_type']!r}")
-    if v.get('speed', 1.0) <= 0 or v.get('rate', 1.0) <= 0:
-        raise ValueError('speed and rate must be > 0')
+    if v.get('speed', 1.0) <= 0 or v.get('rate', 1.0) <= 0 or v.get('climb_rate', 1.0) <= 0:
+        raise ValueError('speed, climb_rate and rate must be > 0')
     if not v.get('drone', 'd') or not v.get('frame_id', 'map'):
         raise ValueError('drone and frame_id must not be empty')
     if v.get('capture', 'realistic') not in ('realistic', 'ideal'):
@@ -107,7 +110,7 @@ class SimDroneNode(Node):
         self._camera = _Camera(self, v) if v['camera'] else None
         self.create_timer(1.0 / v['rate'], self._tick)
         self.get_logger().info(f'sim drone {v["drone"]} at ({v["x"]:.2f}, {v["y"]:.2f}, {v["z"]:.2f}) '
-                               f'in {v["frame_id"]!r}, {v["speed"]:g} m/s')
+                               f'in {v["frame_id"]!r}, {v["speed"]:g} m/s, climbing {v["climb_rate"]:g} m/s')
 
     def on_shutdown(self, timeout: float) -> bool:
         """SIGINT/SIGTERM (:func:`vp_scene.node_runtime.run_node`): pictures not begun are dropped;
@@ -127,7 +130,7 @@ class SimDroneNode(Node):
         dt, self._last = now - self._last, now
         quat = (0.0, 0.0, 0.0, 1.0)
         if self._goal is not None:
-            self._position = fly_toward(self._position, self._goal[0], self._v['speed'], dt)
+            self._position = fly_toward(self._position, self._goal[0], self._v['speed'], dt, self._v['climb_rate'])
             quat = self._goal[1]
         msg = pose_report(self._v['pose_type'], np.concatenate([self._position, quat]), self._v['frame_id'],
                           self.get_clock().now().to_msg(), f'{self._v["drone"]}/base_link')
@@ -151,8 +154,8 @@ class _Camera:
         self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f'{v["drone"]}-camera')
         self._jobs: list = []
         self._jobs_lock = threading.Lock()
-        self._assignments: dict = {}  # plan stamp -> pose index of this drone (None: no pose)
-        self._pending = None          # the trigger waiting for the drone to settle
+        self._assignments: dict = {}  # plan stamp -> [(pose index, goal (3,))] of this drone in route order
+        self._pending = None          # (trigger, [(pose index, goal)] not photographed yet)
         self._early = None            # the latest trigger whose plan's assignment has not arrived yet
         base = drone_topic(v['camera_topic'], v['drone'])
         self._image = node.create_publisher(Image, f'{base}/image_raw', LATCHED)
@@ -212,9 +215,10 @@ class _Camera:
             self._node.get_logger().info(f'camera ready ({v["width"]}x{v["height"]}, warmed up in {seconds:.1f} s)')
 
     def _on_assignment(self, msg) -> None:
-        mine = [(int(e.pose_index), pose_array(e.goal)[:3]) for e in msg.entries if e.drone == self._v['drone']]
+        mine = sorted((int(e.order), int(e.pose_index), pose_array(e.goal)[:3]) for e in msg.entries
+                      if e.drone == self._v['drone'])
         key = self._key(msg.plan_stamp)
-        self._assignments[key] = mine[0] if mine else None
+        self._assignments[key] = [(i, goal) for _, i, goal in mine]
         if self._early is not None and self._key(self._early.plan_stamp) == key:
             early, self._early = self._early, None
             self._on_trigger(early)
@@ -225,25 +229,28 @@ class _Camera:
             self._early = msg
             self._node.get_logger().info(f'capture of plan {key} waits for the plan\'s assignment')
             return
-        if self._assignments[key] is None:
+        if not self._assignments[key]:
             self._node.get_logger().info(f'capture of plan {key} ignored: no pose of it is mine')
             return
-        self._pending = (msg, *self._assignments[key])
-        self._node.get_logger().info(f'capture of plan {key}, pose {self._pending[1]}, realization '
-                                     f'{msg.realization}: to be taken at its goal')
+        self._pending = (msg, list(self._assignments[key]))
+        self._node.get_logger().info(f'capture of plan {key}, pose(s) {[i for i, _ in self._pending[1]]}, '
+                                     f'realization {msg.realization}: each to be taken at its goal')
 
     def settled(self, pose: np.ndarray) -> None:
-        """The drone is at its goal ``pose`` (7,): take the pending picture, if any, once that goal is
-        the one its plan assigned (a trigger may arrive before the new goal: the drone then still
-        hovers at the last plan's pose, and waits)."""
+        """The drone is at its goal ``pose`` (7,): take the next pending picture, if any, once that
+        goal is the next pose its plan assigned (a trigger may arrive before the new goal: the drone
+        then still hovers at the last plan's pose, and waits)."""
         if self._pending is None:
             return
-        trigger, i, goal = self._pending
+        trigger, todo = self._pending
+        i, goal = todo[0]
         if np.max(np.abs(np.asarray(pose[:3], dtype=np.float64) - goal)) > GOAL_TOLERANCE_M:
             return
         if self._description is None:  # latched, it may come after the trigger: wait for it
             return
-        self._pending = None
+        todo.pop(0)
+        if not todo:
+            self._pending = None
         self._submit('capture', self._capture, trigger, i, pose, self._description)
 
     def _capture(self, trigger, i: int, pose: np.ndarray, description) -> None:
