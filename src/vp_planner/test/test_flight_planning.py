@@ -112,3 +112,20 @@ def test_the_flight_fields_are_checked_and_round_trip():
                 {"flight_sift_octave": 2}):
         with pytest.raises(InvalidRequestError):
             request(**bad)
+
+
+def test_among_candidates_the_flights_choose_a_subset_and_name_it(noisy):
+    """Among candidate views the patterns are the evenly spaced and the neighbouring subsets; the
+    flights' choice comes back as its candidates' indices, its cameras in their order."""
+    a = np.deg2rad(np.arange(0, 360, 20.0))
+    c = np.stack([1.6 * np.cos(a), 1.6 * np.sin(a), 1.0 + 0.4 * (np.arange(len(a)) % 3)], axis=1)
+    cands = np.concatenate([c, np.array([0.0, 0.0, 0.9]) - c], axis=1)
+    sim = FakeSimulator()
+    res = plan_views(PlanRequest.of("egp", 4, evaluations=16, initial_evaluations=8, seed=1, candidates=cands,
+                                    sim_flights=6), noisy.points, simulator=sim)
+    assert res.chosen_by == "flights" and [r["source"] for r in res.flights[:2]] == ["circle", "arc"]
+    assert len(res.selected) == 4 and len(set(res.selected)) == 4
+    np.testing.assert_allclose(res.cameras, cands[res.selected])
+    chosen = [p for p in res.flight_plans if sorted(map(tuple, np.round(p["cameras"], 9))) ==
+              sorted(map(tuple, np.round(res.cameras, 9)))]
+    assert chosen and chosen[0]["score"] == res.flight_score

@@ -9,9 +9,11 @@ expensive fidelity that predicts a real flight. After the method's cheap stage h
 evaluations, :func:`flight_stage` spends the flight budget F:
 
 1. **The pool.** The structured patterns a drone operator flies, scored by the cheap reward on
-   their own budget: the tuned circle and the arc (exactly the ``circle`` and ``arc`` baselines'
-   plans of the same budget) and the best of the space's structured caps, rings and arcs
-   (:func:`vp_planner.designs.structured_plans`); then the cheap stage's evaluated plans, best
+   their own budget (:func:`patterns`): the tuned circle and the arc (exactly the ``circle`` and
+   ``arc`` baselines' plans of the same budget) and the best of the space's structured caps, rings
+   and arcs (:func:`vp_planner.designs.structured_plans`); among candidate views, the evenly spaced
+   and the neighbouring subsets (the ``circle`` and ``arc`` candidates modes); then the cheap
+   stage's evaluated plans, best
    reward first, each at least :data:`MIN_PLAN_DISTANCE` of the scene's size away from those
    already in the pool (centres matched camera to camera, :func:`plan_distance`), so that the
    flights see different plans, not one plan and its neighbours.
@@ -44,9 +46,10 @@ from scipy.optimize import linear_sum_assignment
 from vp_scene.flights import FlightDraw, FlightScore, FlightSimulator, flight_draws
 
 from .objective import Objective
-from .space import PlanningCancelled, StopCheck, ViewSpace
+from .space import PlanningCancelled, StopCheck
 
-__all__ = ["FlightOutcome", "flight_stage", "flight_pool", "plan_distance", "MIN_PLAN_DISTANCE", "OnFlight"]
+__all__ = ["FlightOutcome", "PoolPlan", "flight_stage", "flight_pool", "patterns", "plan_distance",
+           "MIN_PLAN_DISTANCE", "OnFlight"]
 
 #: Pool plans differ by at least this fraction of the scene's size (the mean distance between
 #: matched camera centres over the diagonal of the scene's box, at least 1 m).
@@ -67,9 +70,13 @@ def plan_distance(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
 
 @dataclass
 class PoolPlan:
+    """A plan of the pool: its cameras, its encoding in the space (U; NaN where a pattern was built
+    as cameras), cheap reward and source, and the flights flown of it."""
+
     cameras: NDArray[np.float64]
     reward: float
     source: str
+    U: Optional[NDArray[np.float64]] = None
     flights: list = field(default_factory=list)
 
     @property
@@ -79,29 +86,38 @@ class PoolPlan:
         return float(np.mean(values)) if values and all(math.isfinite(v) for v in values) else math.inf
 
 
-def _patterns(space: ViewSpace, obj: Objective, evaluations: int, arc_spacing: float,
-              rng: np.random.Generator) -> list[PoolPlan]:
-    """The structured patterns (module docstring), each tuned by the cheap reward on a budget of
-    its own (``evaluations``: the baselines' budget), on throw-away objectives of the same space."""
-    from .baselines import plan_arc, plan_circle
-    from .designs import structured_plans
+def patterns(space: Any, obj: Objective, request: Any, evaluations: int, rng: np.random.Generator) -> list[PoolPlan]:
+    """The structured patterns of the pool (module docstring), each tuned by the cheap reward on a
+    budget of its own (``evaluations``: the run's, as the baselines get), on throw-away objectives
+    of the same space: in free space the tuned circle, the arc (``request.arc.spacing``) and the best
+    structured plan; among candidates (a :class:`vp_planner.candidates.CandidateSpace`) the
+    ``circle`` and ``arc`` candidates modes' subsets."""
+    from .candidates import CandidateSpace
 
     def side(budget: int) -> Objective:
         return Objective(space, budget, dtype=obj.dtype, should_stop=obj.should_stop)
 
+    if isinstance(space, CandidateSpace):
+        from .candidates import run_arc, run_circle
+
+        tuned = request.replace(evaluations=evaluations)
+        makers = [("circle", evaluations, lambda o: run_circle(space, o, tuned, rng)),
+                  ("arc", evaluations, lambda o: run_arc(space, o, tuned, rng))]
+    else:
+        from .baselines import plan_arc, plan_circle
+        from .designs import structured_plans
+
+        U = structured_plans(space)
+        makers = [("circle", evaluations, lambda o: plan_circle(space, o, evaluations, rng)),
+                  ("arc", evaluations, lambda o: plan_arc(space, o, evaluations, rng, request.arc.spacing)),
+                  ("structured", len(U), lambda o: o(U) if len(U) else None)]
     out = []
-    for source, make in (("circle", lambda o: plan_circle(space, o, evaluations, rng)),
-                         ("arc", lambda o: plan_arc(space, o, evaluations, rng, arc_spacing))):
-        o = side(evaluations)
+    for source, budget, make in makers:
+        o = side(max(1, budget))
         make(o)
         if o.best_index >= 0:
-            out.append(PoolPlan(np.asarray(o.best_cameras(), dtype=np.float64), o.best_value, source))
-    U = structured_plans(space)
-    if len(U):
-        o = side(len(U))
-        o(U)
-        if o.best_index >= 0:
-            out.append(PoolPlan(np.asarray(o.best_cameras(), dtype=np.float64), o.best_value, "structured"))
+            out.append(PoolPlan(np.asarray(o.best_cameras(), dtype=np.float64), o.best_value, source,
+                                np.asarray(o.U[o.best_index], dtype=np.float64)))
     return out
 
 
@@ -109,7 +125,8 @@ def flight_pool(space: ViewSpace, obj: Objective, patterns: Sequence[PoolPlan], 
     """The patterns, then up to ``size`` plans in all from the cheap stage's feasible evaluations,
     best reward first, each at least :data:`MIN_PLAN_DISTANCE` of the scene's size from the plans
     before it (module docstring)."""
-    scale = max(1.0, float(np.linalg.norm(space.extent.hi - space.extent.lo)))
+    pts = np.asarray(space.realizations, dtype=np.float64).reshape(-1, 3)
+    scale = max(1.0, float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0))))
     pool = list(patterns)
     ok = np.asarray(obj.feasible_flags, bool) & np.asarray(obj.candidate_flags, bool)
     values = np.where(ok, np.asarray(obj.values, float), -np.inf)
@@ -118,7 +135,8 @@ def flight_pool(space: ViewSpace, obj: Objective, patterns: Sequence[PoolPlan], 
             break
         cams = obj.cameras[int(i)]
         if all(plan_distance(cams, p.cameras) >= MIN_PLAN_DISTANCE * scale for p in pool):
-            pool.append(PoolPlan(np.asarray(cams, dtype=np.float64), float(values[i]), "cheap"))
+            pool.append(PoolPlan(np.asarray(cams, dtype=np.float64), float(values[i]), "cheap",
+                                 np.asarray(obj.U[int(i)], dtype=np.float64)))
     return pool
 
 
@@ -128,7 +146,8 @@ class FlightOutcome:
     pool (circle, arc, structured, cheap), ``score`` (mean map Chamfer of its flights, m; inf
     when none reconstructed: the cheap reward's best was kept), every flight flown as a record
     (``flights``: plan index in ``plans``, its draw, score, reason, seconds), the plans flown
-    (``plans``: cameras, reward, source, score), and the stage's seconds."""
+    (``plans``: cameras, reward, source, score), the stage's seconds and the chosen plan's
+    encoding ``U`` (among candidates: its indices)."""
 
     cameras: NDArray[np.float64]
     reward: float
@@ -138,12 +157,12 @@ class FlightOutcome:
     plans: list
     seconds: float
     chosen: int
+    U: Optional[NDArray[np.float64]] = None
 
 
-def flight_stage(space: ViewSpace, obj: Objective, simulator: FlightSimulator, flights: int, seed: int,
-                 evaluations: int, arc_spacing: float, wind_variance: float, confirm: Optional[int] = None,
-                 rng: Optional[np.random.Generator] = None, on_flight: Optional[OnFlight] = None,
-                 should_stop: Optional[StopCheck] = None) -> FlightOutcome:
+def flight_stage(space: Any, obj: Objective, simulator: FlightSimulator, flights: int, seed: int,
+                 structured: Sequence[PoolPlan], wind_variance: float, confirm: Optional[int] = None,
+                 on_flight: Optional[OnFlight] = None, should_stop: Optional[StopCheck] = None) -> FlightOutcome:
     """Spend ``flights`` simulated flights on the cheap stage's plans (module docstring) and choose.
 
     Args:
@@ -151,8 +170,7 @@ def flight_stage(space: ViewSpace, obj: Objective, simulator: FlightSimulator, f
         simulator: flies plans (:class:`~vp_scene.flights.FlightSimulator`).
         flights: F >= 1, the flights in all (confirmation included).
         seed: the planning run's seed: the flights' draws (:func:`vp_scene.flights.flight_draws`).
-        evaluations: the cheap budget each pattern is tuned with (the run's, as the baselines').
-        arc_spacing: the arc pattern's spacing (rad).
+        structured: the structured patterns, always flown first (:func:`patterns`).
         wind_variance: the variance of the flights' n_wind (the scene's wind model).
         confirm: flights re-flying the best plans at the end (default: the simulator's workers,
             at least 2, when F leaves room for them after the patterns and one more plan).
@@ -161,14 +179,12 @@ def flight_stage(space: ViewSpace, obj: Objective, simulator: FlightSimulator, f
         PlanningCancelled: ``should_stop()`` became True.
     """
     t0 = time.perf_counter()
-    rng = rng if rng is not None else np.random.default_rng(seed)
     stop = should_stop or (lambda: False)
     q = max(1, int(getattr(simulator, "workers", 1)))
-    patterns = _patterns(space, obj, evaluations, arc_spacing, rng)
     if confirm is None:
-        confirm = max(2, q) if flights >= len(patterns) + 1 + max(2, q) else 0
+        confirm = max(2, q) if flights >= len(structured) + 1 + max(2, q) else 0
     confirm = max(0, min(int(confirm), flights - 1))
-    pool = flight_pool(space, obj, patterns, max(len(patterns), flights - confirm))
+    pool = flight_pool(space, obj, structured, max(len(structured), flights - confirm))
     draws = iter(flight_draws(seed, flights, wind_variance))
     records: list[dict] = []
 
@@ -200,7 +216,7 @@ def flight_stage(space: ViewSpace, obj: Objective, simulator: FlightSimulator, f
         chosen = max(range(len(pool)), key=lambda i: pool[i].reward)
     best = pool[chosen]
     return FlightOutcome(cameras=best.cameras, reward=float(best.reward), source=best.source, score=best.score,
-                         flights=records, chosen=int(chosen),
+                         flights=records, chosen=int(chosen), U=best.U,
                          plans=[{"cameras": p.cameras.tolist(), "reward": p.reward, "source": p.source,
                                  "score": p.score if math.isfinite(p.score) else None,
                                  "flights": len(p.flights)} for p in pool],

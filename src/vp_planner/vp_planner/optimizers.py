@@ -77,7 +77,7 @@ from numpy.typing import NDArray
 
 from .feasibility import check_realizations
 from .methods import BY_NAME
-from .flight_planning import OnFlight, flight_stage
+from .flight_planning import OnFlight, flight_stage, patterns
 from .objective import Objective
 from .request import (InvalidReconstructionError, PlanRequest, check_budget_memory, check_parts, check_plan_memory,
                       check_reconstruction, check_reconstruction_memory, check_sortie_weighting, total_evaluations)
@@ -263,19 +263,18 @@ def plan_views(request: PlanRequest, realizations: Any, callback: Optional[Callb
         best = np.zeros((0, 6))
     n_flights = q.flights.flights_of(q.method)
     outcome, note = None, ""
-    if n_flights and among:
-        note = "simulated flights check plans in free space only; the cheap reward chose among the candidates"
-    elif n_flights and simulator is None:
+    if n_flights and simulator is None:
         note = "no flight simulator: the cheap reward chose"
     elif n_flights and not stopped and best is not None:
         try:
-            outcome = flight_stage(space, obj, simulator, n_flights, q.seed, budget, q.arc.spacing,
-                                   float(getattr(simulator, "wind_variance")), rng=rng, on_flight=on_flight,
+            outcome = flight_stage(space, obj, simulator, n_flights, q.seed, patterns(space, obj, q, budget, rng),
+                                   float(getattr(simulator, "wind_variance")), on_flight=on_flight,
                                    should_stop=should_stop)
         except PlanningCancelled:
             stopped = True
-    if outcome is not None:
-        best = outcome.cameras
+    chosen_U = obj.U[obj.best_index] if obj.best_index >= 0 else None
+    if outcome is not None:  # among candidates in the order of the selected indices
+        best, chosen_U = (space.decode(outcome.U) if among else outcome.cameras), outcome.U
         if not np.isfinite(outcome.score):
             note = "every simulated flight failed: the cheap reward chose"
     weights = info.get("weights") if entry.ensemble else None
@@ -301,7 +300,7 @@ def plan_views(request: PlanRequest, realizations: Any, callback: Optional[Callb
         parts=info.get("parts"),
         fixed_cameras=len(F),
         reconstructed_fraction=done,
-        selected=space.indices(obj.U[obj.best_index]).tolist() if among and obj.best_index >= 0 else None,
+        selected=space.indices(chosen_U).tolist() if among and chosen_U is not None else None,
         chosen_by="flights" if outcome is not None and np.isfinite(outcome.score) else "reward",
         flights=None if outcome is None else outcome.flights,
         flight_plans=None if outcome is None else outcome.plans,

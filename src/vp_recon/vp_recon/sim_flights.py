@@ -35,27 +35,28 @@ __all__ = ["fly_plan", "flight_config", "SceneFlights"]
 
 
 def flight_config(settings: FlightSettings, capture: CaptureModel, draw: FlightDraw, fov: float,
-                  mesh_cache: Optional[str] = None) -> ReconConfig:
+                  mesh_cache: Optional[str] = None, ground: Optional[bool] = None) -> ReconConfig:
     """The reconstruction's settings of a flight: ``settings``' image size, SIFT octave and dense
     scale, ``capture`` seeded by the flight's draw, one thread (flights run side by side), no
-    images kept."""
+    images kept; ``ground``: soil under the plants or the blue screen (None: by the capture)."""
     return ReconConfig(width=settings.width, height=settings.height, fov=fov,
                        sift_first_octave=settings.sift_first_octave, dense_scale=settings.dense_scale,
                        capture=dataclasses.replace(capture, seed=int(draw.capture_seed)), num_threads=1,
-                       keep_images=False, mesh_cache=mesh_cache).validate()
+                       keep_images=False, mesh_cache=mesh_cache, ground=ground).validate()
 
 
 def fly_plan(scene: object, wind: WindConfig, cameras: NDArray[np.float64], draw: FlightDraw,
              settings: FlightSettings = FlightSettings(), capture: CaptureModel = REALISTIC,
-             fov: float = np.pi / 2, mesh_cache: Optional[str] = None) -> FlightScore:
+             fov: float = np.pi / 2, mesh_cache: Optional[str] = None, ground: Optional[bool] = None) -> FlightScore:
     """One simulated flight of ``cameras`` (N, 6) over ``scene`` (a :class:`vp_scene.scenario.Scene`)
-    under ``draw`` (module docstring); its score, or its failure."""
+    under ``draw`` (module docstring); its score, or its failure. ``ground``: the world under the
+    plants (:class:`vp_recon.config.ReconConfig`: soil for a field, False for a rig's backdrop)."""
     from .pipeline import reconstruct_realization
 
     t0 = time.perf_counter()
     try:
         noisy = noisy_scene_of(scene, wind, [draw.n_wind], seed=draw.index)
-        cfg = flight_config(settings, capture, draw, fov, mesh_cache)
+        cfg = flight_config(settings, capture, draw, fov, mesh_cache, ground)
         res = reconstruct_realization(noisy, 0, np.asarray(cameras, dtype=np.float64), cfg)
     except ReconError as exc:
         return FlightScore(draw=draw, failed=True, error_code=int(exc.code), reason=str(exc),
@@ -74,8 +75,9 @@ class SceneFlights:
     """The :class:`vp_scene.flights.FlightSimulator` of a prior ``scene`` (a
     :class:`vp_scene.scenario.Scene`): ``wind`` gives the levels, variance and direction of the
     flights' winds (their n_wind values come with the draws), ``settings`` and ``capture`` how
-    they are flown; ``client``: a ``distributed.Client`` (None: in this process). ``workers`` is
-    the number of flights flown at once (the client's workers, 1 in process)."""
+    they are flown (``ground``: soil or the blue screen, :func:`fly_plan`); ``client``: a
+    ``distributed.Client`` (None: in this process). ``workers`` is the number of flights flown at
+    once (the client's workers, 1 in process)."""
 
     scene: object
     wind: WindConfig = dataclasses.field(default_factory=WindConfig)
@@ -84,6 +86,7 @@ class SceneFlights:
     client: object = None
     fov: float = np.pi / 2
     mesh_cache: Optional[str] = None
+    ground: Optional[bool] = None
 
     @property
     def wind_variance(self) -> float:
@@ -100,7 +103,7 @@ class SceneFlights:
             ) -> list[FlightScore]:
         if len(plans) != len(draws):
             raise ValueError(f"{len(plans)} plans and {len(draws)} draws: one draw a plan")
-        args = (self.settings, self.capture, self.fov, self.mesh_cache)
+        args = (self.settings, self.capture, self.fov, self.mesh_cache, self.ground)
         scores: list[Optional[FlightScore]] = [None] * len(plans)
 
         def done(i: int, score: FlightScore) -> None:
