@@ -75,8 +75,8 @@ def _function(name: str) -> Any:
 _BO = "vp_planner.bo_planning:run_bo"
 _C = "vp_planner.candidates:"
 REGISTRY: tuple[Method, ...] = (
-    Method("egp", "EGP-VP: BO with an ensemble of 4 GPs and adaptive EI (the paper's method), its plans checked by "
-           "simulated flights", _BO, True, True, 1000, settings="bo", candidates=_C + "run_bo", flights=12),
+    Method("egp", "EGP-VP: BO, an ensemble of 4 GPs, adaptive EI (the paper's); plans checked by simulated flights",
+           _BO, True, True, 1000, settings="bo", candidates=_C + "run_bo", flights=12),
     Method("gp", "BO with one GP (RBF-ARD) and EI", _BO, True, False, 1000, settings="bo", candidates=_C + "run_bo"),
     Method("circle", "the tuned circle: N cameras on a ring, radius and height by grid search",
            "vp_planner.baselines:run_circle", candidates=_C + "run_circle"),
