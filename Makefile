@@ -72,8 +72,8 @@ view: setup
 bench: setup
 	@$(ENV) python -m bench.table1 $(if $(MODELS),--models $(MODELS))
 
-# docs/results.md from the result files under results/, and the generated blocks of README.md and
-# docs/ from the code (docs/development.md); never edited by hand
+# docs/results.md and docs/history_results.md from the files under results/, and the generated blocks of
+# README.md and docs/ from the code (docs/development.md); never edited by hand
 docs: setup
 	@$(ENV) python -m bench.docs && python tools/doc_tables.py
 

@@ -35,14 +35,16 @@ import argparse
 import math
 import time
 from pathlib import Path
-from typing import Optional
 
 import numpy as np
 
 if not __package__:  # python bench/bench_real.py: as python -m bench.bench_real (bench/_script.py)
     import _script  # noqa: F401
 from vp_scene.limits import seed_arg  # noqa: E402
-from bench.common import ROOT, cached, machine, write_report  # noqa: E402
+from bench.cache import cached  # noqa: E402
+from bench.options import parser  # noqa: E402
+from bench.publish import machine, num, publish, table  # noqa: E402
+from bench.stats import spearman, summary  # noqa: E402
 
 NS = (6, 8, 12)
 METHODS = ('egp', 'circle', 'arc', 'sa', 'random')
@@ -53,7 +55,7 @@ RANDOM_SUBSET = 'random subset'
 
 
 def parse_args(argv=None) -> argparse.Namespace:
-    ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    ap = parser(__doc__, 'threads', 'out', threads=2)
     ap.add_argument('--scan', type=Path, required=True, help='a flight folder (README "From a real flight")')
     ap.add_argument('--ns', type=int, nargs='+', default=list(NS), help='plan sizes N')
     ap.add_argument('--methods', nargs='+', default=list(METHODS))
@@ -61,8 +63,6 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument('--evaluations', type=int, default=100, help='reward evaluations of a plan')
     ap.add_argument('--initial', type=int, default=50, help="egp's initial design")
     ap.add_argument('--seed', type=seed_arg, default=0)
-    ap.add_argument('--threads', type=int, default=2, help='threads of COLMAP and OpenCV')
-    ap.add_argument('--out', type=Path, default=ROOT / 'results')
     args = ap.parse_args(argv)
     from vp_planner.methods import BY_NAME
 
@@ -134,10 +134,8 @@ def flight_record(prior_model, cams: np.ndarray, idx: list, index: int, seed: in
     return rec
 
 
-def spearman_of(rewards: list, chamfers: list) -> Optional[float]:
+def spearman_of(rewards: list, chamfers: list) -> float:
     """Spearman's rho of the rewards against -Chamfer (a failure, None: Chamfer inf, ranked last)."""
-    from bench.stats import spearman
-
     return spearman([float(r) for r in rewards], [-(math.inf if c is None else float(c)) for c in chamfers])
 
 
@@ -179,7 +177,7 @@ def run(args: argparse.Namespace) -> dict:
     from vp_scene.ply import load_points
 
     scan = args.scan.resolve()
-    cache = args.out / 'cache' / 'real' / scan.name
+    cache = Path(args.out) / 'cache' / 'real' / scan.name
     cache.mkdir(parents=True, exist_ok=True)
     views = read_flight(scan, max_megapixels=math.inf)
     names = list(views.names)
@@ -289,8 +287,6 @@ def wide_gaps(cams: np.ndarray, prior_points: np.ndarray, fov: float, size: tupl
 def analyse(plans: list, ns: list) -> dict:
     """Spearman over all plans, and per N: each method's Chamfer and the random subsets' summary,
     the bar egp <= circle."""
-    from bench.stats import summary
-
     out = {'spearman_reward_vs_minus_chamfer': spearman_of([p['reward'] for p in plans],
                                                            [p.get('chamfer') for p in plans]),
            'spearman_reward_vs_minus_shape': spearman_of([p['reward'] for p in plans],
@@ -327,8 +323,6 @@ def analyse(plans: list, ns: list) -> dict:
 
 
 def markdown(data: dict) -> str:
-    from bench.docs import num, table
-
     a = data['analysis']
     lines = [f'# Real photographs: {data["scan"]}', '',
              f'{data["views"]} views ({data["image_size"][0]} x {data["image_size"][1]}) of `{data["scan"]}`. Reference: '
@@ -377,10 +371,7 @@ def markdown(data: dict) -> str:
 def main(argv=None) -> int:
     args = parse_args(argv)
     data = run(args)
-    out = args.out / 'real'
-    write_report(out / f'{data["scan"]}.json', data)
-    (out / f'{data["scan"]}.md').write_text(markdown(data))
-    print(markdown(data))
+    publish(Path(args.out) / 'real', data['scan'], data, markdown(data))
     return 0
 
 

@@ -1,19 +1,17 @@
-"""Shared pieces of the benchmarks: scenarios, the resumable JSON cache, cached planning runs."""
+"""The benchmarks' scenes and plans: the scenarios, the planner variants, cached planning runs and
+the reconstruction records of a plan (one wind realization at a time, failures recorded)."""
 from __future__ import annotations
 
 import json
 import math
-import os
-import platform
-import subprocess
-import sys
-import threading
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Optional
+from typing import Any, Optional
 
 import numpy as np
 
+from bench import cpu_capability
+from bench.cache import cached
 from vp_planner.methods import BY_NAME
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -25,83 +23,6 @@ CORN50 = ROOT.parent / 'shared' / 'data' / 'corn50'
 def default_models() -> str:
     """``../shared/data/corn50`` when present (the paper's kind of plants), else '' (procedural)."""
     return str(CORN50) if CORN50.is_dir() else ''
-
-
-def machine() -> str:
-    return f'{platform.machine()}, {os.cpu_count()} CPU cores, Python {platform.python_version()}'
-
-
-def cached(path: Path, compute: Callable[[], Any]) -> Any:
-    """The JSON cached at ``path``, or compute, store (atomically) and return it."""
-    if path.exists():
-        try:
-            return json.loads(path.read_text())
-        except json.JSONDecodeError:
-            path.unlink()  # a torn write from an interrupted run: recompute
-    value = compute()
-    write_json(path, value)
-    return value
-
-
-def json_safe(value: Any) -> Any:
-    """``value`` with every non-finite float (NaN, +-inf: a mean of nothing, a std of one value, an
-    interval of one pair) as None: JSON has no NaN (RFC 8259), and a ``NaN`` literal is a file that
-    strict readers refuse. Readers take None as "no value" (``bench.stats``)."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: json_safe(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [json_safe(v) for v in value]
-    return value
-
-
-def write_json(path: Path, value: Any, indent: Optional[int] = None) -> None:
-    """Write ``value`` to ``path`` atomically (a temporary file per writer, then ``os.replace``:
-    several cluster workers and the client write the cache concurrently), non-finite floats as
-    null (:func:`json_safe`; ``allow_nan=False``: no NaN literal ever reaches a file). The one
-    place the benchmarks write JSON (records through it, reports through :func:`write_report`)."""
-    text = json.dumps(json_safe(value), indent=indent, allow_nan=False)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f'.{path.name}.{os.getpid()}.{threading.get_ident()}.tmp')
-    tmp.write_text(text + ('\n' if indent is not None else ''))
-    os.replace(tmp, path)
-
-
-def git_commit() -> Optional[str]:
-    """The commit the working tree is at (12 hex digits), ``-dirty`` when tracked files differ
-    from it; None outside a git checkout."""
-    def git(*args: str) -> str:
-        return subprocess.run(['git', *args], cwd=ROOT, capture_output=True, text=True, timeout=30,
-                              check=True).stdout.strip()
-    try:
-        head = git('rev-parse', '--short=12', 'HEAD')
-        dirty = git('status', '--porcelain', '--untracked-files=no')
-    except (OSError, subprocess.SubprocessError):
-        return None
-    return head + ('-dirty' if dirty else '')
-
-
-def cpu_capability() -> Optional[str]:
-    """torch's CPU kernels in this process (``bench.pin_cpu_kernels``), None before torch is imported."""
-    torch = sys.modules.get('torch')
-    return torch.backends.cpu.get_cpu_capability() if torch is not None else None
-
-
-def provenance() -> dict:
-    """``command`` (the argv of this run, as ``python -m bench.<name> ...`` for a benchmark),
-    ``commit`` (:func:`git_commit`) and ``torch_cpu_capability`` (:func:`cpu_capability`): what
-    docs/results.md prints under every table."""
-    argv = list(sys.argv)
-    script = Path(argv[0]) if argv else Path()
-    if script.suffix == '.py' and script.resolve().parent == ROOT / 'bench':
-        argv = ['python', '-m', f'bench.{script.stem}'] + argv[1:]
-    return {'command': argv, 'commit': git_commit(), 'torch_cpu_capability': cpu_capability()}
-
-
-def write_report(path: Path, value: dict, indent: int = 1) -> None:
-    """A benchmark's result file (``results/...json``): ``value`` with its :func:`provenance`."""
-    write_json(path, {**value, **provenance()}, indent)
 
 
 _SCENES: dict = {}
@@ -239,13 +160,6 @@ def flight_simulator(request, noisy):
 
     return SceneFlights(noisy.scene, noisy.config, request.flights.settings(), flight_capture(request),
                         fov=request.cameras.fov)
-
-
-def add_capture(ap) -> None:
-    """The capture flags of the reconstruction CLI (default: realistic; README 'Capture model')."""
-    from vp_recon.cli import add_capture_arguments
-
-    add_capture_arguments(ap)
 
 
 def capture_of(args):

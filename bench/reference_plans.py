@@ -45,8 +45,10 @@ import numpy as np
 
 if not __package__:  # python bench/reference_plans.py: as python -m bench.reference_plans (bench/_script.py)
     import _script  # noqa: F401
-from bench.common import (CORN50, ROOT, SCENARIOS, cpu_capability, git_commit, plan_cell, provenance,  # noqa: E402
-                          write_json)
+from bench import cpu_capability  # noqa: E402
+from bench.cache import write_json  # noqa: E402
+from bench.common import CORN50, ROOT, SCENARIOS, plan_cell  # noqa: E402
+from bench.publish import git_commit, provenance  # noqa: E402
 
 RESULTS = ROOT / 'results' / 'reference_plans.json'
 PINS_FILE = ROOT / 'tests' / 'data' / 'reference_plans.json'

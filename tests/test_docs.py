@@ -1,9 +1,9 @@
-"""The documents: docs/results.md is generated from results/*.json (``make docs`` gives the
-committed file byte for byte, so it is never edited by hand), every table names its file, commit
-and command, a table whose plans no longer reproduce is marked stale, and no results file holds a
-NaN or Infinity literal (JSON has none; the benchmarks write null). The README is a short guide
-(words and line length counted); its generated blocks and docs/'s are what the code gives
-(``tools/doc_tables.py``), and every link between the documents lands on a heading."""
+"""The documents: docs/results.md and docs/history_results.md are generated from the files under
+results/ (``make docs`` gives the committed files byte for byte, so they are never edited by hand),
+every table names its file, commit and command, a table whose plans no longer reproduce is marked
+stale, and no results file holds a NaN or Infinity literal (JSON has none; the benchmarks write null).
+The README is a short guide (words and line length counted); its generated blocks and docs/'s are
+what the code gives (``tools/doc_tables.py``), and every link between the documents lands on a heading."""
 from __future__ import annotations
 
 import json
@@ -15,7 +15,9 @@ import sys
 import pytest
 
 from bench import docs, reference_plans
-from bench.common import ROOT, git_commit, write_json, write_report
+from bench.cache import write_json
+from bench.common import ROOT
+from bench.publish import git_commit, publish
 
 RESULTS = sorted(p for p in (ROOT / "results").rglob("*.json") if "cache" not in p.relative_to(ROOT).parts)
 
@@ -26,15 +28,23 @@ def _strict(text: str):
     return json.loads(text, parse_constant=refuse)
 
 
-def test_results_md_is_what_the_results_give():
-    assert docs.OUT.read_text() == docs.render(), "docs/results.md differs from the results: run make docs"
+def test_the_documents_are_what_the_results_give():
+    for name, text in docs.render().items():
+        assert (docs.OUT / name).read_text() == text, f"docs/{name} differs from the results: run make docs"
 
 
-def test_every_table_names_its_file_commit_and_command():
-    text = docs.render()
-    sections = [s for s in text.split("\n## ")[1:] if not s.startswith("Contents")]
-    assert len(sections) == len(docs.CURRENT) + len(docs.IDEAL) + len(docs.SUPERSEDED)
-    for s in sections:
+def test_every_table_names_its_file_commit_and_command_and_superseded_runs_stand_apart():
+    """docs/results.md holds the current results only; every superseded run is in
+    docs/history_results.md, with what superseded it."""
+    def sections(text: str) -> dict:
+        return {s.split("\n", 1)[0]: s for s in text.split("\n## ")[1:] if not s.startswith("Contents")}
+    rendered = docs.render()
+    current, superseded = sections(rendered[docs.RESULTS_MD]), sections(rendered[docs.SUPERSEDED_MD])
+    assert list(current) == [t for t, *_ in docs.CURRENT + docs.IDEAL]
+    assert list(superseded) == [t for t, *_ in docs.SUPERSEDED]
+    for (title, *_, by), s in zip(docs.SUPERSEDED, superseded.values()):
+        assert s.split("\n\n", 2)[1] == by, title
+    for s in [*current.values(), *superseded.values()]:
         assert "Source: [`results/" in s and ("measured at commit `" in s or "committed in `" in s), s[:200]
         assert "command" in s, s[:200]
 
@@ -44,13 +54,14 @@ def test_no_results_file_holds_a_nan_literal(path):
     _strict(path.read_text())
 
 
-def test_a_report_is_strict_json_and_says_where_it_came_from(tmp_path):
-    out = tmp_path / "r.json"
-    write_report(out, {"std": float("nan"), "interval": [float("-inf"), 1.5], "n": 1})
-    data = _strict(out.read_text())
+def test_a_report_is_strict_json_and_says_where_it_came_from(tmp_path, capsys):
+    """publish: the result's JSON (strict, with its command and commit), its markdown beside it, printed."""
+    path = publish(tmp_path / "out", "r", {"std": float("nan"), "interval": [float("-inf"), 1.5], "n": 1}, "# R\n")
+    data = _strict(path.read_text())
+    assert path == tmp_path / "out" / "r.json" and (tmp_path / "out" / "r.md").read_text() == "# R\n"
     assert data["std"] is None and data["interval"] == [None, 1.5] and data["n"] == 1
-    assert data["commit"] == git_commit()
-    assert data["command"][0] == sys.argv[0] or data["command"][:2] == ["python", "-m"], data["command"]
+    assert data["commit"] == git_commit() and data["command"] == sys.argv
+    assert capsys.readouterr().out.startswith("# R\nwrote ")
     write_json(tmp_path / "cache.json", {"mean": math.nan})  # cache records too
     assert _strict((tmp_path / "cache.json").read_text()) == {"mean": None}
 
@@ -106,11 +117,11 @@ def test_a_table_whose_plans_differ_is_marked_stale(tmp_path, monkeypatch):
     assert "STALE" not in docs.table1_seed0_section("results/table1.json", "T")
 
 
-def test_make_docs_check_says_when_the_file_is_stale(tmp_path):
-    out = tmp_path / "results.md"
-    out.write_text("edited by hand\n")
-    assert docs.main(["--out", str(out), "--check"]) == 1
-    assert docs.main(["--out", str(out)]) == 0 and docs.main(["--out", str(out), "--check"]) == 0
+def test_make_docs_check_says_when_a_document_is_stale(tmp_path):
+    assert docs.main(["--out", str(tmp_path), "--check"]) == 1  # none written yet
+    assert docs.main(["--out", str(tmp_path)]) == 0 and docs.main(["--out", str(tmp_path), "--check"]) == 0
+    (tmp_path / docs.SUPERSEDED_MD).write_text("edited by hand\n")
+    assert docs.main(["--out", str(tmp_path), "--check"]) == 1
 
 
 #: The README is read in about a quarter of an hour, its lines in any editor.
@@ -170,7 +181,7 @@ def test_links_between_the_documents_land_on_a_heading():
     """Every relative link of README.md and docs/*.md names a file that exists, and its #anchor a
     heading of that file; links into docs/results.md land on a table (the README's sections moved
     to docs/: a reference to one that is not there fails here)."""
-    tables = {docs.anchor(t) for t, *_ in docs.CURRENT + docs.IDEAL + docs.SUPERSEDED}
+    tables = {docs.anchor(t) for t, *_ in docs.CURRENT + docs.IDEAL}
     bad, into_results = [], 0
     for doc in DOCUMENTS:
         for target, anchor in re.findall(r"\]\(([^)#\s]*)(?:#([^)\s]*))?\)", doc.read_text()):
@@ -182,7 +193,7 @@ def test_links_between_the_documents_land_on_a_heading():
                 continue
             if not anchor or path.suffix != ".md":
                 continue
-            if path == docs.OUT:
+            if path == docs.OUT / docs.RESULTS_MD:
                 into_results += 1
                 if anchor not in tables:
                     bad.append((doc.name, f"{target}#{anchor}"))

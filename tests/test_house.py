@@ -103,8 +103,9 @@ HOMES = {
     "vp_recon.config": ["ReconConfig", "matching_method"],
     "vp_recon.results": ["RealizationResult", "PlanReconResult", "ViewsResult", "Prior", "plan_result"],
     "vp_recon.progress": ["ReconCancelled", "tick"],
-    "vp_recon.tasks": ["worker_call", "worker_result", "on_cluster"],
-    "vp_recon.pipeline": ["render_flight", "reconstruct_views", "reconstruct_plan"],
+    "vp_recon.tasks": ["worker_call", "worker_result", "ClusterQueue"],
+    "vp_recon.pipeline": ["render_flight", "reconstruct_views", "reconstruct_set", "reconstruct_sets",
+                          "reconstruct_plan"],
     "vp_recon.segment": ["plant_mask", "image_mask"],
     "vp_recon.fleet_captures": ["FleetCaptures"],
 }
