@@ -150,16 +150,25 @@ def plan_cell(cache: Path, scenario: str, variant: str, seed: int, evals: int = 
 def flight_simulator(request, noisy):
     """The simulated flights of a benchmark's plan (None when the request makes none): the
     reconstruction's own (:class:`vp_recon.sim_flights.SceneFlights`, handed to the planner from
-    here, above both packages) over the scene's plants, flown in this process one after the other
-    (a benchmark's plans are its tasks: they run side by side on the cluster's workers), under the
-    realistic capture with the request's reported-pose errors (:func:`vp_planner.cli.flight_capture`)."""
+    here, above both packages) over the scene's plants, under the realistic capture with the
+    request's reported-pose errors (:func:`vp_planner.cli.flight_capture`). A plan made on a
+    benchmark's Dask worker flies on that cluster (``distributed.worker_client`` for each batch: the
+    planning task leaves its worker's slot to the flights while it waits for them), as the planner's
+    CLI flies on its own; elsewhere the flights run in this process, one after the other."""
     if not request.flights.flights_of(request.method) or request.candidates.poses is not None:
         return None
     from vp_planner.cli import flight_capture
     from vp_recon.sim_flights import SceneFlights
 
+    try:
+        from distributed import get_worker, worker_client
+
+        get_worker()
+        client = worker_client
+    except (ImportError, ValueError):  # not on a Dask worker
+        client = None
     return SceneFlights(noisy.scene, noisy.config, request.flights.settings(), flight_capture(request),
-                        fov=request.cameras.fov)
+                        client=client, fov=request.cameras.fov)
 
 
 def capture_of(args):

@@ -76,8 +76,10 @@ class SceneFlights:
     :class:`vp_scene.scenario.Scene`): ``wind`` gives the levels, variance and direction of the
     flights' winds (their n_wind values come with the draws), ``settings`` and ``capture`` how
     they are flown (``ground``: soil or the blue screen, :func:`fly_plan`); ``client``: a
-    ``distributed.Client`` (None: in this process). ``workers`` is the number of flights flown at
-    once (the client's workers, 1 in process)."""
+    ``distributed.Client``, or a callable that gives one as a context manager for each batch (a
+    Dask task's ``distributed.worker_client``, so that the task leaves its worker to the flights only
+    while it waits for them), or None: in this process. ``workers`` is the number of flights flown at
+    once (the cluster's workers, 1 in process)."""
 
     scene: object
     wind: WindConfig = dataclasses.field(default_factory=WindConfig)
@@ -96,6 +98,10 @@ class SceneFlights:
     def workers(self) -> int:
         if self.client is None:
             return 1
+        if callable(self.client):
+            from distributed import get_client
+
+            return max(1, len(get_client().scheduler_info().get("workers", {})))
         return max(1, len(self.client.scheduler_info().get("workers", {})))
 
     def fly(self, plans: Sequence[NDArray[np.float64]], draws: Sequence[FlightDraw],
@@ -117,17 +123,20 @@ class SceneFlights:
                     break
                 done(i, fly_plan(self.scene, self.wind, cams, draw, *args))
         else:
+            import contextlib
+
             from distributed import as_completed
 
-            scene = self.client.scatter(self.scene, broadcast=True)
-            futures = {self.client.submit(fly_plan, scene, self.wind, np.asarray(cams), draw, *args, pure=False): i
-                       for i, (cams, draw) in enumerate(zip(plans, draws))}
-            try:
-                for fut in as_completed(list(futures)):
-                    done(futures[fut], fut.result())
-                    if should_stop is not None and should_stop():
-                        break
-            finally:
-                self.client.cancel([f for f in futures if not f.done()])
+            with (self.client() if callable(self.client) else contextlib.nullcontext(self.client)) as client:
+                scene = client.scatter(self.scene, broadcast=True)
+                futures = {client.submit(fly_plan, scene, self.wind, np.asarray(cams), draw, *args, pure=False): i
+                           for i, (cams, draw) in enumerate(zip(plans, draws))}
+                try:
+                    for fut in as_completed(list(futures)):
+                        done(futures[fut], fut.result())
+                        if should_stop is not None and should_stop():
+                            break
+                finally:
+                    client.cancel([f for f in futures if not f.done()])
         return [s if s is not None else FlightScore(draw=d, failed=True, error_code=UNKNOWN, reason="cancelled")
                 for s, d in zip(scores, draws)]
