@@ -42,8 +42,9 @@ if not __package__:  # python bench/bench_fields.py: as python -m bench.bench_fi
 from vp_scene.limits import seed_arg  # noqa: E402
 from bench.cache import cached, write_json  # noqa: E402
 from bench.cluster import Task, cluster_client, run_tasks  # noqa: E402
-from bench.common import (VARIANTS, baselines, capture_of, capture_tag, chamfer_text, known_realizations,  # noqa: E402
-                          models_tag, reconstruct_record, reconstructed, scene, variant_request, variants_of)
+from bench.common import (VARIANTS, baselines, capture_of, capture_tag, chamfer_text, flight_simulator,  # noqa: E402
+                          flight_tag, known_realizations, models_tag, reconstruct_record, reconstructed, scene,
+                          variant_request, variants_of)
 from bench.options import parser  # noqa: E402
 from bench.publish import machine, publish  # noqa: E402
 from bench.stats import describe, describe_difference, paired_difference, rank, summary  # noqa: E402
@@ -92,7 +93,9 @@ def plan_path(cache: Path, field: str, n: int, label: str, args) -> tuple[Path, 
     """(cache file, evaluation budget) of :func:`plan_cell`."""
     parts, total = field_budget(field, n, args.models)
     evals = EVALS_PER_PART if by_parts(label) else total
-    return cache / "plans" / f"{models_tag(args.models)}-{field}-n{n}-{label}-seed{args.seed}-e{evals}.json", evals
+    tag = flight_tag(variant_request(label, num_cameras=n, evaluations=evals, initial_evaluations=min(50, evals),
+                                     seed=args.seed))
+    return cache / "plans" / f"{models_tag(args.models)}-{field}-n{n}-{label}-seed{args.seed}-e{evals}{tag}.json", evals
 
 
 def by_parts(label: str) -> bool:
@@ -115,10 +118,13 @@ def plan_cell(cache: Path, field: str, n: int, label: str, args) -> dict:
 
         torch.set_num_threads(1)
         noisy, _ = scene(field, args.models)
-        res = plan_views(request, noisy.points)
+        res = plan_views(request, noisy.points, simulator=flight_simulator(request, noisy))
         return {"cameras": np.asarray(res.cameras).tolist(), "reward": float(res.reward),
                 "reward_model": res.reward_model, "evaluations": int(res.evaluations),
-                "seconds": float(res.seconds), "parts": res.parts, "initial_best": res.initial_best}
+                "seconds": float(res.seconds), "parts": res.parts, "initial_best": res.initial_best,
+                "chosen_by": res.chosen_by, "flight_score": res.flight_score, "flights_note": res.flights_note,
+                "flights": res.flights, "flight_plans": res.flight_plans,
+                "flight_settings": request.flights.settings().to_dict()}
     return cached(path, compute)
 
 

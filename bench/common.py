@@ -66,7 +66,8 @@ class Variant:
 VARIANTS = {
     'egp': Variant({'method': 'egp'}, ('planners', 'fields', 'sorties', 'cheap')),  # the default planner
     'egp-random-init': Variant({'method': 'egp', 'structured_init': 0}, ('planners',)),  # the paper's random design
-    'egp-paper-config': Variant({'method': 'egp', 'structured_init': 0, 'bo_mode': 'global'}),  # the paper's BO
+    'egp-paper-config': Variant({'method': 'egp', 'structured_init': 0, 'bo_mode': 'global', 'sim_flights': 0}),  # the paper's BO
+    'egp-cheap': Variant({'method': 'egp', 'sim_flights': 0}),                  # egp without its simulated flights
     'egp-one-space': Variant({'method': 'egp', 'parts': 1}, ('fields',)),       # a field in one 6N-dim space
     # by parts under coverage-graph: the parts' chains weighed by the view graph (issue 42)
     'egp-graph': Variant({'method': 'egp', 'reward': 'coverage-graph'}, ('fields',)),
@@ -106,7 +107,17 @@ def plan_path(cache: Path, scenario: str, variant: str, seed: int, evals: int = 
 
     n = num_cameras or SCENARIOS[scenario]
     reward = reward or DEFAULT_REWARD_MODEL
-    return cache / 'plans' / f'{models_tag(models)}-{scenario}-n{n}-{variant}-{reward}-seed{seed}-e{evals}-i{init}.json'
+    request = variant_request(variant, num_cameras=n, evaluations=evals, initial_evaluations=init, seed=seed,
+                              reward=reward)
+    return cache / 'plans' / (f'{models_tag(models)}-{scenario}-n{n}-{variant}-{reward}-seed{seed}-e{evals}-i{init}'
+                              f'{flight_tag(request)}.json')
+
+
+def flight_tag(request) -> str:
+    """The part of a cached plan's name that says its simulated flights ('' for none)."""
+    flights = request.flights.flights_of(request.method)
+    return '' if not flights else '-f{}-{width}x{height}o{sift_first_octave}d{dense_scale:g}'.format(
+        flights, **request.flights.settings().to_dict())
 
 
 def plan_cell(cache: Path, scenario: str, variant: str, seed: int, evals: int = 100, init: int = 50,
@@ -128,12 +139,38 @@ def plan_cell(cache: Path, scenario: str, variant: str, seed: int, evals: int = 
 
         torch.set_num_threads(1)  # as the planner node and CLI
         noisy, _ = scene(scenario, models)
-        res = plan_views(request, noisy.points)
+        res = plan_views(request, noisy.points, simulator=flight_simulator(request, noisy))
         return {'cameras': np.asarray(res.cameras).tolist(), 'reward': float(res.reward), 'reward_model': reward,
                 'trace': [float(x) for x in res.trace], 'seconds': float(res.seconds),
                 'ensemble_weights': res.ensemble_weights, 'initial_best': res.initial_best, 'steps': res.steps,
-                'cpu_capability': cpu_capability()}
+                'cpu_capability': cpu_capability(), 'chosen_by': res.chosen_by, 'flight_score': res.flight_score,
+                'flights_note': res.flights_note, 'flights': res.flights, 'flight_plans': res.flight_plans,
+                'flight_settings': request.flights.settings().to_dict()}
     return cached(path, compute)
+
+
+def flight_simulator(request, noisy):
+    """The simulated flights of a benchmark's plan (None when the request makes none): the
+    reconstruction's own (:class:`vp_recon.sim_flights.SceneFlights`, handed to the planner from
+    here, above both packages) over the scene's plants, under the realistic capture with the
+    request's reported-pose errors (:func:`vp_planner.cli.flight_capture`). A plan made on a
+    benchmark's Dask worker flies on that cluster (``distributed.worker_client`` for each batch: the
+    planning task leaves its worker's slot to the flights while it waits for them), as the planner's
+    CLI flies on its own; elsewhere the flights run in this process, one after the other."""
+    if not request.flights.flights_of(request.method) or request.candidates.poses is not None:
+        return None
+    from vp_planner.cli import flight_capture
+    from vp_recon.sim_flights import SceneFlights
+
+    try:
+        from distributed import get_worker, worker_client
+
+        get_worker()
+        client = worker_client
+    except (ImportError, ValueError):  # not on a Dask worker
+        client = None
+    return SceneFlights(noisy.scene, noisy.config, request.flights.settings(), flight_capture(request),
+                        client=client, fov=request.cameras.fov)
 
 
 def capture_of(args):

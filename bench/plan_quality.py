@@ -14,7 +14,9 @@ ablations of ``study_models``) scores every plan, and Spearman's rho between the
 -Chamfer is reported over all plans and over the plans that reconstructed at all.
 
 Phases (``--phase``): ``plans`` (generate, cached), ``recon`` (reconstruct, one cached JSON per
-plan and realization: resumable), ``analyze`` (models, Spearman, ``results/plan_quality.json``
+plan and realization: resumable), ``flights`` (one simulated flight of every plan as the planner
+flies it, ``--flight-*`` its setting: :func:`flight_cell`; the analysis then ranks by each setting's
+flights beside the reward models, ``flight-<setting>``), ``analyze`` (models, Spearman, ``results/plan_quality.json``
 and ``results/plan_quality.png``), ``all``. ``--phase analyze --records REPORT`` scores the plans
 under today's reward models against the per-plan records a committed report keeps (every score of
 every realization, failures with their reasons) instead of the cache: a reward changed, the
@@ -57,7 +59,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument('--realizations', default='0,1', help='wind realizations to reconstruct (comma-separated)')
     ap.add_argument('--ground', action=argparse.BooleanOptionalAction, default=None,
                     help='render a textured soil plane under the plants (default: by the capture, as vp_recon.cli)')
-    ap.add_argument('--phase', default='all', choices=['plans', 'recon', 'analyze', 'all', 'check'],
+    ap.add_argument('--phase', default='all', choices=['plans', 'recon', 'flights', 'analyze', 'all', 'check'],
                     help="check: the design/check split and the check half's Spearman from the per-plan "
                          "records already in --out's plan_quality.json (no cache needed)")
     ap.add_argument('--split-seed', type=int, default=SPLIT_SEED,
@@ -68,6 +70,14 @@ def parse_args(argv=None) -> argparse.Namespace:
                     help="analyze: score the plans under today's reward models against the per-plan records of "
                          "this plan_quality.json instead of the cache (a study whose reconstructions are "
                          "committed but whose cache is gone; the reconstruction is not run again)")
+    from vp_scene.flights import FlightSettings
+
+    fs = FlightSettings()
+    ap.add_argument('--flight-width', type=int, default=fs.width, help="flights: the simulated flights' image width")
+    ap.add_argument('--flight-height', type=int, default=fs.height, help="flights: their image height")
+    ap.add_argument('--flight-sift-octave', type=int, default=fs.sift_first_octave, choices=(-1, 0),
+                    help="flights: their SIFT first octave")
+    ap.add_argument('--flight-dense-scale', type=float, default=fs.dense_scale, help="flights: their dense scale")
     ap.add_argument('--limit', type=int, default=0, help='reconstruct only the first n plans (0: all)')
     ap.add_argument('--ids', nargs='+', default=None,
                     help='reconstruct only these plan ids, in this order (e.g. to do the rarer families first)')
@@ -230,6 +240,62 @@ def recon_cell(scenario: str, models: str, plan: dict, k: int, args) -> dict:
             'seconds': {**r.seconds, 'total': time.perf_counter() - t0},
         }
     return cached(path, compute)
+
+
+# ----------------------------------------------------------------------------- simulated flights
+def flight_settings(args):
+    from vp_scene.flights import FlightSettings
+
+    return FlightSettings(args.flight_width, args.flight_height, args.flight_sift_octave, args.flight_dense_scale)
+
+
+def flight_tag(settings) -> str:
+    """The name of a flight setting in the cache and the report (``flight-2000x1500o0d0.5``)."""
+    return f'flight-{settings.width}x{settings.height}o{settings.sift_first_octave}d{settings.dense_scale:g}'
+
+
+def flight_path(scenario: str, models: str, plan: dict, settings) -> Path:
+    return CACHE / models_tag(models) / scenario / flight_tag(settings) / f'{plan["id"]}.json'
+
+
+def flight_cell(scenario: str, models: str, plan: dict, index: int, settings) -> dict:
+    """One simulated flight of a plan (cached), as the planner flies it: over the scene's plants,
+    under the draw of flight ``index`` of a planning run of seed 0 (the planner's own wind and capture
+    noise, never the study's realizations), the realistic capture with ground markers."""
+    from vp_recon.sim_flights import fly_plan
+    from vp_scene.capture import REALISTIC
+    from vp_scene.flights import flight_draws
+
+    def compute() -> dict:
+        noisy, _ = scene(scenario, models)
+        draw = flight_draws(0, 1, noisy.config.variance, start=index)[0]
+        return fly_plan(noisy.scene, noisy.config, np.asarray(plan['cameras']), draw, settings, REALISTIC).to_dict()
+    return cached(flight_path(scenario, models, plan, settings), compute)
+
+
+def run_flights(args, client, study: dict) -> dict:
+    """One simulated flight of every plan of the study (cached), flight j the plan set's j-th."""
+    settings = flight_settings(args)
+    tasks = [Task((s, p['id']), flight_cell, (s, args.models, p, j, settings),
+                  flight_path(s, args.models, p, settings), f'{s} {p["id"]} flight')
+             for s in args.scenarios for j, p in enumerate(study[s])]
+    return run_tasks(client, tasks, f'flying ({flight_tag(settings)})')
+
+
+def flight_predictors(scenario: str, models: str, plans: list[dict]) -> dict:
+    """The simulated flights found in the cache, as predictors beside the reward models:
+    {flight tag: {'reward': minus each plan's map Chamfer (-inf for a failed flight), ...}}, for
+    the settings that flew every plan of ``plans``."""
+    out = {}
+    for folder in sorted((CACHE / models_tag(models) / scenario).glob('flight-*')):
+        recs = [folder / f'{p["id"]}.json' for p in plans]
+        if not all(f.is_file() for f in recs):
+            continue
+        scores = [json.loads(f.read_text()) for f in recs]
+        vals = [-math.inf if r['failed'] or r['chamfer'] is None else -float(r['chamfer']) for r in scores]
+        out[folder.name] = {'reward': vals, 'ms_per_plan': 1000 * float(np.mean([r['seconds'] for r in scores])),
+                            'failed': int(sum(r['failed'] for r in scores))}
+    return out
 
 
 def run_plans(args, client) -> dict:
@@ -440,7 +506,8 @@ def analyze(args) -> dict:
                     continue
                 plan_set = (s, tuple(p['id'] for p in plans))  # a variant's clouds share the plans: score once
                 if plan_set not in scored:
-                    scored[plan_set] = score_models(s, args.models, plans, specs)
+                    scored[plan_set] = {**score_models(s, args.models, plans, specs),
+                                        **flight_predictors(s, args.models, plans)}
                 rewards = scored[plan_set]
                 ch = np.array([plan_chamfer(p, key) for p in plans])
                 ok = np.isfinite(ch)
@@ -653,11 +720,13 @@ def markdown(data: dict) -> str:
 
 def main(argv=None) -> int:
     args = parse_args(argv)
-    if args.phase in ('plans', 'all', 'recon'):
+    if args.phase in ('plans', 'all', 'recon', 'flights'):
         with cluster_client(args) as client:
             study = run_plans(args, client)
             if args.phase in ('recon', 'all'):
                 run_recon(args, client, study)
+            if args.phase == 'flights':
+                run_flights(args, client, study)
     if args.phase in ('analyze', 'all'):
         analyze(args)
     if args.phase == 'check':

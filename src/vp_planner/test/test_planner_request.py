@@ -106,8 +106,9 @@ def test_the_request_is_grouped_and_each_group_validates_itself() -> None:
     assert request.bo == BOSpec(initial_evaluations=10, mode="global") and request.arc == ArcSpec(0.4)
     assert request.lawnmower == LawnmowerSpec(tilt=0.2) and request.reward == RewardSpec("paper")
     assert isinstance(request.sortie, Sortie) and request.sortie.tau == 0.05
-    assert set(GROUPS) == {"cameras", "feasibility", "reward", "bo", "arc", "lawnmower", "sortie", "candidates"}
-    assert len(FLAT) == 28 and set(request.as_dict()) == set(FLAT)
+    assert set(GROUPS) == {"cameras", "feasibility", "reward", "bo", "arc", "lawnmower", "sortie", "candidates",
+                           "flights"}
+    assert len(FLAT) == 33 and set(request.as_dict()) == set(FLAT)
     for group, bad, error in ((CameraSpec, {"num_cameras": 1}, InvalidNumCamerasError),
                               (Feasibility, {"min_altitude": -1.0}, ValueError),
                               (RewardSpec, {"name": "magic"}, UnknownRewardModelError),

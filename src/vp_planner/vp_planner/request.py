@@ -13,6 +13,7 @@ constructor, each field's default written once (in the group's class):
 ``lawnmower``       :class:`LawnmowerSpec`, lawnmower's settings: overlap, tilt
 ``sortie``          :class:`Sortie`, a second sortie: fixed_cameras, reconstruction, tau, reconstructed_weight
 ``candidates``      :class:`CandidateSet`, the poses to choose N of (None: plan in free space)
+``flights``         :class:`FlightSpec`, the simulated flights that check the plans: count and setting
 ==================  ========================================================================================
 
 The planner node builds it from a goal and its parameters, the CLI from its flags, the benchmarks
@@ -71,6 +72,13 @@ every default):
                             (:mod:`vp_planner.candidates`), finite, non-zero viewing vectors,
                             N <= M <= :data:`MAX_CANDIDATES`, a method with a candidates mode
                             (InvalidCandidatesError); stored read-only; None: plan in free space
+``sim_flights``             simulated flights that check the cheap reward's plans
+                            (:mod:`vp_planner.flight_planning`), an integer in [-1, :data:`MAX_FLIGHTS`];
+                            -1: the method's default (:attr:`vp_planner.methods.Method.flights`), 0: none
+``flight_width``,           the flights' image size, pixels (:class:`vp_scene.flights.FlightSettings`)
+``flight_height``
+``flight_sift_octave``      the flights' SIFT first octave, -1 or 0
+``flight_dense_scale``      the flights' dense-step scale, in [0.1, 1]
 ==========================  ===========================================================================
 
 Other bad fields raise :class:`InvalidRequestError` (the feasibility minima: ValueError, from
@@ -97,6 +105,7 @@ from numpy.typing import NDArray
 
 from vp_scene import limits
 from vp_scene.camera import IMAGE_SIZE, check_image_side
+from vp_scene.flights import FlightSettings
 
 from .feasibility import Feasibility
 from .methods import BY_NAME, DEFAULT_METHOD, METHODS
@@ -145,6 +154,8 @@ __all__ = [
     "total_evaluations",
     "MAX_POSITION_SIGMA",
     "MAX_ATTITUDE_SIGMA",
+    "FlightSpec",
+    "MAX_FLIGHTS",
 ]
 
 #: The largest number of cameras N of a plan (:mod:`vp_planner.optimizers` says why).
@@ -440,9 +451,43 @@ class CandidateSet:
             _put(self, "poses", _read_only(check_candidates(self.poses)))
 
 
+#: The most simulated flights a request may ask for (each is a reconstruction: seconds to minutes).
+MAX_FLIGHTS: int = 200
+_FLIGHT = FlightSettings()
+
+
+@dataclass(frozen=True)
+class FlightSpec:
+    """The simulated flights that check the cheap reward's plans (:mod:`vp_planner.flight_planning`):
+    how many (``count``; -1: the method's default, 0: none) and how each is photographed and
+    reconstructed (:class:`vp_scene.flights.FlightSettings`)."""
+
+    count: int = _flat(-1, "sim_flights")
+    width: int = _flat(_FLIGHT.width, "flight_width")
+    height: int = _flat(_FLIGHT.height, "flight_height")
+    sift_first_octave: int = _flat(_FLIGHT.sift_first_octave, "flight_sift_octave")
+    dense_scale: float = _flat(_FLIGHT.dense_scale, "flight_dense_scale")
+
+    def __post_init__(self) -> None:
+        _put(self, "count", _integer("sim_flights", self.count, -1, MAX_FLIGHTS))
+        try:
+            self.settings()
+        except ValueError as exc:
+            raise InvalidRequestError(str(exc)) from None
+
+    def settings(self) -> FlightSettings:
+        return FlightSettings(width=self.width, height=self.height, sift_first_octave=self.sift_first_octave,
+                              dense_scale=self.dense_scale)
+
+    def flights_of(self, method: str) -> int:
+        """The flights a run of ``method`` makes: ``count``, or the method's default for -1."""
+        return BY_NAME[method].flights if self.count < 0 else self.count
+
+
 #: The request's groups: attribute -> class, in the order a request is validated.
 GROUPS: dict[str, type] = {"cameras": CameraSpec, "feasibility": Feasibility, "reward": RewardSpec, "bo": BOSpec,
-                           "arc": ArcSpec, "lawnmower": LawnmowerSpec, "sortie": Sortie, "candidates": CandidateSet}
+                           "arc": ArcSpec, "lawnmower": LawnmowerSpec, "sortie": Sortie, "candidates": CandidateSet,
+                           "flights": FlightSpec}
 
 
 def _check_method(method: Any) -> str:
@@ -500,6 +545,7 @@ class PlanRequest:
     lawnmower: LawnmowerSpec = field(default_factory=LawnmowerSpec)
     sortie: Sortie = field(default_factory=Sortie)
     candidates: CandidateSet = field(default_factory=CandidateSet)
+    flights: FlightSpec = field(default_factory=FlightSpec)
 
     def __post_init__(self) -> None:
         _check_method(self.method)
@@ -611,7 +657,7 @@ def _build(values: Mapping[str, Any], between: bool) -> dict:
         _check_design(method, out["evaluations"], out["bo"])
     out["reward"] = _group("reward", values)
     out["seed"] = _check_seed(values.get("seed", DEFAULTS["seed"]))
-    for name in ("feasibility", "arc", "lawnmower", "sortie", "candidates"):
+    for name in ("feasibility", "arc", "lawnmower", "sortie", "candidates", "flights"):
         out[name] = _group(name, values)
     if between:
         _check_candidates_for(method, out["cameras"].num_cameras, out["candidates"])
