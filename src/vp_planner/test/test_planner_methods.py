@@ -45,6 +45,23 @@ def test_the_readme_table_is_the_registry() -> None:
     assert method_table() in (REPO / "README.md").read_text()
 
 
+@pytest.mark.parametrize("action, opening", [("PlanViews", "`PlanViews` goal:"),
+                                             ("SimulateFlights", "It serves `vp_interfaces/action/SimulateFlights`")])
+def test_the_readme_names_every_field_and_code_of_the_actions(action, opening) -> None:
+    """The README's paragraph on an action names each of its goal, result and feedback fields and
+    each of its result's error codes, as the action file has them."""
+    text = (REPO / "src" / "vp_interfaces" / "action" / f"{action}.action").read_text()
+    names = set()
+    for line in text.splitlines():
+        code = line.split("#", 1)[0].split()
+        if len(code) >= 2 and code[0] != "---":
+            names.add(code[1].split("=", 1)[0])
+    readme = (REPO / "README.md").read_text()
+    paragraph = readme[readme.index(opening):].split("\n\n", 1)[0]
+    named = set(re.findall(r"`(\w+)`", paragraph))
+    assert names - named == set(), (action, "not in the README", sorted(names - named))
+
+
 # ---------------------------------------------------------------- issue 39, item 2: a registry that dispatches
 def plan_spiral(space, objective, request, rng, parts) -> dict:
     """A method that is not in the suite: the registry entry below plans with it."""
