@@ -49,10 +49,12 @@ def wait_for_server(client, action: ActionClient, planner) -> None:
     client.spin_until(lambda: False, SETTLE_S)
 
 
-def goal(num_cameras=4, method="circle", evaluations=20, initial=0, seed=1, reward="") -> PlanViews.Goal:
+def goal(num_cameras=4, method="circle", evaluations=20, initial=0, seed=1, reward="", sim_flights=0) -> PlanViews.Goal:
+    """A goal; without simulated flights (the plumbing: there is no recon node here to fly them;
+    tests/test_flights_nodes.py flies them)."""
     g = PlanViews.Goal()
-    g.num_cameras, g.method, g.evaluations, g.initial_evaluations, g.seed, g.reward = (
-        num_cameras, method, evaluations, initial, seed, reward)
+    g.num_cameras, g.method, g.evaluations, g.initial_evaluations, g.seed, g.reward, g.sim_flights = (
+        num_cameras, method, evaluations, initial, seed, reward, sim_flights)
     return g
 
 
