@@ -40,15 +40,17 @@ class Handle:
 
 class Client:
     """An ActionClient of SimulateFlights whose server answers ``answer(goal) -> (accepted, result,
-    feedback)``; ``ready``: server_is_ready()."""
+    feedback)``; ``ready``: server_is_ready(); ``answers``: False loses the goal's acceptance (its
+    feedback still comes; the result is asked for by the goal's id, as rclpy's handles do)."""
 
-    def __init__(self, answer, ready=True) -> None:
-        self.answer, self.ready, self.goals, self.handles = answer, ready, [], []
+    def __init__(self, answer, ready=True, answers=True) -> None:
+        self.answer, self.ready, self.answers, self.goals, self.handles = answer, ready, answers, [], []
+        self.result_requests = 0
 
     def server_is_ready(self) -> bool:
         return self.ready
 
-    def send_goal_async(self, goal, feedback_callback=None) -> Future:
+    def send_goal_async(self, goal, feedback_callback=None, goal_uuid=None) -> Future:
         self.goals.append(goal)
         accepted, result, feedback = self.answer(goal)
         for fb in feedback:
@@ -56,7 +58,15 @@ class Client:
             msg.feedback = fb
             feedback_callback(msg)
         self.handles.append(Handle(accepted, result))
-        return done(self.handles[-1])
+        return done(self.handles[-1]) if self.answers else Future()
+
+    def _get_result_async(self, _handle) -> Future:  # rclpy's ClientGoalHandle.get_result_async
+        self.result_requests += 1
+        return self.handles[-1].result
+
+    def _cancel_goal_async(self, _handle) -> Future:
+        self.handles[-1].cancelled = True
+        return done(None)
 
 
 def sim(client) -> ActionFlights:
@@ -125,3 +135,31 @@ def test_a_stop_cancels_the_goal_and_a_lost_server_fails_the_flights_not_back(mo
     t0 = time.monotonic()
     scores = sim(client).fly(plans(2), flight_draws(0, 2, 0.002))
     assert all(s.failed and "went away" in s.reason for s in scores) and time.monotonic() - t0 < 30
+
+
+def test_a_lost_acceptance_is_known_by_the_feedback_and_a_lost_result_by_every_flight_back(monkeypatch) -> None:
+    """The goal's acceptance never comes, its feedback does (the batch's start, then a flight):
+    the result is asked for by the goal's id; a result that never comes either is not waited for
+    once every flight is back by feedback; a goal with no answer at all is given up."""
+    import vp_planner.flight_client as fc
+
+    monkeypatch.setattr(fc, "RESULT_GRACE_S", 0.2)
+    monkeypatch.setattr(fc, "RESULT_AGAIN_S", 0.1)
+    monkeypatch.setattr(fc, "ANSWER_S", 0.3)
+
+    def answer(goal, result=None):
+        fb = [SimulateFlights.Feedback(flights_done=0, flights_total=1),
+              SimulateFlights.Feedback(flights_done=1, flights_total=1, last=scored(goal, 0, 0.04))]
+        return True, result if result is not None else Future(), fb
+
+    client = Client(lambda goal: answer(goal, done(SimulateFlights.Impl.GetResultService.Response(
+        result=SimulateFlights.Result(flights=[scored(goal, 0, 0.04)])))), answers=False)
+    got = []
+    scores = sim(client).fly(plans(1), flight_draws(0, 1, 0.002), on_flight=lambda i, s: got.append(i))
+    assert got == [0] and scores[0].chamfer == 0.04 and client.result_requests == 1
+    client = Client(answer, answers=False)  # neither acceptance nor result: the feedback had every flight
+    scores = sim(client).fly(plans(1), flight_draws(0, 1, 0.002))
+    assert scores[0].chamfer == 0.04 and client.result_requests >= 2  # asked again meanwhile
+    client = Client(lambda goal: (True, Future(), []), answers=False)  # nothing at all
+    scores = sim(client).fly(plans(1), flight_draws(0, 1, 0.002))
+    assert scores[0].failed and "did not answer" in scores[0].reason

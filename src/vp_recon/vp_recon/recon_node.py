@@ -604,6 +604,8 @@ class ReconNode(Node):
 
         self.get_logger().info(f'flying {total} plans ({settings.width}x{settings.height}, SIFT octave '
                                f'{settings.sift_first_octave}, dense scale {settings.dense_scale:g})')
+        # the batch has started: its client knows the goal accepted even when the answer was lost
+        goal_handle.publish_feedback(SimulateFlights.Feedback(flights_done=0, flights_total=total))
         try:
             with contextlib.ExitStack() as stack:
                 client = self._flights_client(stack)
@@ -611,6 +613,8 @@ class ReconNode(Node):
                 scores = sim.fly(plans, draws, on_flight=on_flight, should_stop=stopped)
         except OSError as exc:  # the cluster: no scheduler at that address, workers that cannot start
             return finish(R.CLUSTER_FAILED, f'the Dask cluster {self._param("scheduler") or "local"!r} failed: {exc}')
+        except Exception as exc:  # noqa: BLE001 - e.g. a cluster lost while the scene is sent: the goal's failure
+            return finish(R.UNKNOWN, f'{type(exc).__name__}: {exc}')
         result.flights = [flight_msg(score, i) for i, score in enumerate(scores)]
         if stopped():
             why = 'cancelled' if goal_handle.is_cancel_requested else 'the recon node is shutting down'
