@@ -68,10 +68,12 @@ def plan_process_cpu_s(planner_pid: int) -> float:
     return total
 
 
-def goal(num_cameras=4, method="circle", evaluations=20, initial=0, seed=1, reward="") -> PlanViews.Goal:
+def goal(num_cameras=4, method="circle", evaluations=20, initial=0, seed=1, reward="", sim_flights=0) -> PlanViews.Goal:
+    """A goal; without simulated flights (the plumbing: there is no recon node here to fly them;
+    tests/test_flights_nodes.py flies them)."""
     g = PlanViews.Goal()
-    g.num_cameras, g.method, g.evaluations, g.initial_evaluations, g.seed, g.reward = (
-        num_cameras, method, evaluations, initial, seed, reward)
+    g.num_cameras, g.method, g.evaluations, g.initial_evaluations, g.seed, g.reward, g.sim_flights = (
+        num_cameras, method, evaluations, initial, seed, reward, sim_flights)
     return g
 
 

@@ -137,7 +137,7 @@ def test_each_default_lives_in_one_place() -> None:
 
     params = {name: spec.default for name, spec in planner_node.PARAMS.items()}
     shared = set(params) & set(FLAT)
-    assert len(shared) == 22, sorted(shared)
+    assert len(shared) == 27, sorted(shared)  # the simulated flights' five among them
     assert {n: params[n] for n in shared} == {n: DEFAULTS[n] for n in shared}
     assert (params["image_width"], params["image_height"]) == DEFAULTS["image_size"] == IMAGE_SIZE
     flags = vars(cli.parse_args(["--out", "x"]))

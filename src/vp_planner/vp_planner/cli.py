@@ -369,15 +369,12 @@ def build_noisy(scene: dict) -> Any:
 
 def flight_capture(request: "PlanRequest") -> Any:
     """The capture model the planner's simulated flights fly: the realistic one, with the request's
-    reported-pose errors and, with ground control, the markers (without: none)."""
-    import dataclasses
-
-    from vp_scene.capture import REALISTIC
+    reported-pose errors and, with ground control, the markers (without: none):
+    :func:`vp_scene.flights.flight_capture`."""
+    from vp_scene.flights import flight_capture as capture
 
     rs = request.reward
-    return dataclasses.replace(REALISTIC, report_position_sigma=rs.position_sigma,
-                               report_attitude_sigma=rs.attitude_sigma,
-                               gcp_markers=REALISTIC.gcp_markers if rs.ground_control else 0).validate()
+    return capture(rs.position_sigma, rs.attitude_sigma, rs.ground_control)
 
 
 @contextlib.contextmanager

@@ -73,7 +73,7 @@ every default):
                             N <= M <= :data:`MAX_CANDIDATES`, a method with a candidates mode
                             (InvalidCandidatesError); stored read-only; None: plan in free space
 ``sim_flights``             simulated flights that check the cheap reward's plans
-                            (:mod:`vp_planner.flight_planning`), an integer in [-1, :data:`MAX_FLIGHTS`];
+                            (:mod:`vp_planner.flight_planning`), an integer in [-1, :data:`vp_scene.flights.MAX_FLIGHTS`];
                             -1: the method's default (:attr:`vp_planner.methods.Method.flights`), 0: none
 ``flight_width``,           the flights' image size, pixels (:class:`vp_scene.flights.FlightSettings`)
 ``flight_height``
@@ -105,7 +105,7 @@ from numpy.typing import NDArray
 
 from vp_scene import limits
 from vp_scene.camera import IMAGE_SIZE, check_image_side
-from vp_scene.flights import FlightSettings
+from vp_scene.flights import MAX_FLIGHTS, FlightSettings
 
 from .feasibility import Feasibility
 from .methods import BY_NAME, DEFAULT_METHOD, METHODS
@@ -155,7 +155,6 @@ __all__ = [
     "MAX_POSITION_SIGMA",
     "MAX_ATTITUDE_SIGMA",
     "FlightSpec",
-    "MAX_FLIGHTS",
 ]
 
 #: The largest number of cameras N of a plan (:mod:`vp_planner.optimizers` says why).
@@ -451,8 +450,6 @@ class CandidateSet:
             _put(self, "poses", _read_only(check_candidates(self.poses)))
 
 
-#: The most simulated flights a request may ask for (each is a reconstruction: seconds to minutes).
-MAX_FLIGHTS: int = 200
 _FLIGHT = FlightSettings()
 
 

@@ -57,3 +57,29 @@ def test_the_simulator_flies_a_batch_in_order_and_stops_when_asked(noisy_scene):
                      should_stop=lambda: len(got) >= 1)
     assert got == [0] and not scores[0].failed and scores[0].draw == draws[0]
     assert scores[1].failed and scores[1].reason == "cancelled" and scores[1].draw == draws[1]
+
+
+def test_a_batch_given_flat_is_read_into_plans_and_draws_and_a_bad_one_is_named():
+    """The SimulateFlights goal's form: 6 numbers a camera plan after plan, one count, index, wind
+    and capture seed a plan; a capture seed an evaluation could have (below 2^31) is refused."""
+    import pytest
+
+    from vp_recon.sim_flights import flight_batch
+
+    a, b = arc(3, 25.0), arc(4, 20.0)
+    flat = np.concatenate([a.ravel(), b.ravel()])
+    plans, draws = flight_batch(flat, [3, 4], [0, 1], [0.01, -0.02], [2 ** 31, 2 ** 32 - 1])
+    np.testing.assert_array_equal(plans[0], a)
+    np.testing.assert_array_equal(plans[1], b)
+    assert draws == [FlightDraw(0, 0.01, 2 ** 31), FlightDraw(1, -0.02, 2 ** 32 - 1)]
+    for args, text in [
+        ((flat, [], [], [], []), "cameras_per_plan has 0 plans, must have 1 to 200"),
+        ((flat, [3, 4], [0], [0.0, 0.0], [2 ** 31] * 2), "flight_indices has 1 values for 2 plans"),
+        ((flat, [3, 3], [0, 1], [0.0, 0.0], [2 ** 31] * 2), "cameras has 42 numbers"),
+        ((flat, [1, 6], [0, 1], [0.0, 0.0], [2 ** 31] * 2), r"cameras_per_plan\[0\] is 1, must be in \[2, "),
+        ((flat, [3, 4], [0, 1], [0.0, 0.0], [2 ** 31, 7]), r"capture_seeds\[1\] is 7, must be in \[2147483648, "),
+        ((flat, [3, 4], [0, 1], [0.0, math.nan], [2 ** 31] * 2), r"n_wind\[1\] is nan"),
+        ((np.where(np.arange(42) == 5, np.nan, flat), [3, 4], [0, 1], [0.0, 0.0], [2 ** 31] * 2), "non-finite"),
+    ]:
+        with pytest.raises(ValueError, match=text):
+            flight_batch(*args)

@@ -39,6 +39,18 @@ the drones reported, the camera) goes to its ``captures/realization_<k>`` as a f
 (:func:`vp_recon.flight.write_flight`; README "From a real flight"). The rendering and scoring parameters are read anew for every plan; a change to a
 bad value is refused with the reason.
 
+It serves ``vp_interfaces/action/SimulateFlights`` on ``/simulate_flights``, the planner's simulated
+flights (:mod:`vp_recon.sim_flights`): the goal's plans flown over the scene rebuilt from
+``/scene/description`` (as for rendering), each under its own draw, photographed at the goal's
+setting and capture figures, reconstructed and scored; one flight a Dask task on the node's
+cluster (the user's ``scheduler``, else the kept local cluster of ``workers``, opened at the first
+batch when ``scheduler`` is '': a cancel is answered within :data:`vp_recon.sim_flights.POLL_S`
+whatever a flight is doing; a flight already running ends on its worker and is dropped). Feedback
+as each flight comes back; a flight that fails is a scored failure in the result, never a failed
+goal. One batch flies at a time (another goal meanwhile is rejected); a batch and a plan's
+reconstruction run side by side, sharing the machine (on one cluster, the scheduler interleaves
+their tasks): neither waits for the other.
+
 The work runs on a worker thread, so the node's callbacks keep running. Queueing policy: the
 plan in progress is finished; of the plans that arrive meanwhile only the newest is kept
 (it replaces an older queued one, which is logged), because a newer plan supersedes older ones.
@@ -54,6 +66,7 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+import threading
 import time
 from collections import OrderedDict
 from pathlib import Path
@@ -61,10 +74,13 @@ from typing import Optional
 
 import numpy as np
 from geometry_msgs.msg import PoseArray
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
 
+from vp_interfaces.action import SimulateFlights
 from vp_interfaces.msg import CameraPlan, ReconstructionScore, SceneDescription
 from vp_recon.config import MAX_CAMERAS, ReconConfig
 from vp_recon.errors import ReconError, check_plan_size, ensure_writable_dir
@@ -77,14 +93,16 @@ from vp_recon.outputs import contact_sheet, write_image, write_ply
 from vp_recon.pipeline import reconstruct_plan, reconstruct_sets
 from vp_recon.progress import ReconCancelled
 from vp_recon.results import RealizationResult
+from vp_recon.sim_flights import SceneFlights, flight_batch, flight_config
 from vp_scene.camera import IMAGE_SIDE_RANGE, IMAGE_SIZE
 from vp_scene.capture import IDEAL, REALISTIC, CaptureModel
 from vp_scene.cloud import numpy_to_pointcloud2, realizations_from_cloud
 from vp_scene.cluster import KeptLocalCluster
+from vp_scene.flights import FlightSettings, flight_capture
 from vp_scene.folders import new_run_folder, remove_if_empty
 from vp_scene.limits import MAX_SEED
-from vp_scene.messages import (aggregate_score, error_score, plan_key, pose_array_to_cameras, realization_score,
-                               scene_of_description, score_msg)
+from vp_scene.messages import (aggregate_score, error_score, flight_msg, plan_key, pose_array_to_cameras,
+                               realization_score, scene_of_description, score_msg)
 from vp_scene.node_runtime import (INT_MAX, LATCHED, NewestWins, Param, declare_typed, parameter_value,
                                    refuse_bad_changes, run_node, typed_values)
 
@@ -269,10 +287,15 @@ class ReconNode(Node):
         self._local = KeptLocalCluster()  # scheduler 'local': one cluster for the node's life
         if self._param('scheduler') == 'local':
             self._local.warm(self._param('workers'))  # started while the planner plans
+        self._flying = threading.Lock()  # one batch of simulated flights at a time
+        self._flights_server = ActionServer(self, SimulateFlights, '/simulate_flights', execute_callback=self._fly,
+                                            goal_callback=self._on_flights_goal,
+                                            cancel_callback=lambda _g: CancelResponse.ACCEPT,
+                                            callback_group=ReentrantCallbackGroup())
         self._plans.start()
         self.get_logger().info(
             f'recon ready ({self._param("width")}x{self._param("height")}, output {self._param("output_folder")}): '
-            'waiting for /scene/description, /scene/noisy_points and /camera_plan')
+            'waiting for /scene/description, /scene/noisy_points and /camera_plan; serving /simulate_flights')
 
     # ---------------------------------------------------------------- parameters
     def _param(self, name: str):
@@ -522,6 +545,104 @@ class ReconNode(Node):
                                f'over {len(result.realizations)} realizations')
         self.score_pub.publish(agg)
 
+    # ---------------------------------------------------------------- simulated flights
+    def _on_flights_goal(self, _goal: SimulateFlights.Goal) -> GoalResponse:
+        if self._plans.stopped:
+            self.get_logger().warn('rejecting simulated flights: shutting down')
+            return GoalResponse.REJECT
+        if self._flying.locked():
+            self.get_logger().warn('rejecting simulated flights: another batch is flying')
+            return GoalResponse.REJECT
+        return GoalResponse.ACCEPT
+
+    def _fly(self, goal_handle) -> SimulateFlights.Result:
+        """A SimulateFlights goal to its one terminal transition (succeed, canceled or abort)."""
+        R = SimulateFlights.Result
+        result = R()
+
+        def finish(code: int, text: str = '') -> SimulateFlights.Result:
+            result.error_code, result.error_msg = code, text
+            if code not in (R.NONE, R.CANCELED):
+                self.get_logger().error(f'simulated flights: {text}')
+            if goal_handle.is_active:
+                if code == R.NONE:
+                    goal_handle.succeed()
+                elif goal_handle.is_cancel_requested:
+                    goal_handle.canceled()
+                else:
+                    goal_handle.abort()
+            return result
+
+        if not self._flying.acquire(blocking=False):
+            return finish(R.UNKNOWN, 'another batch of simulated flights is flying')
+        try:
+            return self._fly_batch(goal_handle, result, finish)
+        finally:
+            self._flying.release()
+
+    def _fly_batch(self, goal_handle, result: SimulateFlights.Result, finish) -> SimulateFlights.Result:
+        R, goal = SimulateFlights.Result, goal_handle.request
+        try:  # the goal as a whole, before anything flies
+            plans, draws = flight_batch(goal.cameras, goal.cameras_per_plan, goal.flight_indices, goal.n_wind,
+                                        goal.capture_seeds, self._param('max_cameras'))
+            settings = FlightSettings(width=int(goal.width), height=int(goal.height),
+                                      sift_first_octave=int(goal.sift_first_octave), dense_scale=float(goal.dense_scale))
+            capture = flight_capture(float(goal.report_position_sigma), float(goal.report_attitude_sigma),
+                                     bool(goal.ground_control))
+            if not (math.isfinite(goal.fov) and 0.0 < goal.fov < math.pi):
+                raise ValueError(f'fov must be in (0, pi) rad, got {goal.fov}')
+            flight_config(settings, capture, draws[0], float(goal.fov))  # the reconstruction's own checks
+        except ValueError as exc:
+            return finish(R.INVALID_GOAL, str(exc))
+        try:
+            noisy = self._scene_now()
+        except ReconError as exc:
+            return finish(R.NO_SCENE if exc.code == Score.NO_SCENE else R.UNKNOWN, str(exc))
+        total, done = len(plans), [0]
+
+        def stopped() -> bool:
+            return goal_handle.is_cancel_requested or self._plans.stopped
+
+        def on_flight(i: int, score) -> None:
+            done[0] += 1
+            goal_handle.publish_feedback(SimulateFlights.Feedback(flights_done=done[0], flights_total=total,
+                                                                  last=flight_msg(score, i)))
+            what = (f'failed ({score.reason})' if score.failed else
+                    f'map Chamfer {score.chamfer:.4f} m, shape {score.chamfer_shape:.4f} m')
+            self.get_logger().info(f'simulated flight {done[0]}/{total} (plan {i}): {what}, {score.seconds:.1f} s')
+
+        self.get_logger().info(f'flying {total} plans ({settings.width}x{settings.height}, SIFT octave '
+                               f'{settings.sift_first_octave}, dense scale {settings.dense_scale:g})')
+        # the batch has started: its client knows the goal accepted even when the answer was lost
+        goal_handle.publish_feedback(SimulateFlights.Feedback(flights_done=0, flights_total=total))
+        try:
+            with contextlib.ExitStack() as stack:
+                client = self._flights_client(stack)
+                sim = SceneFlights(noisy.scene, noisy.config, settings, capture, client, float(goal.fov))
+                scores = sim.fly(plans, draws, on_flight=on_flight, should_stop=stopped)
+        except OSError as exc:  # the cluster: no scheduler at that address, workers that cannot start
+            return finish(R.CLUSTER_FAILED, f'the Dask cluster {self._param("scheduler") or "local"!r} failed: {exc}')
+        except Exception as exc:  # noqa: BLE001 - e.g. a cluster lost while the scene is sent: the goal's failure
+            return finish(R.UNKNOWN, f'{type(exc).__name__}: {exc}')
+        result.flights = [flight_msg(score, i) for i, score in enumerate(scores)]
+        if stopped():
+            why = 'cancelled' if goal_handle.is_cancel_requested else 'the recon node is shutting down'
+            self.get_logger().info(f'simulated flights {why} after {done[0]} of {total}')
+            return finish(R.CANCELED, f'{why} after {done[0]} of {total} flights')
+        return finish(R.NONE)
+
+    def _flights_client(self, stack: contextlib.ExitStack) -> object:
+        """The Dask client the flights fly on: the user's scheduler (open for the batch), else the
+        node's kept local cluster of ``workers`` (``scheduler`` '' too: a flight a task, so that a
+        cancel is answered at once). OSError when it cannot be opened."""
+        from vp_scene.cluster import open_client
+
+        scheduler = self._param('scheduler')
+        if scheduler and scheduler != 'local':
+            tls = cluster_tls({k: self._param(k) for k in TLS_KEYS})
+            return stack.enter_context(open_client(scheduler, self._param('workers'), quiet=True, tls=tls))
+        return self._local.get(self._param('workers'))
+
     # ---------------------------------------------------------------- outputs
     def _publish_clouds(self, done: list, frame: str) -> None:
         """The clouds of every realization of the plan done so far, in one latched message."""
@@ -551,7 +672,8 @@ class ReconNode(Node):
 
 def main(args=None) -> int:
     """Entry point ``recon``: exit 2 with one line for a bad parameter, 0 after SIGINT/SIGTERM."""
-    return run_node('recon', ReconNode, args, num_threads=2)
+    # a SimulateFlights goal holds a thread while it flies: the others serve its cancel and the topics
+    return run_node('recon', ReconNode, args, num_threads=3)
 
 
 if __name__ == '__main__':

@@ -13,11 +13,16 @@ error code and reason, never an exception.
 flights run in this process, one after the other, or on a Dask client (one flight a task,
 :func:`vp_scene.cluster.open_client`: the local cluster or a user's scheduler). vp_recon offers
 it under the entry point ``reconstruction`` of :data:`vp_scene.flights.ENTRY_POINTS`, which is
-how the planner's CLI finds it without importing this package.
+how the planner's CLI finds it without importing this package. On a cluster a batch's flights come
+back as they finish, ``should_stop`` is looked at every :data:`POLL_S` meanwhile, and a task that
+ends in an exception is a scored failure. :func:`flight_batch` reads a batch given flat (the recon
+node's ``SimulateFlights`` goal) into plans and draws.
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import math
 import time
 from typing import Callable, Optional, Sequence
 
@@ -25,13 +30,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vp_scene.capture import REALISTIC, CaptureModel
-from vp_scene.flights import FlightDraw, FlightScore, FlightSettings, OnFlight
+from vp_scene.flights import FLIGHT_CAPTURE_SEEDS, MAX_FLIGHTS, FlightDraw, FlightScore, FlightSettings, OnFlight
 from vp_scene.wind import WindConfig, noisy_scene_of
 
-from .config import ReconConfig
+from .config import MAX_CAMERAS, ReconConfig
 from .errors import UNKNOWN, ReconError
 
-__all__ = ["fly_plan", "flight_config", "SceneFlights"]
+__all__ = ["fly_plan", "flight_config", "flight_batch", "SceneFlights", "POLL_S"]
+
+#: s between two looks at ``should_stop`` (and at the flights done) while a batch flies on a cluster.
+POLL_S = 0.1
 
 
 def flight_config(settings: FlightSettings, capture: CaptureModel, draw: FlightDraw, fov: float,
@@ -68,6 +76,43 @@ def fly_plan(scene: object, wind: WindConfig, cameras: NDArray[np.float64], draw
     return FlightScore(draw=draw, chamfer=float(res.chamfer), chamfer_shape=float(res.chamfer_shape),
                        coverage=None if coverage is None else float(coverage), images=int(res.images),
                        seconds=time.perf_counter() - t0)
+
+
+def flight_batch(cameras: Sequence[float], cameras_per_plan: Sequence[int], indices: Sequence[int],
+                 n_wind: Sequence[float], capture_seeds: Sequence[int], max_cameras: int = MAX_CAMERAS
+                 ) -> tuple[list[NDArray[np.float64]], list[FlightDraw]]:
+    """The plans (each (N_i, 6)) and draws of a batch given flat (the ``SimulateFlights`` goal's
+    form: 6 numbers a camera, plan after plan, and one count, flight index, n_wind and capture seed
+    a plan); ValueError naming the first bad field: 1 to :data:`vp_scene.flights.MAX_FLIGHTS`
+    plans, 2..``max_cameras`` finite
+    cameras a plan, the counts summing to the cameras, finite winds, capture seeds in
+    :data:`vp_scene.flights.FLIGHT_CAPTURE_SEEDS` (never an evaluation's)."""
+    flat = np.asarray(cameras, dtype=np.float64).ravel()
+    counts = [int(n) for n in cameras_per_plan]
+    if not 1 <= len(counts) <= MAX_FLIGHTS:
+        raise ValueError(f"cameras_per_plan has {len(counts)} plans, must have 1 to {MAX_FLIGHTS}")
+    for name, values in (("flight_indices", indices), ("n_wind", n_wind), ("capture_seeds", capture_seeds)):
+        if len(values) != len(counts):
+            raise ValueError(f"{name} has {len(values)} values for {len(counts)} plans: one a plan")
+    for i, n in enumerate(counts):
+        if not 2 <= n <= max_cameras:
+            raise ValueError(f"cameras_per_plan[{i}] is {n}, must be in [2, {max_cameras}]")
+    if flat.size != 6 * sum(counts):
+        raise ValueError(f"cameras has {flat.size} numbers, cameras_per_plan asks for 6 x {sum(counts)}")
+    if not np.all(np.isfinite(flat)):
+        raise ValueError("cameras has non-finite numbers")
+    lo, hi = FLIGHT_CAPTURE_SEEDS
+    for i, (seed, wind) in enumerate(zip(capture_seeds, n_wind)):
+        if not lo <= int(seed) < hi:
+            raise ValueError(f"capture_seeds[{i}] is {int(seed)}, must be in [{lo}, {hi}) (a simulated flight's, "
+                             "never an evaluation's)")
+        if not math.isfinite(float(wind)):
+            raise ValueError(f"n_wind[{i}] is {float(wind)}, must be finite")
+    ends = np.cumsum([0] + counts)
+    plans = [flat[6 * a:6 * b].reshape(-1, 6) for a, b in zip(ends[:-1], ends[1:])]
+    draws = [FlightDraw(index=int(j), n_wind=float(w), capture_seed=int(c))
+             for j, w, c in zip(indices, n_wind, capture_seeds)]
+    return plans, draws
 
 
 @dataclasses.dataclass
@@ -122,21 +167,29 @@ class SceneFlights:
                 if should_stop is not None and should_stop():
                     break
                 done(i, fly_plan(self.scene, self.wind, cams, draw, *args))
-        else:
-            import contextlib
-
-            from distributed import as_completed
-
+        else:  # as they come back, looking at should_stop every POLL_S meanwhile
             with (self.client() if callable(self.client) else contextlib.nullcontext(self.client)) as client:
                 scene = client.scatter(self.scene, broadcast=True)
-                futures = {client.submit(fly_plan, scene, self.wind, np.asarray(cams), draw, *args, pure=False): i
+                pending = {client.submit(fly_plan, scene, self.wind, np.asarray(cams), draw, *args, pure=False): i
                            for i, (cams, draw) in enumerate(zip(plans, draws))}
                 try:
-                    for fut in as_completed(list(futures)):
-                        done(futures[fut], fut.result())
-                        if should_stop is not None and should_stop():
-                            break
-                finally:
-                    client.cancel([f for f in futures if not f.done()])
+                    while pending and not (should_stop is not None and should_stop()):
+                        ready = [f for f in pending if f.done()]
+                        for fut in ready:
+                            i = pending.pop(fut)
+                            done(i, _outcome(fut, draws[i]))
+                        if not ready:
+                            time.sleep(POLL_S)
+                finally:  # a flight already running ends on its worker (Dask stops no running task); dropped
+                    client.cancel(list(pending))
         return [s if s is not None else FlightScore(draw=d, failed=True, error_code=UNKNOWN, reason="cancelled")
                 for s, d in zip(scores, draws)]
+
+
+def _outcome(future: object, draw: FlightDraw) -> FlightScore:
+    """A finished flight's score; a task that ended in an exception (a lost worker, a failure
+    :func:`fly_plan` does not catch) is a scored failure naming it."""
+    try:
+        return future.result()
+    except Exception as exc:  # noqa: BLE001 - a flight's failure is its score, never the batch's
+        return FlightScore(draw=draw, failed=True, error_code=UNKNOWN, reason=f"{type(exc).__name__}: {exc}")

@@ -16,6 +16,8 @@ This module holds what both sides agree on, so that neither imports the other:
   realizations come from the scene seed's wind stream (:func:`vp_scene.wind.draw_n_wind`) and its
   capture seeds are below :data:`FLIGHT_CAPTURE_SEEDS` ``[0]`` (every node and CLI refuses larger
   ones), so no wind realization or capture-noise seed that an evaluation scores reaches a flight;
+* :func:`flight_capture`: the capture model a flight is photographed under (the realistic one, with
+  the planner's reported-pose errors and ground control);
 * :class:`FlightScore`: what a flight returns (plain data);
 * :class:`FlightSimulator`: the interface the planner is handed (by the CLI, the benchmarks, or
   the planner node as a client of the recon node's ``/simulate_flights`` action), and
@@ -35,13 +37,17 @@ from numpy.typing import NDArray
 
 from .camera import check_image_side
 
-__all__ = ["FlightSettings", "FlightDraw", "FlightScore", "FlightSimulator", "flight_draws", "FLIGHT_STREAM",
+__all__ = ["FlightSettings", "FlightDraw", "FlightScore", "FlightSimulator", "flight_draws", "flight_capture",
+           "FLIGHT_STREAM", "MAX_FLIGHTS",
            "FLIGHT_CAPTURE_SEEDS", "ENTRY_POINTS", "load_simulator", "FlightSimulatorMissing"]
 
 #: The seed-sequence entry that marks the flights' draws (the scene's streams are 0-3, :mod:`vp_scene.scenario`).
 FLIGHT_STREAM = 0x464C  # "FL"
 #: [lo, hi): the capture seeds of simulated flights; an evaluation's capture seed is below lo.
 FLIGHT_CAPTURE_SEEDS = (2 ** 31, 2 ** 32)
+#: The most simulated flights a planning run (a request's ``sim_flights``) or one batch may ask for
+#: (each is a reconstruction: seconds to minutes).
+MAX_FLIGHTS: int = 200
 #: The entry-point group under which a package offers its :class:`FlightSimulator` class.
 ENTRY_POINTS = "vp_scene.flight_simulators"
 
@@ -99,6 +105,20 @@ def flight_draws(seed: int, count: int, variance: float, start: int = 0) -> list
         capture_seed = int(rng.integers(*FLIGHT_CAPTURE_SEEDS))
         out.append(FlightDraw(index=j, n_wind=n_wind, capture_seed=capture_seed))
     return out
+
+
+def flight_capture(report_position_sigma: float, report_attitude_sigma: float, ground_control: bool) -> Any:
+    """The :class:`vp_scene.capture.CaptureModel` a simulated flight is photographed under: the
+    realistic one (hover errors, sensor noise) with the errors of the poses the planner's flight
+    reports (m, degrees per axis) and, with ``ground_control``, its markers (without: none);
+    ValueError naming a bad figure. Its seed is each flight's (:class:`FlightDraw`)."""
+    import dataclasses
+
+    from .capture import REALISTIC
+
+    return dataclasses.replace(REALISTIC, report_position_sigma=report_position_sigma,
+                               report_attitude_sigma=report_attitude_sigma,
+                               gcp_markers=REALISTIC.gcp_markers if ground_control else 0).validate()
 
 
 @dataclass
