@@ -34,7 +34,6 @@ resumes, a new egp time redoes the others). Writes ``<out>/bench_cheap_stage-<pl
 """
 from __future__ import annotations
 
-import argparse
 import math
 import os
 import sys
@@ -47,7 +46,7 @@ import numpy as np
 if not __package__:  # python bench/bench_cheap_stage.py: as python -m bench.bench_cheap_stage (bench/_script.py)
     import _script  # noqa: F401
 from bench.cache import cached  # noqa: E402
-from bench.common import ROOT, default_models, models_tag, scene, variant_request, variants_of  # noqa: E402
+from bench.common import models_tag, scene, variant_request, variants_of  # noqa: E402
 from bench.publish import machine, publish  # noqa: E402
 from bench.stats import describe, describe_difference, paired_difference, summary  # noqa: E402
 
@@ -254,8 +253,9 @@ def markdown(report: dict) -> str:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    ap.add_argument('--models', default=default_models(), help="PLY folder ('' for procedural plants)")
+    from bench import options
+
+    ap = options.parser(__doc__, 'models', 'out')
     ap.add_argument('--scenarios', nargs='+', default=list(CELLS), choices=list(CELLS))
     ap.add_argument('--variants', nargs='+', default=list(VARIANTS), choices=list(VARIANTS))
     ap.add_argument('--seeds', type=int, default=5, help='planning seeds --seed-from..SEEDS-1')
@@ -266,7 +266,6 @@ def main(argv=None) -> int:
     ap.add_argument('--pilot', type=int, default=100, help="evaluations of sa's pilot run (its rate)")
     ap.add_argument('--clock', default='wall', choices=list(CLOCKS),
                     help="the others get egp's wall time, or its CPU time (a quiet machine's wall time)")
-    ap.add_argument('--out', default=str(ROOT / 'results'))
     args = ap.parse_args(argv)
     if REFERENCE not in args.variants:
         ap.error(f'--variants must include {REFERENCE} (its wall time is the others\')')

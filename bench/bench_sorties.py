@@ -39,7 +39,7 @@ from vp_scene.limits import seed_arg  # noqa: E402
 from bench.cache import cached  # noqa: E402
 from bench.cluster import Task, cluster_client, run_tasks  # noqa: E402
 from bench.common import (baselines, capture_of, capture_tag, chamfer_text, models_tag, plan_cell,  # noqa: E402
-                          plan_path, reconstruct_record, scene, variant_request, variants_of)
+                          plan_path, reconstruct_record, scene, variant_request, variants_of, VARIANTS)
 from bench.options import parser  # noqa: E402
 from bench.publish import machine, publish  # noqa: E402
 from bench.stats import rank_key  # noqa: E402
@@ -49,7 +49,8 @@ from vp_recon.config import MATCHINGS  # noqa: E402
 
 #: scenario -> (N cameras of sortie 1, M cameras of sortie 2).
 SORTIES = {'one_plant': (4, 2), 'three_row': (6, 3), 'six_rect': (6, 3), 'grid_3x3': (8, 4)}
-#: The planner variant (common.VARIANTS) of sortie 1 and of cases a, b, d, e.
+#: The planner variant (common.VARIANTS) of sortie 1 and of cases a, b, d, e, unless ``--planner``
+#: says another (part of every cache name then).
 PLANNER = 'egp'
 #: The cases c: sortie 2 = a baseline variant of M (common.VARIANTS: the ``sorties`` baselines).
 C_CASES = {f'c-{v}': v for v in baselines(variants_of('sorties'))}
@@ -65,6 +66,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument('--evals', type=int, default=100)
     ap.add_argument('--init', type=int, default=50)
     ap.add_argument('--seed', type=seed_arg, default=0)
+    ap.add_argument('--planner', default=PLANNER,
+                    choices=[v for v, var in VARIANTS.items() if var.request['method'] == 'egp'],
+                    help='the egp variant of sortie 1 and of cases a, b, d, e (default %(default)s; '
+                         'egp-cheap: without its simulated flights)')
     ap.add_argument('--realizations', type=int, default=2, help='wind realizations reconstructed')
     ap.add_argument('--tau', type=float, default=DEFAULT_TAU)
     ap.add_argument('--reconstructed-weight', type=float, default=DEFAULT_RECONSTRUCTED_WEIGHT)
@@ -86,7 +91,7 @@ def sortie2_cell(cache: Path, scenario: str, first: dict, m: int, args, reconstr
 
         torch.set_num_threads(1)  # as the planner node and CLI
         noisy, _ = scene(scenario, args.models)
-        request = variant_request(PLANNER, num_cameras=m, evaluations=args.evals, initial_evaluations=args.init,
+        request = variant_request(args.planner, num_cameras=m, evaluations=args.evals, initial_evaluations=args.init,
                                   seed=args.seed, fixed_cameras=first['cameras'], reconstruction=reconstruction,
                                   tau=args.tau, reconstructed_weight=args.reconstructed_weight, reward=args.reward)
         res = plan_views(request, noisy.points)
@@ -99,10 +104,15 @@ def sortie2_path(cache: Path, scenario: str, m: int, args, with_reconstruction: 
     """The cache file of :func:`sortie2_cell` (case e: ``with_reconstruction``)."""
     case = 'e' if with_reconstruction else 'd'
     tag = (f'{models_tag(args.models)}-{scenario}-sortie2-{case}-m{m}-seed{args.seed}-e{args.evals}-i{args.init}'
-           + reward_tag(args)
+           + reward_tag(args) + planner_tag(args)
            + (f'-tau{args.tau:g}-w{args.reconstructed_weight:g}-{args.width}x{args.height}'
               f'{capture_tag(capture_of(args))}-k{args.realizations}' if with_reconstruction else ''))
     return cache / 'plans' / f'{tag}.json'
+
+
+def planner_tag(args) -> str:
+    """Cache-name suffix of a ``--planner`` other than :data:`PLANNER` ('' for it)."""
+    return '' if args.planner == PLANNER else f'-{args.planner}'
 
 
 def recon_cell(cache: Path, out: Path, scenario: str, name: str, cameras, args) -> dict:
@@ -150,7 +160,7 @@ def run(client, cache: Path, out: Path, args) -> dict:
     (3) the plans of e (from sortie 1's reconstruction); (4) the reconstructions of d and e.
     A task that fails is a record with its error (counted, never dropped)."""
     kw = dict(evals=args.evals, init=args.init, models=args.models)
-    plan_of = {'a': (PLANNER, 1), 'b': (PLANNER, 0), **{c: (v, 0) for c, v in C_CASES.items()}}
+    plan_of = {'a': (args.planner, 1), 'b': (args.planner, 0), **{c: (v, 0) for c, v in C_CASES.items()}}
 
     def plan_task(scenario: str, key: str, variant: str, cameras: int) -> Task:
         a = (cache, scenario, variant, args.seed, args.evals, args.init, args.models, cameras, args.reward)
@@ -166,7 +176,7 @@ def run(client, cache: Path, out: Path, args) -> dict:
                     sortie2_path(cache, scenario, m, args, reconstruction is not None), f'{scenario} plan {key}')
 
     sizes = {s: SORTIES[s] for s in args.scenarios}
-    plans = run_tasks(client, [plan_task(s, 'sortie1', PLANNER, n) for s, (n, m) in sizes.items()]
+    plans = run_tasks(client, [plan_task(s, 'sortie1', args.planner, n) for s, (n, m) in sizes.items()]
                       + [plan_task(s, c, v, m + n * extra) for s, (n, m) in sizes.items()
                          for c, (v, extra) in plan_of.items()], 'planning')
 
@@ -174,13 +184,13 @@ def run(client, cache: Path, out: Path, args) -> dict:
         """The reconstruction after sortie 2 of ``case``: a's cameras alone, else sortie 1's and the case's."""
         (n, m), first, p = sizes[s], plans[(s, 'sortie1')], plans[(s, case)]
         cams = p['cameras'] if case == 'a' else np.concatenate([first['cameras'], p['cameras']])
-        return recon_task(s, case, f'{case}-n{n}-m{m}', cams)
+        return recon_task(s, case, f'{case}-n{n}-m{m}' + planner_tag(args), cams)
 
     def planned(s: str, case: str) -> bool:
         return (s, case) in plans and 'error' not in plans[(s, case)]
 
     ok = [s for s in sizes if planned(s, 'sortie1')]
-    recons = run_tasks(client, [recon_task(s, 'sortie1', f'sortie1-{PLANNER}-n{sizes[s][0]}',
+    recons = run_tasks(client, [recon_task(s, 'sortie1', f'sortie1-{args.planner}-n{sizes[s][0]}',
                                            plans[(s, 'sortie1')]['cameras'])
                                 for s in ok]
                        + [sortie2_task(s, 'd', plans[(s, 'sortie1')]) for s in ok]

@@ -43,12 +43,13 @@ def test_results_files(tmp_path: Path) -> None:
 
 
 def test_a_slice_runs_on_a_local_cluster_and_a_rerun_reads_the_cache(tmp_path: Path) -> None:
-    """The smoke slice (procedural plants, 640x480, ideal capture) through a 1-worker LocalCluster:
+    """The smoke slice (procedural plants, 640x480, ideal capture, egp without its simulated flights:
+    tests/test_flights_nodes.py and the planner's tests fly them) through a 1-worker LocalCluster:
     every case of the table has a result or a named error, sortie 2's plan e is made from sortie 1's
     reconstruction, and a rerun runs no task (every plan and reconstruction cached)."""
     argv = ["--models", "", "--scenarios", "one_plant", "--evals", "4", "--init", "3", "--realizations", "1",
             "--width", "640", "--height", "480", "--capture", "ideal", "--out", str(tmp_path), "--workers", "1",
-            "--threads", "1"]
+            "--threads", "1", "--planner", "egp-cheap"]
     assert bench_sorties.main(argv) == 0
     rows = json.loads((tmp_path / "bench_sorties.json").read_text())["rows"]
     cases = rows["one_plant"]["cases"]

@@ -169,7 +169,9 @@ class SceneFlights:
                 done(i, fly_plan(self.scene, self.wind, cams, draw, *args))
         else:  # as they come back, looking at should_stop every POLL_S meanwhile
             with (self.client() if callable(self.client) else contextlib.nullcontext(self.client)) as client:
-                scene = client.scatter(self.scene, broadcast=True)
+                # a key of this batch's own (hash=False): the same scene scattered by an earlier
+                # batch under its content's key would be released with that batch's future
+                scene = client.scatter(self.scene, broadcast=True, hash=False)
                 pending = {client.submit(fly_plan, scene, self.wind, np.asarray(cams), draw, *args, pure=False): i
                            for i, (cams, draw) in enumerate(zip(plans, draws))}
                 try:

@@ -42,7 +42,9 @@ class ClusterQueue:
 
     def __init__(self, client: object, noisy_scene: object, should_stop: Optional[Callable[[], bool]] = None) -> None:
         self._client = client
-        self._scene = client.scatter(noisy_scene, broadcast=True)
+        # a key of its own (hash=False): the same scene scattered under its content's key by another
+        # queue or batch on this client would be released with that one's future
+        self._scene = client.scatter(noisy_scene, broadcast=True, hash=False)
         self._should_stop = should_stop
         self._pending: deque = deque()  # (k, future), in the order submitted
 
