@@ -9,9 +9,9 @@ import pytest
 import torch
 
 from vp_planner.reward import noisy_reward
-from vp_planner.reward_models import (DEFAULT_REWARD_MODEL, REWARD_MODELS, CoverageParams, check_reward_model,
-                                      coverage_reward, make_reward, model_parts, placement_error, point_coverage,
-                                      view_graph, view_graph_factor, within_tau)
+from vp_planner.reward_models import (DEFAULT_REWARD_MODEL, REGISTRY, REWARD_MODELS, CoverageParams,
+                                      check_reward_model, coverage_reward, make_reward, model_parts, placement_error,
+                                      point_coverage, reward_model, view_graph, view_graph_factor, within_tau)
 from vp_scene.camera import CameraModel, look_at
 
 IMAGE = CameraModel(2000, 1500, math.pi / 2)
@@ -40,6 +40,22 @@ def test_model_names() -> None:
     assert check_reward_model("paper") == "paper"
     with pytest.raises(ValueError, match="unknown reward model"):
         check_reward_model("magic")
+    with pytest.raises(ValueError, match="unknown reward model 'magic'; one of paper, coverage, coverage-graph"):
+        reward_model("magic")
+
+
+def test_the_registry_says_what_each_model_is_and_makes_it() -> None:
+    """Every name of REWARD_MODELS is an entry of REGISTRY; the coverage family takes CoverageParams
+    (coverage-graph with the view graph on, whatever they say), the paper model none."""
+    assert tuple(m.name for m in REGISTRY) == REWARD_MODELS and all(m.summary for m in REGISTRY)
+    assert reward_model("paper").params(ALL_ON) is None
+    assert reward_model("coverage").params(ALL_ON) == ALL_ON
+    assert reward_model("coverage-graph").params(ALL_ON) == replace(ALL_ON, view_graph=True)
+    pts = blob()
+    cams = ring_at(2.0, [0, 12, 24, 36])
+    graph = make_reward(("coverage-graph", NO_REGISTRATION), pts, image=IMAGE)(cams[None])[0]
+    assert graph == pytest.approx(coverage_reward(cams, pts, replace(NO_REGISTRATION, view_graph=True, max_points=0),
+                                                  IMAGE), abs=1e-6)
 
 
 def test_paper_model_is_eqs_2_to_7() -> None:

@@ -124,11 +124,10 @@ def _scene_args(p: argparse.ArgumentParser, given_only: bool = False) -> None:
 def _reward_args(p: argparse.ArgumentParser, default: Optional[str]) -> None:
     from vp_scene.camera import IMAGE_SIZE
 
-    from .reward_models import REWARD_MODELS
+    from .reward_models import REGISTRY, REWARD_MODELS
 
     p.add_argument("--reward", default=default, choices=REWARD_MODELS,
-                   help="reward model (paper: eqs. 2-7; coverage: expected reconstructed fraction; coverage-graph: "
-                        "coverage times the view graph's connectivity)")
+                   help="reward model (" + "; ".join(f"{m.name}: {m.summary}" for m in REGISTRY) + ")")
     p.add_argument("--image-width", type=int, default=None,
                    help=f"image width of the cameras, pixels ({IMAGE_SIZE[0]})")
     p.add_argument("--image-height", type=int, default=None,

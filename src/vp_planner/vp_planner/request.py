@@ -102,7 +102,7 @@ from .feasibility import Feasibility
 from .methods import BY_NAME, DEFAULT_METHOD, METHODS
 from .reward import DEFAULT_FOV, DEFAULT_THETA_MATCH
 from .reward_models import (DEFAULT_RECONSTRUCTED_WEIGHT, DEFAULT_REWARD_MODEL, DEFAULT_TAU, CoverageParams,
-                            check_fixed_cameras, check_reward_model)
+                            check_fixed_cameras, check_reward_model, reward_model)
 
 __all__ = [
     "MAX_CAMERAS",
@@ -357,9 +357,10 @@ class RewardSpec:
         _put(self, "ground_control", bool(self.ground_control))
 
     def model_spec(self) -> Any:
-        """What :func:`vp_planner.reward_models.make_reward` takes: the name for ``paper`` (it has
-        no registration term), else the coverage model with this flight's reported-pose errors."""
-        if self.name == "paper":
+        """What :func:`vp_planner.reward_models.make_reward` takes: the name for a model without
+        parameters (``paper``: no registration term), else the model with the coverage parameters
+        of this flight's reported-pose errors."""
+        if not reward_model(self.name).coverage:
             return self.name
         return self.name, dataclasses.replace(_COVERAGE, position_sigma=self.position_sigma,
                                               attitude_sigma=self.attitude_sigma, ground_control=self.ground_control)
@@ -641,18 +642,19 @@ def check_reconstruction_memory(num_points: int, available: Optional[int] = None
 def estimate_memory(num_cameras: int, num_realizations: int, num_points: int, reward: str) -> int:
     """Bytes one reward evaluation of an N-camera plan needs at most (an upper estimate).
 
-    paper: its chunks (``reward.DEFAULT_MAX_ELEMENTS`` elements, about 10 float64 arrays of that
-    size alive at once) plus per pair S = N (N - 1) / 2 an accumulator, two indices and the pair's
-    coefficients (about 80 bytes). coverage: the per-camera terms, N x K x min(P, 3000) elements
-    (each realization subsampled to 3000 points) of about 200 bytes in all (measured: 150), and
-    its pair blocks (``max_elements`` = 2^22 float32 elements, about 6 arrays).
+    ``paper`` (a model without coverage parameters): its chunks (``reward.DEFAULT_MAX_ELEMENTS``
+    elements, about 10 float64 arrays of that size alive at once) plus per pair S = N (N - 1) / 2
+    an accumulator, two indices and the pair's coefficients (about 80 bytes). The coverage models:
+    the per-camera terms, N x K x min(P, max_points) elements (each realization subsampled) of at
+    most 200 bytes in all, and their pair blocks (``max_elements`` = 2^22 float32 elements, about
+    6 arrays).
     """
     from .reward import DEFAULT_MAX_ELEMENTS
     from .reward_models import CoverageParams
 
     N, K, P = int(num_cameras), int(num_realizations), int(num_points)
     S = N * (N - 1) // 2
-    if reward == "paper":
+    if not reward_model(reward).coverage:
         return 10 * 8 * DEFAULT_MAX_ELEMENTS + 80 * S
     kp = K * min(P, CoverageParams().max_points or P)
     return 200 * N * kp + 6 * 4 * (1 << 22) + 80 * S

@@ -111,7 +111,7 @@ from vp_scene.camera import CameraModel, optical_axes
 from .feasibility import check_realizations
 from .reward import DEFAULT_FOV, DEFAULT_THETA_MATCH, noisy_reward, prepare_points
 
-__all__ = ["REWARD_MODELS", "DEFAULT_REWARD_MODEL", "ZBUFFER_CELLS", "CoverageParams", "RewardFunction", "make_reward",
+__all__ = ["RewardModel", "REGISTRY", "reward_model", "REWARD_MODELS", "DEFAULT_REWARD_MODEL", "ZBUFFER_CELLS", "CoverageParams", "RewardFunction", "make_reward",
            "coverage_reward", "point_coverage", "view_graph", "view_graph_factor", "model_parts",
            "placement_error", "within_tau", "check_reward_model",
            "reconstructed_weights", "reconstructed_mask",
@@ -126,8 +126,6 @@ DEFAULT_RECONSTRUCTED_WEIGHT: float = 0.1
 #: Bounds of a camera's z-buffer grid (cells across the image, ``CoverageParams.zbuffer_width``).
 ZBUFFER_CELLS: tuple[int, int] = (8, 1024)
 
-#: Reward models by name (``reward`` parameter, PlanViews goal field, ``--reward``).
-REWARD_MODELS: tuple[str, ...] = ("paper", "coverage", "coverage-graph")
 #: The model the plan-quality study supports (README; results/ideal/plan_quality.json, and under the
 #: realistic capture results/plan_quality.json).
 DEFAULT_REWARD_MODEL: str = "coverage"
@@ -137,9 +135,14 @@ RewardFunction = Callable[[Any], np.ndarray]
 
 def check_reward_model(name: Any) -> str:
     """``name`` if it is one of :data:`REWARD_MODELS`, else ValueError naming the choices."""
-    if not isinstance(name, str) or name not in REWARD_MODELS:
+    return reward_model(name).name
+
+
+def reward_model(name: Any) -> "RewardModel":
+    """The registry's entry of ``name`` (:data:`REGISTRY`), else ValueError naming the choices."""
+    if not isinstance(name, str) or name not in _BY_NAME:
         raise ValueError(f"unknown reward model {name!r}; one of {', '.join(REWARD_MODELS)}")
-    return name
+    return _BY_NAME[name]
 
 
 @dataclass(frozen=True)
@@ -517,43 +520,93 @@ def make_reward(spec: Union[str, tuple], realizations: Any, fov: float = DEFAULT
                 point_weights: Any = None) -> RewardFunction:
     """A function cams (..., N, 6) -> rewards of the named model on these realizations.
 
-    ``spec`` is a name of :data:`REWARD_MODELS` or ``("coverage", CoverageParams)`` (``coverage-graph``
-    is ``coverage`` with ``view_graph=True``). ``image``
+    ``spec`` is a name of :data:`REWARD_MODELS` or ``(name, CoverageParams)`` (the parameters of a
+    model that takes them, :attr:`RewardModel.coverage`; the others ignore them). ``image``
     gives the image size the resolution term uses (default 2000 x 1500, the paper's) and its
     field of view is ``fov``. ``fixed_cameras`` (M, 6): cameras already flown, scored with every
     plan (R(z ∪ F), module docstring); ``point_weights`` (K, P): w_p of every point (None: 1).
     """
     name, params = (spec, None) if isinstance(spec, str) else spec
-    check_reward_model(name)
+    model = reward_model(name)
     F = check_fixed_cameras(fixed_cameras)
     R = check_realizations(realizations)
     W = None if point_weights is None else _check_weights(point_weights, R.shape[:2])
+    return model.make(R, W, F, fov, theta_match, image, dtype, params)
 
-    def with_fixed(cams: Any) -> np.ndarray:
-        """The plans (..., N, 6) with the fixed cameras appended: (..., N + M, 6)."""
-        z = np.asarray(cams, dtype=np.float64)
-        if not len(F) or z.ndim < 2:
-            return z
-        return np.concatenate([z, np.broadcast_to(F, z.shape[:-2] + F.shape)], axis=-2)
 
-    if name == "paper":
-        prep = prepare_points(R, dtype, W)
+def _with_fixed(cams: Any, F: np.ndarray) -> np.ndarray:
+    """The plans (..., N, 6) with the fixed cameras F (M, 6) appended: (..., N + M, 6)."""
+    z = np.asarray(cams, dtype=np.float64)
+    if not len(F) or z.ndim < 2:
+        return z
+    return np.concatenate([z, np.broadcast_to(F, z.shape[:-2] + F.shape)], axis=-2)
 
-        def paper(cams: Any) -> np.ndarray:
-            return np.asarray(noisy_reward(with_fixed(cams), prep, fov, theta_match, dtype=dtype))
-        return paper
-    cam_model = image or CameraModel(fov=fov)
-    if abs(cam_model.fov - fov) > 1e-12:
-        cam_model = CameraModel(cam_model.width, cam_model.height, fov)
-    params = params or CoverageParams()
-    if name == "coverage-graph":  # the name is the view graph, whatever params say
-        params = replace(params, view_graph=True)
+
+def _paper_reward(R: np.ndarray, W: Optional[np.ndarray], F: np.ndarray, fov: float, theta_match: float,
+                  image: Optional[CameraModel], dtype: torch.dtype, params: None) -> RewardFunction:
+    """``paper``: eqs. 2-7 (:func:`vp_planner.reward.noisy_reward`), in ``dtype``; no image size."""
+    prep = prepare_points(R, dtype, W)
+
+    def paper(cams: Any) -> np.ndarray:
+        return np.asarray(noisy_reward(_with_fixed(cams, F), prep, fov, theta_match, dtype=dtype))
+    return paper
+
+
+def _coverage_reward(R: np.ndarray, W: Optional[np.ndarray], F: np.ndarray, fov: float, theta_match: float,
+                     image: Optional[CameraModel], dtype: torch.dtype, params: CoverageParams) -> RewardFunction:
+    """The ``coverage`` family: :func:`coverage_reward` of ``params`` on the realizations subsampled
+    once (``max_points``), with ``image``'s size at field of view ``fov``; its window stands for
+    theta_match and it sums in float32 whatever ``dtype``."""
+    image = image or CameraModel(fov=fov)
+    if abs(image.fov - fov) > 1e-12:
+        image = CameraModel(image.width, image.height, fov)
     idx = _subsample(R.shape[1], params.max_points, 0)
     pts = R if idx is None else R[:, idx]
     w = None if W is None else (W if idx is None else W[:, idx])
+    flat = replace(params, max_points=0)
 
     def coverage(cams: Any) -> np.ndarray:
-        return np.asarray(coverage_reward(with_fixed(cams), pts, replace(params, max_points=0), cam_model,
-                                          weights=w))
+        return np.asarray(coverage_reward(_with_fixed(cams, F), pts, flat, image, weights=w))
     return coverage
 
+
+@dataclass(frozen=True)
+class RewardModel:
+    """One reward model of the registry: its ``name`` (the ``reward`` parameter, the PlanViews goal
+    field, ``--reward``), a one-line ``summary``, whether it is of the ``coverage`` family (it
+    takes :class:`CoverageParams`, its registration term the flight's reported-pose errors, and
+    ``fixes`` the flags its name sets whatever the parameters say), and ``build``, how it is made
+    on the checked realizations: ``build(R, W, F, fov, theta_match, image, dtype, params)``
+    (:meth:`make`)."""
+
+    name: str
+    summary: str
+    build: Callable[..., RewardFunction]
+    coverage: bool = True
+    fixes: tuple[tuple[str, Any], ...] = ()
+
+    def params(self, params: Optional[CoverageParams] = None) -> Optional[CoverageParams]:
+        """The model's :class:`CoverageParams` (None for a model that takes none): ``params`` (or
+        the defaults) with the flags the name fixes."""
+        if not self.coverage:
+            return None
+        return replace(params or CoverageParams(), **dict(self.fixes))
+
+    def make(self, R: np.ndarray, W: Optional[np.ndarray], F: np.ndarray, fov: float, theta_match: float,
+             image: Optional[CameraModel], dtype: torch.dtype, params: Optional[CoverageParams] = None
+             ) -> RewardFunction:
+        """The reward function on checked realizations R (K, P, 3), point weights W (K, P) or None
+        and fixed cameras F (M, 6) (:func:`make_reward` checks them)."""
+        return self.build(R, W, F, fov, theta_match, image, dtype, self.params(params))
+
+
+#: The reward models (one home): names, what each is, how each is made.
+REGISTRY: tuple[RewardModel, ...] = (
+    RewardModel("paper", "eqs. 2-7", _paper_reward, coverage=False),
+    RewardModel("coverage", "expected reconstructed fraction", _coverage_reward),
+    RewardModel("coverage-graph", "coverage times the view graph's connectivity", _coverage_reward,
+                fixes=(("view_graph", True),)),
+)
+_BY_NAME: dict[str, RewardModel] = {m.name: m for m in REGISTRY}
+#: Reward models by name (``reward`` parameter, PlanViews goal field, ``--reward``).
+REWARD_MODELS: tuple[str, ...] = tuple(_BY_NAME)
