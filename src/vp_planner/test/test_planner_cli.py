@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from vp_planner.cli import main
+from vp_planner.request import PlanRequest
 from vp_planner.reward import noisy_reward
 from vp_planner.reward_models import DEFAULT_REWARD_MODEL, make_reward
 from vp_scene.camera import CameraModel, poses_to_cameras
@@ -27,6 +28,8 @@ def test_cli_writes_plan(tmp_path: Path) -> None:
                 "scene", "fov", "theta_match", "simple_regret"):
         assert key in plan, key
     assert plan["method"] == "random" and plan["seed"] == 3 and plan["evaluations"] == 12
+    # the request as it wrote itself: every field but the arrays, what from_dict rebuilds
+    assert PlanRequest.from_dict(plan["request"]) == PlanRequest.of("random", 3, evaluations=12, seed=3)
     assert len(plan["trace"]) == 12 and len(plan["simple_regret"]) == 12
     cams = np.array(plan["cameras"])
     assert cams.shape == (3, 6) and np.array(plan["poses"]).shape == (3, 7)

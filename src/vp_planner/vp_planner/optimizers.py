@@ -79,7 +79,7 @@ from .feasibility import check_realizations
 from .methods import BY_NAME
 from .objective import Objective
 from .request import (InvalidReconstructionError, PlanRequest, check_budget_memory, check_parts, check_plan_memory,
-                      check_reconstruction, check_reconstruction_memory, check_sortie_weighting, total_evaluations)
+                      check_reconstruction_memory, total_evaluations)
 from .reward_models import DEFAULT_REWARD_MODEL
 from .space import Callback, NoFeasiblePlanError, PlanningCancelled, StopCheck, ViewSpace
 
@@ -93,13 +93,13 @@ class InvalidSceneError(ValueError):
 def sortie_weights(realizations: NDArray[np.float64], reconstruction: Any, tau: float, reconstructed_weight: float,
                    available: Optional[int] = None) -> tuple[NDArray[np.float64], float]:
     """Point weights (K, P) of a second sortie (:func:`vp_planner.reward_models.reconstructed_weights`)
-    and the fraction of points reconstructed; InvalidReconstructionError for a bad reconstruction,
-    tau or weight, or a reconstruction the memory cannot hold."""
+    and the fraction of points reconstructed, for a request's :class:`~vp_planner.request.Sortie`
+    (which checked the points, tau and the weight); InvalidReconstructionError for a
+    reconstruction the memory cannot hold (or, from the mask's own checks, bad points or tau)."""
     from .reward_models import reconstructed_mask
 
-    Q = check_reconstruction(reconstruction)
+    Q = np.asarray(reconstruction, dtype=np.float64).reshape(-1, 3)
     check_reconstruction_memory(len(Q), available)
-    check_sortie_weighting(tau, reconstructed_weight)
     try:
         mask = reconstructed_mask(realizations, Q, tau)
     except ValueError as exc:
