@@ -98,28 +98,22 @@ def _scenario(text: str) -> Any:
     return text if layout is None else layout.to_dict()
 
 
-#: The scene options (argparse's names) and their defaults.
-SCENE_DEFAULTS = {"scenario": "one_plant", "seed": 0, "models": None, "points_per_plant": 4000, "plant_spacing": 0.6,
-                  "row_spacing": 0.76, "levels": 10, "realizations": 5, "wind_variance": 0.002, "wind_direction": 0.0}
-
-
 def _scene_args(p: argparse.ArgumentParser, given_only: bool = False) -> None:
-    """The scene options; ``given_only`` (score): an option not given is left out of the namespace,
-    so that a scene named on the command line is told from the defaults."""
-    d = {k: argparse.SUPPRESS if given_only else v for k, v in SCENE_DEFAULTS.items()}
-    p.add_argument("--scenario", default=d["scenario"], type=_scenario, metavar="NAME_OR_FILE",
-                   help=f"a layout name ({', '.join(SCENARIO_NAMES)}) or a layout file (.yaml, .yml, .json; "
-                        f"README 'Your own field')")
-    p.add_argument("--seed", type=seed_arg, default=d["seed"],
-                   help=f"seed of the scene, the wind and the planner (0 to {MAX_SEED})")
-    p.add_argument("--models", default=d["models"], help="folder of PLY plant models (default: procedural corn)")
-    p.add_argument("--points-per-plant", type=int, default=d["points_per_plant"])
-    p.add_argument("--plant-spacing", type=float, default=d["plant_spacing"])
-    p.add_argument("--row-spacing", type=float, default=d["row_spacing"])
-    p.add_argument("--levels", type=int, default=d["levels"], help="wind levels L")
-    p.add_argument("--realizations", type=int, default=d["realizations"], help="wind realizations K")
-    p.add_argument("--wind-variance", type=float, default=d["wind_variance"])
-    p.add_argument("--wind-direction", type=float, default=d["wind_direction"], help="rad from +x")
+    """The scene options: a flag for every argument of a scene (:class:`vp_scene.scene_spec.SceneSpec`:
+    its default and help); ``given_only`` (score): an option not given is left out of the
+    namespace, so that a scene named on the command line is told from the defaults."""
+    from dataclasses import fields
+
+    from vp_scene.scene_spec import SceneSpec
+
+    special = {"scenario": dict(type=_scenario, metavar="NAME_OR_FILE",
+                                help=f"a layout name ({', '.join(SCENARIO_NAMES)}) or a layout file (.yaml, .yml, "
+                                     f".json; README 'Your own field')"),
+               "seed": dict(type=seed_arg, help=f"seed of the scene, the wind and the planner (0 to {MAX_SEED})"),
+               "models": dict(help="folder of PLY plant models (default: procedural corn)")}
+    for f in fields(SceneSpec):
+        how = special.get(f.name) or dict(type=type(f.default), help=f"{f.metadata['help']} ({f.default})")
+        p.add_argument("--" + f.name.replace("_", "-"), default=argparse.SUPPRESS if given_only else f.default, **how)
 
 
 def _reward_args(p: argparse.ArgumentParser, default: Optional[str]) -> None:
@@ -305,16 +299,15 @@ def set_threads(n: int) -> None:
 def scene_of(args: argparse.Namespace) -> dict:
     """The scene dict (build_noisy_scene's keyword arguments) of the command line options;
     ``scenario`` is a layout name or a layout file's canonical dict (see :func:`_scenario`)."""
+    from vp_scene.scene_spec import SCENE_KEYS
+
     models = None
     if args.models:
         folder = Path(args.models)
         if not folder.is_dir():
             raise CliError(f"models folder not found: {folder}")
         models = str(folder.resolve())
-    return {"scenario": args.scenario, "models": models, "seed": args.seed,
-            "points_per_plant": args.points_per_plant, "plant_spacing": args.plant_spacing,
-            "row_spacing": args.row_spacing, "levels": args.levels, "realizations": args.realizations,
-            "wind_variance": args.wind_variance, "wind_direction": args.wind_direction}
+    return {**{k: getattr(args, k) for k in SCENE_KEYS}, "models": models}
 
 
 def build_scene(scene: dict) -> tuple[np.ndarray, str]:
@@ -507,7 +500,9 @@ def _reconstructed_weights(data: dict, realizations: np.ndarray) -> Optional[np.
 def _score_scene(args: argparse.Namespace, pf: Any) -> dict:
     """The scene a plan is scored on: its own (scene options refused beside it), else the one the
     options name (``--scenario`` required: no scene is guessed)."""
-    given = {k: v for k, v in vars(args).items() if k in SCENE_DEFAULTS}
+    from vp_scene.scene_spec import SCENE, SCENE_KEYS
+
+    given = {k: v for k, v in vars(args).items() if k in SCENE_KEYS}
     flags = ", ".join("--" + k.replace("_", "-") for k in given)
     if pf.scene is not None:
         if given:
@@ -516,7 +511,7 @@ def _score_scene(args: argparse.Namespace, pf: Any) -> dict:
     if "scenario" not in given:
         raise CliError(f"{args.plan} has no 'scene': name the scene it was planned for with --scenario (and its "
                        "other scene options); no scene is guessed (vp_recon.cli refuses such a plan)")
-    return scene_of(argparse.Namespace(**{**SCENE_DEFAULTS, **given}))
+    return scene_of(argparse.Namespace(**{**SCENE.as_dict(), **given}))
 
 
 def _feasibility_warning(pf: Any, realizations: np.ndarray) -> Optional[str]:

@@ -61,6 +61,8 @@ from typing import Any, Iterable, NoReturn, Optional, Union
 
 import numpy as np
 
+from .scene_spec import SCENE
+
 __all__ = ["LayoutError", "PlantSpec", "Layout", "BUILTIN_LAYOUTS", "LAYOUT_SUFFIXES", "MAX_PLANTS", "MAX_LAYOUT_BYTES",
            "MIN_PLANT_DISTANCE", "MAX_SCALE", "MAX_EXTENT", "grid_layout", "builtin_layout", "layout_from_dict",
            "load_layout", "read_scenario", "resolve_layout", "is_layout_file", "parse_json"]
@@ -92,7 +94,7 @@ MAX_EXTENT = 100.0
 _TOP_KEYS = ("name", "plants", "grid", "jitter")
 _PLANT_KEYS = ("x", "y", "yaw", "scale", "model")
 _GRID_KEYS = ("rows", "columns", "plant_spacing", "row_spacing", "jitter", "yaw", "scale", "model")
-_GRID_DEFAULTS = {"plant_spacing": 0.6, "row_spacing": 0.76, "jitter": 0.0}
+_GRID_DEFAULTS = {"plant_spacing": SCENE.plant_spacing, "row_spacing": SCENE.row_spacing, "jitter": 0.0}
 _TOLERANCE = 1e-9  # m: 0.3 - 0.2 is 0.1 for the distance rule
 
 Scenario = Union[str, dict, "Layout"]
@@ -282,7 +284,8 @@ def _closest_pair(xy: np.ndarray) -> tuple[int, int, float]:
 # construction
 # --------------------------------------------------------------------------------------------
 
-def grid_layout(name: str, rows: int, columns: int, plant_spacing: float = 0.6, row_spacing: float = 0.76,
+def grid_layout(name: str, rows: int, columns: int, plant_spacing: float = SCENE.plant_spacing,
+                row_spacing: float = SCENE.row_spacing,
                 jitter: float = 0.0, yaw: Optional[float] = None, scale: Optional[float] = None,
                 model: Optional[str] = None, source: str = "") -> Layout:
     """A rows x columns grid centred at the origin, row after row (the caller checks the values):
@@ -304,7 +307,8 @@ def _positive(name: str, value: object) -> float:
     return v
 
 
-def builtin_layout(name: str, plant_spacing: float = 0.6, row_spacing: float = 0.76) -> Layout:
+def builtin_layout(name: str, plant_spacing: float = SCENE.plant_spacing,
+                   row_spacing: float = SCENE.row_spacing) -> Layout:
     """The built-in layout ``name`` (:data:`BUILTIN_LAYOUTS`) with these spacings (m, > 0)."""
     if name not in BUILTIN_LAYOUTS:
         raise LayoutError(f"unknown scenario {name!r}; expected one of {', '.join(BUILTIN_LAYOUTS)}, "
@@ -516,8 +520,8 @@ def read_scenario(text: str) -> Optional[Layout]:
     return load_layout(text)
 
 
-def resolve_layout(scenario: Scenario, plant_spacing: float = 0.6, row_spacing: float = 0.76,
-                   source: str = "scenario") -> Layout:
+def resolve_layout(scenario: Scenario, plant_spacing: float = SCENE.plant_spacing,
+                   row_spacing: float = SCENE.row_spacing, source: str = "scenario") -> Layout:
     """The layout of a scenario: a built-in name (with these spacings), a path to a layout file,
     a dict of the file format (errors name ``source``) or a Layout (returned as it is).
     The spacings are checked (> 0) whatever the scenario, as they always were."""
