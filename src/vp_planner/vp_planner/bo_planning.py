@@ -30,10 +30,9 @@ def initial_design(space: ViewSpace, n: int, rng: np.random.Generator, structure
     try:
         rest = random_plans(space, n - len(S), rng, should_stop=should_stop) if n > len(S) else np.zeros((0, space.dim))
     except NoFeasiblePlanError as exc:
-        # The range egp/gp serve (issue 19, item 4; README "Planner node"): their space is a
-        # shell about the scene, and random plans in it keep min_separation only up to a few
-        # dozen cameras (one plant, 0.5 m: 40 cameras found 10 feasible plans, 44 none, in 16000
-        # draws). The ring methods widen their circle instead and serve every N up to 100.
+        # The range egp/gp serve (README "Planner node"): their space is a shell about the scene,
+        # and random plans in it keep min_separation only up to a few dozen cameras a plant. The
+        # ring methods widen their circle instead and serve every N up to 100.
         raise NoFeasiblePlanError(f"{exc}; egp/gp plan up to about 40 cameras a plant (more: circle, arc, sa "
                                   f"or lawnmower, or a field planned by parts)") from None
     return np.concatenate([S, rest], axis=0)
@@ -156,8 +155,8 @@ def field_starts(space: ViewSpace, count: int) -> tuple[NDArray[np.float64], NDA
     round the field facing its centre) on the grid its grid search uses, with about half of
     ``count`` cells (3 x 3 of 20), then the structured plans (:func:`structured_plans`, the
     infeasible ones dropped) for the rest. The structured rings sit at one steep elevation on the
-    shell's edge; on the fields the circle's lower, nearer rings scored higher than any plan egp by parts returned (grid_3x3,
-    N = 8: 0.894-0.898 against 0.837-0.865, coverage; 3 planning seeds), so egp starts from them.
+    shell's edge; on a field the circle's lower, nearer rings can score higher than the union of
+    the part plans, so egp starts from them too.
     A ring is recorded with its own cameras (U: :meth:`ViewSpace.encode_cameras`, projected where
     the shell cannot hold it: the joint refinement starts in the parts' shells anyway)."""
     from .baselines import CircleFamily

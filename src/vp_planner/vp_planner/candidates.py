@@ -1,4 +1,4 @@
-"""Choosing among candidate views (issue 41, part 3): a plan is N of M given poses.
+"""Choosing among candidate views: a plan is N of M given poses.
 
 A rig's stops, a gantry's positions or the images of an earlier flight are poses a camera can
 hold (or did); planning among them is a discrete choice of N of the M candidates, scored by the

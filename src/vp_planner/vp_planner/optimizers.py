@@ -48,7 +48,7 @@ reward's pair term included), so one evaluation needs O(N^2) small arrays (pair 
 accumulator per pair) plus the coverage model's per-camera terms, N x K x min(P, 3000) elements
 (:func:`vp_planner.request.estimate_memory`; a plan that would not fit in the memory available is refused before
 anything is allocated). What limits N is time and feasibility: one evaluation costs O(N^2 K P)
-(N = 100 on 5 x 4000 points: about 1e8 pair-point terms, a second or two on one core), the
+(N = 100 on 5 x 4000 points: about 1e8 pair-point terms), the
 BO methods work in 6N dimensions, and random feasible plans (min_separation between every pair)
 become rare beyond a few dozen cameras. Hence the bound of 100 cameras, far above the paper's
 N <= 6; a run is cancellable throughout (``should_stop``), the feasible-plan search included.
@@ -62,8 +62,7 @@ multiplies the budget (:func:`vp_planner.request.total_evaluations`). Beyond the
 :func:`vp_planner.request.estimate_run_memory` of the run exceeds the share of the available memory a request
 may take (:data:`vp_scene.limits.MEMORY_FRACTION`), the request is
 refused before anything is allocated (:class:`vp_planner.request.BudgetTooLargeError`; the planner node's
-``BUDGET_TOO_LARGE``). Before this bound a goal of 4e9 evaluations grew the planner to 20 GB
-until the kernel killed it.
+``BUDGET_TOO_LARGE``).
 """
 from __future__ import annotations
 

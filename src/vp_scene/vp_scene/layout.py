@@ -40,8 +40,7 @@ x = (j - (columns - 1) / 2) plant_spacing, y = (i - (rows - 1) / 2) row_spacing,
 Limits: a file of at most :data:`MAX_LAYOUT_BYTES` (checked before it is parsed), 1 to
 :data:`MAX_PLANTS` plants, at least :data:`MIN_PLANT_DISTANCE` m apart (before
 jitter), every plant within :data:`MAX_EXTENT` m of the origin of ``map`` in x and in y (a field
-of 200 m x 200 m; beyond, a plan is not a drone sortie: a plant at x = 1e9 was planned with
-cameras 1e9 m up), scale in (0, :data:`MAX_SCALE`], no key given twice in one mapping (YAML and
+of 200 m x 200 m; beyond, a plan is not a drone sortie), scale in (0, :data:`MAX_SCALE`], no key given twice in one mapping (YAML and
 JSON would keep the last silently; :func:`parse_json`, and a YAML loader that refuses them, name
 the key and its line). Every error is a :class:`LayoutError` of one line that names the source
 (the file) and the field, e.g. ``field.yaml: grid.rows must be an integer >= 1, got 'three'``.
@@ -79,10 +78,9 @@ BUILTIN_LAYOUTS: dict[str, tuple[int, int]] = {
 LAYOUT_SUFFIXES = (".yaml", ".yml", ".json")
 #: At most this many plants in a layout.
 MAX_PLANTS = 200
-#: A layout file is at most this many bytes, checked before it is parsed: a 100,000-plant YAML
-#: took 18 s and 640 MB to parse before its plant count was refused (PyYAML parses about 0.2 MB
-#: a second: 256 KiB in about 1 s). MAX_PLANTS plants with every key and a comment each take
-#: 30 KiB.
+#: A layout file is at most this many bytes, checked before it is parsed: PyYAML takes seconds and
+#: hundreds of MB on a huge file before its plant count could be refused. MAX_PLANTS plants with
+#: every key and a comment each take 30 KiB.
 MAX_LAYOUT_BYTES = 256 * 1024
 #: m: the plants of a layout file stand at least this far apart (before jitter).
 MIN_PLANT_DISTANCE = 0.1
@@ -147,7 +145,7 @@ class Layout:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "plants", tuple(self.plants))
-        for i, p in enumerate(self.plants):  # the one extent check of every layout (issue 19, item 3)
+        for i, p in enumerate(self.plants):  # the one extent check of every layout
             if not (abs(p.x) <= MAX_EXTENT and abs(p.y) <= MAX_EXTENT):
                 _fail(self.where, f"plant {i} stands at x = {p.x:g}, y = {p.y:g} m, outside the field's "
                                   f"extent of +-{MAX_EXTENT:g} m about the origin of map")
