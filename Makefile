@@ -16,7 +16,7 @@ SCENE_TAG = $(basename $(notdir $(SCENE_ARG)))
 METHOD   ?= egp
 CAMERAS  ?= 4
 DRONES   ?= $(CAMERAS)
-# make run ROUNDS=2 CAMERAS=N CAMERAS2=M: a second sortie of M given the first (README "A second sortie")
+# make run ROUNDS=2 CAMERAS=N CAMERAS2=M: a second sortie of M given the first (docs/planner.md "A second sortie")
 ROUNDS   ?= 1
 CAMERAS2 ?= 0
 EVALS    ?= 100
@@ -72,9 +72,10 @@ view: setup
 bench: setup
 	@$(ENV) python -m bench.table1 $(if $(MODELS),--models $(MODELS))
 
-# docs/results.md from the result files under results/ (README "Development"); never edited by hand
+# docs/results.md and docs/history_results.md from the files under results/, and the generated blocks of
+# README.md and docs/ from the code (docs/development.md); never edited by hand
 docs: setup
-	@$(ENV) python -m bench.docs
+	@$(ENV) python -m bench.docs && python tools/doc_tables.py
 
 clean:
 	rm -rf build install log

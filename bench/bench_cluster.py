@@ -10,8 +10,8 @@ Writes ``results/bench_cluster.json`` and ``.md``. Slow-ish (a few minutes on 2 
 """
 from __future__ import annotations
 
-import argparse
 import json
+import shlex
 import shutil
 import sys
 import tempfile
@@ -23,7 +23,8 @@ if not __package__:  # python bench/bench_cluster.py: as python -m bench.bench_c
     import _script  # noqa: F401
 from bench import table1  # noqa: E402
 from bench.cluster import open_client  # noqa: E402
-from bench.common import ROOT, machine, write_report  # noqa: E402
+from bench.options import parser  # noqa: E402
+from bench.publish import machine, num, publish, table  # noqa: E402
 
 
 def task_seconds(plans: dict, recons: dict) -> float:
@@ -59,9 +60,8 @@ def recon_max_diff(runs: list) -> float:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    ap = parser(__doc__, 'out')
     ap.add_argument('--workers', type=int, nargs='+', default=[1, 2])
-    ap.add_argument('--out', default=str(ROOT / 'results'))
     a, rest = ap.parse_known_args(argv)
     cell_args = rest or ['--models', '', '--scenarios', 'one_plant', 'three_row', '--rows', 'circle', 'arc', 'egp',
                          '--seeds', '1', '--evals', '20', '--init', '10', '--width', '1000', '--height', '750',
@@ -93,25 +93,22 @@ def main(argv=None) -> int:
               'recon_max_abs_diff_chamfer_x100': recon_max_diff(list(records.values())),
               'overhead_per_task_s': (one['wall_s'] - one['task_seconds']) / one['tasks'],
               'speedup': {str(w): one['wall_s'] / r['wall_s'] for w, r in runs.items()}}
-    lines = [f'# Cluster engine: Table I cells on {", ".join(map(str, a.workers))} local worker(s) '
-             f'({report["date"]}, {report["machine"]})', '',
-             f'table1 arguments: `{" ".join(repr(x) if x == "" else x for x in cell_args)}`', '',
-             '| workers | tasks | failed | cluster start s | wall s | sum of task s | speedup |', '|---|---|---|---|---|---|---|']
-    for w, r in runs.items():
-        lines.append(f'| {w} | {r["tasks"]} | {r["failed"]} | {r["cluster_start_s"]:.1f} | {r["wall_s"]:.1f} | '
-                     f'{r["task_seconds"]:.1f} | {report["speedup"][str(w)]:.2f} |')
-    lines += ['', f'Overhead per task with {first} worker (wall - sum of task seconds) / tasks: '
-              f'{report["overhead_per_task_s"]:.2f} s (scene build and imports on a fresh worker included). '
-              f'Same plans on every worker count: {report["same_plans"]}; same reconstruction records: '
-              f'{report["same_records"]} (largest Chamfer x100 difference of one realization: '
-              f'{report["recon_max_abs_diff_chamfer_x100"]:.2g}; the reconstruction is not bit-reproducible '
-              'from one process history to another, also in one process, see the README).']
-    out = Path(a.out)
-    out.mkdir(parents=True, exist_ok=True)
-    write_report(out / 'bench_cluster.json', report)
-    (out / 'bench_cluster.md').write_text('\n'.join(lines) + '\n')
-    print('\n'.join(lines))
+    publish(a.out, 'bench_cluster', report, markdown(report))
     return 0 if report['same_plans'] else 1
+
+
+def markdown(data: dict) -> str:
+    """Wall time, speedup and overhead per worker count, and whether the records agree."""
+    body = [[str(r['workers']), str(r['tasks']), num(r['cluster_start_s'], 1), num(r['wall_s'], 1),
+             num(r['task_seconds'], 1), str(r['failed']), num(data['speedup'].get(str(r['workers'])))]
+            for r in data['runs']]
+    lines = ['# The benchmarks on a Dask cluster', '', 'A small Table I slice (`python -m bench.table1 '
+             + shlex.join(data['table1_arguments']) + '`) on 1 and 2 local workers.', '']
+    lines += table(['workers', 'tasks', 'cluster start s', 'wall s', 'task s (sum)', 'failed', 'speedup'], body)
+    lines += ['', f'Same plans on every worker count: {data["same_plans"]}; same reconstruction records: '
+              f'{data["same_records"]} (largest Chamfer x100 difference {data["recon_max_abs_diff_chamfer_x100"]:.1e}); '
+              f'overhead per task {data["overhead_per_task_s"]:.2f} s.']
+    return '\n'.join(lines) + '\n'
 
 
 if __name__ == '__main__':

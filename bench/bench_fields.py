@@ -40,10 +40,13 @@ import numpy as np
 if not __package__:  # python bench/bench_fields.py: as python -m bench.bench_fields (bench/_script.py)
     import _script  # noqa: F401
 from vp_scene.limits import seed_arg  # noqa: E402
-from bench.cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
-from bench.common import (ROOT, VARIANTS, add_capture, baselines, cached, capture_of, capture_tag,  # noqa: E402
-                          chamfer_text, default_models, known_realizations, machine, models_tag, reconstruct_record,
-                          reconstructed, scene, variant_request, variants_of, write_json, write_report)
+from bench.cache import cached, write_json  # noqa: E402
+from bench.cluster import Task, cluster_client, run_tasks  # noqa: E402
+from bench.common import (VARIANTS, baselines, capture_of, capture_tag, chamfer_text, flight_simulator,  # noqa: E402
+                          flight_tag, known_realizations, models_tag, reconstruct_record, reconstructed, scene,
+                          variant_request, variants_of)
+from bench.options import parser  # noqa: E402
+from bench.publish import machine, publish  # noqa: E402
 from bench.stats import describe, describe_difference, paired_difference, rank, summary  # noqa: E402
 
 #: (field, N) cells: the issue's targets, and N = 16 on the row (planned and reconstructed).
@@ -58,11 +61,7 @@ SUBSAMPLE_SIZES = (1500, 3000, 6000, 12000, 0)
 
 
 def parse_args(argv=None) -> argparse.Namespace:
-    from vp_scene.camera import IMAGE_SIZE
-
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--models", default=default_models(),
-                    help="folder of PLY plant models (default: ../shared/data/corn50 if present; '' procedural)")
+    ap = parser(__doc__, "models", "images", "threads", "capture", "cluster", "out")
     ap.add_argument("--fields", nargs="+", default=[f"{f}:{n}" for f, n in FIELDS],
                     help="FIELD:N cells, e.g. grid_3x3:8 row_12:12")
     ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
@@ -70,13 +69,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument("--recon-methods", nargs="+", default=None, choices=list(METHODS),
                     help="methods to reconstruct (default: all of --methods)")
     ap.add_argument("--realizations", type=int, default=2, help="wind realizations reconstructed per plan")
-    ap.add_argument("--width", type=int, default=IMAGE_SIZE[0])
-    ap.add_argument("--height", type=int, default=IMAGE_SIZE[1])
-    ap.add_argument("--threads", type=int, default=0, help="reconstruction threads (0: all cores)")
     ap.add_argument("--seed", type=seed_arg, default=0)
-    ap.add_argument("--out", default=str(ROOT / "results"))
-    add_capture(ap)
-    add_cluster_args(ap)
     return ap.parse_args(argv)
 
 
@@ -100,7 +93,9 @@ def plan_path(cache: Path, field: str, n: int, label: str, args) -> tuple[Path, 
     """(cache file, evaluation budget) of :func:`plan_cell`."""
     parts, total = field_budget(field, n, args.models)
     evals = EVALS_PER_PART if by_parts(label) else total
-    return cache / "plans" / f"{models_tag(args.models)}-{field}-n{n}-{label}-seed{args.seed}-e{evals}.json", evals
+    tag = flight_tag(variant_request(label, num_cameras=n, evaluations=evals, initial_evaluations=min(50, evals),
+                                     seed=args.seed))
+    return cache / "plans" / f"{models_tag(args.models)}-{field}-n{n}-{label}-seed{args.seed}-e{evals}{tag}.json", evals
 
 
 def by_parts(label: str) -> bool:
@@ -123,10 +118,13 @@ def plan_cell(cache: Path, field: str, n: int, label: str, args) -> dict:
 
         torch.set_num_threads(1)
         noisy, _ = scene(field, args.models)
-        res = plan_views(request, noisy.points)
+        res = plan_views(request, noisy.points, simulator=flight_simulator(request, noisy))
         return {"cameras": np.asarray(res.cameras).tolist(), "reward": float(res.reward),
                 "reward_model": res.reward_model, "evaluations": int(res.evaluations),
-                "seconds": float(res.seconds), "parts": res.parts, "initial_best": res.initial_best}
+                "seconds": float(res.seconds), "parts": res.parts, "initial_best": res.initial_best,
+                "chosen_by": res.chosen_by, "flight_score": res.flight_score, "flights_note": res.flights_note,
+                "flights": res.flights, "flight_plans": res.flight_plans,
+                "flight_settings": request.flights.settings().to_dict()}
     return cached(path, compute)
 
 
@@ -351,11 +349,7 @@ def write_results(args, out: Path, cells, plans, recons, subsampling) -> None:
             lines.append(f"| {key} | {s['plans']} | {s['points_per_realization']} | {size} | "
                          f"{v['spearman_vs_all']:.4f} | {v['mean_shift']:+.4f} | {v['max_abs_diff']:.4f} | "
                          f"{v['ms_per_plan']:.1f} |")
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "bench_fields.md").write_text("\n".join(lines) + "\n")
-    write_report(out / "bench_fields.json", result)
-    print("\n".join(lines))
-    print(f"wrote {out / 'bench_fields.md'} and {out / 'bench_fields.json'}")
+    publish(out, "bench_fields", result, "\n".join(lines) + "\n")
 
 
 if __name__ == "__main__":

@@ -15,11 +15,10 @@ With ``--repeats R`` each variant runs R times (one after the other): the row is
 with every run's wall time beside it (``walls``, their median and maximum); a failed repeat is
 counted in ``failed_repeats``, never dropped.
 
-    python bench/bench_make_run.py [--variants benchmarks sift0 make-run sift0-dense0.5] [--repeats 1] [--out results]
+    python -m bench.bench_make_run [--variants benchmarks sift0 make-run sift0-dense0.5] [--repeats 1] [--out results]
 """
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import subprocess
@@ -32,8 +31,10 @@ import numpy as np
 
 if not __package__:  # python bench/bench_make_run.py: as python -m bench.bench_make_run (bench/_script.py)
     import _script  # noqa: F401
+from bench.common import ROOT  # noqa: E402
+from bench.options import parser  # noqa: E402
+from bench.publish import machine, publish  # noqa: E402
 from bench.stats import paired_interval  # noqa: E402
-from bench.common import ROOT, machine, write_report  # noqa: E402
 
 #: variant -> tools/run_suite.py reconstruction options
 VARIANTS = {
@@ -72,11 +73,6 @@ def run_variant(name: str, domain: int, timeout: float) -> dict:
             'chamfer': [p.get('chamfer') for p in per], 'chamfer_shape': [p.get('chamfer_shape') for p in per]}
 
 
-def paired(base: list, other: list) -> dict:
-    """other - base per realization (both reconstructed): mean, 95 % t interval, n."""
-    return paired_interval(base, other)
-
-
 def markdown(result: dict) -> str:
     def iv(d):
         return '-' if not d or d.get('ci95') is None else \
@@ -105,14 +101,13 @@ def markdown(result: dict) -> str:
     return '\n'.join(lines) + '\n'
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def main(argv=None) -> int:
+    ap = parser(__doc__, 'out')
     ap.add_argument('--variants', nargs='+', default=list(VARIANTS), choices=list(VARIANTS))
     ap.add_argument('--timeout', type=float, default=900.0, help='seconds a run may take')
     ap.add_argument('--domain-id', type=int, default=77, help='ROS_DOMAIN_ID of the first run (then +1 each)')
     ap.add_argument('--repeats', type=int, default=1, help='runs of each variant (module docstring)')
-    ap.add_argument('--out', default=str(ROOT / 'results'))
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     if args.repeats < 1:
         ap.error(f'--repeats must be >= 1, got {args.repeats}')
     runs = {}
@@ -133,15 +128,11 @@ def main() -> int:
     if BASE in runs and runs[BASE].get('chamfer'):
         for name, r in runs.items():
             if name != BASE and r.get('chamfer'):
-                r['vs_base'] = paired(runs[BASE]['chamfer'], r['chamfer'])
-                r['shape_vs_base'] = paired(runs[BASE]['chamfer_shape'], r['chamfer_shape'])
+                r['vs_base'] = paired_interval(runs[BASE]['chamfer'], r['chamfer'])
+                r['shape_vs_base'] = paired_interval(runs[BASE]['chamfer_shape'], r['chamfer_shape'])
     result = {'machine': machine(), 'date': time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime()), 'target_s': 60.0,
               'target_cv': 0.3, 'variants': runs}
-    out = Path(args.out)
-    write_report(out / 'bench_make_run.json', result)
-    text = markdown(result)
-    (out / 'bench_make_run.md').write_text(text)
-    print(text)
+    publish(args.out, 'bench_make_run', result, markdown(result))
     return 0
 
 

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Benchmark of the reconstruction pipeline (vp_recon): JSON on stdout and in results/bench_recon.json.
+"""The reconstruction pipeline's speed (vp_recon): results/bench_recon.{json,md}.
 
 * seconds per rendered frame at 2000 x 1500 (one procedural plant, context already created),
 * seconds per stage (mesh, render, sparse, dense, score) of a realization for ring plans of 4 and
@@ -8,16 +8,13 @@
   tuned on the reward, 100 evaluations) on each scenario: one_plant with 4 cameras, three_row and
   six_rect with 6.
 
-    python bench/bench_recon.py [--quick] [--width 2000 --height 1500] [--realizations 1]
-        [--models FOLDER] [--out results/bench_recon.json]
+    python -m bench.bench_recon [--quick] [--width 2000 --height 1500] [--realizations 1]
+        [--models FOLDER] [--out results]
 
 --quick: 1000 x 750 stages and scenarios, 5 timed frames, 2000 points per plant.
 """
 from __future__ import annotations
 
-import argparse
-import json
-import math
 import os
 import platform
 import sys
@@ -26,12 +23,12 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 
 if not __package__:  # python bench/bench_recon.py: as python -m bench.bench_recon (bench/_script.py)
     import _script  # noqa: F401
-from bench.common import write_report  # noqa: E402
+from bench.options import parser  # noqa: E402
+from bench.publish import num, publish, table  # noqa: E402
 from vp_scene.build import build_noisy_scene  # noqa: E402
 from vp_scene.capture import IDEAL, REALISTIC  # noqa: E402
 
@@ -68,15 +65,15 @@ def time_frames(width: int, height: int, frames: int, ns) -> float:
     return (time.perf_counter() - t) / frames
 
 
-def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--quick", action="store_true")
-    p.add_argument("--width", type=int, default=None)
-    p.add_argument("--height", type=int, default=None)
+def main(argv=None) -> int:
+    from vp_scene.camera import image_side_arg
+
+    p = parser(__doc__, "models", "out", models="")
+    p.add_argument("--quick", action="store_true", help="1000 x 750, 5 timed frames, 2000 points a plant")
+    p.add_argument("--width", type=image_side_arg, default=None, help="image width (default 2000; --quick 1000)")
+    p.add_argument("--height", type=image_side_arg, default=None, help="image height (default 1500; --quick 750)")
     p.add_argument("--realizations", type=int, default=1)
-    p.add_argument("--models", default=None, help="folder of PLY plants (default: procedural corn)")
-    p.add_argument("--out", default=str(ROOT / "results" / "bench_recon.json"))
-    a = p.parse_args()
+    a = p.parse_args(argv)
     width = a.width or (1000 if a.quick else ReconConfig.width)
     height = a.height or (750 if a.quick else ReconConfig.height)
     ppp = 2000 if a.quick else 4000
@@ -87,7 +84,7 @@ def main() -> int:
                  "quick": a.quick, "width": width, "height": height, "realizations": len(ks),
                  "models": a.models, "points_per_plant": ppp}
 
-    ns, _ = build_noisy_scene("one_plant", models=a.models, seed=0, points_per_plant=ppp,
+    ns, _ = build_noisy_scene("one_plant", models=a.models or None, seed=0, points_per_plant=ppp,
                               realizations=max(1, len(ks)))
     out["seconds_per_frame_2000x1500"] = time_frames(2000, 1500, frames, ns)
     print(f"render 2000x1500: {out['seconds_per_frame_2000x1500']:.3f} s/frame", file=sys.stderr)
@@ -115,7 +112,7 @@ def main() -> int:
 
     scen = {}
     for name, n in SCENARIO_CAMERAS.items():
-        sc, _ = build_noisy_scene(name, models=a.models, seed=0, points_per_plant=ppp,
+        sc, _ = build_noisy_scene(name, models=a.models or None, seed=0, points_per_plant=ppp,
                                   realizations=max(1, len(ks)))
         # the tuned circle baseline
         cams = plan_views(PlanRequest.of("circle", n, evaluations=100, seed=0), sc.points).cameras
@@ -134,10 +131,22 @@ def main() -> int:
             scen[name] = {"cameras": n, "error": exc.name, "message": str(exc)}
         print(f"{name}: {scen[name]}", file=sys.stderr)
     out["scenarios"] = scen
-    text = json.dumps(out, indent=1)
-    print(text)
-    write_report(Path(a.out), out)
+    publish(a.out, "bench_recon", out, markdown(out))
     return 0
+
+
+def markdown(data: dict) -> str:
+    """The seconds per stage of the ring plans on one plant, with their registered images and Chamfer."""
+    body = [[name.replace("_", " "), s["capture"], "/".join(map(str, s.get("registered_images") or [])),
+             *(num((s.get("seconds") or {}).get(k), 1) for k in ("render", "sparse", "dense", "score", "total")),
+             num(s.get("chamfer_x100")), num(s.get("chamfer_shape_x100"))]
+            for name, s in data["stages_one_plant"].items()]
+    lines = ["# Reconstruction stages", "", f"One plant ({Path(data.get('models') or '').name or 'procedural'}), "
+             f"{data['width']} x {data['height']}, a ring of views 30 degrees apart, one realization, seconds per "
+             "stage with the reconstruction on the machine's cores.", ""]
+    lines += table(["views", "capture", "registered", "render s", "sparse s", "dense s", "score s", "total s",
+                    "Chamfer x100", "shape x100"], body)
+    return "\n".join(lines) + "\n"
 
 
 if __name__ == "__main__":

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Benchmark of the reward models' cost per plan: JSON on stdout (and results/bench_reward.json).
+"""The reward models' cost per plan: results/bench_reward.{json,md}.
 
 The paper's noisy reward (eq. 7): one plan (raw points, and points laid out once with
 ``prepare_points`` as the optimizers do) and a batch of plans (default 1000) of 4 cameras on 10k
@@ -7,30 +7,27 @@ points x 5 realizations, in float64 and float32. The ``coverage`` and ``coverage
 as :func:`vp_planner.reward_models.make_reward` builds it (its default subsample of the points). Points: a Corn50 plant from ../shared/data/corn50 when present (wind
 displacement as the paper's L-level model), else a synthetic cylinder-ish plant.
 
-    python bench/bench_reward.py [--points 10000] [--realizations 5] [--cameras 4] [--batch 1000]
+    python -m bench.bench_reward [--points 10000] [--realizations 5] [--cameras 4] [--batch 1000]
 """
 from __future__ import annotations
 
-import argparse
-import json
 import platform
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import torch
 
 if not __package__:  # python bench/bench_reward.py: as python -m bench.bench_reward (bench/_script.py)
     import _script  # noqa: F401
-from bench.common import write_report  # noqa: E402
+from bench.common import CORN50  # noqa: E402
+from bench.options import parser  # noqa: E402
+from bench.publish import num, publish, table  # noqa: E402
 from vp_planner.designs import random_plans
 from vp_planner.reward import noisy_reward, prepare_points
 from vp_planner.reward_models import make_reward
 from vp_planner.space import ViewSpace
 from vp_scene.ply import load_ply
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def synthetic_plant(n: int, rng: np.random.Generator) -> np.ndarray:
@@ -42,7 +39,7 @@ def synthetic_plant(n: int, rng: np.random.Generator) -> np.ndarray:
 
 def scene(points: int, K: int, seed: int = 0) -> tuple[np.ndarray, str]:
     rng = np.random.default_rng(seed)
-    ply = ROOT.parent / "shared" / "data" / "corn50" / "10.ply"
+    ply = CORN50 / "10.ply"
     if ply.exists():
         P = load_ply(ply).points  # the project's one PLY reader
         P = P[rng.choice(len(P), points, replace=len(P) < points)]
@@ -70,15 +67,15 @@ def best_of(fn, repeats: int) -> float:
     return best
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser()
+def main(argv=None) -> int:
+    ap = parser(__doc__, "out")
     ap.add_argument("--points", type=int, default=10000)
     ap.add_argument("--realizations", type=int, default=5)
     ap.add_argument("--cameras", type=int, default=4)
     ap.add_argument("--batch", type=int, default=1000)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--threads", type=int, default=1, help="torch threads (the planner's default: 1)")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     torch.set_num_threads(args.threads)
     R, source = scene(args.points, args.realizations)
     space = ViewSpace(R, args.cameras)
@@ -111,10 +108,20 @@ def main() -> int:
         many = best_of(lambda: cov(plans[: min(args.batch, 200)]), args.repeats)
         result["results"][model] = {"one_plan_ms": round(one * 1e3, 3),
                                     "batch_ms_per_plan": round(many / min(args.batch, 200) * 1e3, 3)}
-    json.dump(result, sys.stdout, indent=1)
-    print()
-    write_report(ROOT / "results" / "bench_reward.json", result)
+    publish(args.out, "bench_reward", result, markdown(result))
     return 0
+
+
+def markdown(data: dict) -> str:
+    """Milliseconds a plan of every model: one plan, one plan on prepared points, a plan in a batch."""
+    body = [[m, num(r.get("one_plan_ms"), 1), num(r.get("one_plan_prepared_points_ms"), 1),
+             num(r.get("batch_ms_per_plan"), 1)] for m, r in data["results"].items()]
+    lines = ["# Cost of a reward evaluation", "", f"{data['cameras']} cameras, {data['points']} points x "
+             f"{data['realizations']} realizations, {data['threads']} torch thread; `float64`/`float32`: the paper "
+             "reward. Best of repeats, ms. The paper reward in float32 differs from float64 by at most "
+             f"{data['max_abs_diff_float32']:.1e}.", ""]
+    lines += table(["model", "one plan", "one plan, points prepared", "per plan in a batch"], body)
+    return "\n".join(lines) + "\n"
 
 
 if __name__ == "__main__":

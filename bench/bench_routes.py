@@ -12,11 +12,10 @@ the same before the waits (the solver's orders timed without them).
     python -m bench.bench_routes [--scenario row_12 --variant lawnmower-oblique --cameras 60
         --drones 16 --separation 0.5 --repeats 3]
 
-Writes results/bench_routes.json.
+Writes results/bench_routes.{json,md}.
 """
 from __future__ import annotations
 
-import argparse
 import statistics
 import time
 from dataclasses import fields
@@ -26,9 +25,10 @@ import numpy as np
 
 if not __package__:  # python bench/bench_routes.py: as python -m bench.bench_routes (bench/_script.py)
     import _script  # noqa: F401
-from bench.common import ROOT, plan_cell, scene, write_report  # noqa: E402
+from bench.common import plan_cell, scene  # noqa: E402
+from bench.options import parser  # noqa: E402
+from bench.publish import publish  # noqa: E402
 
-RESULTS = ROOT / 'results' / 'bench_routes.json'
 #: s: what routing the benchmark's fleet may take at most
 LIMIT_S = 10.0
 
@@ -36,14 +36,13 @@ LIMIT_S = 10.0
 def parse_args(argv=None):
     from vp_planner.routes import FlightModel
 
-    ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    ap = parser(__doc__, 'out')
     ap.add_argument('--scenario', default='row_12')
     ap.add_argument('--variant', default='lawnmower-oblique', help='the plan of the views (bench.common.VARIANTS)')
     ap.add_argument('--cameras', type=int, default=60)
     ap.add_argument('--drones', type=int, default=16)
     ap.add_argument('--separation', type=float, default=0.5, help='m between two drones at every moment')
     ap.add_argument('--repeats', type=int, default=3)
-    ap.add_argument('--out', type=Path, default=RESULTS)
     for f in fields(FlightModel):
         ap.add_argument(f'--{f.name.replace("_", "-")}', type=float, default=f.default,
                         help=f'{f.metadata["help"]}, {FlightModel.range_text(f.name)}')
@@ -55,7 +54,7 @@ def run(args) -> dict:
 
     model = FlightModel(**{f.name: getattr(args, f.name) for f in fields(FlightModel)})
     noisy, _ = scene(args.scenario)
-    plan = plan_cell(ROOT / 'results' / 'cache', args.scenario, args.variant, 0, evals=1, init=1,
+    plan = plan_cell(Path(args.out) / 'cache', args.scenario, args.variant, 0, evals=1, init=1,
                      num_cameras=args.cameras)
     views = np.asarray(plan['cameras'])
     lo, hi = views[:, :2].min(axis=0), views[:, :2].max(axis=0)
@@ -101,8 +100,7 @@ def markdown(data: dict) -> str:
 def main(argv=None) -> int:
     args = parse_args(argv)
     data = run(args)
-    write_report(args.out, data)
-    print(markdown(data))
+    publish(args.out, 'bench_routes', data, markdown(data))
     return 0 if data['within_limit'] and data['every_route_within_budget'] else 1
 
 

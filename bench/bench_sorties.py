@@ -26,7 +26,6 @@ on 2 cores at the defaults (8 plans and 7 reconstructions a scenario); a smoke s
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from datetime import datetime, timezone
@@ -37,14 +36,16 @@ import numpy as np
 if not __package__:  # python bench/bench_sorties.py: as python -m bench.bench_sorties (bench/_script.py)
     import _script  # noqa: F401
 from vp_scene.limits import seed_arg  # noqa: E402
-from bench.cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
+from bench.cache import cached  # noqa: E402
+from bench.cluster import Task, cluster_client, run_tasks  # noqa: E402
+from bench.common import (baselines, capture_of, capture_tag, chamfer_text, models_tag, plan_cell,  # noqa: E402
+                          plan_path, reconstruct_record, scene, variant_request, variants_of)
+from bench.options import parser  # noqa: E402
+from bench.publish import machine, publish  # noqa: E402
 from bench.stats import rank_key  # noqa: E402
 from vp_planner.reward_models import (DEFAULT_RECONSTRUCTED_WEIGHT, DEFAULT_REWARD_MODEL, DEFAULT_TAU,  # noqa: E402
                                       REWARD_MODELS)
 from vp_recon.config import MATCHINGS  # noqa: E402
-from bench.common import (ROOT, add_capture, baselines, cached, capture_of, capture_tag, chamfer_text,  # noqa: E402
-                          default_models, machine, models_tag, plan_cell, plan_path, reconstruct_record, scene,
-                          variant_request, variants_of, write_report)
 
 #: scenario -> (N cameras of sortie 1, M cameras of sortie 2).
 SORTIES = {'one_plant': (4, 2), 'three_row': (6, 3), 'six_rect': (6, 3), 'grid_3x3': (8, 4)}
@@ -59,19 +60,12 @@ TARGET = 0.05
 
 
 def parse_args(argv=None) -> argparse.Namespace:
-    from vp_scene.camera import IMAGE_SIZE
-
-    ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    ap.add_argument('--models', default=default_models(),
-                    help="folder of PLY plant models (default: ../shared/data/corn50 if present; '' procedural)")
+    ap = parser(__doc__, 'models', 'images', 'threads', 'capture', 'cluster', 'out')
     ap.add_argument('--scenarios', nargs='+', default=list(SORTIES), choices=list(SORTIES))
     ap.add_argument('--evals', type=int, default=100)
     ap.add_argument('--init', type=int, default=50)
     ap.add_argument('--seed', type=seed_arg, default=0)
     ap.add_argument('--realizations', type=int, default=2, help='wind realizations reconstructed')
-    ap.add_argument('--width', type=int, default=IMAGE_SIZE[0])
-    ap.add_argument('--height', type=int, default=IMAGE_SIZE[1])
-    ap.add_argument('--threads', type=int, default=0, help='threads of the reconstruction (0: all cores)')
     ap.add_argument('--tau', type=float, default=DEFAULT_TAU)
     ap.add_argument('--reconstructed-weight', type=float, default=DEFAULT_RECONSTRUCTED_WEIGHT)
     ap.add_argument('--matching', default='auto', choices=MATCHINGS,
@@ -80,9 +74,6 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument('--reward', default=DEFAULT_REWARD_MODEL, choices=sorted(REWARD_MODELS),
                     help='reward model of every plan (default: the planner\'s, %(default)s); a non-default one '
                          'is part of every cache name')
-    ap.add_argument('--out', default=str(ROOT / 'results'))
-    add_capture(ap)
-    add_cluster_args(ap)
     return ap.parse_args(argv)
 
 
@@ -264,8 +255,7 @@ def write_results(args, out: Path, rows: dict) -> None:
         cells = [chamfer_text(row['cases'][c]) for c in CASES]
         lines.append(f"| {scenario} | {row['n']} + {row['m']} | {chamfer_text(row['sortie1']['chamfer'])} | "
                      + ' | '.join(cells) + f' | {verdict(row)} |')
-    (out / 'bench_sorties.md').write_text('\n'.join(lines) + '\n')
-    write_report(out / 'bench_sorties.json', {'args': vars(args), 'machine': machine(), 'rows': rows})
+    publish(out, 'bench_sorties', {'args': vars(args), 'machine': machine(), 'rows': rows}, '\n'.join(lines) + '\n')
 
 
 def main(argv=None) -> int:
@@ -274,10 +264,7 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     with cluster_client(args) as client:
         rows = run(client, out / 'cache', out, args)
-    for scenario, row in rows.items():
-        print(f'{scenario}: {verdict(row)}', flush=True)
     write_results(args, out, rows)
-    print(json.dumps({s: {c: r['cases'][c].get('chamfer_mean') for c in CASES} for s, r in rows.items()}), flush=True)
     return 0
 
 

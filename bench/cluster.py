@@ -1,7 +1,7 @@
 """The benchmarks' task engine: dask.distributed, on this machine or on a cluster users already run.
 
 Every benchmark builds a list of :class:`Task` (a pure function of picklable arguments that returns
-a plain JSON record, usually through ``common.cached``) and hands it to :func:`run_tasks`:
+a plain JSON record, usually through ``bench.cache.cached``) and hands it to :func:`run_tasks`:
 
 - a task whose result is already in the results cache (``Task.cache``, one JSON file per cell) is
   not submitted: the cache stays the unit of resumability, a rerun finishes only the missing tasks;
@@ -15,7 +15,7 @@ a plain JSON record, usually through ``common.cached``) and hands it to :func:`r
 ``workers`` processes with one thread each; any other value (or ``DASK_SCHEDULER_ADDRESS`` when
 ``scheduler`` is None) is the address of a running ``dask scheduler``. Workers start with
 OMP/MKL/OPENBLAS thread counts of 1 (Dask's ``distributed.nanny.pre-spawn-environ``, set here
-explicitly, plus torch's own count through :class:`OneThread`), so N workers never oversubscribe
+explicitly, plus torch's own count through ``vp_scene.cluster.OneThread``), so N workers never oversubscribe
 N cores. A worker of a remote cluster must import the suite (``install/setup.bash``) and this
 package (``PYTHONPATH=<repo>``, the repository root); the client writes every record into its
 own results cache (workers need not share its disk; a reconstruction's clouds and images stay on the
@@ -24,17 +24,14 @@ worker that made them), see the README, "Running the benchmarks on a cluster".
 from __future__ import annotations
 
 import argparse
-import contextlib
-import logging
-import os
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Hashable, Iterator, Optional
+from typing import Any, Callable, Hashable, Optional
 
-from bench.common import ROOT, write_json
-from vp_scene.cluster import ONE_THREAD_ENV, OneThread  # noqa: F401  (the suite's one home of the engine)
-from vp_scene.cluster import TlsFiles, add_tls_args, check_cluster_args
+from bench.cache import load, write_json
+from bench.common import ROOT
+from vp_scene.cluster import TlsFiles, check_cluster_args
 from vp_scene.cluster import open_client as _open_client
 
 
@@ -49,17 +46,6 @@ class Task:
     label: str = field(default='')
 
 
-def add_cluster_args(ap: argparse.ArgumentParser) -> None:
-    """``--scheduler`` and ``--workers``, the same in every benchmark."""
-    ap.add_argument('--scheduler', default=None,
-                    help="'local' (a LocalCluster on this machine: 127.0.0.1, TLS with this run's credentials) or the "
-                         "address of a running dask scheduler, e.g. tls://10.0.0.5:8786 with --tls-* or "
-                         "tcp://10.0.0.5:8786 (default: $DASK_SCHEDULER_ADDRESS, else local)")
-    ap.add_argument('--workers', type=int, default=1,
-                    help='worker processes of the local cluster, one thread each (default 1)')
-    add_tls_args(ap)
-
-
 def open_client(scheduler: Optional[str] = None, workers: int = 1, quiet: bool = False, tls: TlsFiles = TlsFiles()):
     """:func:`vp_scene.cluster.open_client` whose local workers also import the ``bench`` package
     (the repository root on their ``PYTHONPATH``)."""
@@ -67,7 +53,7 @@ def open_client(scheduler: Optional[str] = None, workers: int = 1, quiet: bool =
 
 
 def cluster_client(args: argparse.Namespace, quiet: bool = False):
-    """:func:`open_client` of the options of :func:`add_cluster_args`; options that do not go
+    """:func:`open_client` of the ``cluster`` options (``bench.options``); options that do not go
     together (TLS files for 'local' or a tcp:// address, a missing file...): one line
     ``<prog>: error: ...`` and exit 2, before anything runs."""
     tls = TlsFiles.from_args(args)
@@ -88,17 +74,6 @@ def _record(fn: Callable[..., Any], args: tuple) -> tuple[bool, Any]:
         return False, {'error': type(exc).__name__, 'error_msg': str(exc)}
 
 
-def _cached_record(task: Task) -> Optional[Any]:
-    import json
-
-    if task.cache is None or not task.cache.exists():
-        return None
-    try:
-        return json.loads(task.cache.read_text())
-    except (json.JSONDecodeError, OSError):
-        return None  # a torn or unreadable file: the task runs again
-
-
 def run_tasks(client, tasks: list[Task], desc: str = 'tasks', timeout: Optional[float] = None) -> dict:
     """Every task's record by key, in the order given: cached ones read, the others run on the
     cluster under one progress bar; failures are ``{'error', 'error_msg'}`` records.
@@ -112,7 +87,7 @@ def run_tasks(client, tasks: list[Task], desc: str = 'tasks', timeout: Optional[
     records: dict = {}
     todo = []
     for t in tasks:
-        hit = _cached_record(t)
+        hit = None if t.cache is None else load(t.cache)
         if hit is None:
             todo.append(t)
         else:

@@ -1,19 +1,17 @@
-"""Shared pieces of the benchmarks: scenarios, the resumable JSON cache, cached planning runs."""
+"""The benchmarks' scenes and plans: the scenarios, the planner variants, cached planning runs and
+the reconstruction records of a plan (one wind realization at a time, failures recorded)."""
 from __future__ import annotations
 
 import json
 import math
-import os
-import platform
-import subprocess
-import sys
-import threading
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Optional
+from typing import Any, Optional
 
 import numpy as np
 
+from bench import cpu_capability
+from bench.cache import cached
 from vp_planner.methods import BY_NAME
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -25,83 +23,6 @@ CORN50 = ROOT.parent / 'shared' / 'data' / 'corn50'
 def default_models() -> str:
     """``../shared/data/corn50`` when present (the paper's kind of plants), else '' (procedural)."""
     return str(CORN50) if CORN50.is_dir() else ''
-
-
-def machine() -> str:
-    return f'{platform.machine()}, {os.cpu_count()} CPU cores, Python {platform.python_version()}'
-
-
-def cached(path: Path, compute: Callable[[], Any]) -> Any:
-    """The JSON cached at ``path``, or compute, store (atomically) and return it."""
-    if path.exists():
-        try:
-            return json.loads(path.read_text())
-        except json.JSONDecodeError:
-            path.unlink()  # a torn write from an interrupted run: recompute
-    value = compute()
-    write_json(path, value)
-    return value
-
-
-def json_safe(value: Any) -> Any:
-    """``value`` with every non-finite float (NaN, +-inf: a mean of nothing, a std of one value, an
-    interval of one pair) as None: JSON has no NaN (RFC 8259), and a ``NaN`` literal is a file that
-    strict readers refuse. Readers take None as "no value" (``bench.stats``)."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: json_safe(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [json_safe(v) for v in value]
-    return value
-
-
-def write_json(path: Path, value: Any, indent: Optional[int] = None) -> None:
-    """Write ``value`` to ``path`` atomically (a temporary file per writer, then ``os.replace``:
-    several cluster workers and the client write the cache concurrently), non-finite floats as
-    null (:func:`json_safe`; ``allow_nan=False``: no NaN literal ever reaches a file). The one
-    place the benchmarks write JSON (records through it, reports through :func:`write_report`)."""
-    text = json.dumps(json_safe(value), indent=indent, allow_nan=False)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f'.{path.name}.{os.getpid()}.{threading.get_ident()}.tmp')
-    tmp.write_text(text + ('\n' if indent is not None else ''))
-    os.replace(tmp, path)
-
-
-def git_commit() -> Optional[str]:
-    """The commit the working tree is at (12 hex digits), ``-dirty`` when tracked files differ
-    from it; None outside a git checkout."""
-    def git(*args: str) -> str:
-        return subprocess.run(['git', *args], cwd=ROOT, capture_output=True, text=True, timeout=30,
-                              check=True).stdout.strip()
-    try:
-        head = git('rev-parse', '--short=12', 'HEAD')
-        dirty = git('status', '--porcelain', '--untracked-files=no')
-    except (OSError, subprocess.SubprocessError):
-        return None
-    return head + ('-dirty' if dirty else '')
-
-
-def cpu_capability() -> Optional[str]:
-    """torch's CPU kernels in this process (``bench.pin_cpu_kernels``), None before torch is imported."""
-    torch = sys.modules.get('torch')
-    return torch.backends.cpu.get_cpu_capability() if torch is not None else None
-
-
-def provenance() -> dict:
-    """``command`` (the argv of this run, as ``python -m bench.<name> ...`` for a benchmark),
-    ``commit`` (:func:`git_commit`) and ``torch_cpu_capability`` (:func:`cpu_capability`): what
-    docs/results.md prints under every table."""
-    argv = list(sys.argv)
-    script = Path(argv[0]) if argv else Path()
-    if script.suffix == '.py' and script.resolve().parent == ROOT / 'bench':
-        argv = ['python', '-m', f'bench.{script.stem}'] + argv[1:]
-    return {'command': argv, 'commit': git_commit(), 'torch_cpu_capability': cpu_capability()}
-
-
-def write_report(path: Path, value: dict, indent: int = 1) -> None:
-    """A benchmark's result file (``results/...json``): ``value`` with its :func:`provenance`."""
-    write_json(path, {**value, **provenance()}, indent)
 
 
 _SCENES: dict = {}
@@ -139,20 +60,23 @@ class Variant:
 
 #: The planner variants of the benchmarks, the one table they all read: name (the reports' label
 #: and part of every cache name) -> :class:`Variant`. Benchmarks: ``planners`` (bench_planners),
-#: ``fields`` (bench_fields), ``sorties`` (bench_sorties: egp's cases, the baselines' c-cases);
-#: table1's rows name a variant and a reward model each.
+#: ``fields`` (bench_fields), ``sorties`` (bench_sorties: egp's cases, the baselines' c-cases),
+#: ``cheap`` (bench_cheap_stage: egp's wall time given to the others); table1's rows name a variant
+#: and a reward model each.
 VARIANTS = {
-    'egp': Variant({'method': 'egp'}, ('planners', 'fields', 'sorties')),       # the default planner
+    'egp': Variant({'method': 'egp'}, ('planners', 'fields', 'sorties', 'cheap')),  # the default planner
     'egp-random-init': Variant({'method': 'egp', 'structured_init': 0}, ('planners',)),  # the paper's random design
-    'egp-paper-config': Variant({'method': 'egp', 'structured_init': 0, 'bo_mode': 'global'}),  # the paper's BO
+    'egp-paper-config': Variant({'method': 'egp', 'structured_init': 0, 'bo_mode': 'global', 'sim_flights': 0}),  # the paper's BO
+    'egp-cheap': Variant({'method': 'egp', 'sim_flights': 0}),                  # egp without its simulated flights
     'egp-one-space': Variant({'method': 'egp', 'parts': 1}, ('fields',)),       # a field in one 6N-dim space
     # by parts under coverage-graph: the parts' chains weighed by the view graph (issue 42)
     'egp-graph': Variant({'method': 'egp', 'reward': 'coverage-graph'}, ('fields',)),
     'gp': Variant({'method': 'gp'}),
     'circle': Variant({'method': 'circle'}, ('planners', 'fields', 'sorties')),
     'arc': Variant({'method': 'arc'}, ('planners', 'fields', 'sorties')),
-    'sa': Variant({'method': 'sa'}, ('planners', 'fields')),
-    'random': Variant({'method': 'random'}, ('planners',)),
+    'sa': Variant({'method': 'sa'}, ('planners', 'fields', 'cheap')),
+    'random': Variant({'method': 'random'}, ('planners', 'cheap')),
+    'cmaes': Variant({'method': 'cmaes'}, ('cheap',)),
     'lawnmower': Variant({'method': 'lawnmower'}, ('fields',)),                 # nadir, 70 % overlap
     'lawnmower-oblique': Variant({'method': 'lawnmower', 'lawnmower_tilt': math.radians(30.0)}, ('fields',)),
 }
@@ -183,7 +107,17 @@ def plan_path(cache: Path, scenario: str, variant: str, seed: int, evals: int = 
 
     n = num_cameras or SCENARIOS[scenario]
     reward = reward or DEFAULT_REWARD_MODEL
-    return cache / 'plans' / f'{models_tag(models)}-{scenario}-n{n}-{variant}-{reward}-seed{seed}-e{evals}-i{init}.json'
+    request = variant_request(variant, num_cameras=n, evaluations=evals, initial_evaluations=init, seed=seed,
+                              reward=reward)
+    return cache / 'plans' / (f'{models_tag(models)}-{scenario}-n{n}-{variant}-{reward}-seed{seed}-e{evals}-i{init}'
+                              f'{flight_tag(request)}.json')
+
+
+def flight_tag(request) -> str:
+    """The part of a cached plan's name that says its simulated flights ('' for none)."""
+    flights = request.flights.flights_of(request.method)
+    return '' if not flights else '-f{}-{width}x{height}o{sift_first_octave}d{dense_scale:g}'.format(
+        flights, **request.flights.settings().to_dict())
 
 
 def plan_cell(cache: Path, scenario: str, variant: str, seed: int, evals: int = 100, init: int = 50,
@@ -205,19 +139,38 @@ def plan_cell(cache: Path, scenario: str, variant: str, seed: int, evals: int = 
 
         torch.set_num_threads(1)  # as the planner node and CLI
         noisy, _ = scene(scenario, models)
-        res = plan_views(request, noisy.points)
+        res = plan_views(request, noisy.points, simulator=flight_simulator(request, noisy))
         return {'cameras': np.asarray(res.cameras).tolist(), 'reward': float(res.reward), 'reward_model': reward,
                 'trace': [float(x) for x in res.trace], 'seconds': float(res.seconds),
                 'ensemble_weights': res.ensemble_weights, 'initial_best': res.initial_best, 'steps': res.steps,
-                'cpu_capability': cpu_capability()}
+                'cpu_capability': cpu_capability(), 'chosen_by': res.chosen_by, 'flight_score': res.flight_score,
+                'flights_note': res.flights_note, 'flights': res.flights, 'flight_plans': res.flight_plans,
+                'flight_settings': request.flights.settings().to_dict()}
     return cached(path, compute)
 
 
-def add_capture(ap) -> None:
-    """The capture flags of the reconstruction CLI (default: realistic; README 'Capture model')."""
-    from vp_recon.cli import add_capture_arguments
+def flight_simulator(request, noisy):
+    """The simulated flights of a benchmark's plan (None when the request makes none): the
+    reconstruction's own (:class:`vp_recon.sim_flights.SceneFlights`, handed to the planner from
+    here, above both packages) over the scene's plants, under the realistic capture with the
+    request's reported-pose errors (:func:`vp_planner.cli.flight_capture`). A plan made on a
+    benchmark's Dask worker flies on that cluster (``distributed.worker_client`` for each batch: the
+    planning task leaves its worker's slot to the flights while it waits for them), as the planner's
+    CLI flies on its own; elsewhere the flights run in this process, one after the other."""
+    if not request.flights.flights_of(request.method) or request.candidates.poses is not None:
+        return None
+    from vp_planner.cli import flight_capture
+    from vp_recon.sim_flights import SceneFlights
 
-    add_capture_arguments(ap)
+    try:
+        from distributed import get_worker, worker_client
+
+        get_worker()
+        client = worker_client
+    except (ImportError, ValueError):  # not on a Dask worker
+        client = None
+    return SceneFlights(noisy.scene, noisy.config, request.flights.settings(), flight_capture(request),
+                        client=client, fov=request.cameras.fov)
 
 
 def capture_of(args):

@@ -1,17 +1,20 @@
 #!/usr/bin/env python3
-"""docs/results.md from the results files: ``make docs`` (``python -m bench.docs``).
+"""docs/results.md and docs/history_results.md from the results files: ``make docs``.
 
-Every figure of docs/results.md is read from a JSON file under results/ by this script, never
-copied by hand (tests/test_docs.py regenerates it and compares it with the committed file), and
-every table names the file, the commit and the command it came from: the ``commit`` and
-``command`` the benchmark recorded (``bench.common.write_report``), or for a file written before
-benchmarks recorded them the commit that committed it and the command from the README of the time
-(:data:`LEGACY`, a mapping of this script). A Table I file whose plans were planned again and
-found to differ (``python -m bench.reference_plans`` -> results/reference_plans.json) is marked
-stale. Spreads are named: "sample std (n-1)" where this script computes them from the records,
-"population std" where a file holds one so computed.
+docs/results.md holds the current results (:data:`CURRENT`, :data:`IDEAL`), docs/history_results.md
+the runs later ones superseded (:data:`SUPERSEDED`, each with what superseded it): which is which
+is decided here, in those lists. Every figure of both is read from a file under results/ by this
+script (a JSON file, or the markdown a retired study committed beside it), never copied by hand
+(tests/test_docs.py regenerates both and compares them with the committed files), and every table
+names the file, the commit and the command it came from: the ``commit`` and ``command`` the
+benchmark recorded (``bench.publish.publish``), or for a file written before benchmarks recorded
+them the commit that committed it and the command from the README of the time (:data:`LEGACY`, a
+mapping of this script). A Table I file whose plans were planned again and found to differ
+(``python -m bench.reference_plans`` -> results/reference_plans.json) is marked stale. Spreads are
+named: "sample std (n-1)" where this script computes them from the records, "population std" where
+a file holds one so computed.
 
-``--check``: exit 1 when docs/results.md is not what the results give (nothing written).
+``--check``: exit 1 when a document is not what the results give (nothing written).
 """
 from __future__ import annotations
 
@@ -24,15 +27,14 @@ import sys
 from pathlib import Path
 from typing import Callable, Optional
 
-import numpy as np
-
 if not __package__:  # python bench/docs.py: as python -m bench.docs (bench/_script.py)
     import _script  # noqa: F401
 from bench import reference_plans  # noqa: E402
 from bench.common import ROOT  # noqa: E402
+from bench.publish import num, table  # noqa: E402
 from bench.stats import describe, describe_difference, summary  # noqa: E402
 
-OUT = ROOT / 'docs' / 'results.md'
+OUT = ROOT / 'docs'
 STD = 'mean +- sample std (n-1) (n: reconstructed; failures counted, ranked last)'
 
 #: results files written before the benchmarks recorded their command and commit:
@@ -84,13 +86,6 @@ def load(rel: str) -> dict:
     return json.loads((ROOT / rel).read_text())
 
 
-def num(x, digits: int = 2, sign: bool = False) -> str:
-    """A number, '-' for none (null, NaN)."""
-    if x is None or (isinstance(x, float) and not math.isfinite(x)):
-        return '-'
-    return f'{x:+.{digits}f}' if sign else f'{x:.{digits}f}'
-
-
 def source(rel: str, data: dict, derived_command: Optional[str] = None) -> str:
     """The line under a table: file, date, commit and command."""
     parts = [f'Source: [`{rel}`](../{rel})'] + ([str(data['date'])] if data.get('date') else [])
@@ -138,10 +133,6 @@ def record_summary(record: Optional[dict], key: str = 'chamfer') -> dict:
     if not per:
         return {'mean': math.nan, 'std': math.nan, 'n': 0, 'failed': 1}
     return summary({i: p.get(key) for i, p in enumerate(per)})
-
-
-def table(head: list[str], rows: list[list[str]]) -> list[str]:
-    return ['| ' + ' | '.join(head) + ' |', '|' + '---|' * len(head)] + ['| ' + ' | '.join(r) + ' |' for r in rows]
 
 
 def cell_grid(cells: dict, text: Callable[[dict], str], corner: str = 'method') -> list[str]:
@@ -258,81 +249,6 @@ def sorties_section(rel: str, title: str) -> str:
     return '\n'.join(lines) + '\n\n' + source(rel, data) + '\n'
 
 
-def plan_quality_section(rel: str, title: str) -> str:
-    from bench.plan_quality import plan_chamfer
-
-    data = load(rel)
-    variants = data['variants']
-    scen = list(data.get('counts') or data.get('plans'))
-    lines = [f'## {title}', '']
-    counts = data.get('counts') or {}
-    if data.get('records'):  # rewards scored again against a committed study's reconstructions
-        r = data['records']
-        lines += [f'The reconstructions are the per-plan records of `{r["file"]}` (measured {r.get("date")} at '
-                  f'`{r.get("commit")}`, not run again); the rewards are scored at this report\'s commit.', '']
-    if counts:
-        lines += ['Plans: ' + '; '.join(f'{s} {c["planned"]} planned, {c["reconstructed"]} reconstructed, '
-                                        f'{c["failed"]} failed, {c["skipped"]} skipped' for s, c in counts.items())
-                  + f' (a failed plan ranks last; split seed {data.get("split_seed")}).', '']
-    for vname, v in variants.items():
-        check, design = v.get('spearman_check'), v.get('spearman_design')
-        if check:
-            models = list(next(iter(check.values())))
-            head = ['model'] + [f'{s} check (design)' for s in check]
-            body = [[m] + [f'{num(check[s].get(m))} ({num(design[s].get(m))})' for s in check] for m in models]
-            caption = f'Spearman rho of reward against -Chamfer, `{vname}`, check half (design half)'
-            auc, auc_d = v.get('auc_check'), v.get('auc_design')
-            if auc:  # the failures' separation (ROC AUC), beside each scenario's rho
-                head += [f'{s} failed: AUC check (design)' for s in auc]
-                body = [row + [f'{num(auc[s].get(m))} ({num(auc_d[s].get(m))})' for s in auc]
-                        for row, m in zip(body, models)]
-                caption += ('; AUC: how well the reward tells the plans that failed from those that reconstructed '
-                            '(ROC AUC, 1 perfect, 0.5 chance; - where no plan of the half failed)')
-            lines += [caption + ':', '']
-        else:
-            sp = v.get('spearman') or {}
-            models = list(next(iter(sp.values()))) if sp else []
-            spr = v.get('spearman_reconstructed') or {}
-            head = ['model'] + [f'{s} all (reconstructed)' for s in sp]
-            body = [[m] + [f'{num(sp[s].get(m))} ({num(spr.get(s, {}).get(m))})' for s in sp] for m in models]
-            lines += [f'Spearman rho of reward against -Chamfer, `{vname}`, all plans (plans that reconstructed):', '']
-        lines += table(head, body) + ['']
-    main = next(iter(variants), None)
-    if data.get('spearman_check') and main and not variants[main].get('spearman_check'):
-        check, design = data['spearman_check'], data['spearman_design']
-        models = list(next(iter(check.values())))
-        lines += [f'Spearman rho on the design/check split (from the per-plan records, `{main}`), check half '
-                  '(design half):', '']
-        lines += table(['model'] + [f'{s} check (design)' for s in check],
-                       [[m] + [f'{num(check[s].get(m))} ({num(design[s].get(m))})' for s in check]
-                        for m in models]) + ['']
-    rel_ = data.get('reliability') or {}
-    for s, r in rel_.items():
-        if r:
-            lines.append(f'Realizations {r["realizations"][0]} and {r["realizations"][1]} rank the {r["n"]} plans of '
-                         f'{s} alike with rho {num(r["rho_between"])} ({r["failed_in_one_only"]} fail in one only); '
-                         f'a perfect model would reach about {num(r["ceiling_mean"])} against their mean '
-                         '(Spearman-Brown).')
-    dense = next((v for k, v in variants.items() if k.endswith('/dense') and v.get('per_plan')), None)
-    if dense:
-        fams: dict = {}
-        for s, plans in dense['per_plan'].items():
-            for p in plans:
-                failed = not math.isfinite(plan_chamfer({'recon': p['realizations']}))
-                f = fams.setdefault(p['family'], {}).setdefault(s, [0, 0, []])
-                f[0] += 1
-                f[1] += failed
-                if failed:
-                    f[2].append(float(np.median(p.get('elevation_deg') or [math.nan])))
-        lines += ['', 'Plans that failed, by family (failed in any realization reconstructed; in brackets the '
-                  'median camera elevation of each failed plan, degrees):', '']
-        lines += table(['family'] + list(dense['per_plan']),
-                       [[fam] + [f'{v[1]} of {v[0]}' + (' (' + ', '.join(f'{e:.0f}' for e in sorted(v[2])) + ')'
-                                                          if v[2] else '') if (v := by.get(s)) else '-'
-                                 for s in dense['per_plan']] for fam, by in fams.items()])
-    return '\n'.join(lines) + '\n\n' + source(rel, data) + '\n'
-
-
 # ---------------------------------------------------------------- smaller benchmarks
 
 def own_markdown(module: str) -> Callable[[str, str], str]:
@@ -345,136 +261,12 @@ def own_markdown(module: str) -> Callable[[str, str], str]:
     return render
 
 
-def recon_stages_section(rel: str, title: str) -> str:
+def committed_markdown(rel: str, title: str) -> str:
+    """A section from the markdown committed beside a results file (``results/<study>.md``): the
+    report of a study whose code has retired (it is in git history), as that study wrote it."""
     data = load(rel)
-    body = [[name.replace('_', ' '), s['capture'], '/'.join(map(str, s.get('registered_images') or [])),
-             *(num(s['seconds'].get(k), 1) for k in
-                                                                    ('render', 'sparse', 'dense', 'score', 'total')),
-             num(s.get('chamfer_x100')), num(s.get('chamfer_shape_x100'))]
-            for name, s in data['stages_one_plant'].items()]
-    lines = [f'## {title}', '', f'One plant ({Path(str(data.get("models"))).name or "procedural"}), '
-             f'{data["width"]} x {data["height"]}, a ring of views 30 degrees apart, one realization, seconds per stage '
-             'with the reconstruction on the machine\'s cores.', '']
-    lines += table(['views', 'capture', 'registered', 'render s', 'sparse s', 'dense s', 'score s', 'total s',
-                    'Chamfer x100', 'shape x100'], body)
-    return '\n'.join(lines) + '\n\n' + source(rel, data) + '\n'
-
-
-def planners_section(rel: str, title: str) -> str:
-    data = load(rel)
-    rewards = list(dict.fromkeys(k.split('/')[0] for k in data['cells']))
-    lines = [f'## {title}', '', f'Final reward after {data["evaluations"]} evaluations ({data["initial_evaluations"]} '
-             f'initial for egp), {STD.split(" (n:")[0]} over {data["seeds"]} seeds, plants {data["models"]}; '
-             '"BO beat": seeds whose final plan is better than the best plan of the initial design.', '']
-    for reward in rewards:
-        keys = [k for k in data['cells'] if k.startswith(reward + '/')]
-        scen = list(dict.fromkeys(k.split('/')[1] for k in keys))
-        methods = list(dict.fromkeys(k.split('/')[2] for k in keys))
-        body = []
-        for s in scen:
-            row = [s]
-            for m in methods:
-                c = data['cells'].get(f'{reward}/{s}/{m}')
-                if c is None:
-                    row.append('-')
-                    continue
-                st = summary(dict(enumerate(c['finals'])))
-                row.append(describe(st, 4) + (f', BO beat {c["bo_improved_seeds"]} of {len(c["finals"])}'
-                                              if 'bo_improved_seeds' in c else '') + f', {c["seconds_mean"]:.1f} s')
-            body.append(row)
-        lines += [f'Reward `{reward}`:', ''] + table(['scenario'] + methods, body) + ['']
-    return '\n'.join(lines) + '\n' + source(rel, data) + '\n'
-
-
-def reward_cost_section(rel: str, title: str) -> str:
-    data = load(rel)
-    body = [[m, num(r.get('one_plan_ms'), 1), num(r.get('one_plan_prepared_points_ms'), 1),
-             num(r.get('batch_ms_per_plan'), 1)] for m, r in data['results'].items()]
-    lines = [f'## {title}', '', f'{data["cameras"]} cameras, {data["points"]} points x {data["realizations"]} '
-             f'realizations, {data["threads"]} torch thread; `float64`/`float32`: the paper reward. Best of repeats, '
-             f'ms. The paper reward in float32 differs from float64 by at most {data["max_abs_diff_float32"]:.1e}.', '']
-    lines += table(['model', 'one plan', 'one plan, points prepared', 'per plan in a batch'], body)
-    return '\n'.join(lines) + '\n\n' + source(rel, data) + '\n'
-
-
-def cluster_section(rel: str, title: str) -> str:
-    data = load(rel)
-    body = [[str(r['workers']), str(r['tasks']), num(r['cluster_start_s'], 1), num(r['wall_s'], 1),
-             num(r['task_seconds'], 1), str(r['failed']), num(data['speedup'].get(str(r['workers'])))]
-            for r in data['runs']]
-    lines = [f'## {title}', '', 'A small Table I slice (`python -m bench.table1 ' + shlex.join(data['table1_arguments'])
-             + '`) on 1 and 2 local workers.', '']
-    lines += table(['workers', 'tasks', 'cluster start s', 'wall s', 'task s (sum)', 'failed', 'speedup'], body)
-    lines += ['', f'Same plans on every worker count: {data["same_plans"]}; same reconstruction records: '
-              f'{data["same_records"]} (largest Chamfer x100 difference {data["recon_max_abs_diff_chamfer_x100"]:.1e}); '
-              f'overhead per task {data["overhead_per_task_s"]:.2f} s.']
-    return '\n'.join(lines) + '\n\n' + source(rel, data) + '\n'
-
-
-def matching_section(rel: str, title: str) -> str:
-    data = load(rel)
-    body = [[r['size'], str(r['cameras']), r['matching'], str(r['pairs_matched']), str(r['pairs_verified']),
-             str(r.get('wide_verified')), str(r.get('images')), num(r.get('chamfer_x100')),
-             num(r.get('seconds_dense'), 1)]
-            for part in ('field', 'threshold') for r in data.get(part) or []]
-    lines = [f'## {title}', '', f'Exhaustive against pose-chosen image pairs ({data.get("scene")}; "wide": verified '
-             'pairs more than 90 degrees apart).', '']
-    lines += table(['size', 'cameras', 'matching', 'pairs matched', 'verified', 'wide verified', 'images',
-                    'Chamfer x100', 'dense s'], body)
-    return '\n'.join(lines) + '\n\n' + source(rel, data) + '\n'
-
-
-def fleet_section(rel: str, title: str) -> str:
-    data = load(rel)
-    lines = [f'## {title}', '',
-             f'Transport: {data["drones"]} drones, {data["width"]} x {data["height"]} rgb8 ({data["megabytes_per_set"]:.0f} '
-             f'MB a set), one publisher process to one subscriber: ' + ', '.join(num(s['seconds']) for s in data['sets'])
-             + f' s a set; the subscriber\'s peak RSS {num(data["subscriber_rss_mb_before"], 0)} -> '
-             + num(max(s['subscriber_max_rss_mb'] for s in data['sets']), 0) + ' MB.', '']
-    rn = data.get('recon_node_memory')
-    if rn:
-        lines += ['Recon node collecting a set (`source: fleet`), peak RSS MB: ' + ', '.join(
-            f'{k} {num(v, 0)}' for k, v in rn['recon_node_peak_rss_mb'].items()) + '.', '']
-    dp = data.get('drone_processes') or {}
-    if dp:
-        body = [[size, str(d['drones']), ', '.join(num(s['seconds_trigger_to_last_image']) for s in d['sets']),
-                 str(sum(len(s['missing_drones']) for s in d['sets'])), num(d.get('drone_rss_mb_mean'), 0)]
-                for size, d in dp.items()]
-        lines += ['Real `sim_drone` processes (camera on, ideal capture) to one subscriber:', '']
-        lines += table(['image size', 'drones', 'trigger to last image, s per set', 'images missing',
-                        'RSS MB a drone'], body) + ['']
-    ah = data.get('across_hosts_capture_set')
-    if ah:
-        lines += [f'Across hosts ({ah["from"]}): a {ah["megabytes_per_set"]:.0f} MB set, trigger to collected '
-                  f'{num(ah["trigger_to_collected_s"])} s, last capture to collected {num(ah["last_capture_to_collected_s"])} s.', '']
-    lines.append('Measured with a benchmark running beside it on 2 shared cores: noisy.')
-    return '\n'.join(lines) + '\n\n' + source(rel, data) + '\n'
-
-
-def viewer_section(rel: str, title: str) -> str:
-    data = load(rel)
-    body = [[str(r['cap']), num(r['server_reconstruction_s']), num(r['page_ready_s'], 1), num(r['frame_ms_median'], 0),
-             num(r['frame_ms_p95'], 0), num(r['fps'], 1), num(r['load_average_1min'], 1)] for r in data['runs']]
-    lines = [f'## {title}', '', f'{data["browser"]}; {data["cameras"]} frustums, a {data["scene_points"]}-point '
-             f'scene and a {data["reconstruction_points"]}-point reconstruction; per cap (points drawn per cloud).', '']
-    lines += table(['cap', 'server: reconstruction s', 'page ready s', 'frame ms median', 'frame ms p95', 'fps',
-                    'load average'], body)
-    return '\n'.join(lines) + '\n\n' + source(rel, data) + '\n'
-
-
-def ideal_table1_section(rel: str, title: str) -> str:
-    return table1_seed0_section(rel, title)
-
-
-def flights_section(rel: str, title: str) -> str:
-    data = load(rel)
-    body = [[k, describe(record_summary(c['flown']), 2), num(c['flown'].get('chamfer_shape_mean')),
-             describe(record_summary(c['ideal']), 2)] for k, c in data['cells'].items()]
-    lines = [f'## {title}', '', f'The seed-0 plans of the ideal Table I flown (capture {data["capture"]["kind"]}, '
-             f'over the blue screen), {data["resolution"][0]} x {data["resolution"][1]}, realizations 0-'
-             f'{data["realizations"] - 1}. Chamfer x100, {STD}.', '']
-    lines += table(['scenario / method', 'flown', 'flown shape', 'ideal'], body)
-    return '\n'.join(lines) + '\n\n' + source(rel, data) + '\n'
+    md = demote((ROOT / rel).with_suffix('.md').read_text(), 2).split('\n', 1)[1].lstrip()
+    return f'## {title}\n\n{md}\n{source(rel, data)}\n'
 
 
 #: (section title, results file, renderer), in the order of docs/results.md
@@ -484,38 +276,42 @@ CURRENT = [
     ('Fields on a soil that does not repeat: 3 planning seeds x 5 realizations',
      'results/rerun/issue42_fields_soil_combined/fields_combined.json', lambda rel, t: combined_section(rel, t, 'Fields')),
     ('Flights that reconstruct: Table I and the fields before and after the anchored model and ground markers',
-     'results/rerun/issue40_flights_fields/flights_check.json', own_markdown('bench.flights_check')),
+     'results/rerun/issue40_flights_fields/flights_check.json', committed_markdown),
     ('Table I, realistic capture before the anchored model: 3 planning seeds x 5 realizations',
      'results/rerun/table1_combined/table1_combined.json', lambda rel, t: combined_section(rel, t, 'Table I')),
     ('Table I, seed 0: the plans, their rewards, paired differences', 'results/table1.json', table1_seed0_section),
     ('Fields before the anchored model: 3 planning seeds x 5 realizations',
      'results/rerun/fields_combined/fields_combined.json', lambda rel, t: combined_section(rel, t, 'Fields')),
-    ('Plan-quality study, realistic capture', 'results/plan_quality.json', plan_quality_section),
+    ('Plan-quality study, realistic capture', 'results/plan_quality.json', own_markdown('bench.plan_quality')),
     ('Reward candidates against the plan-quality study', 'results/rerun/issue42_reward_candidates/reward_candidates.json',
-     own_markdown('bench.reward_candidates')),
+     committed_markdown),
     ('Real photographs', 'results/rerun/issue42_real/real/romi_real_plant.json', own_markdown('bench.bench_real')),
-    ('Plant masks', 'results/masks.json', own_markdown('bench.bench_masks')),
+    ('Plant masks', 'results/masks.json', committed_markdown),
     ('Second sortie', 'results/bench_sorties.json', sorties_section),
-    ('Coverage of the prior against the Chamfer', 'results/coverage_check.json', own_markdown('bench.coverage_check')),
-    ('Reconstruction stages', 'results/bench_recon.json', recon_stages_section),
-    ('Cheaper reconstruction settings', 'results/bench_recon_speed.json', own_markdown('bench.bench_recon_speed')),
+    ('Coverage of the prior against the Chamfer', 'results/coverage_check.json', committed_markdown),
+    ('Reconstruction stages', 'results/bench_recon.json', own_markdown('bench.bench_recon')),
+    ('Cheaper reconstruction settings', 'results/bench_recon_speed.json', committed_markdown),
     ('make run on a soil that does not repeat',
      'results/rerun/issue42_make_run_soil/bench_make_run.json', own_markdown('bench.bench_make_run')),
     ('make run: wall time per setting', 'results/bench_make_run.json', own_markdown('bench.bench_make_run')),
-    ('Planners: final reward', 'results/bench_planners.json', planners_section),
-    ('Cost of a reward evaluation', 'results/bench_reward.json', reward_cost_section),
-    ('The benchmarks on a Dask cluster', 'results/bench_cluster.json', cluster_section),
-    ('Image pairs: exhaustive against pose-chosen', 'results/bench_matching.json', matching_section),
-    ('Fleet images: transport and memory', 'results/bench_fleet_transport.json', fleet_section),
+    ('Planners: final reward', 'results/bench_planners.json', own_markdown('bench.bench_planners')),
+    ("The cheap stage: egp's CPU time given to CMA-ES, SA and random search",
+     'results/bench_cheap_stage-corn50-cpu.json', own_markdown('bench.bench_cheap_stage')),
+    ("The cheap stage: egp's wall time given to CMA-ES, SA and random search (one_plant, a loaded machine)",
+     'results/bench_cheap_stage-corn50.json', own_markdown('bench.bench_cheap_stage')),
+    ('Cost of a reward evaluation', 'results/bench_reward.json', own_markdown('bench.bench_reward')),
+    ('The benchmarks on a Dask cluster', 'results/bench_cluster.json', own_markdown('bench.bench_cluster')),
+    ('Image pairs: exhaustive against pose-chosen', 'results/bench_matching.json', committed_markdown),
+    ('Fleet images: transport and memory', 'results/bench_fleet_transport.json', committed_markdown),
     ('Fleet routes', 'results/bench_routes.json', own_markdown('bench.bench_routes')),
-    ('Viewer frame rates', 'results/bench_viewer.json', viewer_section),
+    ('Viewer frame rates', 'results/bench_viewer.json', committed_markdown),
 ]
 IDEAL = [
-    ('Table I, ideal capture', 'results/ideal/table1.json', ideal_table1_section),
+    ('Table I, ideal capture', 'results/ideal/table1.json', table1_seed0_section),
     ('Table I on the procedural plant (not tuned on), ideal capture', 'results/heldout_procedural/table1.json',
-     ideal_table1_section),
+     table1_seed0_section),
     ('Fields, ideal capture', 'results/ideal/bench_fields.json', fields_section),
-    ('Plan-quality study, ideal capture', 'results/ideal/plan_quality.json', plan_quality_section),
+    ('Plan-quality study, ideal capture', 'results/ideal/plan_quality.json', own_markdown('bench.plan_quality')),
 ]
 #: superseded runs: (title, file, renderer, what became of it); docs/history.md tells their story
 SUPERSEDED = [
@@ -533,7 +329,7 @@ SUPERSEDED = [
      fields_section, 'Superseded by the fields with 3 seeds x 5 realizations.'),
     ('Fields, row rows rerun with every SfM model registered', 'results/rerun/fields_merged_models_row/bench_fields.json',
      fields_section, 'Superseded by the fields with 3 seeds x 5 realizations.'),
-    ('Table I plans flown over the blue screen', 'results/flights_blue_screen/table1_flights.json', flights_section,
+    ('Table I plans flown over the blue screen', 'results/flights_blue_screen/table1_flights.json', committed_markdown,
      'Superseded by Table I under the realistic capture (over the textured soil).'),
     ('Second sortie, three_row and six_rect with every SfM model registered',
      'results/rerun/sorties_merged_models/bench_sorties.json', sorties_section, 'Superseded by the second sortie at a later commit.'),
@@ -544,7 +340,7 @@ SUPERSEDED = [
     ('Second sortie, grid_3x3', 'results/rerun/sorties_grid_3x3/bench_sorties.json', sorties_section,
      'Its records, at the same code, were reused by the current second sortie.'),
     ('Plan-quality study, realistic capture before the anchored model',
-     'results/rerun/plan_quality_before_anchored/plan_quality.json', plan_quality_section,
+     'results/rerun/plan_quality_before_anchored/plan_quality.json', own_markdown('bench.plan_quality'),
      'Superseded by the study rerun under the anchored model and ground markers (issue 42).'),
     ('Fields with the registration in the reward (egp planned again): 3 planning seeds x 5 realizations',
      'results/rerun/issue42_fields_combined/fields_combined.json', lambda rel, t: combined_section(rel, t, 'Fields'),
@@ -571,19 +367,19 @@ SUPERSEDED = [
      'three clusters of 4 whose anchored adjustment drifted in every realization (the points kept at the reported '
      'poses). Not kept; the option stays, and the plan-quality study reports it (coverage-object-cells).'),
     ('Plan-quality study, the rewards before the registration term',
-     'results/rerun/issue42_plan_quality_before_registration/plan_quality.json', plan_quality_section,
+     'results/rerun/issue42_plan_quality_before_registration/plan_quality.json', own_markdown('bench.plan_quality'),
      'The same reconstructions scored by the rewards before coverage weighed the registration (issue 42); '
      'superseded by the study scored again from its records.'),
     ('Plan-quality study, the anchored model before its last resort',
-     'results/rerun/issue42_plan_quality_before_last_resort/plan_quality.json', plan_quality_section,
+     'results/rerun/issue42_plan_quality_before_last_resort/plan_quality.json', own_markdown('bench.plan_quality'),
      'The same reconstructions before a drifting anchored adjustment kept the points at the reported poses; '
      'superseded by the study with them.'),
     ('Reward candidates, the anchored model before its last resort',
      'results/rerun/issue42_reward_candidates_before_last_resort/reward_candidates.json',
-     own_markdown('bench.reward_candidates'),
+     committed_markdown,
      'The candidates on the study before its failures were reconstructed again (the failures\' AUC is measured here).'),
     ('Flights that reconstruct: Table I alone', 'results/rerun/issue40_flights/flights_check.json',
-     own_markdown('bench.flights_check'), 'Superseded by the same check with the fields (issue 40).'),
+     committed_markdown, 'Superseded by the same check with the fields (issue 40).'),
     ('make run with the registration in the reward',
      'results/rerun/issue42_make_run/bench_make_run.json', own_markdown('bench.bench_make_run'),
      'Rendered over the soil tiled every 4.1 m; superseded by make run on a soil that does not repeat (its '
@@ -595,35 +391,57 @@ SUPERSEDED = [
      own_markdown('bench.bench_make_run'), 'Superseded by make run with the drones\' camera thread, the images\' '
      'heartbeat and the dense pair budget (issue 40).'),
     ('Planners, one_plant under coverage, rerun', 'results/rerun/bench_planners_one_plant_coverage.json',
-     planners_section, 'A reproduction of the planners table\'s one_plant rows under coverage.'),
+     own_markdown('bench.bench_planners'), 'A reproduction of the planners table\'s one_plant rows under coverage.'),
 ]
 
 
-def render() -> str:
-    head = ['# Results', '',
-            'Generated by `make docs` (`python -m bench.docs`) from the JSON files under `results/`: do not edit by '
-            'hand. Every table names its file, the commit it was measured at (or committed in, for files from '
-            'before the benchmarks recorded it) and its command. Machine: x86_64, 2 CPU cores shared with other '
+#: the generated documents under docs/: the current results, and the superseded runs' tables
+RESULTS_MD, SUPERSEDED_MD = 'results.md', 'history_results.md'
+
+
+def preamble(what: str) -> list[str]:
+    """The opening paragraph both documents share: what they are, how to read their tables."""
+    return [f'Generated by `make docs` (`python -m bench.docs`) from the JSON files under `results/`: do not edit '
+            f'by hand. {what} Every table names its file, the commit it was measured at (or committed in, for files '
+            'from before the benchmarks recorded it) and its command. Machine: x86_64, 2 CPU cores shared with other '
             'work, no GPU, Python 3.11 (each file records its own). Chamfer distances are x100 (Table I\'s '
             'unit); lower is better. Spreads say which they are: "sample std (n-1)" is computed here from the '
             'records, over the units named. Plans: `python -m bench.reference_plans` plans the cells of the '
             'Table I files again (results/reference_plans.json): a table whose plans come out differently is '
-            'marked **STALE**. The story of the superseded runs: [history.md](history.md).', '', '## Contents', '']
+            'marked **STALE**.']
+
+
+def render_results() -> str:
+    """docs/results.md: the current results (:data:`CURRENT`, :data:`IDEAL`)."""
+    head = ['# Results', ''] + preamble(
+        f'The runs later ones superseded are in [{SUPERSEDED_MD}]({SUPERSEDED_MD}), their story in '
+        '[history.md](history.md).') + ['', '## Contents', '']
     parts = [('Current results', CURRENT), ('Under the ideal capture (before the capture model)', IDEAL)]
     for group, items in parts:
         head.append(f'- {group}: ' + '; '.join(f'[{t}](#{anchor(t)})' for t, *_ in items))
-    head.append('- Superseded runs: ' + '; '.join(f'[{t}](#{anchor(t)})' for t, *_ in SUPERSEDED))
     body = []
     for group, items in parts:
         body += [f'# {group}', '']
         body += [fn(rel, title) for title, rel, fn in items]
-    body += ['# Superseded runs', '', 'Kept for the record (docs/history.md says what each one showed); each is '
-             'superseded as said under its title.', '']
+    return '\n'.join(head) + '\n\n' + '\n'.join(body).rstrip() + '\n'
+
+
+def render_superseded() -> str:
+    """docs/history_results.md: the superseded runs (:data:`SUPERSEDED`), each with what superseded it."""
+    head = ['# Superseded runs', ''] + preamble(
+        f'Kept for the record: each run here was superseded as said under its title; the current results are in '
+        f'[{RESULTS_MD}]({RESULTS_MD}), what each run showed in [history.md](history.md).') + ['', '## Contents', '']
+    head += [f'- [{t}](#{anchor(t)})' for t, *_ in SUPERSEDED]
+    body = []
     for title, rel, fn, by in SUPERSEDED:
-        text = fn(rel, title)
-        first, rest = text.split('\n', 1)
+        first, rest = fn(rel, title).split('\n', 1)
         body.append(f'{first}\n\n{by}\n{rest}')
     return '\n'.join(head) + '\n\n' + '\n'.join(body).rstrip() + '\n'
+
+
+def render() -> dict[str, str]:
+    """The generated documents: file name under docs/ -> its text."""
+    return {RESULTS_MD: render_results(), SUPERSEDED_MD: render_superseded()}
 
 
 def anchor(title: str) -> str:
@@ -634,18 +452,21 @@ def anchor(title: str) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    ap.add_argument('--out', type=Path, default=OUT)
-    ap.add_argument('--check', action='store_true', help='exit 1 when the file differs from what the results give')
+    ap.add_argument('--out', type=Path, default=OUT, help='folder of the documents (default: %(default)s)')
+    ap.add_argument('--check', action='store_true', help='exit 1 when a document differs from what the results give')
     args = ap.parse_args(argv)
-    text = render()
-    if args.check:
-        same = args.out.is_file() and args.out.read_text() == text
-        print(f'{args.out}: {"up to date" if same else "differs from the results: run make docs"}')
-        return 0 if same else 1
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(text)
-    print(f'wrote {args.out}')
-    return 0
+    stale = 0
+    for name, text in render().items():
+        path = args.out / name
+        if args.check:
+            same = path.is_file() and path.read_text() == text
+            stale += not same
+            print(f'{path}: {"up to date" if same else "differs from the results: run make docs"}')
+            continue
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text)
+        print(f'wrote {path}')
+    return 1 if stale else 0
 
 
 if __name__ == '__main__':

@@ -19,7 +19,6 @@ Writes ``fields_combined.md`` and ``fields_combined.json`` in ``--out``.
 """
 from __future__ import annotations
 
-import argparse
 import sys
 from datetime import datetime, timezone
 from pathlib import Path
@@ -28,7 +27,8 @@ from typing import Optional
 if not __package__:  # python bench/fields_combine.py: as python -m bench.fields_combine (bench/_script.py)
     import _script  # noqa: F401
 from bench.bench_fields import BASELINES  # noqa: E402
-from bench.common import write_report  # noqa: E402
+from bench.options import parser  # noqa: E402
+from bench.publish import publish  # noqa: E402
 from bench.table1_combine import combine, markdown, read_table  # noqa: E402
 
 #: what every joined file must agree on (a different value: a different experiment)
@@ -65,7 +65,7 @@ def load(paths: list[Path]) -> tuple[dict, dict]:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    ap = parser(__doc__)
     ap.add_argument('tables', nargs='+', type=Path, help='bench_fields.json files of bench/bench_fields.py runs, '
                                                          'oldest first')
     ap.add_argument('--out', type=Path, required=True, help='folder for fields_combined.{md,json}')
@@ -78,10 +78,7 @@ def main(argv=None) -> int:
     setting = (f'Capture {meta["capture"]}, {meta["resolution"][0]} x {meta["resolution"][1]}, '
                f'{meta["realizations"]} wind realizations, egp {meta["evaluations_per_part"]} evaluations a part, '
                f'plants {meta["models"]}; columns FIELD:N.')
-    args.out.mkdir(parents=True, exist_ok=True)
-    write_report(args.out / 'fields_combined.json', table)
-    (args.out / 'fields_combined.md').write_text(markdown(table, meta, args.tables, 'Fields', setting))
-    print(f'wrote {args.out / "fields_combined.md"}')
+    publish(args.out, 'fields_combined', table, markdown(table, meta, args.tables, 'Fields', setting))
     return 0
 
 

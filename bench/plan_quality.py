@@ -14,7 +14,9 @@ ablations of ``study_models``, :mod:`bench.reward_ablations`) scores every plan,
 -Chamfer is reported over all plans and over the plans that reconstructed at all.
 
 Phases (``--phase``): ``plans`` (generate, cached), ``recon`` (reconstruct, one cached JSON per
-plan and realization: resumable), ``analyze`` (models, Spearman, ``results/plan_quality.json``
+plan and realization: resumable), ``flights`` (one simulated flight of every plan as the planner
+flies it, ``--flight-*`` its setting: :func:`flight_cell`; the analysis then ranks by each setting's
+flights beside the reward models, ``flight-<setting>``), ``analyze`` (models, Spearman, ``results/plan_quality.json``
 and ``results/plan_quality.png``), ``all``. ``--phase analyze --records REPORT`` scores the plans
 under today's reward models against the per-plan records a committed report keeps (every score of
 every realization, failures with their reasons) instead of the cache: a reward changed, the
@@ -31,15 +33,16 @@ import math
 import sys
 import time
 from pathlib import Path
-from typing import Any
-
 import numpy as np
 
 if not __package__:  # python bench/plan_quality.py: as python -m bench.plan_quality (bench/_script.py)
     import _script  # noqa: F401
-from bench.cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
-from bench.common import (ROOT, SCENARIOS, add_capture, cached, capture_of, capture_tag, default_models,  # noqa: E402
-                          machine, models_tag, scene, variant_request, write_report)
+from bench.cache import cached  # noqa: E402
+from bench.cluster import Task, cluster_client, run_tasks  # noqa: E402
+from bench.common import ROOT, SCENARIOS, capture_of, capture_tag, models_tag, scene, variant_request  # noqa: E402
+from bench.options import parser  # noqa: E402
+from bench.publish import machine, num, publish, table  # noqa: E402
+from bench.stats import spearman  # noqa: E402
 
 CACHE = ROOT / 'results' / 'cache' / 'plan_quality'
 #: what a variant's Spearman ranks against: the dense cloud's Chamfer in map (the main figure),
@@ -51,32 +54,30 @@ SPLIT_SEED = 0
 
 
 def parse_args(argv=None) -> argparse.Namespace:
-    from vp_scene.camera import IMAGE_SIZE
-
-    ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    ap.add_argument('--models', default=default_models(), help='folder of PLY plants (default ../shared/data/corn50)')
+    ap = parser(__doc__, 'models', 'images', 'threads', 'capture', 'cluster', 'out')
     ap.add_argument('--scenarios', nargs='+', default=['one_plant', 'three_row'], choices=list(SCENARIOS))
     ap.add_argument('--realizations', default='0,1', help='wind realizations to reconstruct (comma-separated)')
-    ap.add_argument('--width', type=int, default=IMAGE_SIZE[0])
-    ap.add_argument('--threads', type=int, default=0,
-                    help='threads of the reconstruction (0: all cores; 1 when something else runs beside it)')
-    ap.add_argument('--height', type=int, default=IMAGE_SIZE[1])
     ap.add_argument('--ground', action=argparse.BooleanOptionalAction, default=None,
                     help='render a textured soil plane under the plants (default: by the capture, as vp_recon.cli)')
-    ap.add_argument('--phase', default='all', choices=['plans', 'recon', 'analyze', 'all', 'check'],
+    ap.add_argument('--phase', default='all', choices=['plans', 'recon', 'flights', 'analyze', 'all', 'check'],
                     help="check: the design/check split and the check half's Spearman from the per-plan "
                          "records already in --out's plan_quality.json (no cache needed)")
     ap.add_argument('--split-seed', type=int, default=SPLIT_SEED,
                     help='seed of the design/check split of the plans (stratified by family)')
-    add_capture(ap)
     ap.add_argument('--variants', nargs='+', default=None,
                     help='analyze: variants to report (default: every one found in the cache)')
     ap.add_argument('--records', default=None,
                     help="analyze: score the plans under today's reward models against the per-plan records of "
                          "this plan_quality.json instead of the cache (a study whose reconstructions are "
                          "committed but whose cache is gone; the reconstruction is not run again)")
-    ap.add_argument('--out', default=str(ROOT / 'results'))
-    add_cluster_args(ap)
+    from vp_scene.flights import FlightSettings
+
+    fs = FlightSettings()
+    ap.add_argument('--flight-width', type=int, default=fs.width, help="flights: the simulated flights' image width")
+    ap.add_argument('--flight-height', type=int, default=fs.height, help="flights: their image height")
+    ap.add_argument('--flight-sift-octave', type=int, default=fs.sift_first_octave, choices=(-1, 0),
+                    help="flights: their SIFT first octave")
+    ap.add_argument('--flight-dense-scale', type=float, default=fs.dense_scale, help="flights: their dense scale")
     ap.add_argument('--limit', type=int, default=0, help='reconstruct only the first n plans (0: all)')
     ap.add_argument('--ids', nargs='+', default=None,
                     help='reconstruct only these plan ids, in this order (e.g. to do the rarer families first)')
@@ -241,6 +242,62 @@ def recon_cell(scenario: str, models: str, plan: dict, k: int, args) -> dict:
     return cached(path, compute)
 
 
+# ----------------------------------------------------------------------------- simulated flights
+def flight_settings(args):
+    from vp_scene.flights import FlightSettings
+
+    return FlightSettings(args.flight_width, args.flight_height, args.flight_sift_octave, args.flight_dense_scale)
+
+
+def flight_tag(settings) -> str:
+    """The name of a flight setting in the cache and the report (``flight-2000x1500o0d0.5``)."""
+    return f'flight-{settings.width}x{settings.height}o{settings.sift_first_octave}d{settings.dense_scale:g}'
+
+
+def flight_path(scenario: str, models: str, plan: dict, settings) -> Path:
+    return CACHE / models_tag(models) / scenario / flight_tag(settings) / f'{plan["id"]}.json'
+
+
+def flight_cell(scenario: str, models: str, plan: dict, index: int, settings) -> dict:
+    """One simulated flight of a plan (cached), as the planner flies it: over the scene's plants,
+    under the draw of flight ``index`` of a planning run of seed 0 (the planner's own wind and capture
+    noise, never the study's realizations), the realistic capture with ground markers."""
+    from vp_recon.sim_flights import fly_plan
+    from vp_scene.capture import REALISTIC
+    from vp_scene.flights import flight_draws
+
+    def compute() -> dict:
+        noisy, _ = scene(scenario, models)
+        draw = flight_draws(0, 1, noisy.config.variance, start=index)[0]
+        return fly_plan(noisy.scene, noisy.config, np.asarray(plan['cameras']), draw, settings, REALISTIC).to_dict()
+    return cached(flight_path(scenario, models, plan, settings), compute)
+
+
+def run_flights(args, client, study: dict) -> dict:
+    """One simulated flight of every plan of the study (cached), flight j the plan set's j-th."""
+    settings = flight_settings(args)
+    tasks = [Task((s, p['id']), flight_cell, (s, args.models, p, j, settings),
+                  flight_path(s, args.models, p, settings), f'{s} {p["id"]} flight')
+             for s in args.scenarios for j, p in enumerate(study[s])]
+    return run_tasks(client, tasks, f'flying ({flight_tag(settings)})')
+
+
+def flight_predictors(scenario: str, models: str, plans: list[dict]) -> dict:
+    """The simulated flights found in the cache, as predictors beside the reward models:
+    {flight tag: {'reward': minus each plan's map Chamfer (-inf for a failed flight), ...}}, for
+    the settings that flew every plan of ``plans``."""
+    out = {}
+    for folder in sorted((CACHE / models_tag(models) / scenario).glob('flight-*')):
+        recs = [folder / f'{p["id"]}.json' for p in plans]
+        if not all(f.is_file() for f in recs):
+            continue
+        scores = [json.loads(f.read_text()) for f in recs]
+        vals = [-math.inf if r['failed'] or r['chamfer'] is None else -float(r['chamfer']) for r in scores]
+        out[folder.name] = {'reward': vals, 'ms_per_plan': 1000 * float(np.mean([r['seconds'] for r in scores])),
+                            'failed': int(sum(r['failed'] for r in scores))}
+    return out
+
+
 def run_plans(args, client) -> dict:
     """Each scenario's plan set (one task per scenario) -> {scenario: plans}."""
     tasks = [Task(s, plans_of, (s, args.models), plans_path(s, args.models), s) for s in args.scenarios]
@@ -387,15 +444,6 @@ def realization_agreement(plans: list[dict], key: str = 'chamfer') -> dict | Non
             'failed_in_one_only': int((np.isinf(x) != np.isinf(y)).sum())}
 
 
-def spearman(x, y) -> float:
-    from scipy.stats import spearmanr
-
-    x, y = np.asarray(x, float), np.asarray(y, float)
-    if len(x) < 3 or np.ptp(x) == 0 or np.ptp(y[np.isfinite(y)] if np.isfinite(y).any() else y) == 0:
-        return float('nan')
-    return float(spearmanr(x, y).statistic)
-
-
 def score_models(scenario: str, models: str, plans: list[dict], model_specs: dict) -> dict:
     """Reward of every plan under every model: {model: [reward per plan]} (eq. 7 averaging)."""
     from vp_planner.reward_models import make_reward
@@ -459,7 +507,8 @@ def analyze(args) -> dict:
                     continue
                 plan_set = (s, tuple(p['id'] for p in plans))  # a variant's clouds share the plans: score once
                 if plan_set not in scored:
-                    scored[plan_set] = score_models(s, args.models, plans, specs)
+                    scored[plan_set] = {**score_models(s, args.models, plans, specs),
+                                        **flight_predictors(s, args.models, plans)}
                 rewards = scored[plan_set]
                 ch = np.array([plan_chamfer(p, key) for p in plans])
                 ok = np.isfinite(ch)
@@ -505,10 +554,8 @@ def analyze(args) -> dict:
             result[key] = mv.get(key, {})
         result['split_seed'] = args.split_seed
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    write_report(out / 'plan_quality.json', result)
+    publish(out, 'plan_quality', result, markdown(result))
     plot(out / 'plan_quality.png', per_plan, main_v, specs)
-    print_table(result)
     return result
 
 
@@ -594,36 +641,93 @@ def check_from_records(args) -> dict:
         aucs = auc_halves([r['id'] for r in recorded], rewards, ch, half)
         result['auc_design'][s], result['auc_check'][s] = aucs['design'], aucs['check']
         result['split'][s] = half
-        print(f'{s}: {result["counts"][s]}')
-        for m in rewards:
-            print(f'  {m:32s} design {halves["design"][m]:+.3f}   check {halves["check"][m]:+.3f}')
-    write_report(path, result)
+    publish(path.parent, 'plan_quality', result, markdown(result))
     return result
 
 
-def print_table(result: dict) -> None:
-    for vname, v in result['variants'].items():
-        print(f'\n## {vname}')
-        for s, rhos in v['spearman'].items():
-            print(f'{s} ({v["plans"][s]} plans, {v["failed"][s]} failed; realizations {v["realizations"][s]}):')
-            rel = v.get('reliability', {}).get(s)
-            if rel:
-                print(f'  realization {rel["realizations"][0]} vs {rel["realizations"][1]}: rho {rel["rho_between"]:+.3f} '
-                      f'(noise ceiling of the mean ~{rel["ceiling_mean"]:.2f}, n {rel["n"]})')
-            check, auc = v.get('spearman_check', {}).get(s, {}), v.get('auc_check', {}).get(s, {})
-            for m, rho in sorted(rhos.items(), key=lambda kv: -np.nan_to_num(kv[1], nan=-9)):
-                print(f'  {m:40s} rho {rho:+.3f}   reconstructed {v["spearman_reconstructed"][s][m]:+.3f}   '
-                      f'check {check.get(m, float("nan")):+.3f}   check AUC {auc.get(m, float("nan")):.3f}   '
-                      f'{result["ms_per_plan"].get(s, {}).get(m, float("nan")):.1f} ms/plan')
+def markdown(data: dict) -> str:
+    """The study's report (of a result as :func:`analyze` returns it, or as its JSON holds it):
+    per variant Spearman's rho of each reward model against -Chamfer (check and design halves, the
+    failures' AUC), the noise ceiling, the failed plans by family."""
+    variants = data['variants']
+    lines = ['# Plan-quality study', '']
+    counts = data.get('counts') or {}
+    if data.get('records'):  # rewards scored again against a committed study's reconstructions
+        r = data['records']
+        lines += [f'The reconstructions are the per-plan records of `{r["file"]}` (measured {r.get("date")} at '
+                  f'`{r.get("commit")}`, not run again); the rewards are scored at this report\'s commit.', '']
+    if counts:
+        lines += ['Plans: ' + '; '.join(f'{s} {c["planned"]} planned, {c["reconstructed"]} reconstructed, '
+                                        f'{c["failed"]} failed, {c["skipped"]} skipped' for s, c in counts.items())
+                  + f' (a failed plan ranks last; split seed {data.get("split_seed")}).', '']
+    for vname, v in variants.items():
+        check, design = v.get('spearman_check'), v.get('spearman_design')
+        if check:
+            models = list(next(iter(check.values())))
+            head = ['model'] + [f'{s} check (design)' for s in check]
+            body = [[m] + [f'{num(check[s].get(m))} ({num(design[s].get(m))})' for s in check] for m in models]
+            caption = f'Spearman rho of reward against -Chamfer, `{vname}`, check half (design half)'
+            auc, auc_d = v.get('auc_check'), v.get('auc_design')
+            if auc:  # the failures' separation (ROC AUC), beside each scenario's rho
+                head += [f'{s} failed: AUC check (design)' for s in auc]
+                body = [row + [f'{num(auc[s].get(m))} ({num(auc_d[s].get(m))})' for s in auc]
+                        for row, m in zip(body, models)]
+                caption += ('; AUC: how well the reward tells the plans that failed from those that reconstructed '
+                            '(ROC AUC, 1 perfect, 0.5 chance; - where no plan of the half failed)')
+            lines += [caption + ':', '']
+        else:
+            sp = v.get('spearman') or {}
+            models = list(next(iter(sp.values()))) if sp else []
+            spr = v.get('spearman_reconstructed') or {}
+            head = ['model'] + [f'{s} all (reconstructed)' for s in sp]
+            body = [[m] + [f'{num(sp[s].get(m))} ({num(spr.get(s, {}).get(m))})' for s in sp] for m in models]
+            lines += [f'Spearman rho of reward against -Chamfer, `{vname}`, all plans (plans that reconstructed):', '']
+        lines += table(head, body) + ['']
+    main = next(iter(variants), None)
+    if data.get('spearman_check') and main and not variants[main].get('spearman_check'):
+        check, design = data['spearman_check'], data['spearman_design']
+        models = list(next(iter(check.values())))
+        lines += [f'Spearman rho on the design/check split (from the per-plan records, `{main}`), check half '
+                  '(design half):', '']
+        lines += table(['model'] + [f'{s} check (design)' for s in check],
+                       [[m] + [f'{num(check[s].get(m))} ({num(design[s].get(m))})' for s in check]
+                        for m in models]) + ['']
+    rel_ = data.get('reliability') or {}
+    for s, r in rel_.items():
+        if r:
+            lines.append(f'Realizations {r["realizations"][0]} and {r["realizations"][1]} rank the {r["n"]} plans of '
+                         f'{s} alike with rho {num(r["rho_between"])} ({r["failed_in_one_only"]} fail in one only); '
+                         f'a perfect model would reach about {num(r["ceiling_mean"])} against their mean '
+                         '(Spearman-Brown).')
+    dense = next((v for k, v in variants.items() if k.endswith('/dense') and v.get('per_plan')), None)
+    if dense:
+        fams: dict = {}
+        for s, plans in dense['per_plan'].items():
+            for p in plans:
+                failed = not math.isfinite(plan_chamfer({'recon': p['realizations']}))
+                f = fams.setdefault(p['family'], {}).setdefault(s, [0, 0, []])
+                f[0] += 1
+                f[1] += failed
+                if failed:
+                    f[2].append(float(np.median(p.get('elevation_deg') or [math.nan])))
+        lines += ['', 'Plans that failed, by family (failed in any realization reconstructed; in brackets the '
+                  'median camera elevation of each failed plan, degrees):', '']
+        lines += table(['family'] + list(dense['per_plan']),
+                       [[fam] + [f'{v[1]} of {v[0]}' + (' (' + ', '.join(f'{e:.0f}' for e in sorted(v[2])) + ')'
+                                                          if v[2] else '') if (v := by.get(s)) else '-'
+                                 for s in dense['per_plan']] for fam, by in fams.items()])
+    return '\n'.join(lines) + '\n'
 
 
 def main(argv=None) -> int:
     args = parse_args(argv)
-    if args.phase in ('plans', 'all', 'recon'):
+    if args.phase in ('plans', 'all', 'recon', 'flights'):
         with cluster_client(args) as client:
             study = run_plans(args, client)
             if args.phase in ('recon', 'all'):
                 run_recon(args, client, study)
+            if args.phase == 'flights':
+                run_flights(args, client, study)
     if args.phase in ('analyze', 'all'):
         analyze(args)
     if args.phase == 'check':

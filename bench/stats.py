@@ -100,10 +100,12 @@ def describe_difference(d: dict) -> str:
             + (', ' + ', '.join(fails) if fails else '') + ')')
 
 
-def spearman(x: Sequence[float], y: Sequence[float]) -> Optional[float]:
-    """Spearman's rho of x and y (scipy); None for fewer than 3 pairs or a constant side."""
+def spearman(x: Sequence[float], y: Sequence[float]) -> float:
+    """Spearman's rho of x and y (scipy; ties share their mean rank, an infinity ranks at its end:
+    a failure given -inf ranks last); NaN for fewer than 3 pairs or a side of one value."""
     from scipy.stats import spearmanr
 
-    if len(x) < 3 or len(set(x)) < 2 or len(set(y)) < 2:
-        return None
+    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    if len(x) < 3 or len(np.unique(x)) < 2 or len(np.unique(y)) < 2:
+        return float('nan')
     return float(spearmanr(x, y).statistic)

@@ -28,10 +28,12 @@ import numpy as np
 
 if not __package__:  # python bench/table1.py: as python -m bench.table1 (bench/_script.py)
     import _script  # noqa: F401
-from bench.cluster import Task, add_cluster_args, cluster_client, run_tasks  # noqa: E402
-from bench.common import (ROOT, SCENARIOS, VARIANTS, cached, default_models, machine, models_tag,  # noqa: E402
-                          plan_cell, add_capture, capture_of, capture_tag, known_realizations, plan_path,
-                          reconstruct_record, scene, write_report)
+from bench.cache import cached  # noqa: E402
+from bench.cluster import Task, cluster_client, run_tasks  # noqa: E402
+from bench.common import (SCENARIOS, VARIANTS, capture_of, capture_tag, known_realizations, models_tag,  # noqa: E402
+                          plan_cell, plan_path, reconstruct_record, scene)
+from bench.options import parser  # noqa: E402
+from bench.publish import machine, publish  # noqa: E402
 from bench.stats import describe, describe_difference, paired_difference, rank, realization_units, summary  # noqa: E402
 
 #: Table rows: label -> (planner variant of common.VARIANTS, reward model).
@@ -53,30 +55,19 @@ PAPER = {  # Table I of the paper, Chamfer x100 (mean, std)
 
 
 def parse_args(argv=None) -> argparse.Namespace:
-    from vp_scene.camera import IMAGE_SIZE
-
-    ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    ap.add_argument('--models', default=default_models(),
-                    help="folder of PLY plant models (default: ../shared/data/corn50 if present; '' procedural)")
+    ap = parser(__doc__, 'models', 'images', 'threads', 'capture', 'cluster', 'out')
     ap.add_argument('--scenarios', nargs='+', default=list(SCENARIOS), choices=list(SCENARIOS))
     ap.add_argument('--rows', nargs='+', default=list(ROWS), choices=list(ROWS))
     ap.add_argument('--seeds', type=int, default=5, help='planning seeds for the regret figure')
     ap.add_argument('--evals', type=int, default=100)
     ap.add_argument('--init', type=int, default=50)
-    ap.add_argument('--width', type=int, default=IMAGE_SIZE[0])
-    ap.add_argument('--threads', type=int, default=0,
-                    help='threads of the reconstruction (0: all cores; 1 when something else runs beside it)')
-    ap.add_argument('--height', type=int, default=IMAGE_SIZE[1])
     ap.add_argument('--realizations', type=int, default=0,
                     help='reconstruct the first n wind realizations of each plan (0: all K)')
     ap.add_argument('--recon-seeds', type=int, default=1,
                     help='reconstruct the plans of the first n seeds (statistics over seed x realization)')
     ap.add_argument('--recon-first', type=int, default=0,
                     help='skip the seeds below this one (a slice of more seeds beside a table that has them; '
-                         'bench/table1_combine.py joins the slices)')
-    ap.add_argument('--out', default=str(ROOT / 'results'))
-    add_capture(ap)
-    add_cluster_args(ap)
+                         'python -m bench.table1_combine joins the slices)')
     return ap.parse_args(argv)
 
 
@@ -299,9 +290,7 @@ def write_results(args, out: Path, plans, recons) -> None:
                 'failures': {str(s): f'{p["error"]}: {p["error_msg"]}' for s, p in enumerate(runs) if 'error' in p},
                 'seconds_mean': float(np.mean([p['seconds'] for p in ok])) if ok else float('nan')}
         lines.append('| ' + ' | '.join(cells) + ' |')
-    out.mkdir(parents=True, exist_ok=True)
-    (out / 'table1.md').write_text('\n'.join(lines) + '\n')
-    write_report(out / 'table1.json', table)
+    publish(out, 'table1', table, '\n'.join(lines) + '\n')
 
     fig, axes = plt.subplots(1, len(args.scenarios), figsize=(5 * len(args.scenarios), 4), squeeze=False)
     for ax, scenario in zip(axes[0], args.scenarios):
@@ -319,8 +308,7 @@ def write_results(args, out: Path, plans, recons) -> None:
         ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(out / 'simple_regret.png', dpi=120)
-    print('\n'.join(lines))
-    print(f'wrote {out / "table1.md"}, {out / "table1.json"}, {out / "simple_regret.png"}')
+    print(f'wrote {out / "simple_regret.png"}')
 
 
 if __name__ == '__main__':

@@ -21,7 +21,6 @@ means (seeds both rows have).
 """
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from datetime import datetime, timezone
@@ -30,7 +29,9 @@ from typing import Optional
 
 if not __package__:  # python bench/table1_combine.py: as python -m bench.table1_combine (bench/_script.py)
     import _script  # noqa: F401
-from bench.common import SCENARIOS, write_report  # noqa: E402
+from bench.common import SCENARIOS  # noqa: E402
+from bench.options import parser  # noqa: E402
+from bench.publish import publish  # noqa: E402
 from bench.stats import describe, describe_difference, paired_difference, rank, realization_units, summary  # noqa: E402
 from bench.table1 import BASELINES  # noqa: E402
 
@@ -155,17 +156,14 @@ def markdown(table: dict, meta: dict, paths: list[Path], title: str = 'Table I',
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    ap = parser(__doc__)
     ap.add_argument('tables', nargs='+', type=Path, help="table1.json files of bench/table1.py runs, oldest first")
     ap.add_argument('--out', type=Path, required=True, help='folder for table1_combined.{md,json}')
     args = ap.parse_args(argv)
     cells, meta = load(args.tables)
     table = {'date': datetime.now(timezone.utc).strftime('%Y-%m-%d'), **meta,
              'inputs': [str(p) for p in args.tables], **combine(cells)}
-    args.out.mkdir(parents=True, exist_ok=True)
-    write_report(args.out / 'table1_combined.json', table)
-    (args.out / 'table1_combined.md').write_text(markdown(table, meta, args.tables))
-    print(f'wrote {args.out / "table1_combined.md"}')
+    publish(args.out, 'table1_combined', table, markdown(table, meta, args.tables))
     return 0
 
 

@@ -14,8 +14,8 @@ bounded in time as well as in count).
         of /probe/cloud is matched ("discovered": seconds from its node's creation) and FILE
         exists, N clouds of P points at HZ ("cloud_sent").
     netns_probe.py goal --seconds S --trigger FILE [--cameras N --seed K]
-        waits for the /plan_views server ("server": seconds), then for FILE to exist, sends one
-        circle goal and prints the result ("result").
+        waits for the /plan_views server, its services and publishers ("server": seconds), then for
+        FILE to exist, sends one circle goal and prints the result ("result").
 """
 from __future__ import annotations
 
@@ -137,9 +137,15 @@ def goal(node, args) -> None:
     created = time.monotonic()
     client = ActionClient(node, PlanViews, "/plan_views")
     end = created + args.seconds
-    while not client.server_is_ready() and time.monotonic() < end:
+    # the server's services (server_is_ready) and its feedback and status publishers: every
+    # endpoint of the action discovered, before the test takes a link down
+    topics = ("/plan_views/_action/feedback", "/plan_views/_action/status")
+
+    def ready() -> bool:
+        return client.server_is_ready() and all(node.count_publishers(t) for t in topics)
+    while not ready() and time.monotonic() < end:
         rclpy.spin_once(node, timeout_sec=0.05)
-    if not client.server_is_ready():
+    if not ready():
         emit("error", what="no /plan_views server")
         return
     emit("server", seconds=time.monotonic() - created)

@@ -306,8 +306,7 @@ def test_scene_planner_recon_and_dispatcher_on_three_hosts(lab, ros_env, tmp_pat
     # the link flap: the planner host's cable out for 5 s; then the next plan
     goal = lab.probe("planner", "goal", ["goal", "--seconds", "60", "--trigger", str(trigger_goal), "--cameras", "3"],
                      env)
-    wait(lambda: events(goal, "server"), 30, "the goal client's /plan_views server", goal, planner)
-    time.sleep(1.0)
+    wait(lambda: events(goal, "server"), 30, "the goal client's /plan_views server (every endpoint)", goal, planner)
     t_down = lab.link("planner", up=False)
     time.sleep(LINK_DOWN_S)
     t_up = lab.link("planner", up=True)

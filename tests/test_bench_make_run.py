@@ -6,15 +6,17 @@ from __future__ import annotations
 import pytest
 
 from bench import bench_make_run as bmr
+from bench.stats import paired_interval
 
 
 def test_failed_runs_are_rows_and_pairs_skip_missing_realizations() -> None:
-    d = bmr.paired([2.0, 3.0, None, 4.0], [2.5, 3.0, 1.0, 4.5])
+    d = paired_interval([2.0, 3.0, None, 4.0], [2.5, 3.0, 1.0, 4.5])
     assert d["n"] == 3 and d["mean"] == pytest.approx(1 / 3)
     ok = {"options": bmr.VARIANTS["benchmarks"], "wall": 190.0, "returncode": 0, "chamfer_mean": 3.0,
           "chamfer_shape_mean": 1.4, "chamfer": [2.0, 4.0], "chamfer_shape": [1.3, 1.5]}
     fast = {**ok, "options": bmr.VARIANTS["make-run"], "wall": 108.0, "chamfer_mean": 3.1,
-            "vs_base": bmr.paired([2.0, 4.0], [2.1, 4.1]), "shape_vs_base": bmr.paired([1.3, 1.5], [1.3, 1.5])}
+            "vs_base": paired_interval([2.0, 4.0], [2.1, 4.1]),
+            "shape_vs_base": paired_interval([1.3, 1.5], [1.3, 1.5])}
     failed = {"options": bmr.VARIANTS["sift0"], "wall": 12.0, "returncode": 2, "error": ["x"]}
     text = bmr.markdown({"machine": "m", "date": "d", "target_s": 120.0,
                          "variants": {"benchmarks": ok, "make-run": fast, "sift0": failed}})

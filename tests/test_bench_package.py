@@ -6,9 +6,12 @@ from __future__ import annotations
 
 import ast
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
+
+import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 BENCH = REPO / "bench"
@@ -59,3 +62,18 @@ def test_only_the_script_shim_touches_sys_path_for_bench():
     assert found == [], found
     importers = [p for p in sorted((REPO / "tests").glob("*.py")) if "from bench" in p.read_text()]
     assert importers and [hit for p in importers for hit in _touches_sys_path(p)] == []
+
+
+def test_the_shared_options_are_spelt_once():
+    """--models, --out, --width/--height, --threads, the capture's and the cluster's options come
+    from bench.options: the same flags and defaults in every benchmark that takes them."""
+    from bench import bench_fields, bench_sorties, options, plan_quality, table1
+
+    shared = vars(options.parser("", *options.SHARED).parse_args([]))
+    for module in (table1, bench_fields, bench_sorties, plan_quality):
+        args = vars(module.parse_args([]))
+        assert {k: args[k] for k in shared} == shared, module.__name__
+    flags = re.compile(r"""add_argument\(\s*["']--(models|capture|scheduler|tls-[a-z-]+)["']""")
+    assert [p.name for p in BENCH.glob("*.py") if p.name != "options.py" and flags.search(p.read_text())] == []
+    with pytest.raises(ValueError, match="no shared option 'model'"):
+        options.parser("", "model")

@@ -1,4 +1,4 @@
-"""bench/stats.py: sample std with n, failures counted and ranked last, paired t-intervals."""
+"""bench/stats.py: sample std with n, failures counted and ranked last, paired t-intervals, Spearman."""
 from __future__ import annotations
 
 import math
@@ -81,3 +81,15 @@ def test_a_row_with_no_success_reads_failed_not_nan():
     assert describe(summary({0: 1.0, 1: 2.0})) == "1.500 +- 0.707 (n=2)"
     assert describe_difference(paired_difference({0: None}, {0: 1.0})) == "no pair (n=0, 1 only a failed)"
     assert describe_difference(paired_difference({0: 1.0, 1: 2.0}, {0: 3.0, 1: None})) == "-2.000 (n=1, 1 only b failed)"
+
+
+def test_one_spearman_ranks_a_failure_last_and_is_nan_where_undefined():
+    """The one Spearman of the benchmarks (plan quality, real scans): -inf (a failure) ranks at its
+    end; fewer than 3 pairs or a side of one value has no rho: NaN (null in a result file)."""
+    from bench.stats import spearman
+
+    assert spearman([0.9, 0.8, 0.7, 0.1], [-1.0, -2.0, -3.0, -math.inf]) == 1.0
+    assert spearman([3, 1, 2, 5], [1, 2, 3, 4]) == pytest.approx(sps.spearmanr([3, 1, 2, 5], [1, 2, 3, 4]).statistic)
+    assert math.isnan(spearman([1.0, 2.0], [1.0, 2.0]))
+    assert math.isnan(spearman([1.0, 1.0, 1.0], [1.0, 2.0, 3.0]))
+    assert math.isnan(spearman([1.0, 2.0, 3.0], [-math.inf] * 3))

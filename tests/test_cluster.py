@@ -117,33 +117,41 @@ def test_failing_task_recorded_with_named_error_others_finish(capfd):
     assert "SIGTERM" not in err and "Aborted at" not in err, err[-2000:]
 
 
-def _slow_square(x: int) -> dict:
+def _held_square(x: int, folder: str) -> dict:
+    """x squared once the test lets it go: it marks its start (``started-<pid>-<x>`` in ``folder``)
+    and waits for ``folder/release`` (120 s at most), so that a worker killed meanwhile dies in
+    the middle of it."""
     import os
     import time
-    time.sleep(1.5)
+    from pathlib import Path
+
+    Path(folder, f"started-{os.getpid()}-{x}").touch()
+    deadline = time.monotonic() + 120
+    while not Path(folder, "release").exists() and time.monotonic() < deadline:
+        time.sleep(0.02)
     return {"x": x, "square": x * x, "pid": os.getpid()}
 
 
-def test_worker_sigkilled_mid_run_its_tasks_finish_on_the_other():
+def test_worker_sigkilled_mid_run_its_tasks_finish_on_the_other(tmp_path):
     n = 12
-    tasks = [cluster.Task(i, _slow_square, (i,)) for i in range(n)]
+    tasks = [cluster.Task(i, _held_square, (i, str(tmp_path))) for i in range(n)]
     with cluster.open_client("local", 2, quiet=True) as client:
         pids = client.run(os.getpid)  # worker address -> pid
         assert len(pids) == 2
         victim = sorted(pids.values())[0]
         killed = threading.Event()
 
-        def kill_when_busy() -> None:
+        def kill_mid_task() -> None:
             deadline = time.monotonic() + 60
-            while time.monotonic() < deadline:  # both workers are running tasks
-                if sum(len(v) for v in client.processing().values()) >= 2:
+            while time.monotonic() < deadline:  # the victim has started a task, which waits for us
+                if list(tmp_path.glob(f"started-{victim}-*")):
+                    os.kill(victim, signal.SIGKILL)
+                    killed.set()
                     break
-                time.sleep(0.1)
-            time.sleep(0.5)  # mid-task
-            os.kill(victim, signal.SIGKILL)
-            killed.set()
+                time.sleep(0.05)
+            (tmp_path / "release").touch()
 
-        killer = threading.Thread(target=kill_when_busy, daemon=True)
+        killer = threading.Thread(target=kill_mid_task, daemon=True)
         killer.start()
         rec = cluster.run_tasks(client, tasks, timeout=DEADLINE_S)
         killer.join(timeout=70)
@@ -152,9 +160,9 @@ def test_worker_sigkilled_mid_run_its_tasks_finish_on_the_other():
         os.kill(victim, 0)
     assert sorted(rec) == list(range(n))
     assert all("error" not in r and r["square"] == i * i for i, r in rec.items()), rec
-    # the victim finished fewer than its share: the rest ran elsewhere (the other worker or the
-    # nanny's restarted one)
-    assert sum(r["pid"] == victim for r in rec.values()) < n
+    # the victim finished none of its tasks: they ran elsewhere (the other worker or the nanny's
+    # restarted one)
+    assert all(r["pid"] != victim for r in rec.values())
 
 
 def _recon_plan(tmp_path: Path) -> Path:
@@ -239,6 +247,20 @@ def dask_scheduler(tmp_path: Path, env: dict):
     worker = NodeProcess([dask, "worker", address, "--host", "127.0.0.1", "--nthreads", "1", "--no-dashboard"],
                          env, tmp_path / "worker.log")
     return sched, worker, address
+
+
+def worker_busy(address: str, timeout: float) -> bool:
+    """Whether a worker of the scheduler at ``address`` is given a task within ``timeout`` s (the
+    scheduler's ``processing``: what each worker runs now); the client is gone when it returns."""
+    from distributed import Client
+
+    deadline = time.monotonic() + timeout
+    with Client(address, timeout=timeout, set_as_default=False) as client:
+        while time.monotonic() < deadline:
+            if any(client.processing().values()):
+                return True
+            time.sleep(0.05)
+    return False
 
 
 def test_a_scheduler_lost_mid_reconstruction_is_one_line_and_a_recorded_failure(tmp_path):

@@ -62,12 +62,16 @@ def test_table1_slice_on_a_scheduler_and_two_workers_in_namespaces(lab, tmp_path
 
 
 KILL_CLIENT = """
-import json, os, signal, threading, time
+import glob, json, os, signal, threading, time
 from bench import cluster
 
-def slow_square(x):
+def held_square(x, folder):
+    # marks its start, then waits for the test's release: a worker killed meanwhile dies mid-task
     import os, time
-    time.sleep(1.5)
+    open(os.path.join(folder, f'started-{{os.getpid()}}-{{x}}'), 'w').close()
+    deadline = time.monotonic() + 120
+    while not os.path.exists(os.path.join(folder, 'release')) and time.monotonic() < deadline:
+        time.sleep(0.02)
     return {{'x': x, 'square': x * x, 'pid': os.getpid()}}
 
 with cluster.open_client({sched!r}, quiet=True) as client:
@@ -76,17 +80,20 @@ with cluster.open_client({sched!r}, quiet=True) as client:
     victim = pids[next(a for a in pids if {victim_addr!r} in a)]
     killed = []
 
-    def kill_when_busy():
+    def kill_mid_task():
         deadline = time.monotonic() + 60
-        while time.monotonic() < deadline and sum(len(v) for v in client.processing().values()) < 2:
-            time.sleep(0.1)
-        time.sleep(0.5)  # mid-task
-        os.kill(victim, signal.SIGKILL)
-        killed.append(victim)
+        while time.monotonic() < deadline:  # the victim has started a task, which waits for us
+            if glob.glob(os.path.join({folder!r}, f'started-{{victim}}-*')):
+                os.kill(victim, signal.SIGKILL)
+                killed.append(victim)
+                break
+            time.sleep(0.05)
+        open(os.path.join({folder!r}, 'release'), 'w').close()
 
-    killer = threading.Thread(target=kill_when_busy, daemon=True)
+    killer = threading.Thread(target=kill_mid_task, daemon=True)
     killer.start()
-    rec = cluster.run_tasks(client, [cluster.Task(i, slow_square, (i,)) for i in range(12)], timeout=300)
+    tasks = [cluster.Task(i, held_square, (i, {folder!r})) for i in range(12)]
+    rec = cluster.run_tasks(client, tasks, timeout=300)
     killer.join(timeout=70)
     left = len(client.scheduler_info()['workers'])
 open({out!r}, 'w').write(json.dumps({{'killed': killed, 'victim': victim, 'left': left,
@@ -108,7 +115,9 @@ def test_a_worker_killed_in_its_namespace_loses_no_task(lab, tmp_path):  # noqa:
         lab.start(host, "worker", [dask, "worker", sched, "--host", lab.addr[host], "--nthreads", "1",
                                    "--no-nanny", "--no-dashboard", "--name", host], env)
     out = tmp_path / "kill.json"
-    code = KILL_CLIENT.format(sched=sched, victim_addr=lab.addr["recon"], out=str(out))
+    held = tmp_path / "held"
+    held.mkdir()
+    code = KILL_CLIENT.format(sched=sched, victim_addr=lab.addr["recon"], out=str(out), folder=str(held))
     res = subprocess.run(["ip", "netns", "exec", lab.ns["scene"], sys.executable, "-c", code], env=env,
                          capture_output=True, text=True, timeout=420)
     assert res.returncode == 0, res.stderr[-3000:]
@@ -117,4 +126,4 @@ def test_a_worker_killed_in_its_namespace_loses_no_task(lab, tmp_path):  # noqa:
     rec = {k: v for k, v in got["records"]}
     assert sorted(rec) == list(range(12))
     assert all("error" not in r and r["square"] == i * i for i, r in rec.items()), rec
-    assert sum(r["pid"] == got["victim"] for r in rec.values()) < 12  # the rest ran on the other host
+    assert all(r["pid"] != got["victim"] for r in rec.values())  # its task ran again on the other host

@@ -124,6 +124,18 @@ def make_certificate(folder: Path) -> TlsFiles:
     return TlsFiles(str(cert_path), str(cert_path), str(key_path))
 
 
+def scheduler_address(info: Path, scheduler: NodeProcess, timeout: float) -> str:
+    """The address in a ``dask scheduler --scheduler-file`` once the file holds it whole (dask
+    writes it in place: a reader may see it empty or cut)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and scheduler.alive():
+        try:
+            return json.loads(info.read_text())["address"]
+        except (OSError, ValueError, KeyError):  # not there yet, or not written whole
+            time.sleep(0.1)
+    raise AssertionError(f"no address in {info} after {timeout:.0f} s:\n{scheduler.output()[-2000:]}")
+
+
 def test_a_tls_cluster_serves_the_client_with_the_certificate_and_refuses_others(tmp_path, capfd) -> None:
     """Item 2, a cluster of your own machines: ``dask scheduler --protocol tls`` and ``dask worker``
     with the certificate (README's commands, on 127.0.0.1); ``open_client('tls://...', tls=...)``,
@@ -139,12 +151,7 @@ def test_a_tls_cluster_serves_the_client_with_the_certificate_and_refuses_others
     procs = [NodeProcess([dask, "scheduler", "--protocol", "tls", "--host", "127.0.0.1", "--port", "0",
                           "--no-dashboard", "--scheduler-file", str(info), *files], env, tmp_path / "scheduler.log")]
     try:
-        deadline = time.monotonic() + 60
-        while not info.exists() and time.monotonic() < deadline and procs[0].alive():
-            time.sleep(0.1)
-        assert info.exists(), procs[0].output()[-2000:]
-        time.sleep(0.2)  # the file is written whole, but give it its moment
-        address = json.loads(info.read_text())["address"]
+        address = scheduler_address(info, procs[0], 60)
         assert address.startswith("tls://127.0.0.1:"), address
         procs.append(NodeProcess([dask, "worker", address, "--host", "127.0.0.1", "--nthreads", "1", "--no-nanny",
                                   "--no-dashboard", "--name", "w0", *files], env, tmp_path / "worker.log"))

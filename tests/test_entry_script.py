@@ -31,6 +31,9 @@ ECHO = REPO / "tests" / "echo_camera_plan.py"
 SMALL_REALISTIC = ["--scenario", "one_plant", "--cameras", "4", "--points-per-plant", "3000", "--realizations", "2",
                    "--width", "800", "--height", "600"]
 SMALL = [*SMALL_REALISTIC, "--capture", "ideal"]  # the plumbing; realistic: test_recon_capture, test_two_sorties
+#: egp's simulated flights, as few and small as they go (many: tests/test_flights_nodes.py)
+ONE_FLIGHT = ["--sim-flights", "1", "--flight-width", "640", "--flight-height", "480", "--flight-sift-octave", "-1",
+              "--flight-dense-scale", "0.5"]
 
 
 def alive(pid: int) -> bool:
@@ -54,7 +57,7 @@ def test_end_to_end_small_mission(ros_env, tmp_path) -> None:
     echo = NodeProcess([sys.executable, str(ECHO), str(echo_out), "600"], ros_env, tmp_path / "echo.log")
     try:
         proc = subprocess.run([sys.executable, str(SCRIPT), *SMALL, "--method", "egp", "--evals", "16",
-                               "--init", "10", "--drones", "3", "--out", str(out), "--timeout", "500"],
+                               "--init", "10", "--drones", "3", "--out", str(out), "--timeout", "500", *ONE_FLIGHT],
                               env=ros_env, capture_output=True, text=True, timeout=560)
         log = proc.stdout + proc.stderr
         assert proc.returncode == 0, log[-6000:]
@@ -73,6 +76,11 @@ def test_end_to_end_small_mission(ros_env, tmp_path) -> None:
     # SIFT keeps its doubled first octave below SIFT_OCTAVE0_FROM pixels (these are 800 wide)
     assert summary["recon_settings"] == {"sift_first_octave": -1, "dense_scale": 0.7}
     assert 0 < summary["reward"] <= 1
+    # the plan's one simulated flight, flown by the recon node, chose it (the circle pattern, flown first)
+    assert summary["chosen_by"] == "flights" and summary["flights_note"] == "", summary["flights_note"]
+    (flight,) = summary["flights"]
+    assert flight["source"] == "circle" and flight["draw"]["capture_seed"] >= 2 ** 31 and flight["seconds"] > 0
+    assert summary["flight_score"] == flight["score"]["chamfer"] > 0 and "simulated flights" in proc.stdout
     no_truth = summary["no_truth"]  # issue 20, part 4: what a real flight can check
     assert no_truth["registered_images"] >= 2 and 0 < no_truth["coverage_of_prior"] <= 1
     assert no_truth["mean_reprojection_error"] > 0 and no_truth["mean_track_length"] >= 2

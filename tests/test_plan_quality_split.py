@@ -82,7 +82,8 @@ def test_check_reads_the_main_variant_of_the_capture(tmp_path):
     records = []
     for i, p in enumerate(plans):
         chamfer = float(rng.uniform(1, 5))
-        records.append({"id": p["id"], "reward": {"coverage": -chamfer, "paper": float(rng.uniform())},
+        records.append({"id": p["id"], "family": p["family"],
+                        "reward": {"coverage": -chamfer, "paper": float(rng.uniform())},
                         "realizations": {"0": {"error": "RECONSTRUCTION_FAILED"} if i == 0 else {"chamfer": chamfer}}})
     variant = f"{plan_quality.variant_name(args)}/dense"
     assert variant == "2000x1500-realistic-anchored/dense"

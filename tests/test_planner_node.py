@@ -9,6 +9,7 @@ import signal
 import time
 
 import numpy as np
+import psutil
 import pytest
 
 from action_msgs.msg import GoalStatus
@@ -49,10 +50,30 @@ def wait_for_server(client, action: ActionClient, planner) -> None:
     client.spin_until(lambda: False, SETTLE_S)
 
 
-def goal(num_cameras=4, method="circle", evaluations=20, initial=0, seed=1, reward="") -> PlanViews.Goal:
+def plan_process_cpu_s(planner_pid: int) -> float:
+    """CPU seconds of the planner's plan process (:mod:`vp_planner.plan_process`: forked by the
+    fork server the planner started, so the planner's grandchild); 0 while there is none."""
+    try:
+        family = psutil.Process(planner_pid).children(recursive=True)
+    except psutil.Error:
+        return 0.0
+    total = 0.0
+    for proc in family:
+        try:
+            if proc.ppid() != planner_pid:
+                times = proc.cpu_times()
+                total = max(total, times.user + times.system)
+        except psutil.Error:  # ended meanwhile
+            continue
+    return total
+
+
+def goal(num_cameras=4, method="circle", evaluations=20, initial=0, seed=1, reward="", sim_flights=0) -> PlanViews.Goal:
+    """A goal; without simulated flights (the plumbing: there is no recon node here to fly them;
+    tests/test_flights_nodes.py flies them)."""
     g = PlanViews.Goal()
-    g.num_cameras, g.method, g.evaluations, g.initial_evaluations, g.seed, g.reward = (
-        num_cameras, method, evaluations, initial, seed, reward)
+    g.num_cameras, g.method, g.evaluations, g.initial_evaluations, g.seed, g.reward, g.sim_flights = (
+        num_cameras, method, evaluations, initial, seed, reward, sim_flights)
     return g
 
 
@@ -158,7 +179,8 @@ def test_cancel_during_the_feasible_plan_search(system) -> None:
                                                             initial=50)), TIMEOUT)
     assert handle.accepted
     assert client.spin_until(lambda: "planning 100 cameras" in planner.output(), TIMEOUT), planner.output()
-    time.sleep(1.0)  # inside the search
+    # inside the search: the plan's own process has computed for a second
+    assert client.spin_until(lambda: plan_process_cpu_s(planner.pid) >= 1.0, TIMEOUT), planner.output()
     client.spin_future(handle.cancel_goal_async(), TIMEOUT)
     t0 = time.monotonic()
     res = client.spin_future(handle.get_result_async(), 20.0)

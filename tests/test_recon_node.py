@@ -158,7 +158,7 @@ def test_a_lost_scheduler_is_an_error_score_and_the_node_serves_on(recon_system,
     the node serves on."""
     import os
 
-    from test_cluster import dask_scheduler  # tests/: a dask scheduler and worker as processes
+    from test_cluster import dask_scheduler, worker_busy  # tests/: a dask scheduler and worker as processes
 
     env = dict(os.environ, OMP_NUM_THREADS="1", PYOPENGL_PLATFORM="egl")
     env.pop("DASK_SCHEDULER_ADDRESS", None)
@@ -168,7 +168,7 @@ def test_a_lost_scheduler_is_an_error_score_and_the_node_serves_on(recon_system,
         client, pub, scores, _clouds, recon = recon_system(scheduler=address, width=1280, height=960)
         pub.publish(pose_array(ring()))
         assert recon.wait_for_output(f"realizations in parallel on Dask ({address}", TIMEOUT), recon.output()[-3000:]
-        time.sleep(1.0)  # its 2 realizations take about 5 s each on the one worker
+        assert worker_busy(address, TIMEOUT), recon.output()[-3000:]  # a realization on the worker
         sched.signal(signal.SIGKILL)
         assert client.spin_until(lambda: aggregate(scores), 60), recon.output()[-3000:]
     finally:
@@ -176,7 +176,11 @@ def test_a_lost_scheduler_is_an_error_score_and_the_node_serves_on(recon_system,
         sched.stop()
     agg = aggregate(scores)[0]
     assert agg.error_code == Score.UNKNOWN and f"lost the Dask scheduler {address}" in agg.error_msg, agg.error_msg
-    time.sleep(1.0)
+    # it serves on: the next plan is answered (an empty one, at once), and the lost scheduler left
+    # no traceback in the log meanwhile
+    pub.publish(pose_array(np.zeros((0, 6)), stamp=2))
+    assert client.spin_until(lambda: len(aggregate(scores)) >= 2, 60), recon.output()[-3000:]
+    assert aggregate(scores)[1].error_code == Score.EMPTY_PLAN, aggregate(scores)[1].error_msg
     assert recon.alive() and "Traceback" not in recon.output(), recon.output()[-3000:]
 
 

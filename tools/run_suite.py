@@ -11,6 +11,10 @@ route (``/fleet/assignment``); with ``--source fleet`` (the default with drones)
 flies the routes once per wind realization the recon node asks for (``fly_on: capture``), the
 drones photograph each of their poses and the recon node reconstructs their images
 (``--source render``: it renders the plan itself).
+The planner's simulated flights (egp's, by default) fly through the recon node's ``/simulate_flights``
+on its cluster (``--sim-flights 0``: none, the cheap reward chooses; ``--flight-*``: their setting, the
+planner's parameters); summary.json says how the plan was chosen (``chosen_by``), its ``flight_score``
+and every flight (``flights``: the plan's source, the draw, the score, seconds).
 A ``recorder`` node (vp_recon) writes the run's topics to ``<out>/run.mcap`` (a ROS 2 bag that
 ``ros2 bag info``/``play`` and Foxglove open); it is started first and stopped last. Everything is shut down on success,
 on Ctrl-C and when any node dies; the nodes die with this script even when it is killed with
@@ -63,6 +67,7 @@ from typing import Dict, List, Optional
 from node_process import NodeProcess, node_command
 from vp_planner.methods import DEFAULT_METHOD, METHODS  # the registry (torch-free)
 from vp_scene.camera import IMAGE_SIDE_RANGE, IMAGE_SIZE, image_side_arg
+from vp_scene.flights import MAX_FLIGHTS, FlightSettings
 from vp_scene.limits import MAX_SEED, seed_arg
 from vp_scene.scene_spec import SCENE
 
@@ -145,6 +150,19 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
     ap.add_argument('--dense-scale', type=float, default=0.7,
                     help='recon: dense stereo on the images resized by this factor, (0, 1] (default 0.7; '
                          'the benchmarks: 1)')
+    flight = FlightSettings()  # the planner's defaults (vp_planner.request's, from vp_scene.flights)
+    ap.add_argument('--sim-flights', type=int, default=None,
+                    help="simulated flights that check the cheap reward's plans, flown by the recon node (-1: the "
+                         "method's default, egp 12; 0: none, the cheap reward chooses; default: the planner's, -1)")
+    ap.add_argument('--flight-width', type=image_side_arg, default=None,
+                    help=f"the simulated flights' image width, pixels (default: the planner's, {flight.width})")
+    ap.add_argument('--flight-height', type=image_side_arg, default=None,
+                    help=f"the simulated flights' image height, pixels (default: the planner's, {flight.height})")
+    ap.add_argument('--flight-sift-octave', type=int, default=None, choices=(-1, 0),
+                    help=f"the simulated flights' SIFT first octave (default: the planner's, {flight.sift_first_octave})")
+    ap.add_argument('--flight-dense-scale', type=float, default=None,
+                    help=f"the simulated flights' dense step on the images resized by this factor, 0.1..1 (default: "
+                         f"the planner's, {flight.dense_scale:g})")
     ap.add_argument('--managed', action='store_true',
                     help='start the planner and the dispatcher as managed lifecycle nodes (managed:=true) and drive '
                          'their transitions here (configure, activate), as a lifecycle manager does')
@@ -162,6 +180,13 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
         ap.error('--evals must be >= 1')
     if not 0 < args.dense_scale <= 1:
         ap.error('--dense-scale must be in (0, 1]')
+    if args.sim_flights is not None and not -1 <= args.sim_flights <= MAX_FLIGHTS:
+        ap.error(f'--sim-flights must be in [-1, {MAX_FLIGHTS}], got {args.sim_flights}')
+    try:  # the flights' setting: the planner's own checks, here before anything starts
+        FlightSettings(**{k: v for k, v in zip(('width', 'height', 'sift_first_octave', 'dense_scale'), (
+            args.flight_width, args.flight_height, args.flight_sift_octave, args.flight_dense_scale)) if v is not None})
+    except ValueError as exc:
+        ap.error(f'--flight-*: {exc}')
     if args.sift_first_octave is None:
         args.sift_first_octave = 0 if args.width >= SIFT_OCTAVE0_FROM else -1
     if args.cameras2 < 0 or args.cameras2 == 1:
@@ -281,6 +306,7 @@ class Mission:
         self._spin = threading.Thread(target=self._spin_forever, daemon=True)
         self._spin.start()
         self.progress = None
+        self.flights_bar = None
         self.feedback_seen = False
 
     def _spin_forever(self) -> None:
@@ -297,6 +323,17 @@ class Mission:
     def on_feedback(self, fb_msg) -> None:
         self.feedback_seen = True
         fb = fb_msg.feedback
+        if fb.flights_total:  # the simulated flights, after the evaluations
+            from tqdm import tqdm
+            if self.flights_bar is None:
+                self.close_bars()
+                self.flights_bar = tqdm(total=fb.flights_total, desc='simulated flights', unit='flight',
+                                        file=sys.stdout, dynamic_ncols=True)
+            self.flights_bar.n = fb.flights_done
+            last = fb.last_flight_chamfer
+            self.flights_bar.set_postfix({'last map Chamfer': 'failed' if math.isnan(last) else f'{last:.4f} m'},
+                                         refresh=True)
+            return
         if self.progress is None:
             from tqdm import tqdm
             self.progress = tqdm(total=fb.evaluations_total, desc=f'planning ({self.args.method})',
@@ -360,9 +397,14 @@ class Mission:
 
         return ClientGoalHandle(self.client, goal_id, self.PlanViews.Impl.SendGoalService.Response(accepted=True))
 
+    def close_bars(self) -> None:
+        for bar in (self.progress, self.flights_bar):
+            if bar is not None:
+                bar.close()
+        self.progress = self.flights_bar = None
+
     def close(self) -> None:
-        if self.progress is not None:
-            self.progress.close()
+        self.close_bars()
         self.executor.shutdown(timeout_sec=1.0)
         self.node.destroy_node()
         self.rclpy.try_shutdown(context=self.context)
@@ -453,16 +495,16 @@ def fly_sortie(mission: Mission, nodes: List[NodeProcess], deadline: float, args
     result_future = handle.get_result_async()
     wait_for(result_future.done, nodes, deadline, 'the plan')
     result = result_future.result().result
-    if mission.progress is not None:
-        mission.progress.close()
-        mission.progress = None
+    mission.close_bars()
     if result.error_code != 0:
         outcome.append(f'error: planning failed (error_code {result.error_code}): {result.error_msg}')
         return None
     poses = msgs_to_poses(result.plan.poses).tolist()
     cameras = [list(result.cameras[i:i + 6]) for i in range(0, len(result.cameras), 6)]
-    print(f'plan: {result.reward_model} reward {result.reward:.4f} after {result.evaluations} evaluations '
-          f'({result.planning_time:.1f} s)', flush=True)
+    print(f'plan: {result.reward_model} reward {result.reward:.4f} after {result.evaluations} evaluations'
+          + (f', chosen by {len(result.flights)} simulated flights (map Chamfer {result.flight_score:.4f} m)'
+             if result.chosen_by == 'flights' else '')
+          + f' ({result.planning_time:.1f} s)' + (f'; {result.flights_note}' if result.flights_note else ''), flush=True)
     for i, pose in enumerate(poses):
         print(f'  cam {i}: position ({pose[0]:+.3f}, {pose[1]:+.3f}, {pose[2]:+.3f}) m  '
               f'quaternion ({pose[3]:+.3f}, {pose[4]:+.3f}, {pose[5]:+.3f}, {pose[6]:+.3f})',
@@ -497,7 +539,7 @@ def fly_sortie(mission: Mission, nodes: List[NodeProcess], deadline: float, args
               'images': agg.num_images, 'reward': result.reward,
               'chamfer_mean': None if agg.error_code else agg.chamfer,
               'chamfer_std': None if agg.error_code else agg.chamfer_std,
-              'error_code': agg.error_code, 'seconds': time.monotonic() - started}
+              'error_code': agg.error_code, 'chosen_by': result.chosen_by, 'seconds': time.monotonic() - started}
     return {'result': result, 'fleet': fleet, 'agg': agg, 'per': per, 'cloud': cloud, 'record': record}
 
 
@@ -505,7 +547,8 @@ def run(args: argparse.Namespace) -> int:
     from vp_planner.routes import FlightModel, launch_row
     from vp_recon.errors import ERROR_NAMES
     from vp_scene.folders import write_atomic
-    from vp_scene.messages import msgs_to_poses, path_poses, point_array, pose_array, score_record  # conversions' one home
+    from vp_scene.messages import (flight_record, msgs_to_poses, path_poses, point_array, pose_array,  # conversions'
+                                   score_record)  # one home
 
     out = Path(args.out).resolve()
     try:
@@ -554,10 +597,13 @@ def run(args: argparse.Namespace) -> int:
         nodes.append(start_node('recorder', 'vp_recon', 'recorder', {'output': str(out / RECORDING)},
                                 {**env, 'OMP_NUM_THREADS': '1'}, out, lock))
         nodes.append(start_node('scene', 'vp_scene', 'scene', scene_params, {**env, 'OMP_NUM_THREADS': '1'}, out))
+        flights = {k: v for k, v in (('sim_flights', args.sim_flights), ('flight_width', args.flight_width),
+                                     ('flight_height', args.flight_height), ('flight_sift_octave', args.flight_sift_octave),
+                                     ('flight_dense_scale', args.flight_dense_scale)) if v is not None}
         nodes.append(start_node('planner', 'vp_planner', 'planner', {
             'num_cameras': args.cameras, 'method': args.method, 'evaluations': args.evals,
             'initial_evaluations': min(args.init, args.evals), 'seed': args.seed, 'num_threads': 1,
-            'managed': args.managed},
+            'managed': args.managed, **flights},
             {**env, 'OMP_NUM_THREADS': '1'}, out))
         # the realizations reconstruct after the plan is made (the planner idle): on a local Dask
         # cluster of one-thread workers, all cores (issue 18, part 4: make run's time)
@@ -621,6 +667,10 @@ def run(args: argparse.Namespace) -> int:
             'registered_images': agg.registered_images,
             'poses': poses, 'seconds': time.monotonic() - start,
             'evaluations': result.evaluations, 'trace': list(result.trace), 'seed': args.seed,
+            # how the plan was chosen: by the simulated flights (each flight: the plan's source, draw, score, seconds)
+            'chosen_by': result.chosen_by,
+            'flight_score': result.flight_score if math.isfinite(result.flight_score) else None,
+            'flights_note': result.flights_note, 'flights': [flight_record(f) for f in result.flights],
             'error_code': agg.error_code, 'error_msg': agg.error_msg,
             'per_realization': [score_record(s) for s in per],
             'rounds': [r['record'] for r in rounds],

@@ -23,5 +23,7 @@ setup(
             'recorder = vp_recon.node_entry:recorder',
             'viewer = vp_recon.node_entry:viewer',
         ],
+        # the planner's simulated flights (vp_scene.flights.load_simulator): found, not imported
+        'vp_scene.flight_simulators': ['reconstruction = vp_recon.sim_flights:SceneFlights'],
     },
 )

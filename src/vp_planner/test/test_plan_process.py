@@ -75,3 +75,69 @@ def test_a_child_killed_from_outside_is_reported(scene) -> None:
 
     with pytest.raises(PlanProcessDied, match="killed by SIGKILL"):
         run_plan(request, scene, should_stop=kill_it)
+
+
+class ParentSimulator:
+    """A FlightSimulator in the caller's process: scores a plan by its cameras' mean height (m / 100)
+    and records the process, the plans and the draws it flew; ``block`` holds a batch until
+    should_stop() is true (a flight that takes long)."""
+
+    def __init__(self, block: bool = False) -> None:
+        self.workers, self.wind_variance, self.block = 2, 0.002, block
+        self.flown: list = []
+        self.stopped = False
+
+    def fly(self, plans, draws, on_flight=None, should_stop=None):
+        from vp_scene.flights import FlightScore
+
+        out = []
+        for i, (cams, draw) in enumerate(zip(plans, draws)):
+            self.flown.append((os.getpid(), np.asarray(cams).copy(), draw))
+            while self.block and not should_stop():
+                time.sleep(0.01)
+            if self.block:
+                self.stopped = True
+                return out
+            out.append(FlightScore(draw=draw, chamfer=float(np.mean(cams[:, 2])) / 100, chamfer_shape=0.01,
+                                   images=len(cams), seconds=0.1))
+            on_flight(i, out[-1])
+        return out
+
+
+def test_the_flights_are_flown_by_the_callers_simulator_and_their_progress_comes_back(scene) -> None:
+    """The child asks, the caller's simulator flies (in the caller's process), each flight goes
+    back to the flight stage as it comes and its progress to the caller: the plan is the one
+    plan_views makes with the same simulator in process."""
+    from vp_scene.flights import FLIGHT_CAPTURE_SEEDS
+
+    request = PlanRequest.of("egp", 4, evaluations=12, initial_evaluations=8, seed=1, sim_flights=5)
+    sim, seen = ParentSimulator(), []
+    got = run_plan(request, scene, simulator=sim, on_flight=lambda done, total, score: seen.append((done, total, score)))
+    here = plan_views(request, scene, simulator=ParentSimulator())
+    assert got.chosen_by == "flights" == here.chosen_by and len(got.flights) == 5
+    np.testing.assert_array_equal(got.cameras, here.cameras)
+    assert got.flight_score == pytest.approx(here.flight_score)
+    assert {pid for pid, _, _ in sim.flown} == {os.getpid()} and len(sim.flown) == 5
+    assert [(d, t) for d, t, _ in seen] == [(i, 5) for i in range(1, 6)]
+    assert all(FLIGHT_CAPTURE_SEEDS[0] <= draw.capture_seed for _, _, draw in sim.flown)
+    assert [s.draw for _, _, s in seen] == [draw for _, _, draw in sim.flown]
+    assert not _plans()
+
+
+def test_a_stop_during_the_flights_ends_the_plan_and_the_batch_at_once(scene) -> None:
+    request = PlanRequest.of("egp", 4, evaluations=10, initial_evaluations=8, seed=1, sim_flights=4)
+    sim = ParentSimulator(block=True)
+    asked: list = []
+
+    def should_stop() -> bool:
+        if sim.flown and not asked:
+            asked.append(time.monotonic())
+        return bool(asked) and time.monotonic() - asked[0] > 0.5
+
+    assert run_plan(request, scene, should_stop=should_stop, simulator=sim) is None
+    took = time.monotonic() - asked[0]
+    assert not _plans()
+    deadline = time.monotonic() + 10.0  # the batch's thread sees the stop by itself
+    while not sim.stopped and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert sim.stopped and took < 5.0, took

@@ -319,7 +319,8 @@ def test_cli_plans_a_field_by_parts_and_flies_a_lawnmower(tmp_path: Path) -> Non
     common = ["--scenario", str(field), "--cameras", "4", "--seed", "1", "--points-per-plant", "100",
               "--realizations", "2", "--no-progress"]
     out = tmp_path / "egp"
-    assert main(common + ["--method", "egp", "--evals", "8", "--init", "4", "--parts", "2", "--out", str(out)]) == 0
+    assert main(common + ["--method", "egp", "--evals", "8", "--init", "4", "--parts", "2", "--sim-flights", "0",
+                          "--out", str(out)]) == 0
     plan = json.loads((out / "plan.json").read_text())
     assert [p["cameras"] for p in plan["parts"]] == [2, 2] and plan["evaluations"] == 2 * 8 + 4
     assert len(plan["cameras"]) == 4 and len(plan["trace"]) == 20 and plan["lawnmower"] is None
@@ -369,3 +370,31 @@ def test_a_refused_request_writes_nothing_and_the_corrected_one_runs(tmp_path: P
         assert sorted(x.name for x in out.iterdir()) == ["notes.txt"]
     assert main(args) == 0, capsys.readouterr().err
     assert sorted(x.name for x in out.iterdir()) == ["noisy_points.npy", "notes.txt", "plan.json"]
+
+
+def test_cli_checks_its_plans_by_simulated_flights_on_a_local_cluster(tmp_path: Path, capsys) -> None:
+    """--sim-flights: the plans are flown (the reconstruction's simulator, found by its entry point)
+    on a local Dask cluster, one line a flight on stderr, and plan.json records every flight tried
+    (its plan, source, draw, score or failure, seconds), the plans flown and how the plan was chosen."""
+    out = tmp_path / "run"
+    rc = main(["--scenario", "one_plant", "--method", "egp", "--cameras", "3", "--evals", "12", "--init", "6",
+               "--seed", "2", "--points-per-plant", "1500", "--realizations", "2", "--sim-flights", "4",
+               "--flight-width", "640", "--flight-height", "480", "--flight-sift-octave", "-1",
+               "--flight-dense-scale", "1.0", "--workers", "2", "--out", str(out), "--no-progress"])
+    err = capsys.readouterr().err
+    assert rc == 0, err[-3000:]
+    assert [line.split(":")[0] for line in err.splitlines() if line.startswith("flight ")] == \
+        [f"flight {i}/4" for i in range(1, 5)]
+    plan = json.loads((out / "plan.json").read_text())
+    assert plan["sim_flights"] == 4 and len(plan["flights"]) == 4
+    assert plan["flight_settings"] == {"width": 640, "height": 480, "sift_first_octave": -1, "dense_scale": 1.0}
+    sources = [f["source"] for f in plan["flights"]]  # in the order they came back, batch after batch of 2
+    assert sorted(sources[:2]) == ["arc", "circle"] and "structured" in sources[2:], sources
+    for f in plan["flights"]:
+        assert f["draw"]["capture_seed"] >= 2 ** 31 and f["seconds"] > 0
+        assert f["failed"] == (f["chamfer"] is None) and (f["reason"] != "") == f["failed"]
+    if plan["chosen_by"] == "flights":
+        chosen = [p for p in plan["flight_plans"] if p["cameras"] == plan["cameras"]]
+        assert chosen and chosen[0]["score"] == plan["flight_score"]
+    else:
+        assert plan["flights_note"]

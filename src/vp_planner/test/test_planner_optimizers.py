@@ -34,7 +34,7 @@ def check_result(res, method: str, realizations: np.ndarray, n: int, evaluations
     assert res.seconds > 0
 
 
-@pytest.mark.parametrize("method", ["circle", "arc", "sa", "random"])
+@pytest.mark.parametrize("method", ["circle", "arc", "sa", "random", "cmaes"])
 def test_baselines(method: str, realizations: np.ndarray) -> None:
     progress = []
 
@@ -91,7 +91,7 @@ def test_circle_geometry(realizations: np.ndarray) -> None:
     np.testing.assert_allclose(c + v, np.broadcast_to(centre, c.shape), atol=1e-9)  # facing the centre
 
 
-@pytest.mark.parametrize("method", ["circle", "sa", "random"])
+@pytest.mark.parametrize("method", ["circle", "sa", "random", "cmaes"])
 def test_cancel_within_one_evaluation(method: str, realizations: np.ndarray) -> None:
     res = plan_views(PlanRequest.of(method, 3, evaluations=40), realizations, callback=lambda d, t, b, w: d < 7)
     assert res.stopped and res.evaluations == 7 and res.trace.shape == (7,)
@@ -125,11 +125,11 @@ def test_bo_methods(method: str, realizations: np.ndarray) -> None:
 
 
 def test_bad_inputs(realizations: np.ndarray) -> None:
-    assert set(METHODS) == {"egp", "gp", "circle", "arc", "sa", "random", "lawnmower"}
+    assert set(METHODS) == {"egp", "gp", "circle", "arc", "sa", "random", "cmaes", "lawnmower"}
     with pytest.raises(InvalidNumCamerasError):
         plan_views(PlanRequest.of("random", 1), realizations)
     with pytest.raises(UnknownMethodError, match="unknown method"):
-        plan_views(PlanRequest.of("cmaes", 3), realizations)
+        plan_views(PlanRequest.of("nelder-mead", 3), realizations)
     with pytest.raises(InvalidBudgetError):
         plan_views(PlanRequest.of("random", 3, evaluations=0), realizations)
     with pytest.raises(InvalidBudgetError):
@@ -191,7 +191,7 @@ def test_evaluation_budget_is_bounded_before_anything_is_allocated(realizations:
 
     assert set(MAX_EVALUATIONS) == set(METHODS)
     assert MAX_EVALUATIONS["egp"] == MAX_EVALUATIONS["gp"] == 1000
-    assert all(MAX_EVALUATIONS[m] == 100_000 for m in ("circle", "arc", "sa", "random", "lawnmower"))
+    assert all(MAX_EVALUATIONS[m] == 100_000 for m in ("circle", "arc", "sa", "random", "cmaes", "lawnmower"))
     for method, evals in (("circle", 4_000_000_000), ("sa", 100_001), ("random", 10**9), ("egp", 1001)):
         with pytest.raises(BudgetTooLargeError, match=f"above the bound of {MAX_EVALUATIONS[method]}"):
             plan_views(PlanRequest.of(method, 4, evaluations=evals, initial_evaluations=10), realizations)

@@ -60,7 +60,7 @@ def test_request_round_trips_and_is_frozen(realizations: np.ndarray) -> None:
 
 
 @pytest.mark.parametrize("fields, error, text", [
-    ({"method": "cmaes"}, UnknownMethodError, "unknown method"),
+    ({"method": "nelder-mead"}, UnknownMethodError, "unknown method"),
     ({"num_cameras": 1}, InvalidNumCamerasError, "from 2 to 100"),
     ({"num_cameras": 2.5}, InvalidNumCamerasError, "integer"),
     ({"evaluations": 0}, InvalidBudgetError, "evaluations must be >= 1"),
@@ -106,8 +106,9 @@ def test_the_request_is_grouped_and_each_group_validates_itself() -> None:
     assert request.bo == BOSpec(initial_evaluations=10, mode="global") and request.arc == ArcSpec(0.4)
     assert request.lawnmower == LawnmowerSpec(tilt=0.2) and request.reward == RewardSpec("paper")
     assert isinstance(request.sortie, Sortie) and request.sortie.tau == 0.05
-    assert set(GROUPS) == {"cameras", "feasibility", "reward", "bo", "arc", "lawnmower", "sortie", "candidates"}
-    assert len(FLAT) == 28 and set(request.as_dict()) == set(FLAT)
+    assert set(GROUPS) == {"cameras", "feasibility", "reward", "bo", "arc", "lawnmower", "sortie", "candidates",
+                           "flights"}
+    assert len(FLAT) == 33 and set(request.as_dict()) == set(FLAT)
     for group, bad, error in ((CameraSpec, {"num_cameras": 1}, InvalidNumCamerasError),
                               (Feasibility, {"min_altitude": -1.0}, ValueError),
                               (RewardSpec, {"name": "magic"}, UnknownRewardModelError),
@@ -136,7 +137,7 @@ def test_each_default_lives_in_one_place() -> None:
 
     params = {name: spec.default for name, spec in planner_node.PARAMS.items()}
     shared = set(params) & set(FLAT)
-    assert len(shared) == 22, sorted(shared)
+    assert len(shared) == 27, sorted(shared)  # the simulated flights' five among them
     assert {n: params[n] for n in shared} == {n: DEFAULTS[n] for n in shared}
     assert (params["image_width"], params["image_height"]) == DEFAULTS["image_size"] == IMAGE_SIZE
     flags = vars(cli.parse_args(["--out", "x"]))

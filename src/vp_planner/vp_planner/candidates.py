@@ -29,7 +29,8 @@ candidates are ordered by azimuth about the prior's centre):
 * ``arc``: N neighbouring candidates (N consecutive in azimuth), the best window.
 * ``sa``: simulated annealing over the subsets (:func:`vp_planner.baselines.anneal_subsets`).
 * ``random``: random subsets, the best.
-* ``lawnmower`` has no candidates mode (it flies its own lines).
+* ``lawnmower`` has no candidates mode (it flies its own lines), nor ``cmaes`` (a search in the
+  continuous space).
 
 Few views can fail where more work (the dev scan: 10 views 36 degrees apart registered 2 of 10,
 20 views every 18 degrees all): the ``coverage`` reward's matching window (full weight up to 25

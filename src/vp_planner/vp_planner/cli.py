@@ -28,7 +28,7 @@ dict) and its top-level ``scenario`` the layout's name.
 Among candidate views (README "From a real flight"): ``--candidates FOLDER --prior PRIOR.ply``
 plans N of the flight folder's poses (poses.csv or COLMAP's text model; a rig's stops, a gantry,
 the images of an earlier flight) on the prior cloud (a PLY in the folder's frame, e.g. a first
-reconstruction), with every method but lawnmower (:mod:`vp_planner.candidates`); the image size
+reconstruction), with every method but cmaes and lawnmower (:mod:`vp_planner.candidates`); the image size
 and the field of view are the folder's camera's unless given. plan.json then names the chosen
 images (``images``, ``selected``: their indices among the folder's poses), the folder
 (``candidates``) and the prior (``prior``), and has no ``scene``; ``python -m vp_recon.cli
@@ -57,7 +57,9 @@ Errors: one line on stderr and exit code 2.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
+import os
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Optional, Sequence
@@ -168,8 +170,24 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
                        help="with --candidates: the planning cloud, a PLY in the folder's frame (a first reconstruction)")
         p.add_argument("--threads", type=int, default=1,
                        help="torch threads (default 1: leaves the other cores to a reconstruction beside it)")
+        p.add_argument("--scheduler", default="local",
+                       help="where the simulated flights run, one a task: 'local' (a local Dask cluster of "
+                            "--workers processes) or a scheduler's address (tls://host:8786 with --tls-*)")
+        p.add_argument("--workers", type=int, default=max(1, os.cpu_count() or 1),
+                       help="worker processes of --scheduler local (default: the cores)")
+        from vp_scene.cluster import add_tls_args
+
+        add_tls_args(p)
         p.add_argument("--no-progress", action="store_true", help="no progress bar")
     args = p.parse_args(argv)
+    if command == "plan":
+        from vp_scene.cluster import TlsFiles, check_cluster_args
+
+        args.tls = TlsFiles.from_args(args)
+        try:
+            check_cluster_args(args.scheduler, args.workers, args.tls)
+        except ValueError as exc:
+            p.error(str(exc))
     if command == "plan" and (args.candidates_folder is None) != (args.prior is None):
         p.error("--candidates and --prior go together (the poses to choose among and the cloud they are scored on)")
     args.command = command
@@ -313,10 +331,46 @@ def scene_of(args: argparse.Namespace) -> dict:
 def build_scene(scene: dict) -> tuple[np.ndarray, str]:
     """The noisy realizations (K, P, 3) of a scene dict and its layout's name (the layout
     resolved once, by the scene's build)."""
+    noisy = build_noisy(scene)
+    return np.asarray(noisy.points, dtype=np.float64), noisy.scene.scenario
+
+
+def build_noisy(scene: dict) -> Any:
+    """The :class:`vp_scene.wind.NoisyScene` of a scene dict."""
     from vp_scene.build import build_noisy_scene
 
-    noisy, _ = build_noisy_scene(**scene)
-    return np.asarray(noisy.points, dtype=np.float64), noisy.scene.scenario
+    return build_noisy_scene(**scene)[0]
+
+
+def flight_capture(request: "PlanRequest") -> Any:
+    """The capture model the planner's simulated flights fly: the realistic one, with the request's
+    reported-pose errors and, with ground control, the markers (without: none):
+    :func:`vp_scene.flights.flight_capture`."""
+    from vp_scene.flights import flight_capture as capture
+
+    rs = request.reward
+    return capture(rs.position_sigma, rs.attitude_sigma, rs.ground_control)
+
+
+@contextlib.contextmanager
+def flight_simulator(args: argparse.Namespace, request: "PlanRequest", noisy: Any):
+    """The simulated flights of the scene ``noisy`` (the installed simulator,
+    :func:`vp_scene.flights.load_simulator`) on the Dask cluster of ``--scheduler``; None when the
+    request makes no flights. CliError when no simulator is installed."""
+    from vp_scene.flights import FlightSimulatorMissing, load_simulator
+
+    if not request.flights.flights_of(request.method):
+        yield None
+        return
+    try:
+        simulator = load_simulator()
+    except FlightSimulatorMissing as exc:
+        raise CliError(str(exc)) from None
+    from vp_scene.cluster import open_client
+
+    with open_client(args.scheduler, args.workers, quiet=True, tls=args.tls) as client:
+        yield simulator(scene=noisy.scene, wind=noisy.config, settings=request.flights.settings(),
+                        capture=flight_capture(request), client=client, fov=request.cameras.fov)
 
 
 def memory_beside(shape: Sequence[int]) -> Optional[int]:
@@ -420,8 +474,10 @@ def plan(args: argparse.Namespace) -> dict:
         realizations, scene, layout_name = among["realizations"], None, None
         request = request.replace(candidates=among["cameras"], fov=args.fov if args.fov is not None else among["fov"],
                                   image_size=_image_size(args, among["size"]))
+        noisy = None
     else:
-        realizations, layout_name = build_scene(scene)
+        noisy = build_noisy(scene)
+        realizations, layout_name = np.asarray(noisy.points, dtype=np.float64), noisy.scene.scenario
 
     bar: Any = None
     if not args.no_progress:
@@ -436,8 +492,17 @@ def plan(args: argparse.Namespace) -> dict:
             bar.set_postfix_str(f"best {best:.4f}", refresh=False)
         return True
 
+    def flown(done: int, total: int, score: Any) -> None:
+        text = f"flight {done}/{total}: " + (f"failed ({score.reason})" if score.failed else
+                                             f"map Chamfer x100 {100 * score.chamfer:.3f}, {score.seconds:.0f} s")
+        if bar is not None:
+            bar.write(text, file=sys.stderr)
+        else:
+            print(text, file=sys.stderr, flush=True)
+
     try:
-        res = plan_views(request, realizations, callback=progress)
+        with flight_simulator(args, request, noisy) if noisy is not None else contextlib.nullcontext() as sim:
+            res = plan_views(request, realizations, callback=progress, simulator=sim, on_flight=flown)
     finally:
         if bar is not None:
             bar.close()
@@ -465,6 +530,13 @@ def plan(args: argparse.Namespace) -> dict:
             "tau": sortie.tau,
             "reconstructed_weight": sortie.reconstructed_weight, "fraction": res.reconstructed_fraction},
         "scene": scene,
+        "chosen_by": res.chosen_by,
+        "sim_flights": request.flights.flights_of(request.method),
+        "flight_settings": request.flights.settings().to_dict(),
+        "flight_score": res.flight_score,
+        "flights_note": res.flights_note,
+        "flights": res.flights,
+        "flight_plans": res.flight_plans,
     }
     if among is not None:
         data.pop("scene")

@@ -30,9 +30,11 @@ class Method:
     by parts, the GP budget bound) and with an ensemble of GPs (``ensemble``: the result carries
     its weights and models), its ``max_evaluations``, the ``evaluations`` a run makes whatever its
     budget (None: the budget), the ``settings`` group of the request it reads besides the
-    common fields (:class:`vp_planner.request.PlanRequest`'s ``bo``, ``arc``, ``lawnmower``), and
-    the function of its ``candidates`` mode: N of the request's candidate poses
-    (:mod:`vp_planner.candidates`; None: the method has none).
+    common fields (:class:`vp_planner.request.PlanRequest`'s ``bo``, ``arc``, ``lawnmower``), the
+    function of its ``candidates`` mode: N of the request's candidate poses
+    (:mod:`vp_planner.candidates`; None: the method has none), and the simulated ``flights`` that
+    check its plans by default (:mod:`vp_planner.flight_planning`; a request's ``sim_flights``
+    overrides it).
 
     The planner is called as ``plan(space, objective, request, rng, parts) -> dict``: it spends
     the budget on the :class:`~vp_planner.objective.Objective` of the
@@ -51,6 +53,7 @@ class Method:
     evaluations: Optional[int] = None
     settings: Optional[str] = None
     candidates: Optional[str] = None
+    flights: int = 0
 
     def plan(self, space: Any, objective: Any, request: Any, rng: Any, parts: int) -> dict:
         """Plan ``request`` with this method (its :attr:`planner`); the run's extra results."""
@@ -72,8 +75,8 @@ def _function(name: str) -> Any:
 _BO = "vp_planner.bo_planning:run_bo"
 _C = "vp_planner.candidates:"
 REGISTRY: tuple[Method, ...] = (
-    Method("egp", "EGP-VP: BO with an ensemble of 4 GPs and adaptive EI (the paper's method)", _BO, True, True, 1000,
-           settings="bo", candidates=_C + "run_bo"),
+    Method("egp", "EGP-VP: BO, an ensemble of 4 GPs, adaptive EI (the paper's); plans checked by simulated flights",
+           _BO, True, True, 1000, settings="bo", candidates=_C + "run_bo", flights=12),
     Method("gp", "BO with one GP (RBF-ARD) and EI", _BO, True, False, 1000, settings="bo", candidates=_C + "run_bo"),
     Method("circle", "the tuned circle: N cameras on a ring, radius and height by grid search",
            "vp_planner.baselines:run_circle", candidates=_C + "run_circle"),
@@ -83,6 +86,8 @@ REGISTRY: tuple[Method, ...] = (
            "vp_planner.baselines:run_sa", candidates=_C + "run_sa"),
     Method("random", "uniformly random feasible plans", "vp_planner.baselines:run_random",
            candidates=_C + "run_random"),
+    Method("cmaes", "CMA-ES (the cma package, IPOP restarts) in the unit cube, from the best structured plan",
+           "vp_planner.cmaes:run_cmaes"),
     Method("lawnmower", "the grid survey farmers fly: flight lines with a set overlap, one evaluation",
            "vp_planner.baselines:run_lawnmower", evaluations=1, settings="lawnmower"),
 )

@@ -29,6 +29,8 @@ the best-so-far reward after every evaluation, and return the best *feasible* pl
   choose N of them by simulated annealing (swap one viewpoint for a nearby candidate,
   Metropolis acceptance, geometric cooling).
 * ``random``: uniformly random feasible plans of the same space.
+* ``cmaes``: CMA-ES (the ``cma`` package, :mod:`vp_planner.cmaes`) in the same space, from the
+  best of its structured plans, with IPOP restarts while the budget lasts.
 * ``lawnmower``: the grid survey farmers fly: flight lines along the field's longer side at the
   lowest height (at least ``min_standoff`` above the canopy) at which the N images cover the
   field with a set overlap, nadir or tilted (oblique); one evaluation, no tuning.
@@ -76,6 +78,7 @@ from numpy.typing import NDArray
 
 from .feasibility import check_realizations
 from .methods import BY_NAME
+from .flight_planning import OnFlight, flight_stage, patterns
 from .objective import Objective
 from .request import (InvalidReconstructionError, PlanRequest, check_budget_memory, check_parts, check_plan_memory,
                       check_reconstruction_memory, total_evaluations)
@@ -124,9 +127,11 @@ class PlanResult:
         rewards: (evaluations,) reward of every evaluated plan (0 for infeasible ones).
         reward_model: the reward model the plan maximizes.
         steps: egp/gp: one record per BO step (model drawn, weights, improved, trust region); by
-            parts: the steps of the joint refinement.
+            parts: the steps of the joint refinement; cmaes: one record per CMA-ES run (population,
+            generations, best reward, why it stopped).
         initial_best: egp/gp: the best reward of the initial design (by parts: of the union of
-            the part plans, before the joint refinement).
+            the part plans, before the joint refinement); cmaes: of the structured plans it
+            starts from.
         parts: egp/gp by parts: one record per part (cameras, points, evaluations, the part's own
             reward and its initial design's best); None otherwise.
         fixed_cameras: M, the cameras already flown the reward counted (0: a first sortie).
@@ -134,6 +139,12 @@ class PlanResult:
             points within tau of it (weighed ``reconstructed_weight``); else None.
         selected: among candidates, the indices (N,) of the chosen candidates in the request's
             candidate list (the order of ``cameras``); None in free space.
+        chosen_by: ``'reward'`` (the cheap reward's best plan) or ``'flights'`` (the simulated
+            flights chose it, :mod:`vp_planner.flight_planning`).
+        flights: every simulated flight flown (records: plan index, source, draw, score), None
+            when none was; ``flight_plans``: the plans flown (cameras, reward, source, score);
+            ``flight_score``: the chosen plan's mean map Chamfer over its flights (m);
+            ``flights_note``: why the flights asked for were not flown ('' when they were).
     """
 
     method: str
@@ -153,6 +164,11 @@ class PlanResult:
     fixed_cameras: int = 0
     reconstructed_fraction: Optional[float] = None
     selected: Optional[list] = None
+    chosen_by: str = "reward"
+    flights: Optional[list] = None
+    flight_plans: Optional[list] = None
+    flight_score: Optional[float] = None
+    flights_note: str = ""
 
     def simple_regret(self, optimum: float = 1.0) -> NDArray[np.float64]:
         """SR(t) = r~(z*) - max_{tau <= t} r~(z_tau) (paper Sec. V-B), with r~(z*) = ``optimum``."""
@@ -161,7 +177,8 @@ class PlanResult:
 
 # ---------------------------------------------------------------------- entry point
 def plan_views(request: PlanRequest, realizations: Any, callback: Optional[Callback] = None,
-               should_stop: Optional[StopCheck] = None) -> PlanResult:
+               should_stop: Optional[StopCheck] = None, simulator: Any = None,
+               on_flight: Optional[OnFlight] = None) -> PlanResult:
     """Plan ``request.cameras.num_cameras`` views of the noisy scene with ``request.method`` (one of
     :data:`METHODS`, planned by its registry entry's planner); every setting is a field of the
     :class:`~vp_planner.request.PlanRequest` (validated there, its docstring gives the units and rules).
@@ -176,6 +193,12 @@ def plan_views(request: PlanRequest, realizations: Any, callback: Optional[Callb
         should_stop: ``should_stop() -> bool``, asked between evaluations and inside the
             feasible-plan searches (rejection sampling, BO candidate batches, SA's start); True
             stops the run as a callback returning False does (a cancel, a node shutting down).
+        simulator: the :class:`vp_scene.flights.FlightSimulator` of the scene (handed in by the
+            caller: the CLI, a benchmark, the planner node's client of the recon node); with
+            flights to make (``request.flights.flights_of(method)``) the cheap stage's plans are
+            checked by simulated flights and the flights choose (:mod:`vp_planner.flight_planning`);
+            None: the cheap reward chooses (``flights_note`` says so when flights were asked for).
+        on_flight: ``on_flight(done, total, score)`` after every flight.
 
     Planning by parts (egp/gp, ``request.bo.parts``): each part gets ``evaluations``, the joint
     refinement ``evaluations // 2``, all counted in the result; 0: :func:`vp_planner.parts.auto_parts`
@@ -241,6 +264,22 @@ def plan_views(request: PlanRequest, realizations: Any, callback: Optional[Callb
         if not stopped:
             raise NoFeasiblePlanError(f"no feasible plan among the {obj.count} evaluated plans")
         best = np.zeros((0, 6))
+    n_flights = q.flights.flights_of(q.method)
+    outcome, note = None, ""
+    if n_flights and simulator is None:
+        note = "no flight simulator: the cheap reward chose"
+    elif n_flights and not stopped and best is not None:
+        try:
+            outcome = flight_stage(space, obj, simulator, n_flights, q.seed, patterns(space, obj, q, budget, rng),
+                                   float(getattr(simulator, "wind_variance")), on_flight=on_flight,
+                                   should_stop=should_stop)
+        except PlanningCancelled:
+            stopped = True
+    chosen_U = obj.U[obj.best_index] if obj.best_index >= 0 else None
+    if outcome is not None:  # among candidates in the order of the selected indices
+        best, chosen_U = (space.decode(outcome.U) if among else outcome.cameras), outcome.U
+        if not np.isfinite(outcome.score):
+            note = "every simulated flight failed: the cheap reward chose"
     weights = info.get("weights") if entry.ensemble else None
     names = None
     if entry.ensemble:
@@ -250,7 +289,7 @@ def plan_views(request: PlanRequest, realizations: Any, callback: Optional[Callb
     return PlanResult(
         method=q.method,
         cameras=np.asarray(best, dtype=np.float64),
-        reward=float(obj.best_value),
+        reward=float(obj.best_value if outcome is None else outcome.reward),
         trace=obj.trace(),
         evaluations=obj.count,
         seconds=time.perf_counter() - start,
@@ -264,5 +303,10 @@ def plan_views(request: PlanRequest, realizations: Any, callback: Optional[Callb
         parts=info.get("parts"),
         fixed_cameras=len(F),
         reconstructed_fraction=done,
-        selected=space.indices(obj.U[obj.best_index]).tolist() if among and obj.best_index >= 0 else None,
+        selected=space.indices(chosen_U).tolist() if among and chosen_U is not None else None,
+        chosen_by="flights" if outcome is not None and np.isfinite(outcome.score) else "reward",
+        flights=None if outcome is None else outcome.flights,
+        flight_plans=None if outcome is None else outcome.plans,
+        flight_score=None if outcome is None or not np.isfinite(outcome.score) else float(outcome.score),
+        flights_note=note,
     )

@@ -12,7 +12,17 @@ within :data:`POLL_S` seconds whatever the child was doing, and the child's memo
 
 The child dies with the fork server, which ends with the process that started it (Linux's
 PR_SET_PDEATHSIG), so a plan never outlives its caller; it ignores SIGINT (a terminal's Ctrl-C
-reaches the caller, which decides) and runs torch with the threads asked. The library's refusals
+reaches the caller, which decides) and runs torch with the threads asked.
+
+Simulated flights (:mod:`vp_planner.flight_planning`): given a ``simulator``
+(:class:`vp_scene.flights.FlightSimulator`, e.g. the planner node's client of the recon node's
+``/simulate_flights``), the child plans with a stand-in of the same ``workers`` and
+``wind_variance`` whose ``fly`` sends the batch to the caller over the (duplex) pipe and waits; the
+caller flies it with the real simulator on a thread of its own, sends each flight back as it comes
+(the stand-in hands it to the flight stage) and then the batch's scores, while it keeps looking at
+``should_stop``: a stop kills the child at once and ends the batch (the simulator's ``should_stop``
+turns true, e.g. the flights' goal is cancelled). The flights' progress comes back as the
+evaluations' does (``on_flight``). The library's refusals
 come back as the exceptions ``plan_views`` raised (an exception that cannot be pickled comes back
 as a RuntimeError naming it); a child that dies without an answer (the kernel's OOM killer) is a
 :class:`PlanProcessDied`.
@@ -43,6 +53,8 @@ _PRELOAD = ["vp_planner.plan_process", "vp_planner.optimizers", "vp_planner.bo",
 _PR_SET_PDEATHSIG = 1
 
 Progress = Callable[[int, int, float, Optional[list]], Any]
+#: ``on_flight(done, total, score)``: :data:`vp_planner.flight_planning.OnFlight`.
+FlightProgress = Callable[[int, int, Any], Any]
 
 
 class PlanProcessDied(RuntimeError):
@@ -83,9 +95,33 @@ def _portable(exc: BaseException) -> BaseException:
         return RuntimeError(f"{type(exc).__name__}: {exc}")
 
 
-def _child(conn: Any, request: Any, realizations: np.ndarray, threads: int) -> None:
-    """The child's work: ``plan_views`` with a callback that sends each evaluation's progress,
-    then ``("result", PlanResult)`` or ``("error", exception)``."""
+class _FlightsOverPipe:
+    """The child's :class:`vp_scene.flights.FlightSimulator`: ``fly`` sends ``("fly", (plans,
+    draws))`` to the caller and hands each ``("flight", (i, score))`` it gets back to
+    ``on_flight`` until ``("flown", scores)`` (``("fly_error", exception)``: raised here). A stop is
+    the caller's (it kills this process), so ``should_stop`` is not looked at."""
+
+    def __init__(self, conn: Any, workers: int, wind_variance: float) -> None:
+        self.conn, self.workers, self.wind_variance = conn, int(workers), float(wind_variance)
+
+    def fly(self, plans: Any, draws: Any, on_flight: Any = None, should_stop: Any = None) -> list:
+        self.conn.send(("fly", ([np.asarray(p, dtype=np.float64) for p in plans], list(draws))))
+        while True:
+            kind, payload = self.conn.recv()
+            if kind == "flight":
+                if on_flight is not None:
+                    on_flight(*payload)
+            elif kind == "flown":
+                return payload
+            else:
+                raise payload
+
+
+def _child(conn: Any, request: Any, realizations: np.ndarray, threads: int,
+           flights: Optional[tuple] = None) -> None:
+    """The child's work: ``plan_views`` with a callback that sends each evaluation's progress
+    (and, with ``flights`` = (workers, wind_variance), a :class:`_FlightsOverPipe` simulator whose
+    flights' progress is sent too), then ``("result", PlanResult)`` or ``("error", exception)``."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     _die_with_parent()
     import torch
@@ -98,8 +134,13 @@ def _child(conn: Any, request: Any, realizations: np.ndarray, threads: int) -> N
         conn.send(("progress", (done, total, best, weights)))
         return True
 
+    def flown(done: int, total: int, score: Any) -> None:
+        conn.send(("flight_progress", (done, total, score)))
+
+    simulator = None if flights is None else _FlightsOverPipe(conn, *flights)
     try:
-        message: tuple = ("result", plan_views(request, realizations, callback=progress))
+        message: tuple = ("result", plan_views(request, realizations, callback=progress, simulator=simulator,
+                                               on_flight=flown))
     except Exception as exc:  # noqa: BLE001 - every failure goes back to the caller
         message = ("error", _portable(exc))
     try:
@@ -146,8 +187,36 @@ class _Start(threading.Thread):
             self.child.join()
 
 
+class _Flying(threading.Thread):
+    """Flies one batch the child sent with the caller's simulator, sending each flight back as it
+    comes, then the scores (or the simulator's exception); a child gone meanwhile is no error."""
+
+    def __init__(self, simulator: Any, conn: Any, batch: tuple, should_stop: Callable[[], bool],
+                 lock: threading.Lock) -> None:
+        super().__init__(name="plan-flights", daemon=True)
+        self.simulator, self.conn, self.batch, self.should_stop, self.lock = simulator, conn, batch, should_stop, lock
+
+    def _send(self, message: tuple) -> None:
+        with self.lock:  # run_plan closes the pipe under it: never a write to a closed (or reused) descriptor
+            try:
+                self.conn.send(message)
+            except (OSError, ValueError):  # the child ended (a stop, a death): its flights are moot
+                pass
+
+    def run(self) -> None:
+        plans, draws = self.batch
+        try:
+            scores = self.simulator.fly(plans, draws, on_flight=lambda i, score: self._send(("flight", (i, score))),
+                                        should_stop=self.should_stop)
+            message: tuple = ("flown", list(scores))
+        except Exception as exc:  # noqa: BLE001 - the child raises it where the flights were asked for
+            message = ("fly_error", _portable(exc))
+        self._send(message)
+
+
 def run_plan(request: Any, realizations: Any, progress: Optional[Progress] = None,
-             should_stop: Optional[Callable[[], bool]] = None, threads: int = 1) -> Optional[Any]:
+             should_stop: Optional[Callable[[], bool]] = None, threads: int = 1, simulator: Any = None,
+             on_flight: Optional[FlightProgress] = None) -> Optional[Any]:
     """``plan_views(request, realizations)`` in a child process (the module docstring).
 
     Args:
@@ -158,6 +227,10 @@ def run_plan(request: Any, realizations: Any, progress: Optional[Progress] = Non
         should_stop: asked every :data:`POLL_S` seconds from the start (the fork server's
             imports included); True ends the child at once.
         threads: torch threads of the child.
+        simulator: the :class:`vp_scene.flights.FlightSimulator` the plan's simulated flights are
+            flown with, here (its ``workers`` and ``wind_variance`` are read once, now); None:
+            ``plan_views`` without one.
+        on_flight: ``on_flight(done, total, score)`` in the caller's thread after each flight.
 
     Returns:
         The :class:`~vp_planner.optimizers.PlanResult`, or None when ``should_stop()`` ended the
@@ -168,9 +241,16 @@ def run_plan(request: Any, realizations: Any, progress: Optional[Progress] = Non
         the child ended without an answer.
     """
     ctx = _context()
-    answers, conn = ctx.Pipe(duplex=False)
-    child = ctx.Process(target=_child, args=(conn, request, np.asarray(realizations, dtype=np.float64), int(threads)),
-                        name="plan", daemon=True)
+    answers, conn = ctx.Pipe(duplex=True)
+    flights = None if simulator is None else (int(simulator.workers), float(simulator.wind_variance))
+    child = ctx.Process(target=_child, args=(conn, request, np.asarray(realizations, dtype=np.float64), int(threads),
+                                             flights), name="plan", daemon=True)
+    ended = threading.Event()  # set as run_plan returns: a batch still flying stops
+    sending = threading.Lock()  # the flights' thread sends to the child; the pipe is closed under it
+
+    def flights_stop() -> bool:
+        return ended.is_set() or (should_stop is not None and should_stop())
+
     start = _Start(child, conn)
     start.start()
     try:
@@ -189,13 +269,22 @@ def run_plan(request: Any, realizations: Any, progress: Optional[Progress] = Non
             except EOFError:
                 child.join(5.0)
                 raise PlanProcessDied(_death(child)) from None
+            if should_stop is not None and should_stop():  # a stop wins over what the child said meanwhile
+                return None
             if kind == "progress":
                 if progress is not None:
                     progress(*payload)
+            elif kind == "fly":
+                _Flying(simulator, answers, payload, flights_stop, sending).start()
+            elif kind == "flight_progress":
+                if on_flight is not None:
+                    on_flight(*payload)
             elif kind == "result":
                 return payload
             else:
                 raise payload
     finally:
-        answers.close()
-        start.end()
+        ended.set()
+        start.end()  # first: a send to a child killed fails at once, and lets go of the lock
+        with sending:
+            answers.close()

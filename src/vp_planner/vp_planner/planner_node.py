@@ -27,6 +27,17 @@ plan (an evaluation of a hundred cameras, a GP fit, a KD-tree), and the next goa
 once. On SIGINT/SIGTERM a running goal is aborted once (``CANCELED``, "shutting down") and its
 client answered before the node exits (:mod:`vp_scene.node_runtime`).
 
+Simulated flights (:mod:`vp_planner.flight_planning`): a plan that makes them (``sim_flights``,
+the goal's or the parameter's; -1: the method's default, egp's) flies them through the recon
+node's ``/simulate_flights`` action (:class:`vp_planner.flight_client.ActionFlights`, handed to
+:func:`vp_planner.plan_process.run_plan`: the planning process asks, the node flies), in batches
+of ``flight_workers``, each flight's wind drawn with the variance of ``/scene/description`` (the
+wind model's default before one arrives); feedback and a log line after every flight; the result
+says how the plan was chosen (``chosen_by``), its flights' score and every flight. When
+``/simulate_flights`` is not served within ``flight_server_timeout`` seconds (no recon node), the
+plan is made without flights and ``flights_note`` says why. A cancel during the flights kills the
+planning process and cancels the flights' goal, answered as any cancel.
+
 A lifecycle node (rclpy.lifecycle; ``managed:=true`` waits unconfigured for a manager, the
 default configures and activates itself at start): configure makes the topics and the action
 server, activate accepts goals, deactivate rejects them (a running goal finishes), cleanup
@@ -35,6 +46,7 @@ destroys what configure made.
 from __future__ import annotations
 
 import math
+import os
 import threading
 import time
 from typing import Optional
@@ -42,14 +54,15 @@ from typing import Optional
 import numpy as np
 import torch
 from geometry_msgs.msg import PoseArray
-from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import PointCloud2
 from visualization_msgs.msg import MarkerArray
 
-from vp_interfaces.action import PlanViews
-from vp_interfaces.msg import CameraPlan
+from vp_interfaces.action import PlanViews, SimulateFlights
+from vp_interfaces.msg import CameraPlan, SceneDescription
+from vp_planner.flight_client import ActionFlights
 from vp_planner.gp import MODEL_NAMES
 from vp_planner.optimizers import InvalidSceneError, PlanResult
 from vp_planner.plan_process import PlanProcessDied, run_plan, warm
@@ -59,7 +72,9 @@ from vp_planner.request import (SETTINGS, BudgetTooLargeError, InvalidBudgetErro
                                 values_of_settings)
 from vp_planner.space import NoFeasiblePlanError
 from vp_scene.cloud import pointcloud2_to_numpy, realizations_from_cloud
-from vp_scene.messages import cameras_to_pose_array, camera_plan_msg, frustum_markers, pose_array_to_cameras
+from vp_scene.messages import (cameras_to_pose_array, camera_plan_msg, flight_record_msg, frustum_markers,
+                               pose_array_to_cameras)
+from vp_scene.wind import WindConfig
 from vp_scene.node_runtime import (INT_MAX, LATCHED, MANAGED, Param, declare_typed, parameter_value,
                                    refuse_bad_changes, run_node, start_lifecycle, typed_values)
 
@@ -117,13 +132,20 @@ PARAMS = {
     'managed': MANAGED,
     'frame_id': Param('map', 'frame of the plans; the scene cloud must be in it', None, False, 'not empty'),
     'scene_timeout': Param(10.0, 's a goal that arrives before the scene waits for it', (0.0, math.inf)),
+    'flight_workers': Param(os.cpu_count() or 1, 'simulated flights asked for at once (a batch; the recon node\'s '
+                            'cluster flies them)', (1, INT_MAX)),
+    'flight_server_timeout': Param(5.0, 's a plan with simulated flights waits for /simulate_flights (then it is '
+                                   'made without them)', (0.0, math.inf)),
 }
+
+#: The wind variance of the flights before a /scene/description arrives: the wind model's default.
+DEFAULT_WIND_VARIANCE = WindConfig().variance
 
 
 def request_values(params: dict, goal: Optional[PlanViews.Goal] = None) -> dict:
     """The flat request values (:data:`vp_planner.request.FLAT`) of the node's parameters
     ({name: typed value}, all of :data:`PARAMS`: :func:`vp_planner.request.values_of_settings`)
-    and a goal's fields, which override their parameter unless left 0, empty or (seed) -1."""
+    and a goal's fields, which override their parameter unless left 0, empty or (seed, sim_flights) -1."""
     values = values_of_settings(params)
     if goal is not None:
         given = {'num_cameras': int(goal.num_cameras), 'method': goal.method, 'evaluations': int(goal.evaluations),
@@ -131,6 +153,8 @@ def request_values(params: dict, goal: Optional[PlanViews.Goal] = None) -> dict:
         values.update({name: value for name, value in given.items() if value})
         if goal.seed >= 0:
             values['seed'] = int(goal.seed)
+        if goal.sim_flights >= 0:
+            values['sim_flights'] = int(goal.sim_flights)
     return values
 
 
@@ -153,6 +177,9 @@ def check_parameters(values: dict) -> dict:
         raise ValueError('scene_timeout must be >= 0')
     if v.get('frame_id', 'map') == '':
         raise ValueError('frame_id must not be empty')
+    if v.get('flight_workers', 1) < 1 or v.get('flight_server_timeout', 0.0) < 0.0:
+        raise ValueError(f'flight_workers must be >= 1 and flight_server_timeout >= 0 s, got '
+                         f'{v.get("flight_workers", 1)}, {v.get("flight_server_timeout", 0.0)}')
     return v
 
 
@@ -171,6 +198,7 @@ class PlannerNode(LifecycleNode):
         self._realizations: Optional[np.ndarray] = None
         self._scene_problem = ''  # why the last cloud was refused
         self._scene_arrived = threading.Event()
+        self._wind_variance = DEFAULT_WIND_VARIANCE  # the flights' winds: /scene/description's
         self._busy = threading.Lock()
         self._shutting_down = threading.Event()
         self._running = 0  # goals inside the execute callback (+ an autostart plan)
@@ -191,8 +219,12 @@ class PlannerNode(LifecycleNode):
             self, PlanViews, '/plan_views', execute_callback=self._execute,
             goal_callback=self._on_goal, cancel_callback=lambda _g: CancelResponse.ACCEPT,
             callback_group=self._cb)
+        description = self.create_subscription(SceneDescription, '/scene/description', self._on_description,
+                                                LATCHED, callback_group=MutuallyExclusiveCallbackGroup())
+        self._flights = ActionClient(self, SimulateFlights, '/simulate_flights', callback_group=self._cb)
         self._made = [(self.destroy_lifecycle_publisher, p) for p in (self.plan_pub, self.info_pub, self.marker_pub)]
-        self._made += [(self.destroy_subscription, scene), (lambda server: server.destroy(), self._server)]
+        self._made += [(self.destroy_subscription, scene), (lambda server: server.destroy(), self._server),
+                       (self.destroy_subscription, description), (lambda client: client.destroy(), self._flights)]
         self.get_logger().info('planner configured')
         return super().on_configure(state)
 
@@ -275,6 +307,9 @@ class PlannerNode(LifecycleNode):
         if self._param('autostart') and self._active:
             threading.Thread(target=self._autostart, daemon=True).start()
 
+    def _on_description(self, msg: SceneDescription) -> None:
+        self._wind_variance = float(msg.wind_variance)
+
     def _autostart(self) -> None:
         if not self._busy.acquire(blocking=False):
             self.get_logger().warn('autostart skipped: a plan is already being computed')
@@ -282,7 +317,8 @@ class PlannerNode(LifecycleNode):
         self._enter()
         try:
             request = request_of(self._params())
-            result = self._plan(request, progress=self._log_progress, should_stop=self._stopping)
+            result = self._plan(request, progress=self._log_progress, should_stop=self._stopping,
+                                on_flight=self._log_flight)
             if result is None:
                 self.get_logger().info('autostart planning stopped: shutting down')
             else:
@@ -298,16 +334,49 @@ class PlannerNode(LifecycleNode):
             extra = '' if not weights else ' weights ' + ' '.join(f'{w:.2f}' for w in weights)
             self.get_logger().info(f'planning {done}/{total} best reward {best:.4f}{extra}')
 
+    def _log_flight(self, done: int, total: int, score) -> None:
+        d = score.draw
+        what = (f'failed ({score.reason})' if score.failed else
+                f'map Chamfer {score.chamfer:.4f} m, shape {score.chamfer_shape:.4f} m, {score.images} images')
+        self.get_logger().info(f'simulated flight {done}/{total}: {what} (n_wind {d.n_wind:+.4f}, capture seed '
+                               f'{d.capture_seed}, {score.seconds:.1f} s)')
+
     # ---------------------------------------------------------------- planning
-    def _plan(self, request: PlanRequest, progress, should_stop) -> Optional[PlanResult]:
+    def _simulator(self, request: PlanRequest, should_stop):
+        """(the flights' simulator, '') for a plan that makes simulated flights, once
+        /simulate_flights is served (waiting up to ``flight_server_timeout`` s); (None, why) when it
+        is not; (None, '') for a plan without flights (the library's note stands)."""
+        if not request.flights.flights_of(request.method) or request.candidates.poses is not None:
+            return None, ''
+        deadline = time.monotonic() + self._param('flight_server_timeout')
+        while not self._flights.server_is_ready():
+            if should_stop() or time.monotonic() > deadline:
+                why = (f'/simulate_flights is not served (no recon node within '
+                       f'{self._param("flight_server_timeout"):g} s): the cheap reward chose, without simulated flights')
+                self.get_logger().warn(why)
+                return None, why
+            time.sleep(0.05)
+        rs = request.reward
+        return ActionFlights(self._flights, request.flights.settings(), rs.position_sigma, rs.attitude_sigma,
+                             rs.ground_control, request.cameras.fov, self._param('flight_workers'),
+                             self._wind_variance, log=self.get_logger().info), ''
+
+    def _plan(self, request: PlanRequest, progress, should_stop, on_flight=None) -> Optional[PlanResult]:
         """The plan of ``request`` on the scene, made in a process of its own
-        (:func:`vp_planner.plan_process.run_plan`); None when ``should_stop()`` ended it."""
+        (:func:`vp_planner.plan_process.run_plan`), its simulated flights flown through
+        /simulate_flights; None when ``should_stop()`` ended it."""
         realizations = self._realizations
         assert realizations is not None
+        flights = request.flights.flights_of(request.method)
         self.get_logger().info(f'planning {request.cameras.num_cameras} cameras with {request.method} '
-                               f'({request.reward.name} reward): {request.evaluations} evaluations, '
-                               f'seed {request.seed}')
-        return run_plan(request, realizations, progress, should_stop, threads=self._param('num_threads'))
+                               f'({request.reward.name} reward): {request.evaluations} evaluations'
+                               + (f', {flights} simulated flights' if flights else '') + f', seed {request.seed}')
+        simulator, why = self._simulator(request, should_stop)
+        result = run_plan(request, realizations, progress, should_stop, threads=self._param('num_threads'),
+                          simulator=simulator, on_flight=on_flight)
+        if result is not None and why and result.flights_note:
+            result.flights_note = why
+        return result
 
     def _publish_plan(self, result: PlanResult, fixed: Optional[np.ndarray] = None,
                       candidates: Optional[PoseArray] = None) -> PoseArray:
@@ -328,7 +397,10 @@ class PlannerNode(LifecycleNode):
             + (f' among {len(candidates.poses)} candidates' if candidates is not None else '')
             + f' ({result.method}, {result.evaluations} evaluations'
             + (f', by {len(result.parts)} parts of ' + '+'.join(str(p['cameras']) for p in result.parts) + ' cameras'
-               if result.parts else '') + f', {result.seconds:.1f} s)')
+               if result.parts else '')
+            + (f', chosen by {len(result.flights)} simulated flights: map Chamfer {result.flight_score:.4f} m'
+               if result.chosen_by == 'flights' else '')
+            + f', {result.seconds:.1f} s)' + (f'; {result.flights_note}' if result.flights_note else ''))
         return msg
 
     # ---------------------------------------------------------------- action
@@ -435,25 +507,35 @@ class PlannerNode(LifecycleNode):
         def should_stop() -> bool:
             return goal_handle.is_cancel_requested or self._stopping()
 
-        made = [0]  # evaluations the plan has made
+        made = [0, 0]  # evaluations and simulated flights the plan has made
+        fb = PlanViews.Feedback()  # the last feedback: a flight's keeps the evaluations' figures
+        fb.last_flight_chamfer = math.nan
 
         def progress(done: int, total: int, best: float, weights) -> None:
             made[0] = done
             if should_stop():
                 return
-            fb = PlanViews.Feedback()
             fb.evaluations_done, fb.evaluations_total, fb.best_reward = done, total, float(best)
             if weights:
                 fb.ensemble_weights = [float(w) for w in weights]
                 fb.ensemble_models = list(MODEL_NAMES)
             goal_handle.publish_feedback(fb)
 
+        def flown(done: int, total: int, score) -> None:
+            made[1] = done
+            self._log_flight(done, total, score)
+            if should_stop():
+                return
+            fb.flights_done, fb.flights_total = done, total
+            fb.last_flight_chamfer = math.nan if score.failed or score.chamfer is None else float(score.chamfer)
+            goal_handle.publish_feedback(fb)
+
         try:
             start = time.monotonic()
-            plan = self._plan(request, progress, should_stop)
+            plan = self._plan(request, progress, should_stop, on_flight=flown)
             if plan is None:
                 why = 'cancelled' if goal_handle.is_cancel_requested else 'the planner is shutting down'
-                text = f'{why} after {made[0]} evaluations'
+                text = f'{why} after {made[0]} evaluations' + (f' and {made[1]} simulated flights' if made[1] else '')
                 result.evaluations = int(made[0])
                 self.get_logger().info(text)
                 return finish(PlanViews.Result.CANCELED, text)
@@ -466,6 +548,9 @@ class PlannerNode(LifecycleNode):
             result.planning_time = time.monotonic() - start
             result.evaluations = int(plan.evaluations)
             result.selected = [int(i) for i in plan.selected or []]
+            result.chosen_by, result.flights_note = plan.chosen_by, plan.flights_note
+            result.flight_score = math.nan if plan.flight_score is None else float(plan.flight_score)
+            result.flights = [flight_record_msg(r) for r in plan.flights or []]
             return finish(PlanViews.Result.NONE, '', succeed=True)
         except InvalidSceneError as exc:
             return abort(PlanViews.Result.NO_SCENE, f'unusable scene: {exc}')

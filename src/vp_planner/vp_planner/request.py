@@ -13,6 +13,7 @@ constructor, each field's default written once (in the group's class):
 ``lawnmower``       :class:`LawnmowerSpec`, lawnmower's settings: overlap, tilt
 ``sortie``          :class:`Sortie`, a second sortie: fixed_cameras, reconstruction, tau, reconstructed_weight
 ``candidates``      :class:`CandidateSet`, the poses to choose N of (None: plan in free space)
+``flights``         :class:`FlightSpec`, the simulated flights that check the plans: count and setting
 ==================  ========================================================================================
 
 The planner node builds it from a goal and its parameters, the CLI from its flags, the benchmarks
@@ -83,6 +84,13 @@ every default):
                             (:mod:`vp_planner.candidates`), finite, non-zero viewing vectors,
                             N <= M <= :data:`MAX_CANDIDATES`, a method with a candidates mode
                             (InvalidCandidatesError); stored read-only; None: plan in free space
+``sim_flights``             simulated flights that check the cheap reward's plans
+                            (:mod:`vp_planner.flight_planning`), an integer in [-1, :data:`vp_scene.flights.MAX_FLIGHTS`];
+                            -1: the method's default (:attr:`vp_planner.methods.Method.flights`), 0: none
+``flight_width``,           the flights' image size, pixels (:class:`vp_scene.flights.FlightSettings`)
+``flight_height``
+``flight_sift_octave``      the flights' SIFT first octave, -1 or 0
+``flight_dense_scale``      the flights' dense-step scale, in [0.1, 1]
 ==========================  ===========================================================================
 
 Other bad fields raise :class:`InvalidRequestError` (the feasibility minima: ValueError, from
@@ -110,6 +118,7 @@ from numpy.typing import NDArray
 
 from vp_scene import limits
 from vp_scene.camera import IMAGE_SIDE_RANGE, IMAGE_SIZE, check_image_side
+from vp_scene.flights import MAX_FLIGHTS, FlightSettings
 
 from .feasibility import Feasibility
 from .methods import BY_NAME, DEFAULT_METHOD, METHODS, REGISTRY
@@ -162,6 +171,7 @@ __all__ = [
     "total_evaluations",
     "MAX_POSITION_SIGMA",
     "MAX_ATTITUDE_SIGMA",
+    "FlightSpec",
 ]
 
 #: The largest number of cameras N of a plan (:mod:`vp_planner.optimizers` says why).
@@ -526,9 +536,49 @@ class CandidateSet:
         _check_fields(self)
 
 
+_FLIGHT = FlightSettings()
+
+
+@dataclass(frozen=True)
+class FlightSpec:
+    """The simulated flights that check the cheap reward's plans (:mod:`vp_planner.flight_planning`):
+    how many (``count``; -1: the method's default, 0: none) and how each is photographed and
+    reconstructed (:class:`vp_scene.flights.FlightSettings`)."""
+
+    count: int = _flat(-1, "sim_flights", "simulated flights that check the cheap reward's plans (the recon "
+                       "node's /simulate_flights; goals with sim_flights -1); -1: the method's default, 0: none",
+                       range=(-1, MAX_FLIGHTS))
+    width: int = _flat(_FLIGHT.width, "flight_width", "the simulated flights' image width, pixels",
+                       range=IMAGE_SIDE_RANGE)
+    height: int = _flat(_FLIGHT.height, "flight_height", "the simulated flights' image height, pixels",
+                        range=IMAGE_SIDE_RANGE)
+    sift_first_octave: int = _flat(_FLIGHT.sift_first_octave, "flight_sift_octave",
+                                   "the simulated flights' SIFT first octave: -1 (each image doubled first) or 0",
+                                   range=(-1, 0))
+    dense_scale: float = _flat(_FLIGHT.dense_scale, "flight_dense_scale",
+                               "the simulated flights' dense step on the images resized by this factor",
+                               range=(0.1, 1.0))
+
+    def __post_init__(self) -> None:
+        _check_fields(self)
+        try:
+            self.settings()
+        except ValueError as exc:
+            raise InvalidRequestError(str(exc)) from None
+
+    def settings(self) -> FlightSettings:
+        return FlightSettings(width=self.width, height=self.height, sift_first_octave=self.sift_first_octave,
+                              dense_scale=self.dense_scale)
+
+    def flights_of(self, method: str) -> int:
+        """The flights a run of ``method`` makes: ``count``, or the method's default for -1."""
+        return BY_NAME[method].flights if self.count < 0 else self.count
+
+
 #: The request's groups: attribute -> class, in the order a request is validated.
 GROUPS: dict[str, type] = {"cameras": CameraSpec, "feasibility": Feasibility, "reward": RewardSpec, "bo": BOSpec,
-                           "arc": ArcSpec, "lawnmower": LawnmowerSpec, "sortie": Sortie, "candidates": CandidateSet}
+                           "arc": ArcSpec, "lawnmower": LawnmowerSpec, "sortie": Sortie, "candidates": CandidateSet,
+                           "flights": FlightSpec}
 
 
 def _check_method(method: Any) -> str:
@@ -585,6 +635,7 @@ class PlanRequest:
     lawnmower: LawnmowerSpec = field(default_factory=LawnmowerSpec)
     sortie: Sortie = field(default_factory=Sortie)
     candidates: CandidateSet = field(default_factory=CandidateSet)
+    flights: FlightSpec = field(default_factory=FlightSpec)
 
     def __post_init__(self) -> None:
         for name, cls in GROUPS.items():

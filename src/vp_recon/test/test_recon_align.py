@@ -1,5 +1,5 @@
 """Registration of a structure-from-motion model to map from a flight's reported poses
-(vp_recon.sparse.similarity_from_poses): exact poses give the similarity back; with a drone's
+(vp_recon.registration.similarity_from_poses): exact poses give the similarity back; with a drone's
 errors the attitudes pin the rotation where a tight cluster of centres cannot."""
 from __future__ import annotations
 
@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from vp_recon.sparse import SparseError, similarity_from_poses
+from vp_recon.errors import SparseError
+from vp_recon.registration import PoseAnchor, similarity_from_poses
 from vp_scene.camera import look_at, world_to_camera
 
 
@@ -100,9 +101,7 @@ def test_every_model_is_placed_on_its_own_poses_and_one_that_cannot_be_is_left_o
     their images' poses (their points join); a smaller model whose centres are a point reflection
     of the reported ones (no similarity with a positive scale) is left out and its images count
     as not registered; the largest one must be placed."""
-    import pycolmap
-
-    from vp_recon.sparse import _merge_models
+    from vp_recon.sparse_modes import merge_models
 
     cams = flight(7, 150.0)
     names = [f"view_{i:03d}.png" for i in range(7)]
@@ -117,28 +116,26 @@ def test_every_model_is_placed_on_its_own_poses_and_one_that_cannot_be_is_left_o
 
     a = model([0, 1, 2, 3], 0.4, Rotation.from_euler("z", 40, degrees=True).as_matrix(), np.array([1.0, 0, 0]))
     b = model([4, 5, 6], 2.0, Rotation.from_euler("x", -70, degrees=True).as_matrix(), np.array([0, 3.0, 0]))
-    m = _merge_models(pycolmap, [b, a], names, cams[:, :3], R_cw)
+    m = merge_models([b, a], names, PoseAnchor(cams[:, :3], R_cw))
     assert m.models == 2 and m.registered == 7
     np.testing.assert_allclose(m.points, np.vstack([plant, plant]), atol=1e-9)
     np.testing.assert_allclose(m.cameras[:, :3], cams[:, :3], atol=1e-9)
 
     bad = model([4, 5, 6], 2.0, np.eye(3), np.zeros(3), mirror=True)
-    m = _merge_models(pycolmap, [a, bad], names, cams[:, :3], R_cw)
+    m = merge_models([a, bad], names, PoseAnchor(cams[:, :3], R_cw))
     assert m.models == 1 and m.registered == 4 and np.isnan(m.cameras[4:]).all() and len(m.points) == 2
     with pytest.raises(SparseError, match="negative scale"):
-        _merge_models(pycolmap, [model([0, 1, 2, 3], 1.0, np.eye(3), np.zeros(3), mirror=True), b], names,
-                      cams[:, :3], R_cw)
+        merge_models([model([0, 1, 2, 3], 1.0, np.eye(3), np.zeros(3), mirror=True), b], names,
+                     PoseAnchor(cams[:, :3], R_cw))
 
 
 def test_self_check_fails_a_model_far_from_its_reported_poses() -> None:
-    """The self-check (vp_recon.sparse, 5): a consistent model's centre residual is ~0 and reported;
+    """The self-check (vp_recon.sparse_modes): a consistent model's centre residual is ~0 and reported;
     a smaller model one of whose images sits 1.6 m above where the drones said (0.43 m RMS after
     the alignment; false matches bend a model so) is left out at the 0.2 m limit; the same model as
     the largest fails the reconstruction with the residual named; without a limit it is kept and
     its residual reported."""
-    import pycolmap
-
-    from vp_recon.sparse import _merge_models
+    from vp_recon.sparse_modes import merge_models
 
     cams = flight(7, 150.0)
     names = [f"view_{i:03d}.png" for i in range(7)]
@@ -154,10 +151,10 @@ def test_self_check_fails_a_model_far_from_its_reported_poses() -> None:
 
     good = model([0, 1, 2, 3])
     bent = model([4, 5, 6], [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 1.6]])
-    m = _merge_models(pycolmap, [good, bent], names, cams[:, :3], R_cw, max_residual=0.2)
+    m = merge_models([good, bent], names, PoseAnchor(cams[:, :3], R_cw), max_residual=0.2)
     assert m.models == 1 and m.registered == 4 and np.isnan(m.cameras[4:]).all()
     assert m.centre_residual == pytest.approx(0.0, abs=1e-9)
-    kept = _merge_models(pycolmap, [good, bent], names, cams[:, :3], R_cw)
+    kept = merge_models([good, bent], names, PoseAnchor(cams[:, :3], R_cw))
     assert kept.models == 2 and 0.2 < kept.centre_residual < 1.6
     with pytest.raises(SparseError, match=r"inconsistent: its camera centres lie 0\.43 m"):
-        _merge_models(pycolmap, [bent, model([0, 1])], names, cams[:, :3], R_cw, max_residual=0.2)
+        merge_models([bent, model([0, 1])], names, PoseAnchor(cams[:, :3], R_cw), max_residual=0.2)

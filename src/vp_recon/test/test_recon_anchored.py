@@ -13,12 +13,13 @@ from vp_scene.capture import REALISTIC, CaptureModel
 from vp_scene.ground_control import GroundControl, GroundControlError, marker_layout, read_gcp_list, \
     read_markers_csv, write_markers_csv
 
-from vp_recon import sparse as sparse_mod
-from vp_recon.config import ReconConfig
+from vp_recon import sparse_modes
+from vp_recon.config import ReconConfig, SparseOptions
+from vp_recon.errors import SparseError
 from vp_recon.gcp import register
 from vp_recon.pipeline import reconstruct_captured, render_flight
 from vp_recon.segment import image_mask
-from vp_recon.sparse import SparseError, sparse_reconstruct
+from vp_recon.sparse import sparse_reconstruct
 
 
 @pytest.fixture(scope="module")
@@ -54,7 +55,8 @@ def test_the_anchored_model_stays_on_the_reported_poses_and_corrects_their_attit
     their optical axes closer to the true ones than the reports."""
     cfg, views = flown
     masks = [image_mask(im, True) for im in views.images]
-    sp = sparse_reconstruct(views.images, views.reported, views.K, tmp_path, mode="anchored", num_threads=1)
+    sp = sparse_reconstruct(views.images, views.reported, views.K, tmp_path,
+                            SparseOptions(mode="anchored", num_threads=1))
     assert sp.mode == "anchored" and sp.fallback == "" and sp.registered == 4 and len(sp.points) > 300
     actual = REALISTIC.fly(arc(), 1).actual
     assert np.all(np.linalg.norm(sp.cameras[:, :3] - actual[:, :3], axis=1) < 0.08)
@@ -76,22 +78,24 @@ def test_a_structure_from_motion_that_fails_falls_back_to_the_anchored_model(flo
         raise SparseError("the model of 4 registered images is inconsistent: its camera centres lie 0.42 m (RMS) "
                           "from the reported ones")
 
-    register_parts = sparse_mod._register_parts
+    import pycolmap
+
+    register_parts = sparse_modes.register_parts
     calls = []
 
-    def drift(pycolmap, rec, *args, **kwargs):  # the last registration (after the last adjustment) slides
-        register_parts(pycolmap, rec, *args, **kwargs)
+    def drift(rec, *args, **kwargs):  # the last registration (after the last adjustment) slides
+        register_parts(rec, *args, **kwargs)
         calls.append(1)
-        if len(calls) == sparse_mod.ANCHOR_ROUNDS + 1:
+        if len(calls) == sparse_modes.ANCHOR_ROUNDS + 1:
             im = rec.images[min(rec.images)]
             pose = im.cam_from_world()
             im.frame.rig_from_world = pycolmap.Rigid3d(pose.rotation, (np.asarray(pose.translation).reshape(3)
                                                                        + [1.0, 0.0, 0.0]).reshape(3, 1))
 
-    monkeypatch.setattr(sparse_mod, "_incremental_model", no_model)
-    monkeypatch.setattr(sparse_mod, "_register_parts", drift)
-    sp = sparse_reconstruct(views.images, views.reported, views.K, tmp_path / "a", mode="incremental", num_threads=1,
-                            prior_centres=views.reported[:, :3])
+    monkeypatch.setattr(sparse_modes, "incremental_model", no_model)
+    monkeypatch.setattr(sparse_modes, "register_parts", drift)
+    sp = sparse_reconstruct(views.images, views.reported, views.K, tmp_path / "a",
+                            SparseOptions(mode="incremental", num_threads=1), prior_centres=views.reported[:, :3])
     assert sp.mode == "anchored" and sp.registered == 4 and "0.42 m" in sp.fallback, sp.fallback
     assert "kept the points triangulated at the reported poses" in sp.fallback, sp.fallback
     assert "from the reported ones (more than 0.20 m" in sp.fallback and sp.centre_residual == 0.0
@@ -99,8 +103,9 @@ def test_a_structure_from_motion_that_fails_falls_back_to_the_anchored_model(flo
     assert kept.sum() == 4 and len(sp.points) > 100
     np.testing.assert_allclose(sp.cameras[kept, :3], views.reported[kept, :3])
     with pytest.raises(SparseError, match="0.42 m"):
-        sparse_reconstruct(views.images, views.reported, views.K, tmp_path / "b", mode="incremental", num_threads=1,
-                           prior_centres=views.reported[:, :3], fallback=None)
+        sparse_reconstruct(views.images, views.reported, views.K, tmp_path / "b",
+                           SparseOptions(mode="incremental", num_threads=1, fallback=None),
+                           prior_centres=views.reported[:, :3])
 
 
 def test_ground_markers_are_found_and_place_the_model(scene, flown) -> None:

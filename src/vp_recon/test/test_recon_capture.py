@@ -94,6 +94,7 @@ def test_parts_that_share_no_matches_are_each_registered_to_map(scene, tmp_path)
     poses. Before, only the largest model was kept: 4 of 8 images registered and one side lost."""
     from vp_recon.pipeline import render_flight
     from vp_recon.segment import image_mask
+    from vp_recon.config import SparseOptions
     from vp_recon.sparse import sparse_reconstruct
 
     cfg = ReconConfig(width=2000, height=1500, num_threads=1)  # 1000 x 750: too few points a side
@@ -103,8 +104,9 @@ def test_parts_that_share_no_matches_are_each_registered_to_map(scene, tmp_path)
     views = render_flight(scene, 1, np.vstack([near, far]), cfg)
     masks = [image_mask(im, cfg.ground_used) for im in views.images]
     within = [(i, j) for part in (range(4), range(4, 8)) for i in part for j in part if i < j]
-    sp = sparse_reconstruct(views.images, views.reported, views.K, tmp_path, mode="incremental", masks=masks,
-                            num_threads=1, pairs=within, prior_centres=views.reported[:, :3])
+    sp = sparse_reconstruct(views.images, views.reported, views.K, tmp_path,
+                            SparseOptions(mode="incremental", num_threads=1), masks=masks, pairs=within,
+                            prior_centres=views.reported[:, :3])
     assert sp.models == 2 and sp.registered == 8, (sp.models, sp.registered)
     # every image placed where its drone reported it, to the hover and localization errors
     assert np.all(np.linalg.norm(sp.cameras[:, :3] - views.reported[:, :3], axis=1) < 0.1)

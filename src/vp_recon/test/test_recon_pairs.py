@@ -153,22 +153,24 @@ def renders(noisy_scene):
 
 
 def test_sparse_matches_only_the_given_pairs(renders, tmp_path) -> None:
+    from vp_recon.config import SparseOptions
     from vp_recon.sparse import sparse_reconstruct
 
     images, cams, K = renders
     given = [(2, 1), (0, 1), (2, 3)]                        # any order; (2, 1) is pair (1, 2)
-    sp = sparse_reconstruct(images, cams, K, tmp_path / "pairs", pairs=given, num_threads=1)
+    sp = sparse_reconstruct(images, cams, K, tmp_path / "pairs", SparseOptions(num_threads=1), pairs=given)
     assert sp.matched_pairs == 3 and len(sp.points) > 10
     assert sp.pair_inliers and set(sp.pair_inliers) <= {(0, 1), (1, 2), (2, 3)}
     assert (tmp_path / "pairs" / "pairs.txt").read_text().splitlines() == [
         "view_000.png view_001.png", "view_001.png view_002.png", "view_002.png view_003.png"]
     assert set(sp.seconds) == {"extract", "match", "triangulate"}
-    full = sparse_reconstruct(images, cams, K, tmp_path / "all", num_threads=1)
+    full = sparse_reconstruct(images, cams, K, tmp_path / "all", SparseOptions(num_threads=1))
     assert full.matched_pairs == 6
 
 
 def test_sparse_rejects_bad_pairs(renders, tmp_path) -> None:
-    from vp_recon.sparse import SparseError, sparse_reconstruct
+    from vp_recon.errors import SparseError
+    from vp_recon.sparse import sparse_reconstruct
 
     images, cams, K = renders
     with pytest.raises(SparseError, match="no image pair"):

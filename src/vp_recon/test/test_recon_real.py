@@ -22,7 +22,7 @@ from vp_recon.flight import CapturedViews, read_flight, write_flight
 from vp_scene.flight_poses import POSES_FILE
 from vp_recon.config import ReconConfig
 from vp_recon.pipeline import reconstruct_views, render_flight
-from vp_recon.sparse import similarity_from_poses
+from vp_recon.registration import similarity_from_poses
 
 #: The dev scan (README of ../shared/data/romi_real_plant): 60 real photographs of a plant.
 ROMI = Path(__file__).resolve().parents[3].parent / "shared" / "data" / "romi_real_plant"
@@ -210,17 +210,16 @@ def test_rough_attitudes_leave_a_failed_structure_from_motion_failed(rolled_flig
     only when they are good: with a 30-degree sigma it would triangulate at attitudes that far off
     and 'register' every image (the dev scan's 10 views: 10 of 10, 8 points kept); the SfM's
     failure is the reconstruction's instead."""
-    from vp_recon import sparse as sparse_mod
-    from vp_recon.errors import RECONSTRUCTION_FAILED, ReconError
-    from vp_recon.sparse import SparseError
+    from vp_recon import sparse_modes
+    from vp_recon.errors import RECONSTRUCTION_FAILED, ReconError, SparseError
 
     weights = []
 
-    def two_of_six(*args, **kwargs):
-        weights.append(args[-1])  # the registration's sigmas: (position m, attitude rad) or None
+    def two_of_six(matched, options, anchor, *args):
+        weights.append(anchor.sigmas)  # the registration's sigmas: (position m, attitude rad) or None
         raise SparseError("incremental mapping registered 2 of 6 images in its largest model")
 
-    monkeypatch.setattr(sparse_mod, "_incremental_model", two_of_six)
+    monkeypatch.setattr(sparse_modes, "incremental_model", two_of_six)
     views, _ = rolled_flight
     for sigma in (30.0, 0.5):
         capture = CaptureModel.named("realistic", report_attitude_sigma=sigma, gcp_markers=0)

@@ -89,7 +89,7 @@ def add_capture_arguments(p: argparse.ArgumentParser) -> None:
 
     p.add_argument("--capture", default="realistic", choices=CAPTURES,
                    help="realistic: hover and localization errors and sensor noise of an RTK multirotor "
-                        "(README 'Capture model'); ideal: planned poses flown and known exactly (before issue 18)")
+                        "(README 'Capture model'); ideal: planned poses flown and known exactly")
     for name, unit in (("hover_position_sigma", "m"), ("hover_attitude_sigma", "deg"),
                        ("report_position_sigma", "m"), ("report_attitude_sigma", "deg"),
                        ("sensor_noise", "of full scale")):
@@ -117,9 +117,8 @@ def capture_from_args(args: argparse.Namespace) -> object:
 def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     from vp_scene.camera import IMAGE_SIDE_RANGE, image_side_arg
 
-    from .config import MATCH_POSES_FROM, MATCHINGS, MAX_CAMERAS, MAX_MEGAPIXELS, ReconConfig
+    from .config import MATCH_POSES_FROM, MATCHINGS, MAX_CAMERAS, MAX_MEGAPIXELS, SPARSE_MODES, ReconConfig
     from .segment import MASK_METHODS
-    from .sparse import MODES
 
     p = _Parser(prog=PROG, description="Render, reconstruct (COLMAP on CPU + SGBM) and score a view plan.")
     what = p.add_mutually_exclusive_group(required=True)
@@ -145,7 +144,7 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
                    help=f"--plan: rendered image height, pixels (default: the plan's, else {ReconConfig.height})")
     p.add_argument("--realizations", default=None, help="comma-separated realization indices (default: all)")
     p.add_argument("--sparse-only", action="store_true", help="score the sparse cloud (no dense stereo)")
-    p.add_argument("--sparse-mode", default="auto", choices=("auto",) + MODES,
+    p.add_argument("--sparse-mode", default="auto", choices=("auto",) + SPARSE_MODES,
                    help="auto (default): anchored for a realistic capture whose attitudes are good to 2 degrees, "
                         "incremental for rougher ones, known_poses for the ideal one; anchored: triangulate at the "
                         "reported poses, bundle-adjust and register on them; incremental: COLMAP's SfM with the "
@@ -169,8 +168,8 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     p.add_argument("--mask", default="auto", choices=MASK_METHODS,
                    help="plant masks of images over soil or a real background: auto (default: excess green for a "
                         "green plant, else the background model), exg or background (README 'From a real flight')")
-    # as the recon node: the last core stays with a planner beside it (a planner of 1 thread took
-    # 2.4x its time beside a reconstruction on all cores of 2; README "Results")
+    # as the recon node: the last core stays with a planner beside it (a reconstruction on all
+    # cores slows a planner beside it down many times)
     p.add_argument("--threads", type=int, default=max(1, (os.cpu_count() or 2) - 1),
                    help="threads of COLMAP and OpenCV (default: cores - 1, leaving one to a planner; 0: all cores)")
     p.add_argument("--max-cameras", type=int, default=None,

@@ -15,40 +15,77 @@ from vp_scene.sim_drone import ground_under
 
 from .metrics import DEFAULT_FSCORE_THRESHOLD
 
-__all__ = ["MAX_CAMERAS", "MAX_MEGAPIXELS", "MATCHINGS", "MATCH_POSES_FROM", "ANCHOR_MAX_ATTITUDE_DEG", "ReconConfig",
-           "matching_method"]
+__all__ = ["MAX_CAMERAS", "MAX_MEGAPIXELS", "MATCHINGS", "MATCH_POSES_FROM", "ANCHOR_MAX_ATTITUDE_DEG", "SPARSE_MODES",
+           "SparseOptions", "ReconConfig", "matching_method"]
 
 #: The most cameras a plan may have (a second sortie's flown cameras included): ``ReconConfig.
 #: max_cameras``, the recon node's parameter ``max_cameras`` and ``--max-cameras`` of ``make
 #: recon``; a larger plan is refused with PLAN_TOO_LARGE before anything is rendered. Every image
-#: of a realization is held at once: measured peak RSS of ``python -m vp_recon.cli --plan`` (one
-#: realization, 2000 x 1500, realistic capture, one_plant) 1.56 GB with 8 cameras, 2.12 GB with
-#: 32, about 23 MB a camera (a 200-camera plan took 5.8 GB), so 256 cameras need about 7.3 GB.
-#: The planner plans at most 100 cameras a sortie; 256 hold 16 drones over 16 sorties.
+#: of a realization is held at once, so a reconstruction's memory grows with its cameras; the cap
+#: leaves room for several sorties of the planner's (at most 100 cameras a sortie).
 MAX_CAMERAS = 256
 #: The most megapixels the images of a flight folder may have together (``--images``,
 #: ``--max-megapixels``), read from their headers before any is decoded: a folder's memory is
-#: its pixels (about 7.7 MB a megapixel, as above), whatever their number. The memory of
-#: MAX_CAMERAS cameras of 2000 x 1500: hundreds of images of a few megapixels, 64 of 12 MP.
+#: its pixels, whatever their number. The pixels of MAX_CAMERAS cameras of 2000 x 1500: hundreds
+#: of images of a few megapixels, 64 of 12 MP.
 MAX_MEGAPIXELS = MAX_CAMERAS * 2000 * 1500 // 1_000_000
 
 #: ``ReconConfig.matching``: which image pairs SIFT matching compares (see :func:`matching_method`).
 MATCHINGS = ("auto", "exhaustive", "poses")
-#: ``'auto'`` matches pairs chosen from the poses from this many cameras up, all pairs below.
-#: Measured (bench/bench_matching.py, three Corn50 plants in a row): from 8 cameras on exhaustive
-#: matching verifies false pairs over 90 degrees apart (2 of 7 at 8 cameras, 16-25 at 12) that
-#: then become dense stereo partners (dense 5x slower, Chamfer worse); at 4-6 cameras both give
-#: about the same, so today's 4-6 camera plans keep exhaustive matching and their results.
+#: ``'auto'`` matches pairs chosen from the poses from this many cameras up, all pairs below:
+#: on larger plans exhaustive matching verifies false pairs of views far apart, which then become
+#: dense stereo partners (a slower dense step, a worse Chamfer distance); on smaller ones both
+#: matchings give about the same.
 MATCH_POSES_FROM = 8
 
 #: ``sparse_mode='auto'``: reported attitudes good to this many degrees (1 sigma) anchor the model
 #: (a triangulation at poses that far off still finds its tracks with the anchored model's loose
-#: first thresholds); rougher ones leave the poses to the images (incremental SfM).
-#: Measured on Table I's seed-0 flights (2026-11-27): where both modes reconstruct, the anchored
-#: model's map and shape Chamfer are those of the incremental mapper or better (three_row circle:
-#: shape 2.09-2.89 against 3.59-5.50), and where the mapper's model fails its self-check the
-#: anchored one reconstructs (README "Capture model").
+#: first thresholds); rougher ones leave the poses to the images (incremental SfM). Where both
+#: modes reconstruct, the anchored model's map and shape Chamfer distances are the incremental
+#: mapper's or better, and where the mapper's model fails its self-check the anchored one
+#: reconstructs (README "Capture model").
 ANCHOR_MAX_ATTITUDE_DEG = 2.0
+
+#: The sparse step's models (``ReconConfig.sparse_mode`` besides ``'auto'``; :mod:`vp_recon.sparse`).
+SPARSE_MODES = ("known_poses", "incremental", "anchored")
+
+
+@dataclass(frozen=True)
+class SparseOptions:
+    """How the sparse step runs (:func:`vp_recon.sparse.sparse_reconstruct`); ValueError for a
+    mode or fallback it does not know.
+
+    Attributes:
+        mode: ``'known_poses'`` (triangulate at the given poses), ``'incremental'`` (COLMAP's
+            structure from motion) or ``'anchored'`` (the model anchored on the given poses).
+        max_features: SIFT features per image.
+        num_threads: COLMAP's threads (-1: all cores).
+        sift_first_octave: SIFT's first octave: -1 (COLMAP's default) doubles the image first, 0
+            starts at its own resolution (about 4x fewer pixels to filter).
+        prior_sigma: m per axis to which the given centres are known (a drone's reported
+            positions): the incremental mode's pose priors, the registration's weight of the
+            centres and the scale of the self-check.
+        attitude_sigma: degrees per axis to which the given attitudes are known: the registration
+            weighs them against the centres; None: the attitudes alone give its rotation.
+        fallback: incremental: ``'anchored'``, the anchored model of the same matches when the
+            structure from motion fails; None: its failure is the sparse step's.
+        quiet: silence COLMAP's INFO / WARNING log lines (errors still show).
+    """
+
+    mode: str = "known_poses"
+    max_features: int = 8192
+    num_threads: int = -1
+    sift_first_octave: int = -1
+    prior_sigma: float = 0.02
+    attitude_sigma: Optional[float] = None
+    fallback: Optional[str] = "anchored"
+    quiet: bool = True
+
+    def __post_init__(self) -> None:
+        if self.mode not in SPARSE_MODES:
+            raise ValueError(f"unknown sparse mode {self.mode!r}; expected one of {', '.join(SPARSE_MODES)}")
+        if self.fallback not in (None, "anchored"):
+            raise ValueError(f"fallback must be 'anchored' or None, got {self.fallback!r}")
 
 
 @dataclass
@@ -131,6 +168,21 @@ class ReconConfig:
             return "known_poses"
         return "anchored" if self.capture.report_attitude_sigma <= ANCHOR_MAX_ATTITUDE_DEG else "incremental"
 
+    def sparse_options(self) -> SparseOptions:
+        """The sparse step's options of these settings: ``sparse_mode_used``, the reported centres
+        known to the capture's localization error (at least 1 cm). Reported attitudes rougher than
+        :data:`ANCHOR_MAX_ATTITUDE_DEG` (a rig's mount tens of degrees off) are weighed against the
+        centres by their sigma, and the anchored model, triangulated at them, is then no fallback:
+        at attitudes that far off it registers every image and keeps a handful of points. Good
+        attitudes alone give the registration's rotation."""
+        capture = self.capture
+        rough = not capture.ideal and capture.report_attitude_sigma > ANCHOR_MAX_ATTITUDE_DEG
+        return SparseOptions(mode=self.sparse_mode_used, max_features=self.max_features,
+                             num_threads=self.num_threads or -1, sift_first_octave=self.sift_first_octave,
+                             prior_sigma=max(capture.report_position_sigma, 0.01),
+                             attitude_sigma=capture.report_attitude_sigma if rough else None,
+                             fallback=None if rough else "anchored")
+
     @property
     def ground_used(self) -> bool:
         """``ground`` with ``None`` resolved by the capture (soil for a flight)."""
@@ -138,8 +190,6 @@ class ReconConfig:
 
     def validate(self) -> "ReconConfig":
         """Raise ValueError naming the first bad field; return self."""
-        from .sparse import MODES
-
         for name in ("width", "height"):
             v = getattr(self, name)
             if not isinstance(v, (int, np.integer)):
@@ -147,8 +197,8 @@ class ReconConfig:
             check_image_side(name, v)
         if not (isinstance(self.fov, (int, float)) and 0 < self.fov < math.pi):
             raise ValueError(f"fov must be in (0, pi) rad, got {self.fov!r}")
-        if self.sparse_mode not in ("auto",) + MODES:
-            raise ValueError(f"sparse_mode must be one of auto, {', '.join(MODES)}, got {self.sparse_mode!r}")
+        if self.sparse_mode not in ("auto",) + SPARSE_MODES:
+            raise ValueError(f"sparse_mode must be one of auto, {', '.join(SPARSE_MODES)}, got {self.sparse_mode!r}")
         if not isinstance(self.capture, CaptureModel):
             raise ValueError(f"capture must be a vp_scene.capture.CaptureModel, got {self.capture!r}")
         self.capture.validate()

@@ -1,7 +1,8 @@
 """The reconstruction's refusals: the error codes (identical to the ``vp_interfaces/ReconstructionScore``
 constants), :class:`ReconError` (a failure with its code) and the checks of what a reconstruction
 is given that answer with them: the plan (EMPTY_PLAN, PLAN_TOO_LARGE), the scene (NO_SCENE) and
-the output folder (OUTPUT_NOT_WRITABLE).
+the output folder (OUTPUT_NOT_WRITABLE); :class:`SparseError`, the sparse step's failure, which
+the pipeline reports as RECONSTRUCTION_FAILED.
 Writers (the CLI, the recon node) turn a ReconError into an exit code or a score message."""
 from __future__ import annotations
 
@@ -17,7 +18,7 @@ from .config import MAX_CAMERAS
 
 __all__ = ["NONE", "UNKNOWN", "EMPTY_PLAN", "NO_SCENE", "NOTHING_VISIBLE", "RECONSTRUCTION_FAILED",
            "OUTPUT_NOT_WRITABLE", "WRONG_FRAME", "CAPTURE_MISSING", "PLAN_TOO_LARGE", "ERROR_NAMES", "ReconError",
-           "REQUEST_ERRORS", "validate_cameras", "check_plan_size", "check_scene", "check_realizations",
+           "SparseError", "REQUEST_ERRORS", "validate_cameras", "check_plan_size", "check_scene", "check_realizations",
            "ensure_writable_dir"]
 
 NONE = 0
@@ -54,6 +55,11 @@ class ReconError(Exception):
     def name(self) -> str:
         """The code's constant name, e.g. ``'NOTHING_VISIBLE'``."""
         return ERROR_NAMES.get(self.code, "UNKNOWN")
+
+
+class SparseError(RuntimeError):
+    """The sparse step made no model: no features, no matches, no triangulated point, or a
+    structure from motion that registered too little or could not be placed in the world."""
 
 
 def validate_cameras(cameras: object) -> NDArray[np.float64]:

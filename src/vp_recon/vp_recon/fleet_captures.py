@@ -1,20 +1,22 @@
 """The fleet's capture sets (the recon node's ``source: fleet``; README "From a real flight"): a
 capture trigger sent on ``/fleet/capture`` and, from every drone of the plan's ``/fleet/assignment``,
 for each of its poses (in its route's ``order``) an image, ``camera_info`` and reported pose with
-one stamp, gathered into a
-:class:`vp_recon.flight.CapturedViews`. The recon node (:mod:`vp_recon.recon_node`) owns one
-:class:`FleetCaptures` and reconstructs what it gathers."""
+one stamp, gathered into a :class:`vp_recon.flight.CapturedViews`. The recon node
+(:mod:`vp_recon.recon_node`) owns one :class:`FleetCaptures`; its :meth:`FleetCaptures.capture_sets`
+is the fleet as a source of the reconstruction's loop (:func:`vp_recon.pipeline.reconstruct_sets`)."""
 from __future__ import annotations
 
 import threading
 import time
 from collections import OrderedDict
+from typing import Callable, Iterator, Optional, Sequence
 
 import numpy as np
 from rclpy.node import Node
 
 from vp_recon.errors import CAPTURE_MISSING, ReconError
-from vp_recon.flight import CapturedViews
+from vp_recon.flight import CapturedViews, flown_views, join_views
+from vp_recon.progress import ReconCancelled
 from vp_scene.flight_poses import FlightError
 from vp_scene.messages import camera_info_intrinsics, compressed_image_array, drone_topic, image_array, pose_array
 from vp_scene.node_runtime import LATCHED
@@ -43,11 +45,10 @@ class FleetCaptures:
     realization and is ignored with a log line. A drone's captures of one trigger are its poses'
     in its route's order (it photographs them as it flies them): the k-th, by stamp, is its k-th pose.
 
-    Memory (issue 20, part 5): an image is converted to its array as it arrives (a view of the
-    message's buffer, which is then the only copy), and at most :data:`CAPTURES_KEPT` captures
-    are kept per drone, or its poses' number (the oldest beyond is dropped with a log line): a capture set of N images
-    costs the node about N images' bytes, not three times that (measured in
-    results/bench_fleet_transport.json, ``recon_node_memory``)."""
+    Memory: an image is converted to its array as it arrives (a view of the message's buffer,
+    which is then the only copy), and at most :data:`CAPTURES_KEPT` captures are kept per drone,
+    or its poses' number (the oldest beyond is dropped with a log line): a capture set of N
+    images costs the node about N images' bytes, not three times that."""
 
     def __init__(self, node: Node, lock: threading.Condition) -> None:
         from vp_interfaces.msg import CaptureTrigger, FleetAssignment
@@ -187,6 +188,36 @@ class FleetCaptures:
                 K=intr[0][0], realization=int(k)).validate()
         except (ValueError, FlightError) as exc:
             raise ReconError(CAPTURE_MISSING, f'capture {k} from the fleet is unusable: {exc}') from None
+
+    def capture_sets(self, plan_stamp, num_poses: int, realizations: int, timeout: float, topic: str,
+                     stopped: Callable[[], bool], transport: str = 'raw', control: object = None,
+                     flown: Optional[Sequence[tuple]] = None) -> Iterator[CapturedViews]:
+        """The fleet as a source of capture sets: realizations 0..``realizations``-1 of the plan,
+        each taken when the loop asks for it (:meth:`capture`), with ``control`` (the field's
+        ground control, :class:`vp_scene.ground_control.GroundControl` or None). A second
+        sortie's cameras already flown (``flown``: :func:`vp_recon.flight.locate_flown`) put
+        their images of the realization first (:func:`vp_recon.flight.flown_views`), as the
+        render source orders the cameras. A ReconError names its realization (CAPTURE_MISSING);
+        ReconCancelled once ``stopped()``."""
+        log = self._node.get_logger()
+        for k in range(realizations):
+            try:
+                views = self.capture(plan_stamp, num_poses, k, timeout, topic, stopped, transport=transport)
+                if views is None:
+                    raise ReconCancelled('stopped while waiting for the fleet')
+                views.control = control
+                log.info(f'capture {k}: {len(views.images)} images from the fleet '
+                         f'({sum(im.nbytes for im in views.images) / 1e6:.0f} MB) collected')
+                if flown:
+                    try:
+                        views = join_views([flown_views(flown, k), views])
+                    except FlightError as exc:
+                        raise ReconError(CAPTURE_MISSING, f'the images of the cameras already flown: {exc}') from None
+                    log.info(f'capture {k}: with the {len(flown)} images of the cameras already flown')
+            except ReconError as exc:
+                exc.realization = k
+                raise
+            yield views
 
     def now_ns(self) -> int:
         return self._ns(self._node.get_clock().now().to_msg())

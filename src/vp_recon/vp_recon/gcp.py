@@ -1,7 +1,7 @@
 """Ground control in a reconstruction: find the control points and place the model on them.
 
 A flight's model is placed in ``map`` on the poses the drones reported
-(:func:`vp_recon.sparse.similarity_from_poses`); its scale then rests on the spread of a few
+(:func:`vp_recon.registration.similarity_from_poses`); its scale then rests on the spread of a few
 camera centres, each known to RTK's 2 cm, and the plant lies metres away from them. Ground control
 points (:mod:`vp_scene.ground_control`) surveyed around the plant hold the scale and the position
 where the plant is. :func:`register` places the model on both:
@@ -16,8 +16,8 @@ where the plant is. :func:`register` places the model on both:
    centres moved by the similarity, over ``camera_sigma``): robust least squares (scipy's
    ``least_squares``, soft-L1 at 3 sigma: a misread marker does not drag the model) in 7
    parameters, started at the identity (the model is already in ``map``). A point seen in one
-   image constrains the model too: a circle of 4 cameras 90 degrees apart saw each marker once
-   (triangulating the markers first placed none of 4 of 5 such flights);
+   image constrains the model too: a circle of 4 cameras 90 degrees apart sees each marker once,
+   and triangulating the markers first would place none;
 3. with fewer than 3 control points seen (or 3 in a line) the model stays where the poses put it.
 
 Before the fit every control point seen is checked against the model the reported poses placed

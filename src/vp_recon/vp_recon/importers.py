@@ -7,9 +7,8 @@ and, per image, ``metadata/images/<name>.json`` with
 
 * ``approximate_pose`` = [x, y, z, pan, tilt]: the pose the robot reported, millimetres in the
   rig's frame and degrees; pan 0 looks along the rig's +y and grows counter-clockwise (the
-  camera's heading from +x is pan + 90 degrees; checked on the scan of
-  ``../shared/data/romi_real_plant`` against COLMAP's refined poses: every optical axis within 3
-  degrees in azimuth), tilt in degrees below the horizontal. A robot that reports no tilt (0)
+  camera's heading from +x is pan + 90 degrees, checked on a real scan against COLMAP's refined
+  poses), tilt in degrees below the horizontal. A robot that reports no tilt (0)
   while its camera looks down is common: a reported attitude known only roughly, to be given
   with its sigma (``--report-attitude-sigma``, README "From a real flight");
 * ``colmap_camera``: what COLMAP made of the scan, registered to the rig's frame: ``camera_model``

@@ -82,7 +82,7 @@ def nn_distances(query: ArrayLike, data: ArrayLike) -> NDArray[np.float64]:
 
     Not point-cloud-utils' ``k_nearest_neighbors``: pcu 0.34 returns a wrong distance for a
     single query point (caught by the tests); its ``chamfer_distance`` agrees with
-    :func:`chamfer` otherwise and has the same speed (about 0.2 s for 100k vs 100k points).
+    :func:`chamfer` otherwise and is no faster.
     """
     from scipy.spatial import cKDTree
 
@@ -121,8 +121,7 @@ def chamfer_after_icp(recon: ArrayLike, truth: ArrayLike, threshold: float = DEF
     correspondences within ``max_distance`` m, at most 50 iterations). A reconstruction whose
     registration is off by more than about ``max_distance`` keeps (most of) that error. When the
     refinement finds no correspondence, or ends worse than it started (ICP on a cloud far off
-    can slide into a wrong local minimum: Table I, three_row circle, a realization 1.5 m off:
-    Chamfer x100 148.5 before, 172.6 after), the score is the unrefined one: a refinement never
+    can slide into a wrong local minimum), the score is the unrefined one: a refinement never
     makes the shape worse than the registration.
     """
     import open3d as o3d
@@ -145,7 +144,7 @@ def chamfer_after_icp(recon: ArrayLike, truth: ArrayLike, threshold: float = DEF
 
 @dataclass(frozen=True)
 class Coverage:
-    """Coverage of the prior (issue 20, part 4; no ground truth read).
+    """Coverage of the prior (no ground truth read).
 
     Attributes:
         fraction: covered points of the best-covered realization of the prior, in [0, 1].
@@ -176,8 +175,7 @@ def coverage_of_prior(recon: ArrayLike, prior: ArrayLike, plant: ArrayLike, tau:
     reconstruction covers best, max_k |{p in prior_k : d(p, S) < tau}| / |prior_k| (the recall of
     the F-score with prior_k in place of the truth); per plant likewise, each plant's best. Over
     the whole prior (two realizations of a plant bent differently) a perfect reconstruction of one
-    covered about half (measured: 0.509 for a six-view arc, Chamfer x100 2.03), which says more
-    about the wind than about the plan.
+    covers about half, which says more about the wind than about the plan.
 
     Raises:
         EmptyCloudError: no reconstructed or prior point. ValueError: bad shapes, tau <= 0.

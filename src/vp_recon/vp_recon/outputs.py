@@ -80,11 +80,11 @@ def write_image(path: PathLike, rgb: NDArray[np.uint8]) -> None:
 
 def no_truth_metrics(registered: int, mean_reprojection_error: float, mean_track_length: float, points: int,
                      coverage: Any = None, centre_residual: float = float("nan")) -> dict:
-    """The metrics a practitioner can check after a real flight (no ground truth; issue 20,
-    part 4): registered images, mean reprojection error (pixels), mean track length (images a
-    sparse point is seen in), points of the cloud, the RMS distance (m) of the registered cameras
-    from the reported poses (``centre_residual``, null without SfM: the sparse step's self-check,
-    :mod:`vp_recon.sparse`) and, with a prior, coverage_of_prior (overall and per plant, at
+    """The metrics a practitioner can check after a real flight (no ground truth): registered
+    images, mean reprojection error (pixels), mean track length (images a sparse point is seen
+    in), points of the cloud, the RMS distance (m) of the registered cameras from the reported
+    poses (``centre_residual``, null without SfM: the sparse step's self-check,
+    :mod:`vp_recon.sparse_modes`) and, with a prior, coverage_of_prior (overall and per plant, at
     coverage_tau metres; :func:`vp_recon.metrics.coverage_of_prior`)."""
     residual = float(centre_residual)
     out = {"registered_images": int(registered), "mean_reprojection_error": float(mean_reprojection_error),

@@ -1,9 +1,8 @@
 """Image pairs worth matching, chosen from the known camera poses and the known scene.
 
-Exhaustive matching compares all N (N - 1) / 2 image pairs. In a field planned with 8-16 (or
-more) cameras most pairs see different plants or look at the same plant from too far apart for
-SIFT to match (stack notes: at 2000 x 1500, 83% of the pairs 30-45 degrees apart matched, 50% at
-45-60, few beyond). The poses are known, and so is the scene the renderer draws, so the pairs that
+Exhaustive matching compares all N (N - 1) / 2 image pairs. In a field planned with many cameras
+most pairs see different plants or look at the same plant from too far apart for SIFT to match
+(it matches most pairs up to about 45 degrees apart, few beyond 60). The poses are known, and so is the scene the renderer draws, so the pairs that
 can match are known before any image is read. The rule, for cameras (the poses reported, any
 attitude, or levelled ``[c, v]``, :mod:`vp_scene.camera`)
 and the scene points {X}:
@@ -33,15 +32,13 @@ Without an occlusion test two cameras on opposite sides of a plant "share" its p
 window (a_ij near 180 degrees) is what keeps them apart.
 
 The pairs may split the cameras into parts that share no pair (a second sortie's few cameras pair
-among themselves; COLMAP then makes one model per part, each registered on its own poses). Tried
-and rejected (2026-11-26, commit fa73d64): a rule joining the parts by each camera's 2 best
-cameras outside its part. Those pairs are 45-134 degrees apart, and on six_rect (six alike
-plants) they verified false matches: one model of all 9 images with its cameras 1.1-2.0 m from
-the reported ones (README "A second sortie").
+among themselves; COLMAP then makes one model per part, each registered on its own poses). The
+parts are not joined by each camera's best partners outside its part: those pairs are far apart,
+and among alike plants they verify false matches, one model of all the images with its cameras
+metres from the reported ones (README "A second sortie").
 
 Cost: one projection per camera of at most ``max_points`` points, then a loop over cameras i
-whose arrays are (N - i - 1, S): memory O(N S) whatever the number of scene points, about 5 MB
-and well under a second for N = 100, S = 2000. ROS-free.
+whose arrays are (N - i - 1, S): memory O(N S) whatever the number of scene points. ROS-free.
 """
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """Render a camera plan, reconstruct it and score it against the truth (paper Sec. V-B, Table I).
 
 For each wind realization k of a :class:`vp_scene.wind.NoisyScene`, the plan is *flown* under
-the capture model ``config.capture`` (:mod:`vp_scene.capture`; issue "Flights, not renders"):
+the capture model ``config.capture`` (:mod:`vp_scene.capture`):
 
 1. mesh: the plants' meshes displaced by realization k's wind (:mod:`vp_scene.meshing`),
 2. render: one image per camera at ``width x height`` (:mod:`vp_scene.render`; the simulated
@@ -20,7 +20,7 @@ the capture model ``config.capture`` (:mod:`vp_scene.capture`; issue "Flights, n
    against the centres by their sigma (a rig reporting its attitude roughly is registered on its
    centres), and the SfM's failure is then the step's (no anchored fallback);
    ``'known_poses'``: triangulation with the reported poses (an ablation); then, when the flight
-   has ground control (the realistic capture lays 4 markers), the model placed on the control
+   has ground control (the realistic capture lays its markers), the model placed on the control
    points and the reported centres together (:mod:`vp_recon.gcp`),
 4. dense: SGBM on neighbouring pairs (:mod:`vp_recon.dense`; COLMAP PatchMatch needs CUDA) with
    the poses the sparse step gives (SfM's, in ``map``),
@@ -31,9 +31,9 @@ the capture model ``config.capture`` (:mod:`vp_scene.capture`; issue "Flights, n
    scene's box, points on background in some view dropped) and is always scored too
    (``sparse_score``), so that a plan can be judged on either.
 
-``capture = IDEAL`` (``--capture ideal``) is the reconstruction before the capture model, bit for
-bit: the planned poses flown and known exactly, noise-free images, pairs chosen with realization
-k's true points, triangulation with the planned poses (``sparse_mode`` ``'auto'`` resolves to
+``capture = IDEAL`` (``--capture ideal``) flies the planned poses and knows them exactly:
+noise-free images, pairs chosen with realization k's true points, triangulation with the planned
+poses (``sparse_mode`` ``'auto'`` resolves to
 ``'known_poses'`` there). Background (``ground``; ``None``: by the capture): a flight renders a
 textured soil plane under the plants and segments each (noisy) image alone, by excess green
 (:func:`vp_recon.segment.plant_mask`); the ideal capture keeps the blue screen and the renderer's
@@ -45,11 +45,17 @@ Errors are :class:`vp_recon.errors.ReconError` with a ``code`` equal to the
 settings and caps), :mod:`vp_recon.errors` (the codes and the input checks), :mod:`vp_recon.results`
 (what it returns), :mod:`vp_recon.progress` (stages, cancel), :mod:`vp_recon.tasks` (Dask).
 
-One loop over the realizations of a plan, :func:`reconstruct_plan`, used by the CLI, the recon
-node and Table I alike, with one failure rule: **a plan is reconstructed only if every one of
-its wind realizations is**; the first realization that fails stops the plan with its
+One loop, :func:`reconstruct_sets`, over the capture sets of a plan's realizations, whatever
+their source: rendered here (:func:`rendered`; :func:`reconstruct_plan`, used by the CLI, the
+recon node and Table I alike) or sent by the fleet as they arrive
+(:meth:`vp_recon.fleet_captures.FleetCaptures.capture_sets`), in this process or on a Dask
+cluster, with one failure rule: **a plan is reconstructed only if every one of its wind
+realizations is**; the first realization that fails stops the plan with its
 :class:`ReconError` (``.realization`` says which). A mean Chamfer distance over the
-realizations that happened to work would hide exactly the plans that reconstruct badly.
+realizations that happened to work would hide exactly the plans that reconstruct badly. One
+capture set is :func:`reconstruct_set` (:func:`reconstruct_captured`: a set given,
+:func:`reconstruct_realization`: one rendered first); a flight folder without realizations,
+:func:`reconstruct_views`.
 """
 from __future__ import annotations
 
@@ -57,8 +63,9 @@ import os
 import shutil
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
-from typing import Optional, Sequence, Union
+from typing import Callable, Iterable, Iterator, NamedTuple, Optional, Sequence, Union
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -66,17 +73,17 @@ from numpy.typing import ArrayLike, NDArray
 from vp_scene.camera import as_poses
 from vp_scene.folders import OwnedFolder
 
-from .config import ANCHOR_MAX_ATTITUDE_DEG, ReconConfig, matching_method
+from .config import ReconConfig, matching_method
 from .errors import EMPTY_PLAN, NO_SCENE, NOTHING_VISIBLE, OUTPUT_NOT_WRITABLE, RECONSTRUCTION_FAILED, UNKNOWN, \
-    ReconError, check_plan_size, check_realizations, check_scene, validate_cameras
+    ReconError, SparseError, check_plan_size, check_realizations, check_scene, validate_cameras
 from .errors import ensure_writable_dir
 from .metrics import EmptyCloudError, chamfer, chamfer_after_icp
 from .progress import ProgressFn, tick
 from .results import PlanReconResult, Prior, RealizationFn, RealizationResult, ViewsResult, plan_result
-from .tasks import on_cluster
+from .tasks import ClusterQueue
 
 __all__ = ["crop_box", "set_threads", "render_flight", "reconstruct_views", "reconstruct_captured",
-           "reconstruct_realization", "reconstruct_plan"]
+           "reconstruct_realization", "Rendered", "rendered", "reconstruct_set", "reconstruct_sets", "reconstruct_plan"]
 
 PathLike = Union[str, os.PathLike]
 
@@ -102,7 +109,7 @@ def render_flight(noisy_scene: object, k: int, cameras: ArrayLike, config: Optio
     (:func:`vp_scene.sim_drone.photograph`: the world renders it), as the capture set a flight
     hands to the reconstruction: a :class:`vp_recon.flight.CapturedViews` of the images rendered
     from the actual poses (with sensor noise) and the poses the drones report. The ideal capture
-    keeps the renderer's masks (an oracle: the capture before issue 18); a flight's masks come
+    keeps the renderer's masks (an oracle); a flight's masks come
     from its images alone (:func:`reconstruct_views`). ``views.seconds``: mesh, render.
     ReconError EMPTY_PLAN for bad cameras or indices, UNKNOWN when meshing or rendering fails.
 
@@ -171,7 +178,7 @@ def reconstruct_views(views: object, config: Optional[ReconConfig] = None, workd
     from .metrics import coverage_of_prior
     from .pairs import select_pairs
     from .segment import flight_masks, image_mask
-    from .sparse import SparseError, sparse_reconstruct
+    from .sparse import sparse_reconstruct
 
     cfg = (config or ReconConfig()).validate()
     set_threads(cfg.num_threads)
@@ -213,21 +220,10 @@ def reconstruct_views(views: object, config: Optional[ReconConfig] = None, workd
         t_pairs = time.perf_counter() - t0
         capture = cfg.capture
         try:
-            mode = cfg.sparse_mode_used
-            priors = None if capture.ideal or mode != "incremental" else reported[:, :3]
-            # Reported attitudes rougher than ANCHOR_MAX_ATTITUDE_DEG (a rig's mount 20 degrees off) are weighed
-            # against the centres by their sigma, and the anchored model, triangulated at them, is no fallback (on
-            # the dev scan's 10 views it "registered" 10 of 10 at poses 20 degrees off, 8 points kept). Good ones
-            # alone give the registration's rotation, as before: weighed by sigma 0.5 they did no better
-            # (4-camera arc, realizations 0 and 1: optical axes 0.52 / 0.25 degrees off against 0.48 / 0.19).
-            rough = not capture.ideal and capture.report_attitude_sigma > ANCHOR_MAX_ATTITUDE_DEG
-            sp = sparse_reconstruct(images, reported, K, wd, mode=mode,
-                                    masks=masks if cfg.sift_masks else None, max_features=cfg.max_features,
-                                    num_threads=cfg.num_threads or -1, pairs=pairs, prior_centres=priors,
-                                    prior_sigma=max(capture.report_position_sigma, 0.01),
-                                    sift_first_octave=cfg.sift_first_octave,
-                                    attitude_sigma=capture.report_attitude_sigma if rough else None,
-                                    fallback=None if rough else "anchored")
+            options = cfg.sparse_options()
+            priors = None if capture.ideal or options.mode != "incremental" else reported[:, :3]
+            sp = sparse_reconstruct(images, reported, K, wd, options, masks=masks if cfg.sift_masks else None,
+                                    pairs=pairs, prior_centres=priors)
         except SparseError as exc:
             raise ReconError(RECONSTRUCTION_FAILED, f"sparse reconstruction failed: {exc}") from exc
         except OSError as exc:
@@ -245,7 +241,7 @@ def reconstruct_views(views: object, config: Optional[ReconConfig] = None, workd
 
         t0 = time.perf_counter()
         # the poses the sparse step knows: the reported ones, or SfM's (in map) where registered
-        # (ideal: the planned poses whatever the mode, as before the capture model)
+        # (ideal: the planned poses whatever the mode)
         geo = reported if capture.ideal or mode == "known_poses" else \
             np.where(np.isfinite(sp.cameras), sp.cameras, as_poses(reported))
         if prior is not None:
@@ -323,7 +319,7 @@ def reconstruct_captured(noisy_scene: object, views: object, config: Optional[Re
     try:
         seconds = dict(views.seconds)
         prior = Prior.of_scene(noisy_scene)
-        # pairs: ideal: as before the capture model (realization k's truth); a flight: the planning cloud
+        # pairs: ideal: from realization k's truth; a flight: from the planning cloud
         vr = reconstruct_views(views, cfg, wd / f"realization_{k}", prior=prior,
                                pair_cloud=truth_all[k] if cfg.capture.ideal else None, progress=progress, k=k)
         seconds.update(vr.seconds)
@@ -363,33 +359,114 @@ def reconstruct_captured(noisy_scene: object, views: object, config: Optional[Re
         K=np.asarray(views.K, dtype=np.float64), ground_control=views.control)
 
 
-def reconstruct_plan(noisy_scene: object, cameras: ArrayLike, config: Optional[ReconConfig] = None,
-                     out_dir: Optional[PathLike] = None, realizations: Optional[Sequence[int]] = None,
-                     progress: Optional[ProgressFn] = None,
-                     on_realization: Optional[RealizationFn] = None, client: object = None) -> PlanReconResult:
-    """Reconstruct and score a plan on every (or the listed) wind realization(s), in order.
+class Rendered(NamedTuple):
+    """A capture set still to be flown: realization ``realization`` of a plan of ``cameras`` (N, 6),
+    rendered by the simulated drones where it is reconstructed (on a Dask worker: the images do
+    not travel)."""
 
-    The failure rule (module docstring): the first realization that fails stops the plan.
-    With a Dask ``client`` (:func:`vp_scene.cluster.open_client`) the realizations reconstruct in
-    parallel on its workers, one thread each; the result is the in-process one (same records, in
-    the order asked), the failure rule reads "the failing realization first in that order", and
-    ``progress`` / ``on_realization`` run in this process as each realization comes back.
+    realization: int
+    cameras: NDArray[np.float64]
+
+
+def rendered(cameras: NDArray[np.float64], realizations: Iterable[int]) -> Iterator[Rendered]:
+    """The render source of :func:`reconstruct_sets`: the plan's realizations, in order."""
+    return (Rendered(int(k), cameras) for k in realizations)
+
+
+def reconstruct_set(noisy_scene: object, capture: object, config: Optional[ReconConfig] = None,
+                    workdir: Optional[PathLike] = None, progress: Optional[ProgressFn] = None) -> RealizationResult:
+    """One capture set of ``noisy_scene`` reconstructed and scored against its realization's truth:
+    a :class:`Rendered` one flown first (:func:`reconstruct_realization`), a
+    :class:`vp_recon.flight.CapturedViews` as it came (:func:`reconstruct_captured`).
+    Arguments and errors as :func:`reconstruct_realization`."""
+    if isinstance(capture, Rendered):
+        return reconstruct_realization(noisy_scene, capture.realization, capture.cameras, config, workdir, progress)
+    return reconstruct_captured(noisy_scene, capture, config, workdir, progress)
+
+
+def reconstruct_sets(noisy_scene: object, captures: Iterable, config: Optional[ReconConfig] = None,
+                     out_dir: Optional[PathLike] = None, progress: Optional[ProgressFn] = None,
+                     on_realization: Optional[RealizationFn] = None, client: object = None,
+                     should_stop: Optional[Callable[[], bool]] = None) -> PlanReconResult:
+    """The one loop: every capture set ``captures`` gives (:class:`Rendered` ones of
+    :func:`rendered`, the fleet's :class:`vp_recon.flight.CapturedViews` as they arrive),
+    reconstructed and scored in the order given (:func:`reconstruct_set`), with the failure rule
+    of the module docstring: the first set that fails stops the plan with its ReconError
+    (``.realization`` set).
+
+    With a Dask ``client`` each set is reconstructed on the cluster as soon as the source gives it
+    (one thread a task, :class:`vp_recon.tasks.ClusterQueue`), while the source makes the next;
+    the results are the in-process ones, taken back in the order given, and ``progress`` /
+    ``on_realization`` run in this process as each is taken back.
 
     Args:
         out_dir: output folder, checked writable (created); the COLMAP workspaces go to
             ``out_dir/work`` when ``config.keep_workdir``. None: temporary workspaces only.
-        realizations: indices k to run (default: all K of the scene), in order, no duplicates.
         progress: ``progress(stage, k)`` after every stage; returning False cancels.
-        on_realization: ``on_realization(result)`` after each realization that succeeded, while
-            its rendered images are still attached (when ``config.keep_images``).
+        on_realization: ``on_realization(result)`` after each set that succeeded, while its
+            images are still attached (when ``config.keep_images``).
+        should_stop: checked while the cluster's results are awaited; True cancels.
 
     Returns:
-        PlanReconResult with chamfer_mean and the population std over the realizations (metres).
-        The first realization keeps its rendered images when ``config.keep_images`` (the others
-        drop theirs after ``on_realization``: memory).
+        PlanReconResult with chamfer_mean and the population std over the sets (metres). The
+        first set keeps its images when ``config.keep_images`` (the others drop theirs after
+        ``on_realization``: memory).
 
     Raises:
-        ReconError as :func:`reconstruct_realization`, with ``.realization`` set to the failing
+        ReconError as :func:`reconstruct_realization`; ReconCancelled.
+    """
+    cfg = (config or ReconConfig()).validate()
+    work_root = None
+    if out_dir is not None:
+        out = ensure_writable_dir(out_dir)
+        if cfg.keep_workdir:
+            work_root = ensure_writable_dir(out / "work")
+    results: list = []
+    t_all = time.perf_counter()
+
+    def report(res: RealizationResult) -> None:
+        if on_realization is not None:
+            on_realization(res)
+        if results:  # only the first set keeps its images (memory)
+            res.rendered = []
+        results.append(res)
+
+    queue = None if client is None else ClusterQueue(client, noisy_scene, should_stop)
+    try:
+        for n, capture in enumerate(captures):
+            sub = replace(cfg, keep_images=cfg.keep_images and (n == 0 or on_realization is not None))
+            if queue is not None:
+                queue.submit(capture.realization, reconstruct_set, capture, replace(sub, num_threads=1), work_root)
+                for res in queue.take(progress, block=False):
+                    report(res)
+                continue
+            try:
+                res = reconstruct_set(noisy_scene, capture, sub, work_root, progress)
+            except ReconError as exc:
+                exc.realization = capture.realization
+                raise
+            report(res)
+        for res in queue.take(progress, block=True) if queue is not None else ():
+            report(res)
+    finally:
+        if queue is not None:
+            queue.cancel()
+    return plan_result(results, {"total": time.perf_counter() - t_all})
+
+
+def reconstruct_plan(noisy_scene: object, cameras: ArrayLike, config: Optional[ReconConfig] = None,
+                     out_dir: Optional[PathLike] = None, realizations: Optional[Sequence[int]] = None,
+                     progress: Optional[ProgressFn] = None, on_realization: Optional[RealizationFn] = None,
+                     client: object = None, should_stop: Optional[Callable[[], bool]] = None) -> PlanReconResult:
+    """Reconstruct and score a plan on every (or the listed) wind realization(s), in order: the
+    plan checked, then :func:`reconstruct_sets` of its :func:`rendered` realizations.
+
+    Args:
+        realizations: indices k to run (default: all K of the scene), in order, no duplicates.
+        out_dir, progress, on_realization, client, should_stop: as :func:`reconstruct_sets`.
+
+    Raises:
+        ReconError as :func:`reconstruct_sets`, with ``.realization`` set to the failing
         realization's k (plan-level problems, such as an unknown realization, have None);
         PLAN_TOO_LARGE for more than ``config.max_cameras`` cameras, before anything is rendered.
         ReconCancelled: ``progress`` returned False.
@@ -398,27 +475,5 @@ def reconstruct_plan(noisy_scene: object, cameras: ArrayLike, config: Optional[R
     cams = validate_cameras(cameras)
     check_plan_size(len(cams), cfg.max_cameras)
     ks = check_realizations(realizations, check_scene(noisy_scene).shape[0])
-    work_root = None
-    if out_dir is not None:
-        out = ensure_writable_dir(out_dir)
-        if cfg.keep_workdir:
-            work_root = ensure_writable_dir(out / "work")
-    results = []
-    t_all = time.perf_counter()
-    if client is not None:
-        results = on_cluster(client, reconstruct_realization, noisy_scene, cams, cfg, ks, work_root, progress,
-                             on_realization)
-    for n, k in enumerate(ks if client is None else ()):
-        keep = cfg.keep_images and (n == 0 or on_realization is not None)
-        sub = ReconConfig(**{**cfg.__dict__, "keep_images": keep})
-        try:
-            res = reconstruct_realization(noisy_scene, k, cams, sub, workdir=work_root, progress=progress)
-        except ReconError as exc:
-            exc.realization = k
-            raise
-        if on_realization is not None:
-            on_realization(res)
-        if n > 0:
-            res.rendered = []
-        results.append(res)
-    return plan_result(results, {"total": time.perf_counter() - t_all})
+    return reconstruct_sets(noisy_scene, rendered(cams, ks), cfg, out_dir, progress, on_realization, client,
+                            should_stop)

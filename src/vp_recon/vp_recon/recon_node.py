@@ -1,4 +1,4 @@
-"""The recon node: a thin ROS 2 adapter around :func:`vp_recon.pipeline.reconstruct_plan`.
+"""The recon node: a thin ROS 2 adapter around :func:`vp_recon.pipeline.reconstruct_sets`.
 
 Subscribes (all reliable, TRANSIENT_LOCAL, as the scene and planner nodes publish them)
 
@@ -20,9 +20,9 @@ Subscribes (all reliable, TRANSIENT_LOCAL, as the scene and planner nodes publis
   sets of the earlier fleet plan that flew them (``record_captures``; the newest of the last
   ``_FLOWN_MEMORY`` plans), or fails with ``CAPTURE_MISSING`` naming the cameras it cannot find.
 
-For every plan it renders, reconstructs and scores each wind realization (one loop, one failure
-rule: :func:`vp_recon.pipeline.reconstruct_plan`, the first failing realization stops the plan)
-and publishes
+For every plan it reconstructs and scores each wind realization's capture set, rendered here or
+sent by the fleet (one loop, one failure rule: :func:`vp_recon.pipeline.reconstruct_sets`, the
+first failing realization stops the plan) and publishes
 
 * ``/reconstruction/score`` (vp_interfaces/ReconstructionScore): one per realization as it is
   done, then the aggregate (``realization = AGGREGATE``); on a failure, the failing
@@ -39,6 +39,18 @@ the drones reported, the camera) goes to its ``captures/realization_<k>`` as a f
 (:func:`vp_recon.flight.write_flight`; README "From a real flight"). The rendering and scoring parameters are read anew for every plan; a change to a
 bad value is refused with the reason.
 
+It serves ``vp_interfaces/action/SimulateFlights`` on ``/simulate_flights``, the planner's simulated
+flights (:mod:`vp_recon.sim_flights`): the goal's plans flown over the scene rebuilt from
+``/scene/description`` (as for rendering), each under its own draw, photographed at the goal's
+setting and capture figures, reconstructed and scored; one flight a Dask task on the node's
+cluster (the user's ``scheduler``, else the kept local cluster of ``workers``, opened at the first
+batch when ``scheduler`` is '': a cancel is answered within :data:`vp_recon.sim_flights.POLL_S`
+whatever a flight is doing; a flight already running ends on its worker and is dropped). Feedback
+as each flight comes back; a flight that fails is a scored failure in the result, never a failed
+goal. One batch flies at a time (another goal meanwhile is rejected); a batch and a plan's
+reconstruction run side by side, sharing the machine (on one cluster, the scheduler interleaves
+their tasks): neither waits for the other.
+
 The work runs on a worker thread, so the node's callbacks keep running. Queueing policy: the
 plan in progress is finished; of the plans that arrive meanwhile only the newest is kept
 (it replaces an older queued one, which is logged), because a newer plan supersedes older ones.
@@ -54,6 +66,7 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+import threading
 import time
 from collections import OrderedDict
 from pathlib import Path
@@ -61,31 +74,35 @@ from typing import Optional
 
 import numpy as np
 from geometry_msgs.msg import PoseArray
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
 
+from vp_interfaces.action import SimulateFlights
 from vp_interfaces.msg import CameraPlan, ReconstructionScore, SceneDescription
 from vp_recon.config import MAX_CAMERAS, ReconConfig
 from vp_recon.errors import ReconError, check_plan_size, ensure_writable_dir
 from vp_recon.fleet_captures import IMAGE_TRANSPORTS, FleetCaptures
 from vp_scene.flight_poses import FlightError
-from vp_recon.flight import flown_views, join_views, locate_flown, write_flight
+from vp_recon.flight import locate_flown, write_flight
 from vp_recon.gcp import describe
 from vp_recon.metrics import DEFAULT_FSCORE_THRESHOLD
 from vp_recon.outputs import contact_sheet, write_image, write_ply
-from vp_recon.pipeline import reconstruct_captured, reconstruct_plan
-from vp_recon.progress import STAGES, ReconCancelled
-from vp_recon.results import RealizationResult, plan_result
-from vp_recon.tasks import worker_call, worker_result
+from vp_recon.pipeline import reconstruct_plan, reconstruct_sets
+from vp_recon.progress import ReconCancelled
+from vp_recon.results import RealizationResult
+from vp_recon.sim_flights import SceneFlights, flight_batch, flight_config
 from vp_scene.camera import IMAGE_SIDE_RANGE, IMAGE_SIZE
 from vp_scene.capture import IDEAL, REALISTIC, CaptureModel
 from vp_scene.cloud import numpy_to_pointcloud2, realizations_from_cloud
 from vp_scene.cluster import KeptLocalCluster
+from vp_scene.flights import FlightSettings, flight_capture
 from vp_scene.folders import new_run_folder, remove_if_empty
 from vp_scene.limits import MAX_SEED
-from vp_scene.messages import (aggregate_score, error_score, plan_key, pose_array_to_cameras, realization_score,
-                               scene_of_description, score_msg)
+from vp_scene.messages import (aggregate_score, error_score, flight_msg, plan_key, pose_array_to_cameras,
+                               realization_score, scene_of_description, score_msg)
 from vp_scene.node_runtime import (INT_MAX, LATCHED, NewestWins, Param, declare_typed, parameter_value,
                                    refuse_bad_changes, run_node, typed_values)
 
@@ -183,6 +200,18 @@ def capture_model(values: dict) -> CaptureModel:
     return CaptureModel.named(full['capture'], seed=full['capture_seed'], **figures)
 
 
+#: The parameters that are the :class:`vp_recon.config.ReconConfig` fields of the same name.
+CONFIG_KEYS = ('width', 'height', 'fov', 'sparse_mode', 'dense', 'matching', 'fscore_threshold', 'sift_first_octave',
+               'dense_scale', 'max_cameras', 'num_threads')
+
+
+def recon_config(values: dict) -> ReconConfig:
+    """The reconstruction settings of the parameter values (defaults for those not given), the
+    images kept for the plan folder; ValueError naming a bad one."""
+    return ReconConfig(**{k: values.get(k, PARAMS[k][0]) for k in CONFIG_KEYS}, keep_images=True,
+                       capture=capture_model(values)).validate()
+
+
 #: The parameters of a tls:// scheduler's certificate files, in vp_scene.cluster.TlsFiles' order.
 TLS_KEYS = ('tls_ca_file', 'tls_cert', 'tls_key')
 
@@ -220,18 +249,13 @@ def check_parameters(values: dict) -> dict:
         from vp_scene.cluster import check_cluster_args
 
         check_cluster_args(v['scheduler'], v.get('workers', PARAMS['workers'][0]), tls)
-    config_keys = ('width', 'height', 'fov', 'sparse_mode', 'dense', 'matching', 'fscore_threshold',
-                   'sift_first_octave', 'dense_scale', 'max_cameras')
-    if any(k in v for k in config_keys):  # the rendering settings: ReconConfig's own checks
-        defaults = {k: PARAMS[k][0] for k in config_keys}
-        ReconConfig(**{**defaults, **{k: v[k] for k in config_keys if k in v}}).validate()
-    if any(k in v for k in CAPTURE_KEYS):
-        capture_model(v)
+    if any(k in v for k in CONFIG_KEYS + CAPTURE_KEYS):  # the reconstruction's settings: ReconConfig's own checks
+        recon_config(v)
     return v
 
 
 class ReconNode(Node):
-    """ROS 2 adapter: plans and scenes in, :func:`reconstruct_plan` calls, scores out."""
+    """ROS 2 adapter: plans and scenes in, :func:`reconstruct_sets` calls, scores out."""
 
     def __init__(self) -> None:
         super().__init__('recon')
@@ -263,10 +287,15 @@ class ReconNode(Node):
         self._local = KeptLocalCluster()  # scheduler 'local': one cluster for the node's life
         if self._param('scheduler') == 'local':
             self._local.warm(self._param('workers'))  # started while the planner plans
+        self._flying = threading.Lock()  # one batch of simulated flights at a time
+        self._flights_server = ActionServer(self, SimulateFlights, '/simulate_flights', execute_callback=self._fly,
+                                            goal_callback=self._on_flights_goal,
+                                            cancel_callback=lambda _g: CancelResponse.ACCEPT,
+                                            callback_group=ReentrantCallbackGroup())
         self._plans.start()
         self.get_logger().info(
             f'recon ready ({self._param("width")}x{self._param("height")}, output {self._param("output_folder")}): '
-            'waiting for /scene/description, /scene/noisy_points and /camera_plan')
+            'waiting for /scene/description, /scene/noisy_points and /camera_plan; serving /simulate_flights')
 
     # ---------------------------------------------------------------- parameters
     def _param(self, name: str):
@@ -274,12 +303,7 @@ class ReconNode(Node):
 
     def _config(self) -> ReconConfig:
         """The reconstruction settings of the parameters now (read for every plan)."""
-        return ReconConfig(width=self._param('width'), height=self._param('height'), fov=self._param('fov'),
-                           sparse_mode=self._param('sparse_mode'), dense=self._param('dense'),
-                           matching=self._param('matching'), fscore_threshold=self._param('fscore_threshold'), keep_images=True,
-                           num_threads=self._param('num_threads'), sift_first_octave=self._param('sift_first_octave'),
-                           dense_scale=self._param('dense_scale'), max_cameras=self._param('max_cameras'),
-                           capture=capture_model({k: self._param(k) for k in CAPTURE_KEYS})).validate()
+        return recon_config({k: self._param(k) for k in CONFIG_KEYS + CAPTURE_KEYS})
 
     def _ground_control(self, scene: object, config: ReconConfig) -> object:
         """The fleet's ground control: the ``ground_control`` file (a real field's), else the markers
@@ -297,8 +321,8 @@ class ReconNode(Node):
 
     def on_shutdown(self, timeout: float) -> bool:
         """SIGINT/SIGTERM: the worker abandons its plan at the next stage; nothing to wait for.
-        The plan's folder goes with it when nothing was written into it yet (issue 19, item 4:
-        an interrupted recon left an empty ``plan-<time>/``); what was written stays."""
+        The plan's folder goes with it when nothing was written into it yet (no empty
+        ``plan-<time>/`` is left behind); what was written stays."""
         with self._lock:  # (the queue's lock: stopped and the folder read together)
             self._plans.stop()
             run_dir = self._run_dir
@@ -444,9 +468,12 @@ class ReconNode(Node):
         done: list[RealizationResult] = []
         started = [time.monotonic()]
 
+        def stop() -> bool:
+            return self._plans.stopped
+
         def progress(stage: str, k: int) -> bool:
             self.get_logger().info(f'realization {k + 1}/{K}: {stage} done')
-            return not self._plans.stopped
+            return not stop()
 
         record = self._param('record_captures')
 
@@ -487,14 +514,19 @@ class ReconNode(Node):
                                                                  quiet=True, tls=tls))
                     self.get_logger().info(f'realizations in parallel on Dask ({self._param("scheduler")}: '
                                            f'{client.scheduler.address}, dashboard {dashboard(client)})')
-                if self._param('source') == 'fleet':
-                    result = self._from_fleet(plan, scene, config, K, run_dir, progress, on_realization, client,
-                                              located)
+                if self._param('source') == 'fleet':  # the capture sets as the drones send them
+                    captures = self._fleet.capture_sets(
+                        plan.header.stamp, len(plan.poses), K, self._param('capture_timeout'),
+                        self._param('camera_topic'), stop, transport=self._param('image_transport'),
+                        control=self._ground_control(scene, config), flown=located)
+                    result = reconstruct_sets(scene, captures, config, out_dir=run_dir, progress=progress,
+                                              on_realization=on_realization, client=client, should_stop=stop)
                     if record:  # a later sortie may name these cameras as flown (locate_flown)
                         self._flown = (self._flown + [(cameras, run_dir)])[-_FLOWN_MEMORY:]
                 else:
                     result = reconstruct_plan(scene, cameras, config, out_dir=run_dir, realizations=range(K),
-                                              progress=progress, on_realization=on_realization, client=client)
+                                              progress=progress, on_realization=on_realization, client=client,
+                                              should_stop=stop)
         except OSError as exc:  # the cluster: no scheduler at that address, workers that cannot start
             remove_if_empty(run_dir)
             self._publish_error(Score.UNKNOWN, f'the Dask cluster {self._param("scheduler")!r} failed: {exc}',
@@ -513,6 +545,104 @@ class ReconNode(Node):
                                f'over {len(result.realizations)} realizations')
         self.score_pub.publish(agg)
 
+    # ---------------------------------------------------------------- simulated flights
+    def _on_flights_goal(self, _goal: SimulateFlights.Goal) -> GoalResponse:
+        if self._plans.stopped:
+            self.get_logger().warn('rejecting simulated flights: shutting down')
+            return GoalResponse.REJECT
+        if self._flying.locked():
+            self.get_logger().warn('rejecting simulated flights: another batch is flying')
+            return GoalResponse.REJECT
+        return GoalResponse.ACCEPT
+
+    def _fly(self, goal_handle) -> SimulateFlights.Result:
+        """A SimulateFlights goal to its one terminal transition (succeed, canceled or abort)."""
+        R = SimulateFlights.Result
+        result = R()
+
+        def finish(code: int, text: str = '') -> SimulateFlights.Result:
+            result.error_code, result.error_msg = code, text
+            if code not in (R.NONE, R.CANCELED):
+                self.get_logger().error(f'simulated flights: {text}')
+            if goal_handle.is_active:
+                if code == R.NONE:
+                    goal_handle.succeed()
+                elif goal_handle.is_cancel_requested:
+                    goal_handle.canceled()
+                else:
+                    goal_handle.abort()
+            return result
+
+        if not self._flying.acquire(blocking=False):
+            return finish(R.UNKNOWN, 'another batch of simulated flights is flying')
+        try:
+            return self._fly_batch(goal_handle, result, finish)
+        finally:
+            self._flying.release()
+
+    def _fly_batch(self, goal_handle, result: SimulateFlights.Result, finish) -> SimulateFlights.Result:
+        R, goal = SimulateFlights.Result, goal_handle.request
+        try:  # the goal as a whole, before anything flies
+            plans, draws = flight_batch(goal.cameras, goal.cameras_per_plan, goal.flight_indices, goal.n_wind,
+                                        goal.capture_seeds, self._param('max_cameras'))
+            settings = FlightSettings(width=int(goal.width), height=int(goal.height),
+                                      sift_first_octave=int(goal.sift_first_octave), dense_scale=float(goal.dense_scale))
+            capture = flight_capture(float(goal.report_position_sigma), float(goal.report_attitude_sigma),
+                                     bool(goal.ground_control))
+            if not (math.isfinite(goal.fov) and 0.0 < goal.fov < math.pi):
+                raise ValueError(f'fov must be in (0, pi) rad, got {goal.fov}')
+            flight_config(settings, capture, draws[0], float(goal.fov))  # the reconstruction's own checks
+        except ValueError as exc:
+            return finish(R.INVALID_GOAL, str(exc))
+        try:
+            noisy = self._scene_now()
+        except ReconError as exc:
+            return finish(R.NO_SCENE if exc.code == Score.NO_SCENE else R.UNKNOWN, str(exc))
+        total, done = len(plans), [0]
+
+        def stopped() -> bool:
+            return goal_handle.is_cancel_requested or self._plans.stopped
+
+        def on_flight(i: int, score) -> None:
+            done[0] += 1
+            goal_handle.publish_feedback(SimulateFlights.Feedback(flights_done=done[0], flights_total=total,
+                                                                  last=flight_msg(score, i)))
+            what = (f'failed ({score.reason})' if score.failed else
+                    f'map Chamfer {score.chamfer:.4f} m, shape {score.chamfer_shape:.4f} m')
+            self.get_logger().info(f'simulated flight {done[0]}/{total} (plan {i}): {what}, {score.seconds:.1f} s')
+
+        self.get_logger().info(f'flying {total} plans ({settings.width}x{settings.height}, SIFT octave '
+                               f'{settings.sift_first_octave}, dense scale {settings.dense_scale:g})')
+        # the batch has started: its client knows the goal accepted even when the answer was lost
+        goal_handle.publish_feedback(SimulateFlights.Feedback(flights_done=0, flights_total=total))
+        try:
+            with contextlib.ExitStack() as stack:
+                client = self._flights_client(stack)
+                sim = SceneFlights(noisy.scene, noisy.config, settings, capture, client, float(goal.fov))
+                scores = sim.fly(plans, draws, on_flight=on_flight, should_stop=stopped)
+        except OSError as exc:  # the cluster: no scheduler at that address, workers that cannot start
+            return finish(R.CLUSTER_FAILED, f'the Dask cluster {self._param("scheduler") or "local"!r} failed: {exc}')
+        except Exception as exc:  # noqa: BLE001 - e.g. a cluster lost while the scene is sent: the goal's failure
+            return finish(R.UNKNOWN, f'{type(exc).__name__}: {exc}')
+        result.flights = [flight_msg(score, i) for i, score in enumerate(scores)]
+        if stopped():
+            why = 'cancelled' if goal_handle.is_cancel_requested else 'the recon node is shutting down'
+            self.get_logger().info(f'simulated flights {why} after {done[0]} of {total}')
+            return finish(R.CANCELED, f'{why} after {done[0]} of {total} flights')
+        return finish(R.NONE)
+
+    def _flights_client(self, stack: contextlib.ExitStack) -> object:
+        """The Dask client the flights fly on: the user's scheduler (open for the batch), else the
+        node's kept local cluster of ``workers`` (``scheduler`` '' too: a flight a task, so that a
+        cancel is answered at once). OSError when it cannot be opened."""
+        from vp_scene.cluster import open_client
+
+        scheduler = self._param('scheduler')
+        if scheduler and scheduler != 'local':
+            tls = cluster_tls({k: self._param(k) for k in TLS_KEYS})
+            return stack.enter_context(open_client(scheduler, self._param('workers'), quiet=True, tls=tls))
+        return self._local.get(self._param('workers'))
+
     # ---------------------------------------------------------------- outputs
     def _publish_clouds(self, done: list, frame: str) -> None:
         """The clouds of every realization of the plan done so far, in one latched message."""
@@ -526,82 +656,6 @@ class ReconNode(Node):
         return score_msg(self._param('frame_id'), self.get_clock().now().to_msg(), realization, K, images,
                          self._param('fscore_threshold'), self._param('capture'), self._param('method'),
                          self._info_of(plan) if plan is not None else None, source=self._param('source'))
-
-    def _from_fleet(self, plan: PoseArray, scene: object, config: ReconConfig, K: int, run_dir: Path,
-                    progress, on_realization, client: object = None, located: Optional[list] = None) -> object:
-        """Source fleet: for each realization k, one capture set of the plan from the drones
-        (:class:`vp_recon.fleet_captures.FleetCaptures`), reconstructed on the library path of every capture set
-        (:func:`vp_recon.pipeline.reconstruct_captured`); the first that fails stops the plan.
-        With a Dask ``client`` each capture set is reconstructed on the cluster as soon as it is
-        collected (one thread a task), while the drones take the next: the results are the
-        in-process ones, reported in the order k. A second sortie (``located``: the cameras
-        already flown, :func:`vp_recon.flight.locate_flown`) puts their images of realization k
-        first (:func:`vp_recon.flight.flown_views`), as the render source orders the cameras."""
-        t0 = time.perf_counter()
-        results = []
-        pending: list = []  # (k, future) on the cluster, in order k
-        shared = client.scatter(scene, broadcast=True) if client is not None else None
-        cluster_cfg = ReconConfig(**{**config.__dict__, 'num_threads': 1}) if client is not None else None
-
-        def finish(res: RealizationResult) -> None:
-            on_realization(res)
-            if res.realization > 0:  # as reconstruct_plan: only the first realization keeps its images (memory)
-                res.rendered = []
-            results.append(res)
-
-        def collect(block: bool) -> None:
-            """Report the cluster's finished reconstructions in order k (all of them: ``block``)."""
-            from distributed import wait
-
-            while pending and (block or pending[0][1].done()):
-                k, fut = pending[0]
-                while not fut.done():
-                    if self._plans.stopped:
-                        raise ReconCancelled('stopped while reconstructing on the cluster')
-                    try:
-                        wait(fut, timeout=0.5)
-                    except TimeoutError:  # distributed.wait's way of saying 'not yet'
-                        pass
-                pending.pop(0)
-                res = worker_result(fut.result(), k)
-                for stage in STAGES:
-                    progress(stage, k)
-                finish(res)
-
-        try:
-            for k in range(K):
-                try:
-                    views = self._fleet.capture(plan.header.stamp, len(plan.poses), k,
-                                                self._param('capture_timeout'), self._param('camera_topic'),
-                                                lambda: self._plans.stopped, transport=self._param('image_transport'))
-                    if views is None:
-                        raise ReconCancelled('stopped while waiting for the fleet')
-                    views.control = self._ground_control(scene, config)
-                    self.get_logger().info(f'capture {k}: {len(views.images)} images from the fleet '
-                                           f'({sum(im.nbytes for im in views.images) / 1e6:.0f} MB) collected')
-                    if located:
-                        try:
-                            views = join_views([flown_views(located, k), views])
-                        except FlightError as exc:
-                            raise ReconError(Score.CAPTURE_MISSING, f'the images of the cameras already flown: {exc}')
-                        self.get_logger().info(f'capture {k}: with the {len(located)} images of the cameras '
-                                               'already flown')
-                    if client is None:
-                        res = reconstruct_captured(scene, views, config, progress=progress)
-                except ReconError as exc:
-                    exc.realization = k
-                    raise
-                if client is None:
-                    finish(res)
-                    continue
-                pending.append((k, client.submit(worker_call, reconstruct_captured, shared, views, cluster_cfg,
-                                                 pure=False)))
-                collect(block=False)
-            collect(block=True)
-        finally:
-            if pending:
-                client.cancel([f for _, f in pending])
-        return plan_result(results, {'total': time.perf_counter() - t0})
 
     def _publish_error(self, code: int, text: str, realization: int, images: int, plan: Optional[PoseArray],
                        realizations: int = 0) -> None:
@@ -618,7 +672,8 @@ class ReconNode(Node):
 
 def main(args=None) -> int:
     """Entry point ``recon``: exit 2 with one line for a bad parameter, 0 after SIGINT/SIGTERM."""
-    return run_node('recon', ReconNode, args, num_threads=2)
+    # a SimulateFlights goal holds a thread while it flies: the others serve its cancel and the topics
+    return run_node('recon', ReconNode, args, num_threads=3)
 
 
 if __name__ == '__main__':

@@ -1,7 +1,8 @@
 """What a reconstruction gives: one realization's reconstruction and scores
 (:class:`RealizationResult`), a plan's over its realizations (:class:`PlanReconResult`,
 :func:`plan_result`), a capture set's reconstruction before any truth is read
-(:class:`ViewsResult`), and the planning cloud it is given as its prior (:class:`Prior`).
+(:class:`ViewsResult`) and its sparse step's (:class:`SparseResult`, the :class:`SparseModel` kept
+and what matching found), and the planning cloud it is given as its prior (:class:`Prior`).
 Distances in metres."""
 from __future__ import annotations
 
@@ -16,7 +17,8 @@ from .errors import check_scene
 from .metrics import CloudScore, Scores
 from .progress import STAGES
 
-__all__ = ["RealizationResult", "RealizationFn", "PlanReconResult", "plan_result", "Prior", "ViewsResult"]
+__all__ = ["RealizationResult", "RealizationFn", "PlanReconResult", "plan_result", "Prior", "SparseModel",
+           "SparseResult", "ViewsResult"]
 
 
 @dataclass
@@ -49,10 +51,10 @@ class RealizationResult(Scores):
         sparse_mode: the model the sparse step kept (``'known_poses'``, ``'incremental'`` or
             ``'anchored'``).
         mean_track_length, mean_reprojection_error: of the sparse model (images a point is seen
-            in; pixels): metrics without a ground truth (issue 20, part 4).
+            in; pixels): metrics without a ground truth.
         coverage: :class:`vp_recon.metrics.Coverage` of the planning cloud (no truth read).
         sparse_models: the structure-from-motion models merged, each registered to map on its own
-            reported poses (parts of a plan that share no matches; :func:`vp_recon.sparse._merge_models`).
+            reported poses (parts of a plan that share no matches; :func:`vp_recon.sparse_modes.merge_models`).
         centre_residual: incremental: RMS distance, m, of the registered cameras from the reported
             poses after the registration (the sparse step's self-check; no truth read); else NaN.
         sparse_fallback: why the structure from motion was not kept (the sparse step then made the
@@ -165,13 +167,71 @@ class Prior:
 
 
 @dataclass
+class SparseModel:
+    """A sparse model in the world, as each mode of the sparse step makes it (:mod:`vp_recon.sparse_modes`).
+
+    Attributes:
+        points: (M, 3) float64 world points; colors: (M, 3) uint8 RGB.
+        mean_track_length: mean number of images observing a point.
+        cameras: (N, 7) the poses (x, y, z, qx, qy, qz, qw, :mod:`vp_scene.camera`) of the model's
+            cameras in the world frame, roll kept: the given ones in ``known_poses`` mode; else
+            the registered images' estimated poses after the alignment, NaN rows for images not
+            registered.
+        registered: images with a pose in the model (that observe >= 1 point).
+        mean_reprojection_error: mean reprojection error of the model's points, pixels (COLMAP's
+            ``compute_mean_reprojection_error``, point-weighted over merged models; a metric
+            without a ground truth).
+        models: the models merged (``incremental``: every model of >= 3 registered images, each
+            aligned to the world on its own, :func:`vp_recon.sparse_modes.merge_models`; 1 otherwise).
+        centre_residual: ``incremental`` and ``anchored``: RMS distance, m, of the registered images'
+            centres after the alignment from the given (reported) ones (the self-check's figure); NaN
+            for ``known_poses``.
+    """
+
+    points: NDArray[np.float64]
+    colors: NDArray[np.uint8]
+    mean_track_length: float
+    cameras: NDArray[np.float64]
+    registered: int
+    mean_reprojection_error: float
+    models: int
+    centre_residual: float
+
+
+@dataclass
+class SparseResult(SparseModel):
+    """What :func:`vp_recon.sparse.sparse_reconstruct` gives: the model kept (the
+    :class:`SparseModel` fields) and what extraction and matching found.
+
+    Attributes:
+        keypoints: SIFT keypoints per image.
+        verified_pairs: image pairs with geometrically verified matches.
+        pair_inliers: verified inlier matches per image pair (i, j), i < j (indices of the images).
+        matched_pairs: image pairs handed to the matcher (N (N - 1) / 2 when exhaustive).
+        seconds: wall time of ``extract``, ``match`` and ``triangulate`` (the model, any mode).
+        mode: the model that was kept: ``'known_poses'``, ``'incremental'`` or ``'anchored'`` (also
+            when the incremental mode fell back to it).
+        fallback: why the structure from motion was not kept (its SparseError's message); '' when
+            it was, or was not tried.
+    """
+
+    keypoints: list = field(default_factory=list)
+    verified_pairs: int = 0
+    pair_inliers: dict = field(default_factory=dict)
+    matched_pairs: int = 0
+    seconds: dict = field(default_factory=dict)
+    mode: str = "known_poses"
+    fallback: str = ""
+
+
+@dataclass
 class ViewsResult:
     """What :func:`reconstruct_views` makes of a capture set (distances metres; no truth read).
 
     Attributes:
         points, colors: the scored cloud (dense, else the cleaned sparse one), world / RGB.
         source: ``'dense'`` or ``'sparse'``.
-        sparse: the :class:`vp_recon.sparse.SparseResult` (registered images, mean track length,
+        sparse: the :class:`SparseResult` (registered images, mean track length,
             mean reprojection error, ...); sparse_clean: its cloud cropped and silhouette-filtered.
         dense: the dense result (None when ``config.dense`` is off).
         seeing: indices of the images whose plant mask has >= ``min_foreground`` pixels.

@@ -1,13 +1,13 @@
 """Plant pixels of a flight's images, from the images alone (the renderer's masks are an oracle
 only the ideal capture keeps): :func:`plant_mask` by excess green over soil, the colour key of the
 rendered sky (:func:`vp_scene.render.foreground_mask`) over the blue screen (:func:`image_mask`
-picks by the background), and for a plant of any colour over soil (issue 41, part 2)
+picks by the background), and for a plant of any colour over soil
 :func:`flight_masks`: two segmentations, and a rule that picks one per flight:
 
 ``exg``
     Excess green (:func:`plant_mask`): the crop-segmentation index. It finds a
-    green plant on soil well (IoU 0.88 against the oracle) and nothing on a plant that is not
-    green (a dried plant of a real scan: 24 of 24 images registered, 1 point kept).
+    green plant on soil well and nothing on a plant that is not green (a dried plant: every
+    image registered, next to no point kept).
 ``background``
     The plant is what the background is not, from the image's own statistics
     (:func:`background_mask`): a Gaussian mixture of the background's colours (CIE Lab, from OpenCV's
@@ -26,8 +26,7 @@ picks by the background), and for a plant of any colour over soil (issue 41, par
     colour, a lens's black margin). A green plant's ExG mask is most of them (the background
     model also flags markers, stones, a pot); a plant that is not green leaves ExG almost empty.
 
-The measured IoU of each against the oracle, and the rule's margins: :data:`EXG_SHARE` and
-``bench/bench_masks.py`` (results/masks.json; docs/results.md "Plant masks").
+Each one's agreement with the oracle and the rule's margins: docs/results.md "Plant masks".
 """
 from __future__ import annotations
 
@@ -42,12 +41,10 @@ from vp_scene.render import foreground_mask
 __all__ = ["EXG_THRESHOLD", "MASK_METHODS", "EXG_SHARE", "BACKGROUND_QUANTILE", "BACKGROUND_MARGIN", "MaskChoice",
            "excess_green", "plant_mask", "image_mask", "background_mask", "box_hull", "choose_method", "flight_masks"]
 
-#: Excess-green threshold of :func:`plant_mask`. Measured (IoU against the segmentation pass, 8
-#: ring views + 1 top view at 640 x 480, sensor noise 2/255, one procedural plant and one Corn50
-#: plant on the soil texture) for 0.03-0.06 with 3x3 opening + closing: 0.04 is the best common
-#: choice (mean IoU 0.878 procedural, 0.888 Corn50; 0.05: 0.879 / 0.859; 0.06: 0.879 / 0.777,
-#: Corn50's yellowish leaves drop out). Otsu's threshold on ExG, ExGR or CIVE gave IoU 0.15-0.17:
-#: the soil's own spread (straw strokes, ExG about 0.08) splits the histogram, not the plant.
+#: Excess-green threshold of :func:`plant_mask`, with a 3x3 opening and closing: the value that
+#: suits both the procedural plant and Corn50 on the soil texture (higher ones drop Corn50's
+#: yellowish leaves). An Otsu threshold (on ExG, ExGR or CIVE) splits the soil's own spread of
+#: straw strokes, not the plant from the soil.
 EXG_THRESHOLD: float = 0.04
 
 
@@ -81,7 +78,7 @@ def image_mask(image: NDArray[np.uint8], ground: bool) -> NDArray[np.bool_]:
 #: Segmentations a reconstruction can use (``ReconConfig.mask``, ``--mask``).
 MASK_METHODS: tuple[str, ...] = ("auto", "exg", "background")
 #: ``auto`` takes excess green when its masks hold at least this share of the pixels the
-#: background model calls plant, over the flight (measured: bench/bench_masks.py).
+#: background model calls plant, over the flight.
 EXG_SHARE: float = 0.55
 #: The background model's threshold: the negative log-likelihood that this share of its own
 #: samples stays under ...
@@ -91,11 +88,11 @@ BACKGROUND_MARGIN: float = 2.0
 #: Mixture components of the background model.
 BACKGROUND_COMPONENTS: int = 5
 #: The background model's mask is made on the image resized to at most this many pixels across
-#: (the mask is resized back): full size for a camera's usual images; a thin organ (a silique of
-#: the dev scan, 3 pixels at 1440 x 1080) blends into the background at a third of it.
+#: (the mask is resized back): full size for a camera's usual images; a thin organ (a silique a
+#: few pixels wide) blends into the background at a third of it.
 WORK_WIDTH: int = 2048
 #: ``auto`` decides on the background model of the images resized to this width (pixel counts
-#: hardly depend on it, and a green plant's flight then pays about 0.1 s an image for the check).
+#: hardly depend on it, and a green plant's flight then pays little for the check).
 DECIDE_WIDTH: int = 640
 #: Width of the border band the samples come from without a prior, as a share of the shorter side.
 BORDER: float = 0.04

@@ -1,28 +1,23 @@
 """Reconstructions as Dask tasks (:func:`vp_scene.cluster.open_client` gives the client): a task's
 call and its answer (:func:`worker_call`, :func:`worker_result`: a ReconError crosses as its code
-and message) and a plan's realizations reconstructed in parallel (:func:`on_cluster`). The recon
-node's fleet source submits its capture sets through the same two."""
+and message) and the queue of a loop's capture sets on a cluster (:class:`ClusterQueue`, used by
+:func:`vp_recon.pipeline.reconstruct_sets`)."""
 from __future__ import annotations
 
-from pathlib import Path
-from typing import Callable, Optional
+from collections import deque
+from typing import Callable, Iterator, Optional
 
-import numpy as np
-from numpy.typing import NDArray
-
-from .config import ReconConfig
 from .errors import ReconError
-from .progress import STAGES, ProgressFn, tick
-from .results import RealizationFn, RealizationResult
+from .progress import STAGES, ProgressFn, ReconCancelled, tick
+from .results import RealizationResult
 
-__all__ = ["worker_call", "worker_result", "on_cluster"]
+__all__ = ["worker_call", "worker_result", "ClusterQueue"]
 
 
 def worker_call(reconstruct: Callable, *args, **kwargs) -> tuple:
-    """``reconstruct(*args, **kwargs)`` on a Dask worker (:func:`vp_recon.pipeline.reconstruct_realization`,
-    or :func:`vp_recon.pipeline.reconstruct_captured` for a fleet's capture set): ('ok', result) or ('error', code,
-    message) (a ReconError travels as its fields: the exception's own pickling is not part of its
-    contract)."""
+    """``reconstruct(*args, **kwargs)`` on a Dask worker (:func:`vp_recon.pipeline.reconstruct_set`):
+    ('ok', result) or ('error', code, message) (a ReconError travels as its fields: the
+    exception's own pickling is not part of its contract)."""
     try:
         return ("ok", reconstruct(*args, **kwargs))
     except ReconError as exc:
@@ -38,41 +33,45 @@ def worker_result(out: tuple, k: int) -> RealizationResult:
     return out[1]
 
 
-def on_cluster(client: object, reconstruct: Callable, noisy_scene: object, cams: NDArray[np.float64],
-               cfg: ReconConfig, ks: list, work_root: Optional[Path], progress: Optional[ProgressFn],
-               on_realization: Optional[RealizationFn]) -> list:
-    """:func:`vp_recon.pipeline.reconstruct_plan`'s loop on a Dask cluster: one task a realization,
-    ``reconstruct(scene, k, cams, config, workdir=...)`` (:func:`vp_recon.pipeline.reconstruct_realization`)."""
-    from distributed import as_completed
+class ClusterQueue:
+    """Reconstructions on a Dask cluster, one task a capture set, submitted as the sets come and
+    taken back in the order they were submitted: the records are the in-process ones, in the
+    in-process order, and the failure rule reads "the first failing set in that order" (a later
+    set's failure waits for the earlier ones to succeed). The scene goes to every worker once;
+    ``should_stop()`` (checked while a result is awaited) raises ReconCancelled."""
 
-    scene = client.scatter(noisy_scene, broadcast=True)
-    futures = {}
-    for n, k in enumerate(ks):
-        keep = cfg.keep_images and (n == 0 or on_realization is not None)
-        sub = ReconConfig(**{**cfg.__dict__, "keep_images": keep, "num_threads": 1})
-        futures[client.submit(worker_call, reconstruct, scene, k, cams, sub, workdir=work_root,
-                              pure=False)] = (n, k)
-    done: dict = {}
-    failed: dict = {}
-    try:
-        for fut in as_completed(list(futures)):
-            n, k = futures[fut]
-            try:
-                res = worker_result(fut.result(), k)
-            except ReconError as exc:
-                failed[n] = exc
-                continue
+    def __init__(self, client: object, noisy_scene: object, should_stop: Optional[Callable[[], bool]] = None) -> None:
+        self._client = client
+        self._scene = client.scatter(noisy_scene, broadcast=True)
+        self._should_stop = should_stop
+        self._pending: deque = deque()  # (k, future), in the order submitted
+
+    def submit(self, k: int, reconstruct: Callable, *args) -> None:
+        """``reconstruct(scene, *args)`` of realization ``k`` on a worker (:func:`worker_call`)."""
+        self._pending.append((k, self._client.submit(worker_call, reconstruct, self._scene, *args, pure=False)))
+
+    def take(self, progress: Optional[ProgressFn], block: bool) -> Iterator[RealizationResult]:
+        """The results at the head of the queue that are done (all of them: ``block``), in order,
+        each after ``progress(stage, k)`` of its stages; the first failure in that order is
+        raised (ReconError with its realization)."""
+        from distributed import wait
+
+        while self._pending and (block or self._pending[0][1].done()):
+            k, fut = self._pending[0]
+            while not fut.done():
+                if self._should_stop is not None and self._should_stop():
+                    raise ReconCancelled("stopped while reconstructing on the cluster")
+                try:
+                    wait(fut, timeout=0.5)
+                except TimeoutError:  # distributed.wait's way of saying 'not yet'
+                    pass
+            self._pending.popleft()
+            res = worker_result(fut.result(), k)
             for stage in STAGES:
                 tick(progress, stage, k)
-            if on_realization is not None:
-                on_realization(res)
-            if n > 0:
-                res.rendered = []
-            done[n] = res
-            if failed and min(failed) < min(set(range(len(ks))) - set(done) - set(failed), default=len(ks)):
-                break  # the first failing realization in order is known: the plan fails with it
-    finally:
-        client.cancel([f for f in futures if not f.done()])
-    if failed:
-        raise failed[min(failed)]
-    return [done[n] for n in range(len(ks))]
+            yield res
+
+    def cancel(self) -> None:
+        """Cancel the tasks not taken back."""
+        if self._pending:
+            self._client.cancel([f for _, f in self._pending])

@@ -160,9 +160,8 @@ class PlanViewer:
         gui = self.server.gui
         self.realization = gui.add_dropdown("realization", ("0",), initial_value="0")
         self.realization.on_update(lambda _e: self._redraw_clouds())
-        # the display cap, changeable in the page: a browser without a GPU (software WebGL) draws
-        # 16 frustums + 60k points at about 7 frames/s on 2 loaded cores, 1k points at 24
-        # (results/bench_viewer.md); a GPU draws 300k points without noticing
+        # the display cap, changeable in the page: a browser without a GPU (software WebGL) slows
+        # down with tens of thousands of points; a GPU draws the slider's maximum with ease
         self.points_shown = gui.add_slider("points shown", min=min(1000, int(max_points)),
                                            max=max(300_000, int(max_points)), step=1000, initial_value=int(max_points),
                                            hint="points drawn per cloud (a random subset of bigger clouds)")

@@ -125,6 +125,33 @@ def test_scores() -> None:
     assert rec["centre_residual"] == 0.02
 
 
+def test_simulated_flights_round_trip() -> None:
+    """A batch to the SimulateFlights goal (flat, as vp_recon.sim_flights.flight_batch reads it), a
+    FlightScore <-> SimulatedFlight (metres, NaN for what a failure has not), a planning run's flight
+    record -> message -> the summary's record."""
+    from vp_scene.flights import FlightScore, FlightSettings, flight_draws
+
+    draws = flight_draws(3, 2, 0.002)
+    goal = m.simulate_flights_goal([CAMERAS, CAMERAS[:2]], draws, FlightSettings(640, 480, -1, 0.5), 0.02, 0.5,
+                                   False, 1.5)
+    assert list(goal.cameras_per_plan) == [3, 2] and list(goal.cameras) == CAMERAS.ravel().tolist() + \
+        CAMERAS[:2].ravel().tolist()
+    assert list(goal.capture_seeds) == [d.capture_seed for d in draws] and list(goal.n_wind) == [d.n_wind for d in draws]
+    assert (goal.width, goal.height, goal.sift_first_octave, goal.dense_scale) == (640, 480, -1, 0.5)
+    assert (goal.report_position_sigma, goal.report_attitude_sigma, goal.ground_control, goal.fov) == (0.02, 0.5, False, 1.5)
+    ok = FlightScore(draw=draws[0], chamfer=0.03, chamfer_shape=0.02, coverage=0.7, images=3, seconds=4.0)
+    bad = FlightScore(draw=draws[1], failed=True, error_code=4, reason="nothing visible", seconds=1.0)
+    for score in (ok, bad):
+        assert m.flight_score_of(m.flight_msg(score, 1)) == score
+    msg = m.flight_msg(bad, 1, "arc")
+    assert msg.plan == 1 and msg.source == "arc" and math.isnan(msg.chamfer) and msg.error_msg == "nothing visible"
+    record = {"plan": 2, "source": "cheap", **ok.to_dict()}
+    assert m.flight_record(m.flight_record_msg(record)) == {
+        "plan": 2, "source": "cheap", "draw": draws[0].to_dict(), "seconds": 4.0,
+        "score": {"chamfer": 0.03, "chamfer_shape": 0.02, "coverage": 0.7, "images": 3, "failed": False,
+                  "error_code": 0, "reason": ""}}
+
+
 def test_scene_description_round_trip() -> None:
     from vp_scene.build import build_noisy_scene
     from vp_scene.layout import Layout
@@ -142,7 +169,7 @@ def test_scene_description_round_trip() -> None:
 #: What converting a message by hand looks like: field by field, or building one from numbers.
 HAND_CONVERSION = re.compile(r"\.position\.[xyz]\b|\.orientation\.[xyzw]\b|\b(Pose|PoseArray|CameraPlan|Marker|"
                              r"SceneDescription|ReconstructionScore|Score|PointCloud2)\(\)|\b(Point|PlantPlacement|"
-                             r"PointField)\(")
+                             r"PointField|SimulatedFlight)\(")
 
 
 def test_no_conversion_code_left_in_the_node_files() -> None:

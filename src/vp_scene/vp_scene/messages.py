@@ -12,6 +12,9 @@ modules never see a message).
 * scores: a reconstruction's figures (one realization, the aggregate, or an error) ->
   ``vp_interfaces/ReconstructionScore`` (distances x 100, as the message says), and back to a
   plain record (:func:`score_record`);
+* simulated flights: a batch of plans and their draws -> a ``vp_interfaces/SimulateFlights`` goal,
+  a :class:`vp_scene.flights.FlightScore` <-> ``vp_interfaces/SimulatedFlight`` (metres), a
+  flight's record (plan.json's ``flights`` entries) -> the message;
 * routes: timed poses (m, 7) <-> ``nav_msgs/Path`` (each pose stamped with its time);
 * drones: a pose report (``PoseStamped`` or ``nav_msgs/Odometry``, :data:`POSE_TYPES`) <-> a
   position (3,) and a pose (7,); per-drone topics from a template (:func:`drone_topic`); a
@@ -38,7 +41,8 @@ from numpy.typing import ArrayLike, NDArray
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
-from vp_interfaces.msg import CameraPlan, PlantPlacement, ReconstructionScore, SceneDescription
+from vp_interfaces.action import SimulateFlights
+from vp_interfaces.msg import CameraPlan, PlantPlacement, ReconstructionScore, SceneDescription, SimulatedFlight
 
 from .camera import cameras_to_poses, check_coordinates, poses_to_cameras, rotation_matrix, tan_half_fov
 
@@ -47,6 +51,7 @@ __all__ = [
     "cameras_to_pose_array", "pose_array_to_cameras", "camera_plan_msg", "plan_key", "frustum_markers",
     "scene_description_msg", "placements_of", "scene_of_description", "POSE_TYPES", "drone_topic", "pose_report",
     "score_msg", "realization_score", "aggregate_score", "error_score", "score_record",
+    "simulate_flights_goal", "flight_msg", "flight_score_of", "flight_record_msg", "flight_record",
     "image_msg", "image_array", "compressed_image_msg", "compressed_image_array", "camera_info_msg",
     "camera_info_intrinsics", "navsatfix_msg", "navsatfix_geodetic", "stamp_after", "path_msg", "path_poses",
     "fleet_assignment_msg",
@@ -377,6 +382,75 @@ def score_record(msg: ReconstructionScore) -> dict:
             'centre_residual': msg.centre_residual, 'coverage_of_prior': msg.coverage_of_prior,
             'coverage_of_prior_per_plant': [float(x) for x in msg.coverage_of_prior_per_plant],
             'coverage_tau': msg.coverage_tau, 'error_code': msg.error_code, 'error_msg': msg.error_msg}
+
+
+# ---------------------------------------------------------------- simulated flights
+def simulate_flights_goal(plans: Sequence[ArrayLike], draws: Sequence[Any], settings: Any,
+                          report_position_sigma: float, report_attitude_sigma: float, ground_control: bool,
+                          fov: float) -> SimulateFlights.Goal:
+    """The ``SimulateFlights`` goal that flies ``plans`` ((N_i, 6) each) under ``draws``
+    (:class:`vp_scene.flights.FlightDraw`, one a plan) at ``settings``
+    (:class:`vp_scene.flights.FlightSettings`), photographed with these reported-pose errors and
+    ground control, with this field of view (rad)."""
+    goal = SimulateFlights.Goal()
+    cams = [np.asarray(p, dtype=np.float64).reshape(-1, 6) for p in plans]
+    goal.cameras = [float(x) for c in cams for x in c.ravel()]
+    goal.cameras_per_plan = [len(c) for c in cams]
+    goal.flight_indices = [int(d.index) for d in draws]
+    goal.n_wind = [float(d.n_wind) for d in draws]
+    goal.capture_seeds = [int(d.capture_seed) for d in draws]
+    goal.width, goal.height = int(settings.width), int(settings.height)
+    goal.sift_first_octave, goal.dense_scale = int(settings.sift_first_octave), float(settings.dense_scale)
+    goal.report_position_sigma, goal.report_attitude_sigma = float(report_position_sigma), float(report_attitude_sigma)
+    goal.ground_control, goal.fov = bool(ground_control), float(fov)
+    return goal
+
+
+def _nan(x: Optional[float]) -> float:
+    return math.nan if x is None else float(x)
+
+
+def _none(x: float) -> Optional[float]:
+    return None if not math.isfinite(x) else float(x)
+
+
+def flight_msg(score: Any, plan: int = 0, source: str = '') -> SimulatedFlight:
+    """``vp_interfaces/SimulatedFlight`` of a :class:`vp_scene.flights.FlightScore` (metres; NaN
+    for the distances a failed flight has not) of the plan ``plan`` (from ``source``)."""
+    d = score.draw
+    return SimulatedFlight(plan=int(plan), source=source, index=int(d.index), n_wind=float(d.n_wind),
+                           capture_seed=int(d.capture_seed), failed=bool(score.failed), chamfer=_nan(score.chamfer),
+                           chamfer_shape=_nan(score.chamfer_shape), coverage=_nan(score.coverage),
+                           images=int(score.images), error_code=int(score.error_code), error_msg=score.reason,
+                           seconds=float(score.seconds))
+
+
+def flight_score_of(msg: SimulatedFlight) -> Any:
+    """The :class:`vp_scene.flights.FlightScore` of a ``SimulatedFlight`` (NaN distances: None)."""
+    from .flights import FlightDraw, FlightScore
+
+    return FlightScore(draw=FlightDraw(index=int(msg.index), n_wind=float(msg.n_wind), capture_seed=int(msg.capture_seed)),
+                       chamfer=_none(msg.chamfer), chamfer_shape=_none(msg.chamfer_shape),
+                       coverage=_none(msg.coverage), images=int(msg.images), failed=bool(msg.failed),
+                       error_code=int(msg.error_code), reason=msg.error_msg, seconds=float(msg.seconds))
+
+
+def flight_record_msg(record: dict) -> SimulatedFlight:
+    """The ``SimulatedFlight`` of a planning run's flight record
+    (:attr:`vp_planner.optimizers.PlanResult.flights`: ``plan``, ``source`` and a FlightScore's fields)."""
+    from .flights import FlightScore
+
+    score = FlightScore.from_dict({k: v for k, v in record.items() if k not in ('plan', 'source')})
+    return flight_msg(score, record['plan'], record['source'])
+
+
+def flight_record(msg: SimulatedFlight) -> dict:
+    """A ``SimulatedFlight`` as a plain record (a run summary's ``flights`` entries): the plan and its
+    source, the draw, the score (metres; None where NaN) and the seconds."""
+    score = flight_score_of(msg)
+    return {'plan': int(msg.plan), 'source': msg.source, 'draw': score.draw.to_dict(),
+            'score': {k: v for k, v in score.to_dict().items() if k not in ('draw', 'seconds')},
+            'seconds': score.seconds}
 
 
 # ---------------------------------------------------------------- images

@@ -25,7 +25,8 @@ from .ply import load_models
 from .procedural import procedural_corn, procedural_name_seed, procedural_seed
 from .scene_spec import SCENE
 
-__all__ = ["SCENARIOS", "PlacedPlant", "Scene", "layout", "make_scene", "place_points", "place_mesh"]
+__all__ = ["SCENARIOS", "PlacedPlant", "Scene", "layout", "make_scene", "place_points", "place_mesh",
+           "scene_of_cloud"]
 
 #: The built-in layouts (:data:`vp_scene.layout.BUILTIN_LAYOUTS`).
 SCENARIOS = tuple(BUILTIN_LAYOUTS)
@@ -239,3 +240,16 @@ def _placed(spec: PlantSpec, model_index: int, model: PlantModel, yaw: float, sc
     base_z, top_z = model.z_min, model.z_max
     return PlacedPlant(model_index=model_index, model_name=model.name, yaw=float(yaw), scale=float(scale),
                        position=position, z_range=np.array([0.0, scale * (top_z - base_z)]), base_z=base_z)
+
+
+def scene_of_cloud(points: np.ndarray, colors: np.ndarray, name: str = "prior") -> Scene:
+    """A scene of one coloured cloud kept where it is (a reconstruction: a first sortie's, a real
+    scan's first pass), as one "plant" placed by the identity (yaw 0, scale 1, no shift), its
+    z_range the cloud's own heights; the world meshes it as it meshes a scanned plant
+    (:func:`vp_scene.meshing.model_mesh`). ValueError for an empty or malformed cloud."""
+    model = PlantModel(name, np.asarray(points, dtype=np.float64), np.asarray(colors, dtype=np.uint8))
+    z = model.points[:, 2]
+    plant = PlacedPlant(model_index=0, model_name=name, yaw=0.0, scale=1.0, position=np.zeros(3),
+                        z_range=np.array([float(z.min()), float(z.max())]), base_z=0.0)
+    return Scene(scenario=name, plants=[plant], points=model.points.copy(), colors=model.colors.copy(),
+                 plant_index=np.zeros(len(model.points), dtype=np.int32), models=[model])

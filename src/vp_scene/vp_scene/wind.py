@@ -22,7 +22,7 @@ from .limits import check_seed
 from .scenario import Scene
 from .scene_spec import SCENE
 
-__all__ = ["WindConfig", "NoisyScene", "draw_n_wind", "levels_of", "displace", "make_noisy_scene"]
+__all__ = ["WindConfig", "NoisyScene", "draw_n_wind", "levels_of", "displace", "make_noisy_scene", "noisy_scene_of"]
 
 
 @dataclass(frozen=True)
@@ -131,7 +131,19 @@ class NoisyScene:
 
 def make_noisy_scene(scene: Scene, config: WindConfig, seed: int) -> NoisyScene:
     """K noisy copies of ``scene`` (paper Sec. V-A), each point's level from its plant's z_range."""
-    n_wind = draw_n_wind(config, seed)
+    return noisy_scene_of(scene, config, draw_n_wind(config, seed), seed)
+
+
+def noisy_scene_of(scene: Scene, config: WindConfig, n_wind: np.ndarray, seed: int) -> NoisyScene:
+    """The noisy copies of ``scene`` under the given ``n_wind`` values (one realization each; a
+    simulated flight's own winds, :mod:`vp_scene.flights`); ``seed`` is recorded as the draws' seed
+    and ``config.realizations`` set to their number."""
+    n_wind = np.asarray(n_wind, dtype=np.float64).reshape(-1)
+    if not len(n_wind) or not np.isfinite(n_wind).all():
+        raise ValueError(f"n_wind must be one or more finite values, got {n_wind!r}")
+    if config.realizations != len(n_wind):
+        config = WindConfig(levels=config.levels, realizations=len(n_wind), variance=config.variance,
+                            direction=config.direction)
     zr = scene.z_ranges[scene.plant_index]
     pts = np.stack([displace(scene.points, zr, w, config.levels, config.direction) for w in n_wind])
     return NoisyScene(scene=scene, config=config, seed=int(seed), n_wind=n_wind, points=pts)

@@ -1,0 +1,85 @@
+"""vp_recon.sim_flights: the planner's simulated flights are real flights of the suite's world and
+reconstruction, under the flight's own wind and capture draws, and a failure is a score."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from vp_scene.flights import FlightDraw, FlightSettings, flight_draws
+
+from vp_recon.sim_flights import SceneFlights, fly_plan
+
+TARGET = np.array([0.0, 0.0, 0.9])
+SMALL = FlightSettings(width=800, height=600, sift_first_octave=-1, dense_scale=1.0)
+
+
+def arc(n: int, step_deg: float, radius: float = 1.6, height: float = 1.6) -> np.ndarray:
+    a = np.deg2rad(step_deg * (np.arange(n) - (n - 1) / 2) - 90.0)
+    c = np.stack([radius * np.cos(a), radius * np.sin(a), np.full(n, height)], axis=1)
+    return np.concatenate([c, TARGET - c], axis=1)
+
+
+def test_a_flight_is_scored_under_its_own_draw_and_a_bad_plan_is_a_scored_failure(noisy_scene, monkeypatch):
+    """The flight's scene is the prior displaced by the draw's n_wind (not one of the scene's own
+    realizations), its capture seeded by the draw; a plan whose cameras see nothing fails with the
+    reconstruction's code and reason, no exception."""
+    import vp_recon.pipeline as pipeline
+
+    seen = []
+    real = pipeline.reconstruct_realization
+
+    def spy(noisy, k, cams, cfg, *a, **kw):
+        seen.append((np.asarray(noisy.n_wind).copy(), cfg.capture.seed, cfg.width, cfg.sift_first_octave))
+        return real(noisy, k, cams, cfg, *a, **kw)
+
+    monkeypatch.setattr(pipeline, "reconstruct_realization", spy)
+    draw = flight_draws(5, 1, noisy_scene.config.variance)[0]
+    score = fly_plan(noisy_scene.scene, noisy_scene.config, arc(4, 25.0), draw, SMALL)
+    assert not score.failed, score.reason
+    assert 0 < score.chamfer < 0.05 and 0 < score.chamfer_shape <= score.chamfer * 1.5 and score.images >= 3
+    assert 0 < score.coverage <= 1 and score.seconds > 0 and score.draw == draw and score.value == score.chamfer
+    (n_wind, capture_seed, width, octave), = seen
+    assert list(n_wind) == [draw.n_wind] and draw.n_wind not in set(noisy_scene.n_wind)
+    assert capture_seed == draw.capture_seed and (width, octave) == (800, -1)
+    away = arc(3, 20.0)
+    away[:, 3:] = -away[:, 3:]  # every camera looks away from the plant
+    bad = fly_plan(noisy_scene.scene, noisy_scene.config, away, FlightDraw(1, 0.0, 2 ** 31 + 1), SMALL)
+    assert bad.failed and bad.error_code == 4 and "plant" in bad.reason and bad.value == math.inf
+
+
+def test_the_simulator_flies_a_batch_in_order_and_stops_when_asked(noisy_scene):
+    sim = SceneFlights(noisy_scene.scene, noisy_scene.config, SMALL)
+    assert sim.workers == 1 and sim.wind_variance == noisy_scene.config.variance
+    draws = flight_draws(0, 2, sim.wind_variance)
+    got = []
+    scores = sim.fly([arc(3, 25.0), arc(3, 25.0)], draws, on_flight=lambda i, s: got.append(i),
+                     should_stop=lambda: len(got) >= 1)
+    assert got == [0] and not scores[0].failed and scores[0].draw == draws[0]
+    assert scores[1].failed and scores[1].reason == "cancelled" and scores[1].draw == draws[1]
+
+
+def test_a_batch_given_flat_is_read_into_plans_and_draws_and_a_bad_one_is_named():
+    """The SimulateFlights goal's form: 6 numbers a camera plan after plan, one count, index, wind
+    and capture seed a plan; a capture seed an evaluation could have (below 2^31) is refused."""
+    import pytest
+
+    from vp_recon.sim_flights import flight_batch
+
+    a, b = arc(3, 25.0), arc(4, 20.0)
+    flat = np.concatenate([a.ravel(), b.ravel()])
+    plans, draws = flight_batch(flat, [3, 4], [0, 1], [0.01, -0.02], [2 ** 31, 2 ** 32 - 1])
+    np.testing.assert_array_equal(plans[0], a)
+    np.testing.assert_array_equal(plans[1], b)
+    assert draws == [FlightDraw(0, 0.01, 2 ** 31), FlightDraw(1, -0.02, 2 ** 32 - 1)]
+    for args, text in [
+        ((flat, [], [], [], []), "cameras_per_plan has 0 plans, must have 1 to 200"),
+        ((flat, [3, 4], [0], [0.0, 0.0], [2 ** 31] * 2), "flight_indices has 1 values for 2 plans"),
+        ((flat, [3, 3], [0, 1], [0.0, 0.0], [2 ** 31] * 2), "cameras has 42 numbers"),
+        ((flat, [1, 6], [0, 1], [0.0, 0.0], [2 ** 31] * 2), r"cameras_per_plan\[0\] is 1, must be in \[2, "),
+        ((flat, [3, 4], [0, 1], [0.0, 0.0], [2 ** 31, 7]), r"capture_seeds\[1\] is 7, must be in \[2147483648, "),
+        ((flat, [3, 4], [0, 1], [0.0, math.nan], [2 ** 31] * 2), r"n_wind\[1\] is nan"),
+        ((np.where(np.arange(42) == 5, np.nan, flat), [3, 4], [0, 1], [0.0, 0.0], [2 ** 31] * 2), "non-finite"),
+    ]:
+        with pytest.raises(ValueError, match=text):
+            flight_batch(*args)
