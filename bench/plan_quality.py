@@ -10,7 +10,7 @@ the result: accuracy, completeness, sparse and dense points, verified SIFT match
 pair, the pairs the dense step used, each camera's elevation and distance.
 
 Then every reward model of :data:`vp_planner.reward_models.REWARD_MODELS` (and the ingredient
-ablations of ``study_models``) scores every plan, and Spearman's rho between the reward and
+ablations of ``study_models``, :mod:`bench.reward_ablations`) scores every plan, and Spearman's rho between the reward and
 -Chamfer is reported over all plans and over the plans that reconstructed at all.
 
 Phases (``--phase``): ``plans`` (generate, cached), ``recon`` (reconstruct, one cached JSON per
@@ -461,7 +461,8 @@ def score_models(scenario: str, models: str, plans: list[dict], model_specs: dic
 
 def study_models() -> dict:
     """The reward models and ingredient ablations the study compares: name -> spec."""
-    from vp_planner.reward_models import REWARD_MODELS, ablations
+    from bench.reward_ablations import ablations
+    from vp_planner.reward_models import REWARD_MODELS
 
     specs = {name: name for name in REWARD_MODELS}
     specs.update(ablations())

@@ -22,7 +22,7 @@ PKG = {"planner": "vp_planner", "recon": "vp_recon", "dispatcher": "vp_planner"}
     ("planner", {"lawnmower_tilt": 1.5}, "lawnmower tilt must be in [0, 60 degrees]"),
     ("planner", {"report_position_sigma": 0.0}, "report_position_sigma must be finite and in (0, 10), got 0.0"),
     ("planner", {"sim_flights": 201}, "sim_flights must be from -1 to 200 (an integer), got 201"),
-    ("planner", {"flight_dense_scale": 0.05}, "flight dense_scale must be in [0.1, 1], got 0.05"),
+    ("planner", {"flight_dense_scale": 0.05}, "flight_dense_scale must be finite and in [0.1, 1], got 0.05"),
     ("recon", {"width": 640.0}, "'width' must be an integer"),
     ("recon", {"dense": 1}, "'dense' must be a boolean"),
     ("recon", {"max_realizations": -1}, "max_realizations must be >= 0"),

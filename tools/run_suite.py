@@ -69,6 +69,7 @@ from vp_planner.methods import DEFAULT_METHOD, METHODS  # the registry (torch-fr
 from vp_scene.camera import IMAGE_SIDE_RANGE, IMAGE_SIZE, image_side_arg
 from vp_scene.flights import MAX_FLIGHTS, FlightSettings
 from vp_scene.limits import MAX_SEED, seed_arg
+from vp_scene.scene_spec import SCENE
 
 #: s between the action server being ready and the goal: server_is_ready() sees the request side of
 #: the action's services only; a goal response sent before its reply path is matched is dropped by
@@ -106,18 +107,18 @@ SIFT_OCTAVE0_FROM = 1600
 def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0],
                                  formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    ap.add_argument('--scenario', default='one_plant', metavar='NAME_OR_FILE',
+    ap.add_argument('--scenario', default=SCENE.scenario, metavar='NAME_OR_FILE',
                     help='a layout name (one_plant, three_row, six_rect, grid_3x3, row_12) or a layout file '
                          "(.yaml, .yml, .json; README 'Your own field')")
     ap.add_argument('--method', default=DEFAULT_METHOD, choices=METHODS)
     ap.add_argument('--cameras', type=int, default=4)
     ap.add_argument('--evals', type=int, default=100, help='reward evaluations')
     ap.add_argument('--init', type=int, default=50, help='initial random design (egp, gp)')
-    ap.add_argument('--seed', type=seed_arg, default=0, help=f'seed of the scene, the wind and the planner (0 to {MAX_SEED})')
+    ap.add_argument('--seed', type=seed_arg, default=SCENE.seed, help=f'seed of the scene, the wind and the planner (0 to {MAX_SEED})')
     ap.add_argument('--reward', default='', help="reward model: paper | coverage | coverage-graph ('': the planner's default)")
     ap.add_argument('--models', default='', help='folder of PLY plant models (default: procedural)')
-    ap.add_argument('--realizations', type=int, default=5, help='K wind realizations')
-    ap.add_argument('--points-per-plant', type=int, default=4000)
+    ap.add_argument('--realizations', type=int, default=SCENE.realizations, help='K wind realizations')
+    ap.add_argument('--points-per-plant', type=int, default=SCENE.points_per_plant)
     ap.add_argument('--width', type=image_side_arg, default=IMAGE_SIZE[0],
                     help=f'rendered image width, pixels ({IMAGE_SIDE_RANGE[0]} to {IMAGE_SIDE_RANGE[1]})')
     ap.add_argument('--height', type=image_side_arg, default=IMAGE_SIZE[1], help='rendered image height, pixels')

@@ -1,4 +1,4 @@
-"""vp_planner.feasibility (issue 19, the house): the feasibility rules live in a torch-free module,
+"""vp_planner.feasibility: the feasibility rules live in a torch-free module,
 so the dispatcher (and the simulated drone beside it) start and check plans without torch; the
 search space's verdict is the rules' verdict."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Planning among candidate views (issue 41, part 3): N of M given poses, for every method."""
+"""Planning among candidate views: N of M given poses, for every method."""
 from __future__ import annotations
 
 import math
@@ -72,7 +72,7 @@ def test_bad_candidates_are_named_errors(prior) -> None:
 
 
 def test_the_coverage_reward_scores_wide_gaps_low() -> None:
-    """Few views can fail where more work (issue 41: 10 real views every 36 degrees registered 2
+    """Few views can fail where more work (10 real views every 36 degrees registered 2
     of 10): the matching window scores a ring whose neighbours are 36 degrees apart well below one
     18 degrees apart, and 60 degrees apart (6 views: beyond the window no pair links a view to
     another, each is a part of its own, which the registration scores 0)."""

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from vp_planner.cli import main
+from vp_planner.request import PlanRequest
 from vp_planner.reward import noisy_reward
 from vp_planner.reward_models import DEFAULT_REWARD_MODEL, make_reward
 from vp_scene.camera import CameraModel, poses_to_cameras
@@ -27,6 +28,8 @@ def test_cli_writes_plan(tmp_path: Path) -> None:
                 "scene", "fov", "theta_match", "simple_regret"):
         assert key in plan, key
     assert plan["method"] == "random" and plan["seed"] == 3 and plan["evaluations"] == 12
+    # the request as it wrote itself: every field but the arrays, what from_dict rebuilds
+    assert PlanRequest.from_dict(plan["request"]) == PlanRequest.of("random", 3, evaluations=12, seed=3)
     assert len(plan["trace"]) == 12 and len(plan["simple_regret"]) == 12
     cams = np.array(plan["cameras"])
     assert cams.shape == (3, 6) and np.array(plan["poses"]).shape == (3, 7)
@@ -56,7 +59,7 @@ def test_cli_writes_plan(tmp_path: Path) -> None:
 
 
 def test_a_plan_is_not_overwritten_without_overwrite(tmp_path: Path, capsys) -> None:
-    """Hardening III, item 8: planning again into an OUT that holds a plan is refused (one line,
+    """Planning again into an OUT that holds a plan is refused (one line,
     exit 2, the hint --overwrite; the plan untouched, also its noisy_points.npy); --overwrite
     replaces both; files of others in OUT (a reconstruction) are left as they are."""
     out = tmp_path / "run"
@@ -95,7 +98,7 @@ def test_cli_errors(tmp_path: Path) -> None:
 
 
 def test_cli_refuses_an_unbounded_budget_in_one_line(tmp_path: Path) -> None:
-    """Issue 19, item 1: `--method circle --evals 100000000` allocated 2.5 GB; `--method egp --evals
+    """`--method circle --evals 100000000` allocated 2.5 GB; `--method egp --evals
     1000000000` ended in a 28-line traceback. Now both are refused in one line, exit 2, before
     anything is allocated (the child's address space is capped at 6 GiB: a regression fails
     here instead of taking the machine down)."""
@@ -151,7 +154,7 @@ def test_cli_paper_reward_and_score(tmp_path: Path, capsys: pytest.CaptureFixtur
 
 def test_cli_records_the_flights_reported_pose_errors_and_score_reads_them(tmp_path: Path,
                                                                            capsys: pytest.CaptureFixture) -> None:
-    """Issue 42: a flight with plain GNSS and no ground markers tells the planner
+    """A flight with plain GNSS and no ground markers tells the planner
     (--report-position-sigma, --no-ground-control); plan.json records them as ``registration``
     and `score` scores the plan under them (a plan without the record: the defaults)."""
     out = tmp_path / "run"
@@ -240,7 +243,7 @@ def test_score_reads_the_plan_as_every_command_and_names_an_infeasible_camera(tm
 
 
 def test_cli_refuses_more_cameras_than_it_can_plan(tmp_path: Path) -> None:
-    """Issue 10, item 2: `make plan METHOD=circle CAMERAS=1000` tried to allocate 80 GB and died
+    """`make plan METHOD=circle CAMERAS=1000` tried to allocate 80 GB and died
     with a traceback. Now: one line naming the bound, exit 2, before the scene is even built."""
     import time
 
@@ -286,7 +289,7 @@ def test_cli_layout_file_makes_a_self_contained_plan(tmp_path: Path) -> None:
 @pytest.mark.parametrize("content, text", [
     ("grid: {rows: three, columns: 2}", "field.yaml: grid.rows must be an integer >= 1, got 'three'"),
     (None, "layout file not found: "),
-    ("plants: [{x: 1000000000, y: 0}]", "field.yaml: plant 0 stands at x = 1e+09, y = 0 m, outside"),  # issue 19
+    ("plants: [{x: 1000000000, y: 0}]", "field.yaml: plant 0 stands at x = 1e+09, y = 0 m, outside"),
 ])
 def test_cli_bad_layout_file_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture, content, text) -> None:
     field = tmp_path / "field.yaml"

@@ -1,4 +1,4 @@
-"""The registry of the planning methods and everything that lists them (issue 19, "the house")."""
+"""The registry of the planning methods and everything that lists them."""
 from __future__ import annotations
 
 import re
@@ -45,7 +45,7 @@ def test_the_readme_table_is_the_registry() -> None:
     assert method_table() in (REPO / "README.md").read_text()
 
 
-# ---------------------------------------------------------------- issue 39, item 2: a registry that dispatches
+# ---------------------------------------------------------------- a registry that dispatches
 def plan_spiral(space, objective, request, rng, parts) -> dict:
     """A method that is not in the suite: the registry entry below plans with it."""
     from vp_planner.baselines import evaluate_plans

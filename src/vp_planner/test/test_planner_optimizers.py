@@ -153,7 +153,7 @@ def test_bad_inputs(realizations: np.ndarray) -> None:
 
 
 def test_camera_count_is_bounded() -> None:
-    """Issue 10, items 1 and 2: there was no upper bound on N."""
+    """There was no upper bound on N."""
     PlanRequest.of("circle", MAX_CAMERAS, evaluations=10, initial_evaluations=5)
     for n in (MAX_CAMERAS + 1, 500, 1000):
         with pytest.raises(InvalidNumCamerasError, match=f"from 2 to {MAX_CAMERAS}"):
@@ -168,7 +168,7 @@ def test_memory_check_refuses_before_allocating() -> None:
 
 
 def test_feasible_plan_search_honours_should_stop(realizations: np.ndarray) -> None:
-    """Issue 10, item 1: the random initial design of 64 cameras (min_separation 0.5) searches
+    """The random initial design of 64 cameras (min_separation 0.5) searches
     for minutes without finding a feasible plan; a stop request ends it at once."""
     t0 = time.monotonic()
     res = plan_views(PlanRequest.of("egp", 64, evaluations=60, initial_evaluations=50), realizations,
@@ -182,7 +182,7 @@ def test_feasible_plan_search_honours_should_stop(realizations: np.ndarray) -> N
 
 
 def test_evaluation_budget_is_bounded_before_anything_is_allocated(realizations: np.ndarray) -> None:
-    """Issue 19, item 1: a budget of 4e9 evaluations was accepted and grew the planner to 20 GB
+    """A budget of 4e9 evaluations was accepted and grew the planner to 20 GB
     (circle, sa and random had no bound; egp asked torch for 192 GB). Each method has a
     documented bound, and a run the memory cannot hold is refused too, both before the space
     or any record is allocated."""
@@ -208,7 +208,7 @@ def test_evaluation_budget_is_bounded_before_anything_is_allocated(realizations:
 
 
 def test_egp_names_the_range_it_serves_when_no_feasible_plan_exists(realizations: np.ndarray) -> None:
-    """Issue 19, item 4: egp found no feasible plan for N = 100 on one_plant while circle does,
+    """egp found no feasible plan for N = 100 on one_plant while circle does,
     although 2-100 cameras are allowed. egp's shell holds random feasible plans up to a few dozen
     cameras a plant; beyond, its refusal says so and names the methods that serve the rest."""
     with pytest.raises(NoFeasiblePlanError, match="egp/gp plan up to about 40 cameras a plant .*circle"):

@@ -1,4 +1,4 @@
-"""PlanRequest (issue 19, the house): one typed, validated request object behind plan_views."""
+"""PlanRequest: one typed, validated request object behind plan_views."""
 from __future__ import annotations
 
 import dataclasses
@@ -21,7 +21,7 @@ SA_SEED1 = np.array([
     [1.93477126207, -0.014416084215, 2.085570506764, -1.79441144647, 0.0, -1.088059880868],
 ])
 SA_SEED1_REWARD = 0.25154024362564087
-SECOND_SORTIE_REWARD = 0.18577361106872559  # coverage with the registration (issue 42)
+SECOND_SORTIE_REWARD = 0.18577361106872559  # coverage with the registration
 
 
 def test_a_plan_through_the_request_is_the_keyword_path_plan(realizations: np.ndarray) -> None:
@@ -93,7 +93,7 @@ def test_each_bad_field_is_refused_with_its_error(fields: dict, error: type, tex
         PlanRequest.from_dict(good).replace(**fields)
 
 
-# ---------------------------------------------------------------- issue 39, item 1: one request, built once
+# ---------------------------------------------------------------- one request, built once
 def test_the_request_is_grouped_and_each_group_validates_itself() -> None:
     """The request is typed groups (cameras, feasibility, reward, the methods' settings, sortie),
     each refusing its own bad value on construction, and the flat names reach every field."""
@@ -186,7 +186,7 @@ def test_a_bad_value_is_the_same_one_line_error_via_node_cli_and_api(node, flags
     assert not (tmp_path / "x").exists()
 
 
-# ---------------------------------------------------------------- issue 42: the flight's reported poses
+# ---------------------------------------------------------------- the flight's reported poses
 def test_the_flights_reported_pose_errors_reach_the_reward(realizations: np.ndarray) -> None:
     """report_position_sigma, report_attitude_sigma and ground_control (node parameters, CLI flags,
     plan.json's ``registration``) set the coverage models' registration term: an arc (one part of

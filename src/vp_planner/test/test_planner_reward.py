@@ -186,7 +186,7 @@ print(float(r[0]), float(small[0]), (resource.getrusage(resource.RUSAGE_SELF).ru
 
 
 def test_pair_term_memory_is_bounded() -> None:
-    """Issue 10, item 2: the pair term was one (2N + S) x P block (80 GB for N = 1000 on 20000
+    """The pair term was one (2N + S) x P block (80 GB for N = 1000 on 20000
     points). 100 cameras on 5000 points now peak at a few tens of MB above the baseline, and
     the value does not depend on the chunk size."""
     import subprocess

@@ -9,9 +9,9 @@ import pytest
 import torch
 
 from vp_planner.reward import noisy_reward
-from vp_planner.reward_models import (DEFAULT_REWARD_MODEL, REWARD_MODELS, CoverageParams, check_reward_model,
-                                      coverage_reward, make_reward, model_parts, placement_error, point_coverage,
-                                      view_graph, view_graph_factor, within_tau)
+from vp_planner.reward_models import (DEFAULT_REWARD_MODEL, REGISTRY, REWARD_MODELS, CoverageParams,
+                                      check_reward_model, coverage_reward, make_reward, model_parts, placement_error,
+                                      point_coverage, reward_model, view_graph, view_graph_factor, within_tau)
 from vp_scene.camera import CameraModel, look_at
 
 IMAGE = CameraModel(2000, 1500, math.pi / 2)
@@ -40,6 +40,22 @@ def test_model_names() -> None:
     assert check_reward_model("paper") == "paper"
     with pytest.raises(ValueError, match="unknown reward model"):
         check_reward_model("magic")
+    with pytest.raises(ValueError, match="unknown reward model 'magic'; one of paper, coverage, coverage-graph"):
+        reward_model("magic")
+
+
+def test_the_registry_says_what_each_model_is_and_makes_it() -> None:
+    """Every name of REWARD_MODELS is an entry of REGISTRY; the coverage family takes CoverageParams
+    (coverage-graph with the view graph on, whatever they say), the paper model none."""
+    assert tuple(m.name for m in REGISTRY) == REWARD_MODELS and all(m.summary for m in REGISTRY)
+    assert reward_model("paper").params(ALL_ON) is None
+    assert reward_model("coverage").params(ALL_ON) == ALL_ON
+    assert reward_model("coverage-graph").params(ALL_ON) == replace(ALL_ON, view_graph=True)
+    pts = blob()
+    cams = ring_at(2.0, [0, 12, 24, 36])
+    graph = make_reward(("coverage-graph", NO_REGISTRATION), pts, image=IMAGE)(cams[None])[0]
+    assert graph == pytest.approx(coverage_reward(cams, pts, replace(NO_REGISTRATION, view_graph=True, max_points=0),
+                                                  IMAGE), abs=1e-6)
 
 
 def test_paper_model_is_eqs_2_to_7() -> None:
@@ -62,40 +78,6 @@ def test_point_behind_a_wall_is_not_counted() -> None:
     assert np.all(without > 0.5)
     # the wall itself stays covered
     assert point_coverage(cams, pts, ALL_ON, IMAGE)[0, :len(wall)].mean() > 0.9
-
-
-def comb_over_plane() -> tuple[np.ndarray, int]:
-    """A plane of points at x = 0 (1 cm apart) behind a comb of 2 cm strips every 20 cm at x = 0.3:
-    (points, number of plane points first)."""
-    s = np.arange(-0.3, 0.3001, 0.01)
-    yy, zz = np.meshgrid(s, s)
-    plane = np.stack([np.zeros(yy.size), yy.ravel(), 1.0 + zz.ravel()], axis=1)
-    strip = np.abs(((yy.ravel() + 0.3) % 0.2) - 0.1) < 0.01
-    comb = plane[strip] + np.array([0.3, 0.0, 0.0])
-    return np.concatenate([plane, comb]), len(plane)
-
-
-def test_occlusion_cells_measure_the_plant_not_the_image() -> None:
-    """``zbuffer_cell``: a leaf hides about its width behind it, whatever the distance: through a
-    comb that covers a tenth of a plane, a camera 6 m away sees as much of the plane as one 2 m
-    away. The grid fixed in the image (the default: 64 cells, 19 cm each at 6 m) hides most of it
-    from afar."""
-    pts, n_plane = comb_over_plane()
-    params = replace(NO_REGISTRATION, resolution=False, zbuffer_cell=0.03)
-
-    def seen(distance: float, p: CoverageParams) -> float:
-        cams = pair_at(distance, 4.0, target=(0.0, 0.0, 1.0))
-        return float(point_coverage(cams, pts[None], p, IMAGE)[0, :n_plane].mean())
-    near, far = seen(2.0, params), seen(6.0, params)
-    assert 0.4 < near < 0.9 and far > 0.8 * near
-    assert seen(6.0, replace(params, zbuffer_cell=0.0)) < 0.5 * far
-    with pytest.raises(ValueError, match="zbuffer_cell"):
-        CoverageParams(zbuffer_cell=-0.01)
-    # eq. 7 under the option: each wind's grid is its own, the batch is the mean of the winds
-    R = np.stack([pts, pts + np.array([0.0, 0.02, 0.0])])
-    cams = pair_at(4.0, 4.0, target=(0.0, 0.0, 1.0))
-    per_k = [coverage_reward(cams, R[k:k + 1], params, IMAGE) for k in range(2)]
-    assert coverage_reward(cams, R, params, IMAGE) == pytest.approx(np.mean(per_k), abs=1e-6)
 
 
 def test_far_camera_scores_less_once_resolution_counts() -> None:
@@ -259,20 +241,16 @@ def test_placement_error_is_the_similarity_fit_propagated_to_the_points() -> Non
 
 def test_a_model_in_two_parts_is_placed_worse_than_one() -> None:
     """Three cameras on each side of a plant (8 degrees apart; the sides share no point SIFT can
-    match) make two parts when the reconstruction matches the pairs the poses pick (from
-    ``exhaustive_below`` cameras up; here set to 0), each placed on its own 0.3 m of baseline: the
+    match) make two parts (the pair rule), each placed on its own 0.3 m of baseline: the
     registration lowers their coverage, with ground markers too (they place the whole, not one
     part against the other). Six cameras on one 40-degree arc make one part: with markers the
-    reward is coverage's; without them its placement counts too. With ``exhaustive_below`` 8 (every
-    pair matched below 8 cameras, as the reconstruction does; not the default) the sides are one
-    model (the soil and the markers link them)."""
+    reward is coverage's; without them its placement counts too."""
     pts = blob()
     split = ring_at(2.0, [0, 8, 16, 180, 188, 196])
     arc = ring_at(2.0, [0, 8, 16, 24, 32, 40])
     E = torch.as_tensor(view_graph(split, pts, ALL_ON, IMAGE))[None]
     same = model_parts(E, 1e-3)[0]
     assert same[:3, :3].all() and same[3:, 3:].all() and not same[:3, 3:].any()
-    assert ALL_ON.exhaustive_below == 0
     plain = {k: coverage_reward(c, pts, NO_REGISTRATION, IMAGE) for k, c in (("split", split), ("arc", arc))}
     reg = {k: coverage_reward(c, pts, ALL_ON, IMAGE) for k, c in (("split", split), ("arc", arc))}
     bare = {k: coverage_reward(c, pts, replace(ALL_ON, ground_control=False), IMAGE)
@@ -280,8 +258,3 @@ def test_a_model_in_two_parts_is_placed_worse_than_one() -> None:
     assert plain["split"] > 0.5 and reg["split"] < 0.8 * plain["split"] and bare["split"] < reg["split"]
     assert reg["arc"] == pytest.approx(plain["arc"], abs=1e-6) and bare["arc"] < plain["arc"]
     assert reg["arc"] > reg["split"]
-    exhaustive = replace(ALL_ON, exhaustive_below=8)
-    assert coverage_reward(split, pts, exhaustive, IMAGE) == pytest.approx(plain["split"], abs=1e-6)
-    # without markers the one model of both sides is placed on all six centres: better than either side
-    assert coverage_reward(split, pts, replace(exhaustive, ground_control=False), IMAGE) > bare["split"]
-    assert coverage_reward(split, pts, replace(ALL_ON, exhaustive_below=6), IMAGE) == pytest.approx(reg["split"])

@@ -1,4 +1,4 @@
-"""A second sortie (issue 21, part 1): planning with the cameras already flown and with what they
+"""A second sortie: planning with the cameras already flown and with what they
 reconstructed (README "A second sortie")."""
 from __future__ import annotations
 

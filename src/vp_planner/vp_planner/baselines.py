@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 
 from .designs import random_plans
 from .objective import Objective
-from .request import PlanRequest
+from .request import ArcSpec, LawnmowerSpec, PlanRequest
 from .space import NoFeasiblePlanError, ViewSpace
 
 __all__ = ["CircleFamily", "ARC_PHASES", "batch_size", "evaluate_plans", "plan_circle", "plan_arc", "plan_sa",
@@ -127,13 +127,13 @@ def evaluate_plans(obj: Objective, cams: NDArray[np.float64], candidate: bool = 
 ARC_PHASES = 8
 
 
-def plan_arc(space: ViewSpace, obj: Objective, evaluations: int, rng: np.random.Generator, spacing: float) -> None:
+def plan_arc(space: ViewSpace, obj: Objective, evaluations: int, rng: np.random.Generator, arc_spec: ArcSpec) -> None:
     """The ``arc`` baseline (module docstring): tune the circle, then place the arc on it. N
-    cameras ``spacing`` apart would wrap past a full turn when N spacing > 2 pi (N > 12 at 30
-    degrees): the arc is then the full ring, 2 pi / N apart."""
+    cameras ``arc_spec.spacing`` apart would wrap past a full turn when N spacing > 2 pi (N > 12
+    at 30 degrees): the arc is then the full ring, 2 pi / N apart."""
     from .patterns import arc
 
-    spacing = min(float(spacing), 2.0 * math.pi / space.num_cameras)
+    spacing = min(float(arc_spec.spacing), 2.0 * math.pi / space.num_cameras)
     phases = min(ARC_PHASES, evaluations)
     tune = evaluations - phases
     if tune > 0:
@@ -152,13 +152,15 @@ def plan_arc(space: ViewSpace, obj: Objective, evaluations: int, rng: np.random.
     evaluate_plans(obj, np.array(plans))
 
 
-def plan_lawnmower(space: ViewSpace, obj: Objective, overlap: float, tilt: float) -> None:
+def plan_lawnmower(space: ViewSpace, obj: Objective, survey: LawnmowerSpec) -> None:
     """The ``lawnmower`` baseline: a grid survey (:func:`vp_planner.patterns.lawnmower`) over the
     field's bounding box at the lowest height, in 1 cm steps from ``min_standoff`` above the
-    canopy, at which the N images cover the field with ``overlap`` and the plan is feasible.
-    One evaluation: a survey is flown as planned, not tuned to the reward."""
+    canopy, at which the N images cover the field with ``survey.overlap`` (the camera tilted
+    ``survey.tilt``) and the plan is feasible. One evaluation: a survey is flown as planned, not
+    tuned to the reward."""
     from .patterns import lawnmower
 
+    overlap, tilt = survey.overlap, survey.tilt
     ext = space.extent
     top = float(ext.hi[2])
     lo_d = max(space.min_standoff, space.min_altitude - top, 0.01)
@@ -301,7 +303,7 @@ def run_circle(space: ViewSpace, obj: Objective, request: PlanRequest, rng: np.r
 
 
 def run_arc(space: ViewSpace, obj: Objective, request: PlanRequest, rng: np.random.Generator, parts: int) -> None:
-    plan_arc(space, obj, request.evaluations, rng, request.arc.spacing)
+    plan_arc(space, obj, request.evaluations, rng, request.arc)
 
 
 def run_sa(space: ViewSpace, obj: Objective, request: PlanRequest, rng: np.random.Generator, parts: int) -> None:
@@ -314,4 +316,4 @@ def run_random(space: ViewSpace, obj: Objective, request: PlanRequest, rng: np.r
 
 def run_lawnmower(space: ViewSpace, obj: Objective, request: PlanRequest, rng: np.random.Generator,
                   parts: int) -> None:
-    plan_lawnmower(space, obj, request.lawnmower.overlap, request.lawnmower.tilt)
+    plan_lawnmower(space, obj, request.lawnmower)

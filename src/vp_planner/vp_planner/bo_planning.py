@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 from .designs import random_plans, structured_plans
 from .methods import BY_NAME
 from .objective import Objective
-from .request import PlanRequest
+from .request import BOSpec, PlanRequest
 from .space import Callback, NoFeasiblePlanError, StopCheck, ViewSpace
 
 __all__ = ["initial_design", "plan_bo", "plan_bo_by_parts", "optimize_in", "run_bo"]
@@ -30,10 +30,9 @@ def initial_design(space: ViewSpace, n: int, rng: np.random.Generator, structure
     try:
         rest = random_plans(space, n - len(S), rng, should_stop=should_stop) if n > len(S) else np.zeros((0, space.dim))
     except NoFeasiblePlanError as exc:
-        # The range egp/gp serve (issue 19, item 4; README "Planner node"): their space is a
-        # shell about the scene, and random plans in it keep min_separation only up to a few
-        # dozen cameras (one plant, 0.5 m: 40 cameras found 10 feasible plans, 44 none, in 16000
-        # draws). The ring methods widen their circle instead and serve every N up to 100.
+        # The range egp/gp serve (README "Planner node"): their space is a shell about the scene,
+        # and random plans in it keep min_separation only up to a few dozen cameras a plant. The
+        # ring methods widen their circle instead and serve every N up to 100.
         raise NoFeasiblePlanError(f"{exc}; egp/gp plan up to about 40 cameras a plant (more: circle, arc, sa "
                                   f"or lawnmower, or a field planned by parts)") from None
     return np.concatenate([S, rest], axis=0)
@@ -43,18 +42,18 @@ def run_bo(space: ViewSpace, obj: Objective, request: PlanRequest, rng: np.rando
     """The registry's planner of egp and gp (:class:`vp_planner.methods.Method`): BO in ``space``,
     or by ``parts`` parts when there are more than 1, with the request's ``bo`` settings; an
     ensemble of GPs where the method's entry says so."""
-    ensemble, bo = BY_NAME[request.method].ensemble, request.bo
+    ensemble = BY_NAME[request.method].ensemble
     if parts > 1:
-        return plan_bo_by_parts(space, obj, request.evaluations, bo.initial_evaluations, request.seed, ensemble,
-                                bo.structured_init, bo.mode, parts)
-    return plan_bo(space, obj, request.evaluations, bo.initial_evaluations, request.seed, rng, ensemble,
-                   bo.structured_init, bo.mode)
+        return plan_bo_by_parts(space, obj, request.bo, request.evaluations, request.seed, ensemble, parts)
+    return plan_bo(space, obj, request.bo, request.evaluations, request.seed, rng, ensemble)
 
 
-def plan_bo(space: ViewSpace, obj: Objective, evaluations: int, initial_evaluations: int, seed: int,
-        rng: np.random.Generator, ensemble: bool, structured_init: int, bo_mode: str) -> dict:
-    X0 = initial_design(space, initial_evaluations, rng, structured_init, obj.should_stop)
-    return optimize_in(space, obj, X0, evaluations, initial_evaluations, seed, ensemble, bo_mode)
+def plan_bo(space: ViewSpace, obj: Objective, bo: BOSpec, evaluations: int, seed: int, rng: np.random.Generator,
+            ensemble: bool) -> dict:
+    """BO in one space: the initial design of ``bo`` (its size, the structured plans first), then
+    :func:`optimize_in` with the rest of the ``evaluations`` in ``bo.mode``."""
+    X0 = initial_design(space, bo.initial_evaluations, rng, bo.structured_init, obj.should_stop)
+    return optimize_in(space, obj, X0, evaluations, bo.initial_evaluations, seed, ensemble, bo.mode)
 
 
 def optimize_in(space: Any, obj: Objective, X0: NDArray[np.float64], evaluations: int, initial_evaluations: int,
@@ -93,13 +92,14 @@ def optimize_in(space: Any, obj: Objective, X0: NDArray[np.float64], evaluations
     return info
 
 
-def plan_bo_by_parts(space: ViewSpace, obj: Objective, evaluations: int, initial_evaluations: int, seed: int,
-                 ensemble: bool, structured_init: int, bo_mode: str, parts: int) -> dict:
+def plan_bo_by_parts(space: ViewSpace, obj: Objective, bo: BOSpec, evaluations: int, seed: int, ensemble: bool,
+                     parts: int) -> dict:
     """EGP-EI (GP-EI) by parts (:mod:`vp_planner.parts`): each of the ``parts`` parts gets the budget
-    of a plan (``evaluations``, ``initial_evaluations``) on its own points, then the whole field's
-    structured plans are scored (up to ``structured_init``, at most half of the ``evaluations // 2``
-    left), and the better start of the union of the part plans and the best structured plan (put
-    into the parts' shells) is refined on the whole field's reward with the rest.
+    of a plan (``evaluations``, ``bo``'s initial design) on its own points, then the whole field's
+    structured plans are scored (up to ``bo.structured_init``, at most half of the
+    ``evaluations // 2`` left), and the better start of the union of the part plans and the best
+    structured plan (put into the parts' shells) is refined on the whole field's reward with the
+    rest, in a trust region.
 
     ``obj`` is the whole run's objective (the joint space's): it counts the part evaluations too
     (recorded with reward 0 and ``candidate=False``: a part's reward is not a plan's) so that the
@@ -120,8 +120,7 @@ def plan_bo_by_parts(space: ViewSpace, obj: Objective, evaluations: int, initial
                         point_weights=None if space.point_weights is None else space.point_weights[:, labels == g])
         part_obj = Objective(sub, evaluations, dtype=obj.dtype, should_stop=obj.should_stop,
                              callback=_forward(obj))
-        info = plan_bo(sub, part_obj, evaluations, initial_evaluations, seed + g, np.random.default_rng([seed, g]),
-                   ensemble, structured_init, bo_mode)
+        info = plan_bo(sub, part_obj, bo, evaluations, seed + g, np.random.default_rng([seed, g]), ensemble)
         best = part_obj.best_cameras()
         if best is None:
             raise NoFeasiblePlanError(f"no feasible plan for part {g + 1} of {parts} ({counts[g]} cameras)")
@@ -136,7 +135,7 @@ def plan_bo_by_parts(space: ViewSpace, obj: Objective, evaluations: int, initial
     # into parts (4 low cameras on each side of a 3 x 3 grid: two parts, each placed on its own
     # reported poses, README "Reward models"), where one ring over the field holds together.
     joint_budget = max(1, evaluations // 2)
-    room = min(structured_init, (joint_budget - 2) // 2)      # at most half, and 2 left for the joint start
+    room = min(bo.structured_init, (joint_budget - 2) // 2)      # at most half, and 2 left for the joint start
     S, whole = field_starts(space, room)
     X0 = [np.concatenate(part_U)]
     if len(S):
@@ -156,8 +155,8 @@ def field_starts(space: ViewSpace, count: int) -> tuple[NDArray[np.float64], NDA
     round the field facing its centre) on the grid its grid search uses, with about half of
     ``count`` cells (3 x 3 of 20), then the structured plans (:func:`structured_plans`, the
     infeasible ones dropped) for the rest. The structured rings sit at one steep elevation on the
-    shell's edge; on the fields the circle's lower, nearer rings scored higher than any plan egp by parts returned (grid_3x3,
-    N = 8: 0.894-0.898 against 0.837-0.865, coverage; 3 planning seeds), so egp starts from them.
+    shell's edge; on a field the circle's lower, nearer rings can score higher than the union of
+    the part plans, so egp starts from them too.
     A ring is recorded with its own cameras (U: :meth:`ViewSpace.encode_cameras`, projected where
     the shell cannot hold it: the joint refinement starts in the parts' shells anyway)."""
     from .baselines import CircleFamily

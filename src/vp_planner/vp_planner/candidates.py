@@ -1,4 +1,4 @@
-"""Choosing among candidate views (issue 41, part 3): a plan is N of M given poses.
+"""Choosing among candidate views: a plan is N of M given poses.
 
 A rig's stops, a gantry's positions or the images of an earlier flight are poses a camera can
 hold (or did); planning among them is a discrete choice of N of the M candidates, scored by the
@@ -50,7 +50,7 @@ from vp_scene.camera import IMAGE_SIZE, CameraModel
 
 from .feasibility import check_realizations
 from .reward import DEFAULT_FOV, DEFAULT_THETA_MATCH
-from .request import MAX_CANDIDATES, InvalidCandidatesError, check_candidates
+from .request import MAX_CANDIDATES, BOSpec, InvalidCandidatesError, check_candidates
 from .reward_models import DEFAULT_REWARD_MODEL, check_fixed_cameras
 from .space import PlanReward
 
@@ -194,14 +194,14 @@ def evaluate_subsets(space: CandidateSpace, obj: Any, subsets: Any) -> NDArray[n
     return np.concatenate(out) if out else np.zeros(0)
 
 
-def plan_bo_subsets(space: CandidateSpace, obj: Any, evaluations: int, initial_evaluations: int, seed: int,
-                    rng: np.random.Generator, ensemble: bool, structured: int = 20, refit_every: int = 5,
-                    pool_random: int = 256) -> dict:
+def plan_bo_subsets(space: CandidateSpace, obj: Any, bo: BOSpec, evaluations: int, seed: int, rng: np.random.Generator,
+                    ensemble: bool, refit_every: int = 5, pool_random: int = 256) -> dict:
     """BO over subsets (module docstring): the run's weights, model names, steps and initial best.
 
-    The initial design is up to ``structured`` evenly spaced and neighbouring subsets, then
-    random ones, ``initial_evaluations`` in all; then one subset a step, never one evaluated
-    before (a subset that has been scored is known: the reward is deterministic)."""
+    The initial design (:class:`vp_planner.request.BOSpec` ``bo``) is up to ``bo.structured_init``
+    evenly spaced and neighbouring subsets, then random ones, ``bo.initial_evaluations`` in all;
+    then one subset a step, never one evaluated before (a subset that has been scored is known:
+    the reward is deterministic)."""
     from botorch.acquisition.analytic import LogExpectedImprovement
     from botorch.optim import optimize_acqf_discrete
 
@@ -211,7 +211,8 @@ def plan_bo_subsets(space: CandidateSpace, obj: Any, evaluations: int, initial_e
 
     names = list(MODEL_NAMES) if ensemble else [SINGLE_MODEL_NAME]
     E = int(evaluations)
-    n0 = min(int(initial_evaluations), E)
+    n0 = min(int(bo.initial_evaluations), E)
+    structured = bo.structured_init
     seen: set = set()
     design: list = []
     if structured > 0:
@@ -301,9 +302,8 @@ def run_bo(space: CandidateSpace, obj: Any, request: Any, rng: np.random.Generat
     """egp and gp among candidates (an ensemble where the registry's entry says so)."""
     from .methods import BY_NAME
 
-    bo = request.bo
-    return plan_bo_subsets(space, obj, request.evaluations, bo.initial_evaluations, request.seed, rng,
-                           BY_NAME[request.method].ensemble, bo.structured_init)
+    return plan_bo_subsets(space, obj, request.bo, request.evaluations, request.seed, rng,
+                           BY_NAME[request.method].ensemble)
 
 
 def run_circle(space: CandidateSpace, obj: Any, request: Any, rng: np.random.Generator) -> None:

@@ -14,8 +14,9 @@ together with the fixed cameras (README "A second sortie").
 
 ``plan`` (the default command) writes ``OUT/plan.json`` (scenario, method, reward_model,
 cameras [[cx,cy,cz,vx,vy,vz], ...], poses [[x,y,z,qx,qy,qz,qw], ...], reward, trace,
-evaluations, initial_evaluations, seed, seconds, scene (every argument needed to rebuild the
-identical scene), fov, theta_match, image_size, simple_regret, ...) and ``OUT/noisy_points.npy``
+evaluations, seed, seconds, scene (every argument needed to rebuild the identical scene), the
+request as it records itself (:meth:`vp_planner.request.PlanRequest.record`: ``request``, every
+field but the arrays, and fov, theta_match, image_size, ...), simple_regret, ...) and ``OUT/noisy_points.npy``
 (the K x P x 3 realizations the reward was computed on), both together when the planning is done
 (an interrupt or an error writes nothing). An OUT that holds a plan is refused (exit 2) unless
 ``--overwrite``; other files in OUT are not touched. A progress bar with the best reward goes to stderr.
@@ -99,38 +100,31 @@ def _scenario(text: str) -> Any:
     return text if layout is None else layout.to_dict()
 
 
-#: The scene options (argparse's names) and their defaults.
-SCENE_DEFAULTS = {"scenario": "one_plant", "seed": 0, "models": None, "points_per_plant": 4000, "plant_spacing": 0.6,
-                  "row_spacing": 0.76, "levels": 10, "realizations": 5, "wind_variance": 0.002, "wind_direction": 0.0}
-
-
 def _scene_args(p: argparse.ArgumentParser, given_only: bool = False) -> None:
-    """The scene options; ``given_only`` (score): an option not given is left out of the namespace,
-    so that a scene named on the command line is told from the defaults."""
-    d = {k: argparse.SUPPRESS if given_only else v for k, v in SCENE_DEFAULTS.items()}
-    p.add_argument("--scenario", default=d["scenario"], type=_scenario, metavar="NAME_OR_FILE",
-                   help=f"a layout name ({', '.join(SCENARIO_NAMES)}) or a layout file (.yaml, .yml, .json; "
-                        f"README 'Your own field')")
-    p.add_argument("--seed", type=seed_arg, default=d["seed"],
-                   help=f"seed of the scene, the wind and the planner (0 to {MAX_SEED})")
-    p.add_argument("--models", default=d["models"], help="folder of PLY plant models (default: procedural corn)")
-    p.add_argument("--points-per-plant", type=int, default=d["points_per_plant"])
-    p.add_argument("--plant-spacing", type=float, default=d["plant_spacing"])
-    p.add_argument("--row-spacing", type=float, default=d["row_spacing"])
-    p.add_argument("--levels", type=int, default=d["levels"], help="wind levels L")
-    p.add_argument("--realizations", type=int, default=d["realizations"], help="wind realizations K")
-    p.add_argument("--wind-variance", type=float, default=d["wind_variance"])
-    p.add_argument("--wind-direction", type=float, default=d["wind_direction"], help="rad from +x")
+    """The scene options: a flag for every argument of a scene (:class:`vp_scene.scene_spec.SceneSpec`:
+    its default and help); ``given_only`` (score): an option not given is left out of the
+    namespace, so that a scene named on the command line is told from the defaults."""
+    from dataclasses import fields
+
+    from vp_scene.scene_spec import SceneSpec
+
+    special = {"scenario": dict(type=_scenario, metavar="NAME_OR_FILE",
+                                help=f"a layout name ({', '.join(SCENARIO_NAMES)}) or a layout file (.yaml, .yml, "
+                                     f".json; README 'Your own field')"),
+               "seed": dict(type=seed_arg, help=f"seed of the scene, the wind and the planner (0 to {MAX_SEED})"),
+               "models": dict(help="folder of PLY plant models (default: procedural corn)")}
+    for f in fields(SceneSpec):
+        how = special.get(f.name) or dict(type=type(f.default), help=f"{f.metadata['help']} ({f.default})")
+        p.add_argument("--" + f.name.replace("_", "-"), default=argparse.SUPPRESS if given_only else f.default, **how)
 
 
 def _reward_args(p: argparse.ArgumentParser, default: Optional[str]) -> None:
     from vp_scene.camera import IMAGE_SIZE
 
-    from .reward_models import REWARD_MODELS
+    from .reward_models import REGISTRY, REWARD_MODELS
 
     p.add_argument("--reward", default=default, choices=REWARD_MODELS,
-                   help="reward model (paper: eqs. 2-7; coverage: expected reconstructed fraction; coverage-graph: "
-                        "coverage times the view graph's connectivity)")
+                   help="reward model (" + "; ".join(f"{m.name}: {m.summary}" for m in REGISTRY) + ")")
     p.add_argument("--image-width", type=int, default=None,
                    help=f"image width of the cameras, pixels ({IMAGE_SIZE[0]})")
     p.add_argument("--image-height", type=int, default=None,
@@ -140,8 +134,7 @@ def _reward_args(p: argparse.ArgumentParser, default: Optional[str]) -> None:
 def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     """Arguments of ``plan`` (the default command) or ``score``; ``args.command`` says which.
     The plan flags' defaults are the request's (:data:`vp_planner.request.DEFAULTS`)."""
-    from .methods import METHODS
-    from .request import BO_MODES, DEFAULTS as D
+    from .request import DEFAULTS as D
 
     argv = list(sys.argv[1:] if argv is None else argv)
     command = argv.pop(0) if argv and argv[0] in ("plan", "score", "mission") else "plan"
@@ -158,51 +151,18 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     else:
         p = _Parser(prog="plan", description="EGP-VP view planning on a noisy corn scene.")
         _scene_args(p)
-        p.add_argument("--method", default=D["method"], choices=METHODS)
-        p.add_argument("--cameras", type=int, default=D["num_cameras"], help="number of cameras N (>= 2)")
-        p.add_argument("--evals", type=int, default=D["evaluations"],
-                       help="reward evaluations (initial design included)")
-        p.add_argument("--init", type=int, default=D["initial_evaluations"], help="initial design size of egp/gp")
         p.add_argument("--out", required=True, help="output folder (one that holds a plan is refused)")
         p.add_argument("--overwrite", action="store_true", help="replace the plan OUT holds (when this run succeeds)")
         _reward_args(p, D["reward"])
-        p.add_argument("--min-standoff", type=float, default=D["min_standoff"])
-        p.add_argument("--min-altitude", type=float, default=D["min_altitude"])
-        p.add_argument("--min-separation", type=float, default=D["min_separation"])
         p.add_argument("--fov", type=float, default=None,
                        help=f"rad (default {D['fov']:.4g}; among --candidates: the folder's camera's)")
-        p.add_argument("--theta-match", type=float, default=D["theta_match"])
-        p.add_argument("--report-position-sigma", type=float, default=D["report_position_sigma"],
-                       help="m per axis: the error of the camera centres the flight reports (RTK about 0.02, "
-                            "plain GNSS 1-3); the coverage models' registration term")
-        p.add_argument("--report-attitude-sigma", type=float, default=D["report_attitude_sigma"],
-                       help="degrees per axis: the error of the attitudes the flight reports")
-        p.add_argument("--ground-control", action=argparse.BooleanOptionalAction, default=D["ground_control"],
-                       help="ground-control markers place the model as a whole (--no-ground-control: the "
-                            "reported poses alone)")
-        p.add_argument("--structured-init", type=int, default=D["structured_init"],
-                       help="structured plans in the egp/gp initial design (0: purely random, as the paper)")
-        p.add_argument("--bo-mode", default=D["bo_mode"], choices=BO_MODES,
-                       help="egp/gp: EI in a trust region about the incumbent, or over the whole space (paper)")
-        p.add_argument("--arc-spacing", type=float, default=D["arc_spacing"],
-                       help=f"arc: rad between neighbouring cameras (default {math.degrees(D['arc_spacing']):g} "
-                            f"degrees)")
-        p.add_argument("--parts", type=int, default=D["parts"],
-                       help="egp/gp: plan the field by this many parts (0: automatic, 1: none)")
-        p.add_argument("--lawnmower-overlap", type=float, default=D["lawnmower_overlap"],
-                       help="lawnmower: image overlap along and across the flight lines (0..0.95)")
-        p.add_argument("--lawnmower-tilt", type=float, default=D["lawnmower_tilt"],
-                       help="lawnmower: camera tilt from nadir, rad (0: nadir; oblique up to 60 degrees)")
+        _request_args(p)
         p.add_argument("--fixed", action="append", default=[], metavar="PLAN.json",
                        help="cameras already flown (a plan file; repeatable): the reward counts them with "
                             "the plan (README 'A second sortie')")
         p.add_argument("--reconstructed", default=None, metavar="PLY",
                        help="what an earlier sortie reconstructed (a PLY in the scene's frame): planning-cloud "
                             "points within --tau of it weigh --reconstructed-weight")
-        p.add_argument("--tau", type=float, default=D["tau"], help="m: a point this close to the reconstruction "
-                                                                    "counts as reconstructed (%(default)s)")
-        p.add_argument("--reconstructed-weight", type=float, default=D["reconstructed_weight"],
-                       help="weight in [0, 1] of a reconstructed point in the reward (others 1; %(default)s)")
         p.add_argument("--candidates", dest="candidates_folder", default=None, metavar="FOLDER",
                        help="plan N of this flight folder's poses (poses.csv or COLMAP text; README 'From a real "
                             "flight'); needs --prior")
@@ -210,16 +170,6 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
                        help="with --candidates: the planning cloud, a PLY in the folder's frame (a first reconstruction)")
         p.add_argument("--threads", type=int, default=1,
                        help="torch threads (default 1: leaves the other cores to a reconstruction beside it)")
-        p.add_argument("--sim-flights", type=int, default=D["sim_flights"],
-                       help="simulated flights that check the cheap reward's plans and choose among them "
-                            "(-1: the method's default, egp 12; 0: none; README 'Planner')")
-        p.add_argument("--flight-width", type=int, default=D["flight_width"], help="the flights' image width, pixels")
-        p.add_argument("--flight-height", type=int, default=D["flight_height"],
-                       help="the flights' image height, pixels")
-        p.add_argument("--flight-sift-octave", type=int, default=D["flight_sift_octave"], choices=(-1, 0),
-                       help="the flights' SIFT first octave (-1: images doubled first; 0: as they are)")
-        p.add_argument("--flight-dense-scale", type=float, default=D["flight_dense_scale"],
-                       help="the flights' dense stereo on views resized by this factor (0.1..1)")
         p.add_argument("--scheduler", default="local",
                        help="where the simulated flights run, one a task: 'local' (a local Dask cluster of "
                             "--workers processes) or a scheduler's address (tls://host:8786 with --tls-*)")
@@ -242,6 +192,32 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
         p.error("--candidates and --prior go together (the poses to choose among and the cloud they are scored on)")
     args.command = command
     return args
+
+
+#: Plan flags (argparse's names) that are settings of a request under another name; every other
+#: setting of :data:`vp_planner.request.SETTINGS` (``--min-standoff``, ``--bo-mode``, ...) is the
+#: flag of its name.
+REQUEST_FLAGS = {"cameras": "num_cameras", "evals": "evaluations", "init": "initial_evaluations"}
+#: The settings the plan command takes with other options: the seed with the scene's, the reward
+#: and the image size with ``score``'s, the field of view with its default among candidates.
+OTHER_FLAGS = ("seed", "reward", "image_width", "image_height", "fov")
+
+
+def _request_args(p: argparse.ArgumentParser) -> None:
+    """A flag for every setting of a request (:data:`vp_planner.request.SETTINGS`, but
+    :data:`OTHER_FLAGS`): its type and default, its help and choices from the request's field."""
+    from .request import SETTINGS
+
+    names = {v: k for k, v in REQUEST_FLAGS.items()}
+    for s in SETTINGS:
+        if s.name in OTHER_FLAGS:
+            continue
+        flag = "--" + names.get(s.name, s.name).replace("_", "-")
+        text = f"{s.help} ({s.default:.4g})" if isinstance(s.default, float) else f"{s.help} ({s.default})"
+        if isinstance(s.default, bool):
+            p.add_argument(flag, action=argparse.BooleanOptionalAction, default=s.default, help=text)
+        else:
+            p.add_argument(flag, type=type(s.default), default=s.default, choices=s.choices, help=text)
 
 
 def _mission_parser() -> argparse.ArgumentParser:
@@ -341,16 +317,15 @@ def set_threads(n: int) -> None:
 def scene_of(args: argparse.Namespace) -> dict:
     """The scene dict (build_noisy_scene's keyword arguments) of the command line options;
     ``scenario`` is a layout name or a layout file's canonical dict (see :func:`_scenario`)."""
+    from vp_scene.scene_spec import SCENE_KEYS
+
     models = None
     if args.models:
         folder = Path(args.models)
         if not folder.is_dir():
             raise CliError(f"models folder not found: {folder}")
         models = str(folder.resolve())
-    return {"scenario": args.scenario, "models": models, "seed": args.seed,
-            "points_per_plant": args.points_per_plant, "plant_spacing": args.plant_spacing,
-            "row_spacing": args.row_spacing, "levels": args.levels, "realizations": args.realizations,
-            "wind_variance": args.wind_variance, "wind_direction": args.wind_direction}
+    return {**{k: getattr(args, k) for k in SCENE_KEYS}, "models": models}
 
 
 def build_scene(scene: dict) -> tuple[np.ndarray, str]:
@@ -460,24 +435,16 @@ def reconstruction_of(path: Optional[str], flag: str = "--reconstructed") -> Opt
         raise CliError(f"{flag}: {exc}") from None
 
 
-#: Plan flags (argparse's names) that are fields of a request under another name; every other
-#: flag named as a field of :data:`vp_planner.request.FLAT` (``--min-standoff``, ``--bo-mode``, ...)
-#: is that field.
-REQUEST_FLAGS = {"cameras": "num_cameras", "evals": "evaluations", "init": "initial_evaluations"}
-#: The request's flat names plan.json keeps as ``registration`` (the flight's reported-pose errors)
-#: and ``score`` reads back.
-REGISTRATION = ("report_position_sigma", "report_attitude_sigma", "ground_control")
 
 
 def request_of(args: argparse.Namespace) -> "PlanRequest":
     """The :class:`~vp_planner.request.PlanRequest` of the plan flags, built and validated in one
     place (the cameras already flown and the reconstruction are read from their files later)."""
-    from .request import DEFAULTS, FLAT, PlanRequest
+    from .request import SETTINGS, PlanRequest, values_of_settings
 
-    values = {REQUEST_FLAGS.get(k, k): v for k, v in vars(args).items()
-              if REQUEST_FLAGS.get(k, k) in FLAT and v is not None}
-    values["image_size"] = _image_size(args, DEFAULTS["image_size"])
-    return PlanRequest.from_dict(values)
+    names = {v: k for k, v in REQUEST_FLAGS.items()}
+    given = {s.name: getattr(args, names.get(s.name, s.name)) for s in SETTINGS}
+    return PlanRequest.from_dict(values_of_settings({k: v for k, v in given.items() if v is not None}))
 
 
 def plan(args: argparse.Namespace) -> dict:
@@ -487,9 +454,8 @@ def plan(args: argparse.Namespace) -> dict:
     from vp_scene.folders import ResultFolder, write_atomic
     from vp_scene.planfile import write_plan
 
-    from .methods import BY_NAME
     from .optimizers import plan_views
-    from .request import FLAT, check_plan_memory
+    from .request import check_plan_memory
 
     request = request_of(args)  # fail before reading files or building the scene
     if args.threads < 1:
@@ -541,38 +507,23 @@ def plan(args: argparse.Namespace) -> dict:
         if bar is not None:
             bar.close()
     poses = cameras_to_poses(res.cameras) if among is None else among["poses"][res.selected]
-    entry, cams, bo, feas, sortie = BY_NAME[request.method], request.cameras, request.bo, request.feasibility, \
-        request.sortie
+    sortie = request.sortie
     data = {
         "scenario": layout_name,
-        "method": request.method,
+        **request.record(),  # the request, written by itself
         "reward_model": res.reward_model,
-        "num_cameras": cams.num_cameras,
         "cameras": [[float(x) for x in row] for row in res.cameras],
         "poses": [[float(x) for x in row] for row in poses],
         "reward": float(res.reward),
         "trace": [float(x) for x in res.trace],
         "simple_regret": [float(x) for x in res.simple_regret()],
         "evaluations": int(res.evaluations),
-        "initial_evaluations": bo.initial_evaluations if entry.settings == "bo" else None,
-        "structured_init": bo.structured_init if entry.settings == "bo" else None,
-        "bo_mode": bo.mode if entry.settings == "bo" else None,
         "initial_best": res.initial_best,
         "parts": res.parts,
-        "lawnmower": ({"overlap": request.lawnmower.overlap, "tilt": request.lawnmower.tilt}
-                      if entry.settings == "lawnmower" else None),
         "steps": res.steps,
-        "seed": request.seed,
         "seconds": float(res.seconds),
-        "fov": cams.fov,
-        "theta_match": request.reward.theta_match,
-        "registration": {k: getattr(getattr(request, FLAT[k][0]), FLAT[k][1]) for k in REGISTRATION},
-        "image_size": list(cams.image_size),
-        "feasibility": {"min_standoff": feas.min_standoff, "min_altitude": feas.min_altitude,
-                        "min_separation": feas.min_separation},
         "ensemble_weights": res.ensemble_weights,
         "model_names": res.model_names,
-        "fixed_cameras": [[float(x) for x in row] for row in sortie.fixed_cameras],
         "fixed_from": [str(Path(f).resolve()) for f in args.fixed],
         "reconstructed": None if sortie.reconstruction is None else {
             "path": str(Path(args.reconstructed).resolve()), "points": int(len(sortie.reconstruction)),
@@ -621,7 +572,9 @@ def _reconstructed_weights(data: dict, realizations: np.ndarray) -> Optional[np.
 def _score_scene(args: argparse.Namespace, pf: Any) -> dict:
     """The scene a plan is scored on: its own (scene options refused beside it), else the one the
     options name (``--scenario`` required: no scene is guessed)."""
-    given = {k: v for k, v in vars(args).items() if k in SCENE_DEFAULTS}
+    from vp_scene.scene_spec import SCENE, SCENE_KEYS
+
+    given = {k: v for k, v in vars(args).items() if k in SCENE_KEYS}
     flags = ", ".join("--" + k.replace("_", "-") for k in given)
     if pf.scene is not None:
         if given:
@@ -630,7 +583,7 @@ def _score_scene(args: argparse.Namespace, pf: Any) -> dict:
     if "scenario" not in given:
         raise CliError(f"{args.plan} has no 'scene': name the scene it was planned for with --scenario (and its "
                        "other scene options); no scene is guessed (vp_recon.cli refuses such a plan)")
-    return scene_of(argparse.Namespace(**{**SCENE_DEFAULTS, **given}))
+    return scene_of(argparse.Namespace(**{**SCENE.as_dict(), **given}))
 
 
 def _feasibility_warning(pf: Any, realizations: np.ndarray) -> Optional[str]:
@@ -658,7 +611,7 @@ def score(args: argparse.Namespace) -> float:
     from vp_scene.build import scene_shape
     from vp_scene.camera import IMAGE_SIZE, CameraModel
 
-    from .request import FLAT, CameraSpec, InvalidRequestError, RewardSpec, check_memory
+    from .request import FLAT, REGISTRATION, CameraSpec, InvalidRequestError, RewardSpec, check_memory
     from .reward_models import DEFAULT_REWARD_MODEL, check_reward_model, make_reward
 
     try:

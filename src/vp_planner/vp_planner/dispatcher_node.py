@@ -331,7 +331,7 @@ class DispatcherNode(LifecycleNode):
         if not np.all(np.isfinite(p)):
             self.get_logger().warn(f'drone {drone}: ignoring a pose with non-finite coordinates',
                                    throttle_duration_sec=5.0)
-            with self._lock:  # named as such when the drone is missed (issue 19: it read "no pose yet")
+            with self._lock:  # named as such when the drone is missed (not as "no pose yet")
                 self._nonfinite[drone] = (float(p[0]), float(p[1]), float(p[2]))
             return
         with self._lock:

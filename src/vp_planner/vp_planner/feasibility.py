@@ -25,7 +25,7 @@ The rules' minima and their defaults have one home, :class:`Feasibility` (a plan
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Optional
 
 import numpy as np
@@ -74,11 +74,12 @@ def check_minima(min_standoff: float, min_altitude: float, min_separation: float
 class Feasibility:
     """The minima of the feasibility rules (m), validated on construction (finite, >= 0;
     ValueError naming the field): ``min_standoff`` from every scene point, ``min_altitude``
-    above the ground, ``min_separation`` between cameras. The defaults here are the suite's."""
+    above the ground, ``min_separation`` between cameras. The defaults here are the suite's; each
+    field's metadata gives its help and range (the planner's parameters and flags read them)."""
 
-    min_standoff: float = 0.5
-    min_altitude: float = 0.3
-    min_separation: float = 0.5
+    min_standoff: float = field(default=0.5, metadata={"help": "m from every scene point", "range": (0.0, math.inf)})
+    min_altitude: float = field(default=0.3, metadata={"help": "m above the ground", "range": (0.0, math.inf)})
+    min_separation: float = field(default=0.5, metadata={"help": "m between cameras", "range": (0.0, math.inf)})
 
     def __post_init__(self) -> None:
         check_minima(self.min_standoff, self.min_altitude, self.min_separation)

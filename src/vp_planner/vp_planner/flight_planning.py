@@ -109,7 +109,7 @@ def patterns(space: Any, obj: Objective, request: Any, evaluations: int, rng: np
 
         U = structured_plans(space)
         makers = [("circle", evaluations, lambda o: plan_circle(space, o, evaluations, rng)),
-                  ("arc", evaluations, lambda o: plan_arc(space, o, evaluations, rng, request.arc.spacing)),
+                  ("arc", evaluations, lambda o: plan_arc(space, o, evaluations, rng, request.arc)),
                   ("structured", len(U), lambda o: o(U) if len(U) else None)]
     out = []
     for source, budget, make in makers:

@@ -7,7 +7,7 @@ the CLI's and the entry script's choices, the benchmarks' variants, the PlanView
 documentation and the README's method table (tests keep the last two equal to it). Plain data,
 no torch: the entry script and the dispatcher import it cheaply (a planner is imported on use).
 
-Budget bounds (issue 19, item 1): egp and gp fit Gaussian processes on every evaluation made,
+Budget bounds: egp and gp fit Gaussian processes on every evaluation made,
 O(n^3) time and O(n^2) memory (four GPs for egp), so 1000 evaluations are already hours; the
 other methods record each evaluation (a few hundred bytes plus about 150 bytes a camera) and
 are bounded at 100000.

@@ -50,7 +50,7 @@ reward's pair term included), so one evaluation needs O(N^2) small arrays (pair 
 accumulator per pair) plus the coverage model's per-camera terms, N x K x min(P, 3000) elements
 (:func:`vp_planner.request.estimate_memory`; a plan that would not fit in the memory available is refused before
 anything is allocated). What limits N is time and feasibility: one evaluation costs O(N^2 K P)
-(N = 100 on 5 x 4000 points: about 1e8 pair-point terms, a second or two on one core), the
+(N = 100 on 5 x 4000 points: about 1e8 pair-point terms), the
 BO methods work in 6N dimensions, and random feasible plans (min_separation between every pair)
 become rare beyond a few dozen cameras. Hence the bound of 100 cameras, far above the paper's
 N <= 6; a run is cancellable throughout (``should_stop``), the feasible-plan search included.
@@ -64,8 +64,7 @@ multiplies the budget (:func:`vp_planner.request.total_evaluations`). Beyond the
 :func:`vp_planner.request.estimate_run_memory` of the run exceeds the share of the available memory a request
 may take (:data:`vp_scene.limits.MEMORY_FRACTION`), the request is
 refused before anything is allocated (:class:`vp_planner.request.BudgetTooLargeError`; the planner node's
-``BUDGET_TOO_LARGE``). Before this bound a goal of 4e9 evaluations grew the planner to 20 GB
-until the kernel killed it.
+``BUDGET_TOO_LARGE``).
 """
 from __future__ import annotations
 
@@ -82,7 +81,7 @@ from .methods import BY_NAME
 from .flight_planning import OnFlight, flight_stage, patterns
 from .objective import Objective
 from .request import (InvalidReconstructionError, PlanRequest, check_budget_memory, check_parts, check_plan_memory,
-                      check_reconstruction, check_reconstruction_memory, check_sortie_weighting, total_evaluations)
+                      check_reconstruction_memory, total_evaluations)
 from .reward_models import DEFAULT_REWARD_MODEL
 from .space import Callback, NoFeasiblePlanError, PlanningCancelled, StopCheck, ViewSpace
 
@@ -96,13 +95,13 @@ class InvalidSceneError(ValueError):
 def sortie_weights(realizations: NDArray[np.float64], reconstruction: Any, tau: float, reconstructed_weight: float,
                    available: Optional[int] = None) -> tuple[NDArray[np.float64], float]:
     """Point weights (K, P) of a second sortie (:func:`vp_planner.reward_models.reconstructed_weights`)
-    and the fraction of points reconstructed; InvalidReconstructionError for a bad reconstruction,
-    tau or weight, or a reconstruction the memory cannot hold."""
+    and the fraction of points reconstructed, for a request's :class:`~vp_planner.request.Sortie`
+    (which checked the points, tau and the weight); InvalidReconstructionError for a
+    reconstruction the memory cannot hold (or, from the mask's own checks, bad points or tau)."""
     from .reward_models import reconstructed_mask
 
-    Q = check_reconstruction(reconstruction)
+    Q = np.asarray(reconstruction, dtype=np.float64).reshape(-1, 3)
     check_reconstruction_memory(len(Q), available)
-    check_sortie_weighting(tau, reconstructed_weight)
     try:
         mask = reconstructed_mask(realizations, Q, tau)
     except ValueError as exc:

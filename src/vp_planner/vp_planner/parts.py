@@ -2,8 +2,7 @@
 
 A plan of N cameras is a point of a 6N-dimensional space; with 8-16 drones over a field of 9-12
 plants that is 48-96 dimensions, where a GP fitted on a hundred or so evaluations models next to
-nothing (``bench/bench_fields.py`` measured plain EGP-EI on a row of 12 plants, N = 12: 300
-evaluations, 262 s, and a lower reward than planning by parts in 70 s). Planning by parts:
+nothing (``bench/bench_fields.py`` compares plain EGP-EI with planning by parts). Planning by parts:
 
 1. **partition** the field into G parts: k-means (Lloyd, k-means++ seeding; scipy's ``kmeans2``)
    on the horizontal positions of the scene points, parts numbered along the field's principal

@@ -64,19 +64,14 @@ from vp_interfaces.action import PlanViews, SimulateFlights
 from vp_interfaces.msg import CameraPlan, SceneDescription
 from vp_planner.flight_client import ActionFlights
 from vp_planner.gp import MODEL_NAMES
-from vp_planner.methods import MAX_EVALUATIONS, METHODS
 from vp_planner.optimizers import InvalidSceneError, PlanResult
 from vp_planner.plan_process import PlanProcessDied, run_plan, warm
-from vp_planner.request import (BO_MODES, DEFAULTS, FLAT, MAX_ATTITUDE_SIGMA, MAX_CAMERAS, MAX_POSITION_SIGMA,
-                                BudgetTooLargeError, InvalidBudgetError, InvalidCandidatesError,
+from vp_planner.request import (SETTINGS, BudgetTooLargeError, InvalidBudgetError, InvalidCandidatesError,
                                 InvalidFixedCamerasError, InvalidNumCamerasError, InvalidReconstructionError,
-                                PlanRequest, UnknownMethodError, UnknownRewardModelError, check_fields)
-from vp_planner.reward_models import REWARD_MODELS
+                                PlanRequest, Setting, UnknownMethodError, UnknownRewardModelError, check_fields,
+                                values_of_settings)
 from vp_planner.space import NoFeasiblePlanError
-from vp_scene.camera import IMAGE_SIDE_RANGE
 from vp_scene.cloud import pointcloud2_to_numpy, realizations_from_cloud
-from vp_scene.flights import MAX_FLIGHTS
-from vp_scene.limits import MAX_SEED
 from vp_scene.messages import (cameras_to_pose_array, camera_plan_msg, flight_record_msg, frustum_markers,
                                pose_array_to_cameras)
 from vp_scene.wind import WindConfig
@@ -103,66 +98,40 @@ def error_code(exc: Exception) -> int:
     return next((code for cls, code in ERROR_CODES if isinstance(exc, cls)), PlanViews.Result.PLANNER_FAILED)
 
 
+#: What a goal does to the parameters it may override (the rest of a parameter's description is
+#: its request field's help).
+GOAL_NOTES = {'num_cameras': 'autostart, and goals that leave it 0', 'method': 'autostart, and goals that leave it empty',
+              'evaluations': 'goals that leave it 0', 'initial_evaluations': 'goals that leave it 0',
+              'seed': 'goals with seed -1', 'reward': 'goals that leave it empty'}
+
+
+def setting_param(setting: Setting) -> Param:
+    """The node parameter of a request's setting (:data:`vp_planner.request.SETTINGS`): its
+    default, help, inclusive range (no upper end: INT_MAX or inf) and what the range cannot say
+    (excluded ends, choices, limits)."""
+    rng = None
+    if setting.range is not None:
+        lo, hi = setting.range
+        top = INT_MAX if isinstance(setting.default, int) else math.inf
+        rng = (lo, top if hi is None else hi)
+    said = [text for text in (setting.limits, _OPEN if setting.open else '',
+                              'one of ' + ', '.join(setting.choices) if setting.choices else '') if text]
+    note = GOAL_NOTES.get(setting.name)
+    return Param(setting.default, setting.help + (f' ({note})' if note else ''), rng, False, '; '.join(said))
+
+
+_OPEN = 'the ends are excluded'
 #: The node's parameters (:class:`vp_scene.node_runtime.Param`): default (its type is enforced),
 #: description, the range the node enforces, read_only where a change is not honoured. Those of a
-#: plan request take their defaults from the request (:data:`vp_planner.request.DEFAULTS`), and
-#: their names are the request's flat names (image_width and image_height: its image_size).
-_EVALS = (1, max(MAX_EVALUATIONS.values()))
-_OPEN = 'the ends are excluded'
-D = DEFAULTS
+#: plan request are its settings (:data:`vp_planner.request.SETTINGS`: name, default, help and
+#: range from the request's field metadata), so that a new request field is a parameter too.
 PARAMS = {
-    'num_cameras': Param(D['num_cameras'], f'N, 2..{MAX_CAMERAS} (autostart, and goals that leave it 0)',
-                         (2, MAX_CAMERAS)),
-    'method': Param(D['method'], 'planning method (autostart, and goals that leave it empty)', None, False,
-                    'one of ' + ', '.join(METHODS)),
-    'evaluations': Param(D['evaluations'], 'reward evaluations (goals that leave it 0)', _EVALS, False,
-                         'at most ' + ', '.join(f'{m} {n}' for m, n in MAX_EVALUATIONS.items())),
-    'initial_evaluations': Param(D['initial_evaluations'], 'initial design of egp/gp (goals that leave it 0)', _EVALS),
-    'seed': Param(D['seed'], 'random seed (goals with seed -1)', (0, MAX_SEED)),
-    'reward': Param(D['reward'], 'reward model', None, False, 'one of ' + ', '.join(REWARD_MODELS)),
-    'image_width': Param(D['image_size'][0], 'image width of the cameras, pixels (the coverage reward)',
-                         IMAGE_SIDE_RANGE),
-    'image_height': Param(D['image_size'][1], 'image height of the cameras, pixels', IMAGE_SIDE_RANGE),
-    'bo_mode': Param(D['bo_mode'], 'egp/gp: search of the acquisition', None, False, 'one of ' + ', '.join(BO_MODES)),
-    'structured_init': Param(D['structured_init'],
-                             'structured plans in the egp/gp initial design (0: random, as the paper)', (0, INT_MAX)),
-    'arc_spacing': Param(D['arc_spacing'], 'arc: rad between neighbouring cameras', (0.0, 2 * math.pi), False,
-                         _OPEN),
-    'parts': Param(D['parts'], 'egp/gp: plan the field by this many parts (0: automatic, 1: none)', (0, INT_MAX)),
-    'lawnmower_overlap': Param(D['lawnmower_overlap'], 'lawnmower: image overlap along and across the flight lines',
-                               (0.0, 0.95)),
-    'lawnmower_tilt': Param(D['lawnmower_tilt'], 'lawnmower: camera tilt from nadir, rad (0: nadir, up to 60 degrees)',
-                            (0.0, math.radians(60.0))),
+    **{s.name: setting_param(s) for s in SETTINGS},
     'num_threads': Param(1, 'torch threads (set at start)', (1, INT_MAX), True),
     'autostart': Param(False, 'plan with the parameters as soon as a scene arrives'),
     'managed': MANAGED,
-    'min_standoff': Param(D['min_standoff'], 'm from every scene point', (0.0, math.inf)),
-    'min_altitude': Param(D['min_altitude'], 'm above the ground', (0.0, math.inf)),
-    'min_separation': Param(D['min_separation'], 'm between cameras', (0.0, math.inf)),
-    'fov': Param(D['fov'], 'horizontal field of view, rad', (0.0, math.pi), False, _OPEN),
-    'theta_match': Param(D['theta_match'], 'matching angle of the reward, rad', (0.0, math.pi), False, _OPEN),
-    'report_position_sigma': Param(D['report_position_sigma'], 'm per axis: the error of the camera centres the '
-                                   'flight reports (RTK about 0.02, plain GNSS 1-3; the registration term)',
-                                   (0.0, MAX_POSITION_SIGMA), False, _OPEN),
-    'report_attitude_sigma': Param(D['report_attitude_sigma'], 'degrees per axis: the error of the reported attitudes',
-                                   (0.0, MAX_ATTITUDE_SIGMA), False, _OPEN),
-    'ground_control': Param(D['ground_control'], 'ground-control markers place the model as a whole (false: the '
-                                                 'reported poses alone place it)'),
     'frame_id': Param('map', 'frame of the plans; the scene cloud must be in it', None, False, 'not empty'),
     'scene_timeout': Param(10.0, 's a goal that arrives before the scene waits for it', (0.0, math.inf)),
-    'tau': Param(D['tau'], 'm: a scene point this close to a goal\'s reconstruction counts as reconstructed',
-                 (0.0, math.inf)),
-    'reconstructed_weight': Param(D['reconstructed_weight'],
-                                  'reward weight of a reconstructed scene point (the others weigh 1)', (0.0, 1.0)),
-    'sim_flights': Param(D['sim_flights'], "simulated flights that check the cheap reward's plans (the recon node's "
-                         "/simulate_flights; goals with sim_flights -1); -1: the method's default, 0: none",
-                         (-1, MAX_FLIGHTS)),
-    'flight_width': Param(D['flight_width'], "the simulated flights' image width, pixels", IMAGE_SIDE_RANGE),
-    'flight_height': Param(D['flight_height'], "the simulated flights' image height, pixels", IMAGE_SIDE_RANGE),
-    'flight_sift_octave': Param(D['flight_sift_octave'], "the simulated flights' SIFT first octave: -1 (each image "
-                                "doubled first) or 0", (-1, 0)),
-    'flight_dense_scale': Param(D['flight_dense_scale'], "the simulated flights' dense step on the images resized by "
-                                "this factor", (0.1, 1.0)),
     'flight_workers': Param(os.cpu_count() or 1, 'simulated flights asked for at once (a batch; the recon node\'s '
                             'cluster flies them)', (1, INT_MAX)),
     'flight_server_timeout': Param(5.0, 's a plan with simulated flights waits for /simulate_flights (then it is '
@@ -175,10 +144,9 @@ DEFAULT_WIND_VARIANCE = WindConfig().variance
 
 def request_values(params: dict, goal: Optional[PlanViews.Goal] = None) -> dict:
     """The flat request values (:data:`vp_planner.request.FLAT`) of the node's parameters
-    ({name: typed value}, all of :data:`PARAMS`) and a goal's fields, which override their
-    parameter unless left 0, empty or (seed, sim_flights) -1."""
-    values = {name: value for name, value in params.items() if name in FLAT}
-    values['image_size'] = (params['image_width'], params['image_height'])
+    ({name: typed value}, all of :data:`PARAMS`: :func:`vp_planner.request.values_of_settings`)
+    and a goal's fields, which override their parameter unless left 0, empty or (seed, sim_flights) -1."""
+    values = values_of_settings(params)
     if goal is not None:
         given = {'num_cameras': int(goal.num_cameras), 'method': goal.method, 'evaluations': int(goal.evaluations),
                  'initial_evaluations': int(goal.initial_evaluations), 'reward': goal.reward}

@@ -19,12 +19,24 @@ constructor, each field's default written once (in the group's class):
 The planner node builds it from a goal and its parameters, the CLI from its flags, the benchmarks
 from their variants (``bench/common.py``), all through the flat names below
 (:meth:`PlanRequest.from_dict`; :meth:`PlanRequest.as_dict` writes them, the form of JSON records);
-``plan_views(request, realizations, callback, should_stop)`` plans it. A request is frozen and
-validated on construction (``dataclasses.replace`` and :meth:`PlanRequest.replace` validate again),
-so a request that exists is one ``plan_views`` accepts up to the checks that need the scene (its
-memory, the parts' camera count) or the machine (:func:`check_memory`). :func:`check_fields`
-checks flat values one field at a time (not the budget against the method and the initial design):
-the planner node's parameters, which a goal may override.
+``plan_views(request, realizations, callback, should_stop)`` plans it, handing the groups on to
+the planners (``request.bo``, ``request.arc``, ...). A request is frozen and validated once, on
+construction: each group in its ``__post_init__`` by the rules of its fields, the request its own
+fields and the checks between fields (the budget's bound for the method, the initial design
+within the budget, candidates for the method); a changed request (:meth:`PlanRequest.replace`) is
+a new one, its changed groups built anew. So a request that exists is one ``plan_views`` accepts
+up to the checks that need the scene (its memory, the parts' camera count) or the machine
+(:func:`check_memory`). :func:`check_fields` checks flat values one field at a time (not against
+each other): the planner node's parameters, which a goal may override.
+
+Field metadata: every field states its rule where it is declared (:func:`_field`): ``help``,
+``range`` (inclusive, an upper end of None: none; ``open``: both ends excluded), ``choices``, the
+``error`` it raises, a ``check`` of its own (arrays, the image size, the reward model), ``flat``
+(its flat name where it differs from the field's), ``split`` (a pair set by two settings: image
+width and height) and ``param=False`` for the fields no node parameter or flag sets (the arrays a
+goal or a file carries, the automatic shell, the precision). :data:`SETTINGS` is every other field
+as a setting (name, default, help, range): the planner node's parameters and the CLI's flags are
+made from it, so that a new field of a group is both without a copy.
 
 Flat names (units; validation; the error raised, every one a ValueError; :data:`DEFAULTS` holds
 every default):
@@ -83,6 +95,7 @@ every default):
 
 Other bad fields raise :class:`InvalidRequestError` (the feasibility minima: ValueError, from
 :class:`~vp_planner.feasibility.Feasibility`); ``from_dict`` refuses names that are not fields.
+A plan file records the request as :meth:`PlanRequest.record` writes it.
 
 The checks of a request against the scene and the machine live here too, run by ``plan_views``
 before anything is allocated: :func:`check_plan_memory` (one evaluation of the plan's N cameras
@@ -104,14 +117,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vp_scene import limits
-from vp_scene.camera import IMAGE_SIZE, check_image_side
+from vp_scene.camera import IMAGE_SIDE_RANGE, IMAGE_SIZE, check_image_side
 from vp_scene.flights import MAX_FLIGHTS, FlightSettings
 
 from .feasibility import Feasibility
-from .methods import BY_NAME, DEFAULT_METHOD, METHODS
+from .methods import BY_NAME, DEFAULT_METHOD, METHODS, REGISTRY
 from .reward import DEFAULT_FOV, DEFAULT_THETA_MATCH
-from .reward_models import (DEFAULT_RECONSTRUCTED_WEIGHT, DEFAULT_REWARD_MODEL, DEFAULT_TAU, CoverageParams,
-                            check_fixed_cameras, check_reward_model)
+from .reward_models import (DEFAULT_RECONSTRUCTED_WEIGHT, DEFAULT_REWARD_MODEL, DEFAULT_TAU, REWARD_MODELS,
+                            CoverageParams, check_fixed_cameras, check_reward_model, reward_model)
 
 __all__ = [
     "MAX_CAMERAS",
@@ -127,6 +140,11 @@ __all__ = [
     "FLAT",
     "DEFAULTS",
     "check_fields",
+    "ARRAYS",
+    "REGISTRATION",
+    "Setting",
+    "SETTINGS",
+    "values_of_settings",
     "InvalidRequestError",
     "InvalidNumCamerasError",
     "UnknownMethodError",
@@ -141,7 +159,6 @@ __all__ = [
     "check_candidates",
     "check_lawnmower",
     "check_reconstruction",
-    "check_sortie_weighting",
     "DTYPES",
     "BO_MODES",
     "estimate_memory",
@@ -249,25 +266,90 @@ def _integer(name: str, value: Any, lo: int, hi: Optional[int] = None, error: ty
     return int(value)
 
 
-def _real(name: str, value: Any, lo: float, hi: float = math.inf, open_ends: bool = False) -> float:
-    """``value`` as a finite float in [lo, hi] ((lo, hi) with ``open_ends``), else InvalidRequestError."""
+def _real(name: str, value: Any, lo: float, hi: float = math.inf, open_ends: bool = False,
+          error: type = InvalidRequestError) -> float:
+    """``value`` as a finite float in [lo, hi] ((lo, hi) with ``open_ends``), else ``error`` naming it."""
     try:
         x = float(value)
     except (TypeError, ValueError):
-        raise InvalidRequestError(f"{name} must be a number, got {value!r}") from None
+        raise error(f"{name} must be a number, got {value!r}") from None
     inside = lo < x < hi if open_ends else lo <= x <= hi
     if not (math.isfinite(x) and inside):
-        ends = f"({lo:g}, {hi:g})" if open_ends else f"[{lo:g}, {hi:g}]"
-        raise InvalidRequestError(f"{name} must be finite and in {ends}, got {value!r}")
+        if hi == math.inf:
+            ends = f"> {lo:g}" if open_ends else f">= {lo:g}"
+        else:
+            ends = "in " + (f"({lo:g}, {hi:g})" if open_ends else f"[{lo:g}, {hi:g}]")
+        raise error(f"{name} must be finite and {ends}, got {value!r}")
     return x
 
 
+def _field(default: Any = None, help: str = "", *, flat: Optional[str] = None, range: Optional[tuple] = None,
+           open: bool = False, choices: Optional[tuple] = None, error: Optional[type] = None,
+           check: Optional[Any] = None, param: bool = True, split: Optional[tuple] = None,
+           limits: str = "") -> Any:
+    """A request field with its rule in its metadata (module docstring, "Field metadata")."""
+    meta = {"help": help, "param": param, "open": open, "limits": limits}
+    for key, value in (("flat", flat), ("range", range), ("choices", choices), ("error", error), ("check", check),
+                       ("split", split)):
+        if value is not None:
+            meta[key] = value
+    return field(default=default, metadata=meta)
+
+
+def _flat(default: Any, name: str, help: str = "", **rule: Any) -> Any:
+    """A group field whose flat name (:data:`FLAT`) is not its own."""
+    return _field(default, help, flat=name, **rule)
+
+
+def _check_field(f: Any, value: Any) -> Any:
+    """``value`` of the field ``f`` (a dataclass Field of a group or of the request) checked by its
+    rule and normalized: its ``check``, else its range (an integer or a finite number), its
+    choices or a bool; the field's error (default InvalidRequestError) names it by its flat name."""
+    m = f.metadata
+    name = m.get("flat", f.name)
+    if "check" in m:
+        return m["check"](value)
+    error = m.get("error", InvalidRequestError)
+    if value is None and f.default is None:
+        return None
+    if "range" in m:
+        lo, hi = m["range"]
+        if isinstance(f.default, int) and not isinstance(f.default, bool):
+            return _integer(name, value, lo, hi, error)
+        return _real(name, value, lo, hi, m.get("open", False), error)
+    if "choices" in m:
+        if value not in m["choices"]:
+            raise error(f"{name} must be one of {', '.join(m['choices'])}, got {value!r}")
+        return value
+    if isinstance(f.default, bool):
+        if not isinstance(value, (bool, np.bool_)):
+            raise error(f"{name} must be true or false, got {value!r}")
+        return bool(value)
+    return value
+
+
+def _check_fields(obj: Any) -> None:
+    """Every field of ``obj`` (a frozen dataclass) checked by its rule, in field order, and stored
+    normalized: the one validation of a group, run in its ``__post_init__``."""
+    for f in fields(obj):
+        if f.metadata:
+            _put(obj, f.name, _check_field(f, getattr(obj, f.name)))
+
+
 def check_lawnmower(overlap: float, tilt: float) -> None:
-    """ValueError unless 0 <= overlap <= 0.95 and 0 <= tilt <= 60 degrees (finite)."""
-    if not (math.isfinite(overlap) and 0.0 <= overlap <= 0.95):
-        raise InvalidRequestError(f"lawnmower overlap must be in [0, 0.95], got {overlap}")
-    if not (math.isfinite(tilt) and 0.0 <= tilt <= math.radians(60.0) + 1e-12):
-        raise InvalidRequestError(f"lawnmower tilt must be in [0, 60 degrees] (rad), got {tilt}")
+    """ValueError unless overlap and tilt are finite and in :class:`LawnmowerSpec`'s ranges
+    (0..0.95; 0..60 degrees, rad)."""
+    lo, hi = _rule(LawnmowerSpec, "overlap")["range"]
+    if not (math.isfinite(overlap) and lo <= overlap <= hi):
+        raise InvalidRequestError(f"lawnmower overlap must be in [{lo:g}, {hi:g}], got {overlap}")
+    lo, hi = _rule(LawnmowerSpec, "tilt")["range"]
+    if not (math.isfinite(tilt) and lo <= tilt <= hi + 1e-12):
+        raise InvalidRequestError(f"lawnmower tilt must be in [0, {math.degrees(hi):g} degrees] (rad), got {tilt}")
+
+
+def _rule(cls: type, name: str) -> Mapping[str, Any]:
+    """The metadata of the field ``name`` of the dataclass ``cls``."""
+    return next(f.metadata for f in fields(cls) if f.name == name)
 
 
 def check_reconstruction(reconstruction: Any) -> NDArray[np.float64]:
@@ -282,14 +364,6 @@ def check_reconstruction(reconstruction: Any) -> NDArray[np.float64]:
     return Q
 
 
-def check_sortie_weighting(tau: float, reconstructed_weight: float) -> None:
-    """InvalidReconstructionError unless tau is finite >= 0 and reconstructed_weight in [0, 1]."""
-    if not (math.isfinite(reconstructed_weight) and 0.0 <= reconstructed_weight <= 1.0):
-        raise InvalidReconstructionError(f"reconstructed_weight must be in [0, 1], got {reconstructed_weight}")
-    if not (math.isfinite(tau) and tau >= 0):
-        raise InvalidReconstructionError(f"tau must be finite and >= 0, got {tau}")
-
-
 def _read_only(a: NDArray[np.float64]) -> NDArray[np.float64]:
     a = np.array(a, dtype=np.float64)
     a.setflags(write=False)
@@ -300,37 +374,61 @@ def _put(obj: Any, name: str, value: Any) -> None:
     object.__setattr__(obj, name, value)
 
 
-def _flat(default: Any, name: str) -> Any:
-    """A group field whose flat name (:data:`FLAT`) is not its own."""
-    return field(default=default, metadata={"flat": name})
+def _image_size(value: Any) -> tuple[int, int]:
+    try:
+        width, height = value
+    except (TypeError, ValueError):
+        raise InvalidRequestError(f"image_size must be (width, height), got {value!r}") from None
+    try:  # the suite's one range of image sides (vp_scene.camera.IMAGE_SIDE_RANGE)
+        return check_image_side("image width", width), check_image_side("image height", height)
+    except ValueError as exc:
+        raise InvalidRequestError(str(exc)) from None
+
+
+def _reward_name(value: Any) -> str:
+    try:
+        return check_reward_model(value)
+    except ValueError as exc:
+        raise UnknownRewardModelError(str(exc)) from None
+
+
+def _fixed_cameras(value: Any) -> NDArray[np.float64]:
+    try:
+        F = _read_only(check_fixed_cameras(value))
+    except ValueError as exc:
+        raise InvalidFixedCamerasError(f"fixed cameras: {exc}") from None
+    if len(F) > MAX_FIXED_CAMERAS:
+        raise InvalidFixedCamerasError(f"fixed cameras: {len(F)} cameras already flown are above the bound of "
+                                       f"{MAX_FIXED_CAMERAS} (a full sortie)")
+    return F
+
+
+def _optional_points(check: Any) -> Any:
+    """The check of an optional array field: None stays None, else ``check``'s array, read-only."""
+    return lambda value: None if value is None else _read_only(check(value))
 
 
 # ---------------------------------------------------------------------- the groups
+_OPEN = "the ends are excluded"
+
+
 @dataclass(frozen=True)
 class CameraSpec:
     """The cameras of the plan: how many (N), their horizontal field of view (rad), their images'
     (width, height) in pixels, and how far they may be (``shell_depth``, m beyond the scene's box
     grown by the stand-off; None: automatic)."""
 
-    num_cameras: int = 4
-    fov: float = DEFAULT_FOV
-    image_size: tuple[int, int] = IMAGE_SIZE
-    shell_depth: Optional[float] = None
+    num_cameras: int = _field(4, "N, the cameras of the plan", range=(2, MAX_CAMERAS), error=InvalidNumCamerasError)
+    fov: float = _field(DEFAULT_FOV, "horizontal field of view, rad", range=(0.0, math.pi), open=True)
+    image_size: tuple[int, int] = _field(IMAGE_SIZE, "(width, height) of the cameras' images, pixels",
+                                         check=_image_size, range=IMAGE_SIDE_RANGE,
+                                         split=(("image_width", "image width of the cameras, pixels (the coverage "
+                                                 "reward)"), ("image_height", "image height of the cameras, pixels")))
+    shell_depth: Optional[float] = _field(None, "m beyond the scene's box grown by the stand-off (None: automatic)",
+                                          range=(0.0, math.inf), open=True, param=False)
 
     def __post_init__(self) -> None:
-        _put(self, "num_cameras", _integer("num_cameras", self.num_cameras, 2, MAX_CAMERAS, InvalidNumCamerasError))
-        _put(self, "fov", _real("fov", self.fov, 0.0, math.pi, open_ends=True))
-        if self.shell_depth is not None:
-            _put(self, "shell_depth", _real("shell_depth", self.shell_depth, 0.0, open_ends=True))
-        try:
-            width, height = self.image_size
-        except (TypeError, ValueError):
-            raise InvalidRequestError(f"image_size must be (width, height), got {self.image_size!r}") from None
-        try:  # the suite's one range of image sides (vp_scene.camera.IMAGE_SIDE_RANGE)
-            _put(self, "image_size", (check_image_side("image width", width),
-                                      check_image_side("image height", height)))
-        except ValueError as exc:
-            raise InvalidRequestError(str(exc)) from None
+        _check_fields(self)
 
 
 @dataclass(frozen=True)
@@ -340,36 +438,31 @@ class RewardSpec:
     models' registration term, :mod:`vp_planner.reward_models`): the reported camera centres'
     error (``position_sigma``, m per axis: RTK about 0.02, plain GNSS 1-3), the reported
     attitudes' (``attitude_sigma``, degrees per axis) and whether ground-control markers place
-    the model as a whole (``ground_control``)."""
+    the model as a whole (``ground_control``). A zero error would make the placement's
+    information infinite: the errors are in (0, MAX)."""
 
-    name: str = _flat(DEFAULT_REWARD_MODEL, "reward")
-    theta_match: float = DEFAULT_THETA_MATCH
-    dtype: str = "float64"
-    position_sigma: float = _flat(_COVERAGE.position_sigma, "report_position_sigma")
-    attitude_sigma: float = _flat(_COVERAGE.attitude_sigma, "report_attitude_sigma")
-    ground_control: bool = _flat(_COVERAGE.ground_control, "ground_control")
+    name: str = _flat(DEFAULT_REWARD_MODEL, "reward", "reward model", check=_reward_name, choices=REWARD_MODELS)
+    theta_match: float = _field(DEFAULT_THETA_MATCH, "matching angle of the reward, rad", range=(0.0, math.pi),
+                                open=True)
+    dtype: str = _field("float64", "reward precision", choices=DTYPES, param=False)
+    position_sigma: float = _flat(_COVERAGE.position_sigma, "report_position_sigma",
+                                  "m per axis: the error of the camera centres the flight reports (RTK about 0.02, "
+                                  "plain GNSS 1-3; the registration term)", range=(0.0, MAX_POSITION_SIGMA), open=True)
+    attitude_sigma: float = _flat(_COVERAGE.attitude_sigma, "report_attitude_sigma",
+                                  "degrees per axis: the error of the reported attitudes",
+                                  range=(0.0, MAX_ATTITUDE_SIGMA), open=True)
+    ground_control: bool = _flat(_COVERAGE.ground_control, "ground_control",
+                                 "ground-control markers place the model as a whole (false: the reported poses "
+                                 "alone place it)")
 
     def __post_init__(self) -> None:
-        try:
-            check_reward_model(self.name)
-        except ValueError as exc:
-            raise UnknownRewardModelError(str(exc)) from None
-        _put(self, "theta_match", _real("theta_match", self.theta_match, 0.0, math.pi, open_ends=True))
-        if self.dtype not in DTYPES:
-            raise InvalidRequestError(f"dtype must be one of {', '.join(DTYPES)}, got {self.dtype!r}")
-        # a zero error would make the placement's information infinite: (0, MAX)
-        _put(self, "position_sigma", _real("report_position_sigma", self.position_sigma, 0.0, MAX_POSITION_SIGMA,
-                                           open_ends=True))
-        _put(self, "attitude_sigma", _real("report_attitude_sigma", self.attitude_sigma, 0.0, MAX_ATTITUDE_SIGMA,
-                                           open_ends=True))
-        if not isinstance(self.ground_control, (bool, np.bool_)):
-            raise InvalidRequestError(f"ground_control must be true or false, got {self.ground_control!r}")
-        _put(self, "ground_control", bool(self.ground_control))
+        _check_fields(self)
 
     def model_spec(self) -> Any:
-        """What :func:`vp_planner.reward_models.make_reward` takes: the name for ``paper`` (it has
-        no registration term), else the coverage model with this flight's reported-pose errors."""
-        if self.name == "paper":
+        """What :func:`vp_planner.reward_models.make_reward` takes: the name for a model without
+        parameters (``paper``: no registration term), else the model with the coverage parameters
+        of this flight's reported-pose errors."""
+        if not reward_model(self.name).coverage:
             return self.name
         return self.name, dataclasses.replace(_COVERAGE, position_sigma=self.position_sigma,
                                               attitude_sigma=self.attitude_sigma, ground_control=self.ground_control)
@@ -380,37 +473,36 @@ class BOSpec:
     """egp/gp's settings: the initial design's size and how many of it are structured plans, the
     acquisition's search (``mode``) and the parts a field is planned by (0: automatic)."""
 
-    initial_evaluations: int = 50
-    structured_init: int = 20
-    mode: str = _flat("trust_region", "bo_mode")
-    parts: int = 0
+    initial_evaluations: int = _field(50, "initial design of egp/gp", range=(1, None), error=InvalidBudgetError)
+    structured_init: int = _field(20, "structured plans in the egp/gp initial design (0: random, as the paper)",
+                                  range=(0, None))
+    mode: str = _flat("trust_region", "bo_mode", "egp/gp: search of the acquisition", choices=BO_MODES)
+    parts: int = _field(0, "egp/gp: plan the field by this many parts (0: automatic, 1: none)", range=(0, None))
 
     def __post_init__(self) -> None:
-        _put(self, "initial_evaluations", _integer("initial_evaluations", self.initial_evaluations, 1, None,
-                                                   InvalidBudgetError))
-        _put(self, "structured_init", _integer("structured_init", self.structured_init, 0))
-        if self.mode not in BO_MODES:
-            raise InvalidRequestError(f"bo_mode must be one of {', '.join(BO_MODES)}, got {self.mode!r}")
-        _put(self, "parts", _integer("parts", self.parts, 0))  # 0: automatic
+        _check_fields(self)
 
 
 @dataclass(frozen=True)
 class ArcSpec:
     """arc's setting: rad between neighbouring cameras."""
 
-    spacing: float = _flat(math.radians(30.0), "arc_spacing")
+    spacing: float = _flat(math.radians(30.0), "arc_spacing", "arc: rad between neighbouring cameras",
+                           range=(0.0, 2 * math.pi), open=True)
 
     def __post_init__(self) -> None:
-        _put(self, "spacing", _real("arc_spacing", self.spacing, 0.0, 2 * math.pi, open_ends=True))
+        _check_fields(self)
 
 
 @dataclass(frozen=True)
 class LawnmowerSpec:
     """lawnmower's settings: the images' overlap along and across the flight lines, the camera's
-    tilt from nadir (rad)."""
+    tilt from nadir (rad); :func:`check_lawnmower` checks both."""
 
-    overlap: float = _flat(0.7, "lawnmower_overlap")
-    tilt: float = _flat(0.0, "lawnmower_tilt")
+    overlap: float = _flat(0.7, "lawnmower_overlap", "lawnmower: image overlap along and across the flight lines",
+                           range=(0.0, 0.95))
+    tilt: float = _flat(0.0, "lawnmower_tilt", "lawnmower: camera tilt from nadir, rad (0: nadir, up to 60 degrees)",
+                        range=(0.0, math.radians(60.0)))
 
     def __post_init__(self) -> None:
         check_lawnmower(self.overlap, self.tilt)
@@ -421,33 +513,27 @@ class Sortie:
     """A second sortie's context: the cameras already flown (stored read-only, (0, 6) for none),
     what they reconstructed (read-only, or None), and how a reconstructed scene point weighs."""
 
-    fixed_cameras: Any = None
-    reconstruction: Any = None
-    tau: float = DEFAULT_TAU
-    reconstructed_weight: float = DEFAULT_RECONSTRUCTED_WEIGHT
+    fixed_cameras: Any = _field(None, "(M, 6) cameras already flown", check=_fixed_cameras, param=False)
+    reconstruction: Any = _field(None, "(Q, 3) points an earlier sortie reconstructed",
+                                 check=_optional_points(check_reconstruction), param=False)
+    tau: float = _field(DEFAULT_TAU, "m: a scene point this close to the reconstruction counts as reconstructed",
+                        range=(0.0, math.inf), error=InvalidReconstructionError)
+    reconstructed_weight: float = _field(DEFAULT_RECONSTRUCTED_WEIGHT, "reward weight of a reconstructed scene point "
+                                         "(the others weigh 1)", range=(0.0, 1.0), error=InvalidReconstructionError)
 
     def __post_init__(self) -> None:
-        try:
-            _put(self, "fixed_cameras", _read_only(check_fixed_cameras(self.fixed_cameras)))
-        except ValueError as exc:
-            raise InvalidFixedCamerasError(f"fixed cameras: {exc}") from None
-        if len(self.fixed_cameras) > MAX_FIXED_CAMERAS:
-            raise InvalidFixedCamerasError(f"fixed cameras: {len(self.fixed_cameras)} cameras already flown are "
-                                           f"above the bound of {MAX_FIXED_CAMERAS} (a full sortie)")
-        if self.reconstruction is not None:
-            _put(self, "reconstruction", _read_only(check_reconstruction(self.reconstruction)))
-        check_sortie_weighting(self.tau, self.reconstructed_weight)
+        _check_fields(self)
 
 
 @dataclass(frozen=True, eq=False)
 class CandidateSet:
     """The poses a plan chooses its N cameras among (stored read-only), or None: free space."""
 
-    poses: Any = _flat(None, "candidates")
+    poses: Any = _flat(None, "candidates", "(M, 6) candidate cameras the plan chooses N of",
+                       check=_optional_points(check_candidates), param=False)
 
     def __post_init__(self) -> None:
-        if self.poses is not None:
-            _put(self, "poses", _read_only(check_candidates(self.poses)))
+        _check_fields(self)
 
 
 _FLIGHT = FlightSettings()
@@ -459,14 +545,22 @@ class FlightSpec:
     how many (``count``; -1: the method's default, 0: none) and how each is photographed and
     reconstructed (:class:`vp_scene.flights.FlightSettings`)."""
 
-    count: int = _flat(-1, "sim_flights")
-    width: int = _flat(_FLIGHT.width, "flight_width")
-    height: int = _flat(_FLIGHT.height, "flight_height")
-    sift_first_octave: int = _flat(_FLIGHT.sift_first_octave, "flight_sift_octave")
-    dense_scale: float = _flat(_FLIGHT.dense_scale, "flight_dense_scale")
+    count: int = _flat(-1, "sim_flights", "simulated flights that check the cheap reward's plans (the recon "
+                       "node's /simulate_flights; goals with sim_flights -1); -1: the method's default, 0: none",
+                       range=(-1, MAX_FLIGHTS))
+    width: int = _flat(_FLIGHT.width, "flight_width", "the simulated flights' image width, pixels",
+                       range=IMAGE_SIDE_RANGE)
+    height: int = _flat(_FLIGHT.height, "flight_height", "the simulated flights' image height, pixels",
+                        range=IMAGE_SIDE_RANGE)
+    sift_first_octave: int = _flat(_FLIGHT.sift_first_octave, "flight_sift_octave",
+                                   "the simulated flights' SIFT first octave: -1 (each image doubled first) or 0",
+                                   range=(-1, 0))
+    dense_scale: float = _flat(_FLIGHT.dense_scale, "flight_dense_scale",
+                               "the simulated flights' dense step on the images resized by this factor",
+                               range=(0.1, 1.0))
 
     def __post_init__(self) -> None:
-        _put(self, "count", _integer("sim_flights", self.count, -1, MAX_FLIGHTS))
+        _check_fields(self)
         try:
             self.settings()
         except ValueError as exc:
@@ -493,24 +587,19 @@ def _check_method(method: Any) -> str:
     return method
 
 
-def _check_evaluations(evaluations: Any, method: Optional[str]) -> int:
-    """The budget: an integer >= 1, and within the bound of ``method`` (None: not checked)."""
-    n = _integer("evaluations", evaluations, 1, None, InvalidBudgetError)
-    if method is not None and n > BY_NAME[method].max_evaluations:
-        raise BudgetTooLargeError(f"evaluations = {n} is above the bound of {BY_NAME[method].max_evaluations} "
-                                  f"for method {method} (README, 'Planner node')")
-    return n
+def _check_evaluations(evaluations: Any) -> int:
+    """The budget as a field: an integer >= 1 (its bound for the method: :meth:`PlanRequest.__post_init__`)."""
+    return _integer("evaluations", evaluations, 1, None, InvalidBudgetError)
 
 
-def _check_design(method: str, evaluations: int, bo: BOSpec) -> None:
-    """egp/gp: the initial design fits in the budget."""
+def _check_budget(method: str, evaluations: int, bo: BOSpec) -> None:
+    """The budget within the bound of ``method``, and for egp/gp the initial design within it."""
+    if evaluations > BY_NAME[method].max_evaluations:
+        raise BudgetTooLargeError(f"evaluations = {evaluations} is above the bound of "
+                                  f"{BY_NAME[method].max_evaluations} for method {method} (README, 'Planner node')")
     if BY_NAME[method].bayesian and evaluations < bo.initial_evaluations:
         raise InvalidBudgetError(f"evaluation budget {evaluations} is smaller than the initial "
                                  f"design ({bo.initial_evaluations})")
-
-
-def _check_seed(seed: Any) -> int:
-    return _integer("seed", seed, 0, limits.MAX_SEED)
 
 
 def _check_candidates_for(method: str, num_cameras: int, candidates: "CandidateSet") -> None:
@@ -529,12 +618,16 @@ def _check_candidates_for(method: str, num_cameras: int, candidates: "CandidateS
 class PlanRequest:
     """What to plan: the method, its budget and seed, and the groups (the module docstring gives
     every field's unit and rule). Build one from flat values with :meth:`from_dict` (or
-    :meth:`of`), change one with :meth:`replace`."""
+    :meth:`of`), change one with :meth:`replace`. Each group validated itself on construction;
+    the request checks its own fields and those between fields (the budget's bound for the
+    method, the initial design within the budget, candidates for the method)."""
 
-    method: str = DEFAULT_METHOD
+    method: str = _field(DEFAULT_METHOD, "planning method", check=_check_method, choices=METHODS)
     cameras: CameraSpec = field(default_factory=CameraSpec)
-    evaluations: int = 100
-    seed: int = 0
+    evaluations: int = _field(100, "reward evaluations", check=_check_evaluations,
+                              range=(1, max(m.max_evaluations for m in REGISTRY)),
+                              limits="at most " + ", ".join(f"{m.name} {m.max_evaluations}" for m in REGISTRY))
+    seed: int = _field(0, "random seed", range=(0, limits.MAX_SEED))
     feasibility: Feasibility = field(default_factory=Feasibility)
     reward: RewardSpec = field(default_factory=RewardSpec)
     bo: BOSpec = field(default_factory=BOSpec)
@@ -545,23 +638,22 @@ class PlanRequest:
     flights: FlightSpec = field(default_factory=FlightSpec)
 
     def __post_init__(self) -> None:
-        _check_method(self.method)
         for name, cls in GROUPS.items():
             if not isinstance(getattr(self, name), cls):
                 raise InvalidRequestError(f"{name} must be a {cls.__name__}, got {getattr(self, name)!r}")
-        _put(self, "evaluations", _check_evaluations(self.evaluations, self.method))
-        _check_design(self.method, self.evaluations, self.bo)
-        _put(self, "seed", _check_seed(self.seed))
+        _check_fields(self)
+        _check_budget(self.method, self.evaluations, self.bo)
         _check_candidates_for(self.method, self.cameras.num_cameras, self.candidates)
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> "PlanRequest":
         """A request of flat values (:data:`FLAT` names, any subset: the others default; the form
         of :meth:`as_dict`, of JSON records, node parameters and CLI flags); InvalidRequestError
-        naming names that are not fields, else the first bad field's error, in the order a goal's
-        fields were always checked (method, num_cameras, evaluations, initial_evaluations, reward,
-        ...)."""
-        return cls(**_build(data, between=True))
+        naming names that are not fields, else the first bad field's error (the groups in the
+        order of :data:`GROUPS`, then the request's own fields and those between fields)."""
+        _refuse_unknown(data)
+        return cls(**{name: data[name] for name in _OWN if name in data},
+                   **{name: _group(name, data) for name in GROUPS})
 
     @classmethod
     def of(cls, method: str, num_cameras: int, **values: Any) -> "PlanRequest":
@@ -569,21 +661,40 @@ class PlanRequest:
         and tests (``PlanRequest.of("sa", 3, evaluations=30, seed=1)``)."""
         return cls.from_dict({"method": method, "num_cameras": num_cameras, **values})
 
-    def as_dict(self) -> dict:
-        """The request as flat plain data (lists for the arrays), :meth:`from_dict`'s input."""
+    def as_dict(self, arrays: bool = True) -> dict:
+        """The request as flat plain data (lists for the arrays), :meth:`from_dict`'s input;
+        ``arrays=False`` leaves out the arrays a goal or a file carries (:data:`ARRAYS`)."""
         out: dict = {}
         for name, (group, attr) in FLAT.items():
-            out[name] = getattr(self if group is None else getattr(self, group), attr)
-        out["image_size"] = list(self.cameras.image_size)
-        out["fixed_cameras"] = self.sortie.fixed_cameras.tolist()
-        rec = self.sortie.reconstruction
-        out["reconstruction"] = None if rec is None else rec.tolist()
-        cand = self.candidates.poses
-        out["candidates"] = None if cand is None else cand.tolist()
+            if not arrays and name in ARRAYS:
+                continue
+            value = getattr(self if group is None else getattr(self, group), attr)
+            out[name] = value.tolist() if isinstance(value, np.ndarray) else list(value) if isinstance(value, tuple) \
+                else value
         return out
 
+    def record(self) -> dict:
+        """The request as a plan file records it (``vp_planner.cli``'s plan.json): ``request``, the
+        flat form (:meth:`as_dict` without :data:`ARRAYS`, which the file names elsewhere), and the
+        keys the plan file's readers read: method, num_cameras, seed, fov, theta_match,
+        image_size, feasibility (the group), registration (:data:`REGISTRATION`), fixed_cameras,
+        and the method's settings (egp/gp: initial_evaluations, structured_init, bo_mode;
+        lawnmower: the group; None for a method without them)."""
+        flat = self.as_dict(arrays=False)
+        settings = BY_NAME[self.method].settings
+        return {
+            "method": self.method, "num_cameras": self.cameras.num_cameras, "seed": self.seed,
+            **{k: flat[k] if settings == "bo" else None for k in ("initial_evaluations", "structured_init", "bo_mode")},
+            "lawnmower": dataclasses.asdict(self.lawnmower) if settings == "lawnmower" else None,
+            "fov": self.cameras.fov, "theta_match": self.reward.theta_match,
+            "registration": {k: flat[k] for k in REGISTRATION}, "image_size": flat["image_size"],
+            "feasibility": dataclasses.asdict(self.feasibility), "fixed_cameras": self.sortie.fixed_cameras.tolist(),
+            "request": flat,
+        }
+
     def replace(self, **values: Any) -> "PlanRequest":
-        """This request with the flat ``values`` changed (validated again)."""
+        """This request with the flat ``values`` changed (the groups changed are built again, and
+        validate themselves, and so does the request)."""
         _refuse_unknown(values)
         top: dict = {}
         changes: dict = {}
@@ -604,9 +715,12 @@ class PlanRequest:
     __hash__ = None  # type: ignore[assignment]
 
 
+#: The request's own fields (not groups), by name.
+_OWN: dict[str, Any] = {f.name: f for f in fields(PlanRequest) if f.name not in GROUPS}
+
+
 def _flat_fields() -> dict[str, tuple[Optional[str], str]]:
-    top = [f.name for f in fields(PlanRequest) if f.name not in GROUPS]
-    out: dict[str, tuple[Optional[str], str]] = {name: (None, name) for name in top}
+    out: dict[str, tuple[Optional[str], str]] = {name: (None, name) for name in _OWN}
     for group, cls in GROUPS.items():
         for f in fields(cls):
             out[f.metadata.get("flat", f.name)] = (group, f.name)
@@ -618,14 +732,77 @@ def _flat_fields() -> dict[str, tuple[Optional[str], str]]:
 FLAT: dict[str, tuple[Optional[str], str]] = _flat_fields()
 
 
-def _default(group: Optional[str], attr: str) -> Any:
-    cls = PlanRequest if group is None else GROUPS[group]
-    f = next(f for f in fields(cls) if f.name == attr)
-    return f.default
+def _field_of(name: str) -> Any:
+    """The dataclass Field of the flat ``name``."""
+    group, attr = FLAT[name]
+    return _OWN[attr] if group is None else next(f for f in fields(GROUPS[group]) if f.name == attr)
 
+
+#: The flat names of the arrays a goal or a file carries (:meth:`PlanRequest.as_dict`'s ``arrays``).
+ARRAYS: tuple[str, ...] = ("fixed_cameras", "reconstruction", "candidates")
+#: The flat names of what the flight reports to place the model by (a plan file's ``registration``).
+REGISTRATION: tuple[str, ...] = ("report_position_sigma", "report_attitude_sigma", "ground_control")
 
 #: Flat name -> its default: the one home of every default of a request (the groups' classes).
-DEFAULTS: dict[str, Any] = {name: _default(group, attr) for name, (group, attr) in FLAT.items()}
+DEFAULTS: dict[str, Any] = {name: _field_of(name).default for name in FLAT}
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One setting of a request a node parameter or a command-line flag sets: its ``name`` (the
+    parameter's; an element of a pair, e.g. image_width of image_size, has a name of its own),
+    the ``flat`` name of the field it sets (and its ``index`` in the pair), its ``default``, ``help``,
+    inclusive ``range`` (None: none; an upper end of None or inf: none), whether the ends are
+    excluded (``open``), its ``choices`` and the ``limits`` its range cannot say."""
+
+    name: str
+    flat: str
+    default: Any
+    help: str
+    range: Optional[tuple] = None
+    open: bool = False
+    choices: Optional[tuple] = None
+    limits: str = ""
+    index: Optional[int] = None
+
+
+def _settings() -> tuple[Setting, ...]:
+    out = []
+    for name in FLAT:
+        f = _field_of(name)
+        m = f.metadata
+        if not m.get("param", True):
+            continue
+        common = dict(help=m.get("help") or name.replace("_", " "), range=m.get("range"), open=m.get("open", False),
+                      choices=m.get("choices"), limits=m.get("limits", ""))
+        if "split" in m:
+            out += [Setting(part, name, f.default[i], **{**common, "help": text}, index=i)
+                    for i, (part, text) in enumerate(m["split"])]
+        else:
+            out.append(Setting(name, name, f.default, **common))
+    return tuple(out)
+
+
+#: The settings of a request that a node parameter or a CLI flag sets, in :data:`FLAT`'s order: every
+#: field but those whose metadata says ``param=False`` (the arrays a goal or a file carries, the
+#: automatic shell and the precision), each from its field's metadata (module docstring).
+SETTINGS: tuple[Setting, ...] = _settings()
+
+
+def values_of_settings(values: Mapping[str, Any]) -> dict:
+    """The flat request values of settings' values ({setting name: value}, any subset): the
+    elements of a pair joined (both given, or the missing one from its default)."""
+    out: dict = {}
+    for s in SETTINGS:
+        if s.name not in values:
+            continue
+        if s.index is None:
+            out[s.flat] = values[s.name]
+        else:
+            pair = list(out.get(s.flat, DEFAULTS[s.flat]))
+            pair[s.index] = values[s.name]
+            out[s.flat] = tuple(pair)
+    return out
 
 
 def _refuse_unknown(values: Mapping[str, Any]) -> None:
@@ -640,32 +817,16 @@ def _group(name: str, values: Mapping[str, Any]) -> Any:
     return GROUPS[name](**kw)
 
 
-def _build(values: Mapping[str, Any], between: bool) -> dict:
-    """PlanRequest's keyword arguments of flat ``values``: each field validated where it lives,
-    in the order of the goal's checks; ``between``: also the checks between fields (the budget's
-    bound for the method, the initial design within the budget)."""
-    _refuse_unknown(values)
-    method = _check_method(values.get("method", DEFAULTS["method"]))
-    out: dict = {"method": method, "cameras": _group("cameras", values)}
-    out["evaluations"] = _check_evaluations(values.get("evaluations", DEFAULTS["evaluations"]),
-                                            method if between else None)
-    out["bo"] = _group("bo", values)
-    if between:
-        _check_design(method, out["evaluations"], out["bo"])
-    out["reward"] = _group("reward", values)
-    out["seed"] = _check_seed(values.get("seed", DEFAULTS["seed"]))
-    for name in ("feasibility", "arc", "lawnmower", "sortie", "candidates", "flights"):
-        out[name] = _group(name, values)
-    if between:
-        _check_candidates_for(method, out["cameras"].num_cameras, out["candidates"])
-    return out
-
-
 def check_fields(values: Mapping[str, Any]) -> None:
     """Check flat ``values`` (any subset of :data:`FLAT`) one field at a time, as a request does,
     but not against each other (the method's budget bound, the initial design within the budget):
     a node's parameters, which a goal may override. The field's ValueError."""
-    _build(values, between=False)
+    _refuse_unknown(values)
+    for name in GROUPS:
+        _group(name, values)
+    for name, f in _OWN.items():
+        if name in values:
+            _check_field(f, values[name])
 
 
 # ---------------------------------------------------------------------- against the scene and the machine
@@ -684,18 +845,19 @@ def check_reconstruction_memory(num_points: int, available: Optional[int] = None
 def estimate_memory(num_cameras: int, num_realizations: int, num_points: int, reward: str) -> int:
     """Bytes one reward evaluation of an N-camera plan needs at most (an upper estimate).
 
-    paper: its chunks (``reward.DEFAULT_MAX_ELEMENTS`` elements, about 10 float64 arrays of that
-    size alive at once) plus per pair S = N (N - 1) / 2 an accumulator, two indices and the pair's
-    coefficients (about 80 bytes). coverage: the per-camera terms, N x K x min(P, 3000) elements
-    (each realization subsampled to 3000 points) of about 200 bytes in all (measured: 150), and
-    its pair blocks (``max_elements`` = 2^22 float32 elements, about 6 arrays).
+    ``paper`` (a model without coverage parameters): its chunks (``reward.DEFAULT_MAX_ELEMENTS``
+    elements, about 10 float64 arrays of that size alive at once) plus per pair S = N (N - 1) / 2
+    an accumulator, two indices and the pair's coefficients (about 80 bytes). The coverage models:
+    the per-camera terms, N x K x min(P, max_points) elements (each realization subsampled) of at
+    most 200 bytes in all, and their pair blocks (``max_elements`` = 2^22 float32 elements, about
+    6 arrays).
     """
     from .reward import DEFAULT_MAX_ELEMENTS
     from .reward_models import CoverageParams
 
     N, K, P = int(num_cameras), int(num_realizations), int(num_points)
     S = N * (N - 1) // 2
-    if reward == "paper":
+    if not reward_model(reward).coverage:
         return 10 * 8 * DEFAULT_MAX_ELEMENTS + 80 * S
     kp = K * min(P, CoverageParams().max_points or P)
     return 200 * N * kp + 6 * 4 * (1 << 22) + 80 * S

@@ -23,20 +23,6 @@ mean over the K realizations of its reward on each one.
       hidden by nearer points of the same realization: a z-buffer of the cloud on a coarse grid
       of ``zbuffer_width`` cells across the image; p is visible when its depth is within
       ``occlusion_tolerance`` (relative) of the nearest depth in its cell (self-occlusion).
-      Option ``zbuffer_cell`` (m, 0 = off, the default): cells that measure that much on the
-      plant at the median depth D_i of what camera i sees in that realization
-      (2 tan(FoV/2) D_i / zbuffer_cell cells across, clamped to ``ZBUFFER_CELLS``), so that a leaf
-      hides about its width whatever the distance (64 cells hide everything behind the nearest
-      leaf in 12.5 cm from 4 m). Measured and not kept (2026-11-29, docs/history.md,
-      docs/results.md): at 3 cm, the cell chosen on the design half of the plan-quality study
-      (1 to 4 cm), the study's design half rho went 0.671 -> 0.716 (one_plant) and 0.697 ->
-      0.694 (three_row), the check half 0.754 -> 0.761 and 0.671 -> 0.633; it ranks row_12's 12
-      plans (4 methods x 3 seeds) as they reconstruct (rho -0.53 -> +0.69), grid_3x3's no better
-      (-0.50 -> -0.75; their Chamfer spans 1.47-1.97, sa's plans scored highest); and
-      egp planned with it (3 planning seeds x 5 realizations, map Chamfer x100): grid_3x3 1.46
-      (the image grid: 1.50; the circle 1.48), row_12 7.80 (3.19; the arc 1.58): seeds 1 and 2
-      2.39 and 2.18 (2.58, 5.37), but seed 0 put the row's 12 cameras in three clusters of 4
-      whose anchored adjustment drifted 0.26-1.15 m in every realization (18.85; 1.63).
     * rho(r) = min(1, (f / r) / ppm_full): image resolution, pixels per metre on the plant at
       distance r (f = (W/2) / tan(FoV/2) for the rendered image size) relative to the density
       ``ppm_full`` above which more pixels no longer help.
@@ -47,7 +33,7 @@ mean over the K realizations of its reward on each one.
     * 1 - prod(1 - q): per-point saturation; a point seen by one good pair is covered, ten
       pairs from the same side do not count ten times (the paper's sum does).
 
-Each ingredient can be switched off (``ablations()``), which is how the study measures it.
+Each ingredient has its switch in :class:`CoverageParams` (the plan-quality benchmark's ablations).
 
 ``coverage-graph``
     ``coverage`` times the connectivity of the plan's view graph: under a flight the images must
@@ -95,15 +81,8 @@ Each ingredient can be switched off (``ablations()``), which is how the study me
     Degenerate: a part of one camera (or of coincident ones) has no scale (I_s = 0): g = 0; so a
     camera whose pairs all lie outside the window adds nothing. Not modelled: the model's shape
     within a part (the bundle adjustment from tracks), and which parts see the markers.
-    The pair rule is the reconstruction's from 8 cameras up (it matches the pairs the poses
-    pick). Below 8 it matches every pair, and pairs that share no plant view still verify
-    matches on the soil and the markers (the plan-quality study's records, realistic capture: of
-    the pairs with no shared plant point 78 % hold 15 or more verified matches, median 49-55),
-    so by the placement alone such a model is one part (``exhaustive_below = 8``). Planned that
-    way, Table I (egp, 3 seeds x 5 realizations, map Chamfer x100) came out no better and worse on
-    six_rect: one_plant 1.617 against 1.647, three_row 1.512 against 1.449, six_rect 1.755 against
-    1.605 (paired +0.151 [+0.030, +0.272]); the pair rule at every N also keeps the neighbours a
-    dense stereo pair needs. So the default stays the pair rule (``exhaustive_below = 0``).
+    The parts follow the pair rule at every N: the reconstruction matches every pair below 8
+    cameras, but the pair rule also keeps the neighbours a dense stereo pair needs.
 
 A second sortie (README "A second sortie"): every model takes the cameras already flown,
 ``fixed_cameras`` (M, 6), and scores a plan z together with them, R(z | F) = R(z ∪ F): pairs
@@ -121,7 +100,7 @@ array exceeds ``max_elements`` elements.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
 from typing import Any, Callable, Optional, Union
 
 import numpy as np
@@ -132,8 +111,8 @@ from vp_scene.camera import CameraModel, optical_axes
 from .feasibility import check_realizations
 from .reward import DEFAULT_FOV, DEFAULT_THETA_MATCH, noisy_reward, prepare_points
 
-__all__ = ["REWARD_MODELS", "DEFAULT_REWARD_MODEL", "CoverageParams", "RewardFunction", "make_reward",
-           "coverage_reward", "point_coverage", "view_graph", "view_graph_factor", "ablations", "model_parts",
+__all__ = ["RewardModel", "REGISTRY", "reward_model", "REWARD_MODELS", "DEFAULT_REWARD_MODEL", "ZBUFFER_CELLS", "CoverageParams", "RewardFunction", "make_reward",
+           "coverage_reward", "point_coverage", "view_graph", "view_graph_factor", "model_parts",
            "placement_error", "within_tau", "check_reward_model",
            "reconstructed_weights", "reconstructed_mask",
            "DEFAULT_TAU", "DEFAULT_RECONSTRUCTED_WEIGHT", "check_fixed_cameras"]
@@ -144,11 +123,9 @@ DEFAULT_TAU: float = 0.03
 #: The weight w_p of a reconstructed point (the others weigh 1).
 DEFAULT_RECONSTRUCTED_WEIGHT: float = 0.1
 
-#: Bounds of a camera's z-buffer grid (cells across the image, ``CoverageParams.zbuffer_cell``).
+#: Bounds of a camera's z-buffer grid (cells across the image, ``CoverageParams.zbuffer_width``).
 ZBUFFER_CELLS: tuple[int, int] = (8, 1024)
 
-#: Reward models by name (``reward`` parameter, PlanViews goal field, ``--reward``).
-REWARD_MODELS: tuple[str, ...] = ("paper", "coverage", "coverage-graph")
 #: The model the plan-quality study supports (README; results/ideal/plan_quality.json, and under the
 #: realistic capture results/plan_quality.json).
 DEFAULT_REWARD_MODEL: str = "coverage"
@@ -158,9 +135,14 @@ RewardFunction = Callable[[Any], np.ndarray]
 
 def check_reward_model(name: Any) -> str:
     """``name`` if it is one of :data:`REWARD_MODELS`, else ValueError naming the choices."""
-    if not isinstance(name, str) or name not in REWARD_MODELS:
+    return reward_model(name).name
+
+
+def reward_model(name: Any) -> "RewardModel":
+    """The registry's entry of ``name`` (:data:`REGISTRY`), else ValueError naming the choices."""
+    if not isinstance(name, str) or name not in _BY_NAME:
         raise ValueError(f"unknown reward model {name!r}; one of {', '.join(REWARD_MODELS)}")
-    return name
+    return _BY_NAME[name]
 
 
 @dataclass(frozen=True)
@@ -169,10 +151,7 @@ class CoverageParams:
 
     Attributes:
         occlusion: z-buffer self-occlusion test.
-        zbuffer_width: z-buffer cells across the image width (height in proportion) when
-            ``zbuffer_cell`` is 0.
-        zbuffer_cell: metres a z-buffer cell measures on the plant at each camera's median depth
-            (0: ``zbuffer_width`` cells across every image).
+        zbuffer_width: z-buffer cells across the image width (height in proportion).
         occlusion_tolerance: a point within this fraction of the cell's nearest depth is visible.
         resolution: weight cameras by pixels per metre on the plant.
         ppm_full: pixels per metre above which rho = 1.
@@ -195,16 +174,10 @@ class CoverageParams:
         registration_tau: metres (the F-score's threshold of the evaluation).
         ground_control: markers on the ground place the model as a whole (the realistic
             capture's default), so only where its parts lie relative to one another counts.
-        exhaustive_below: with fewer cameras than this (the plan's and the fixed ones) the
-            model is one part, as the reconstruction matches every pair below
-            ``vp_recon.config.MATCH_POSES_FROM`` (8); 0 (the default): parts by the pair rule at
-            any N (module docstring: measured both ways).
     """
 
     occlusion: bool = True
     zbuffer_width: int = 64
-    # an option, measured and not kept (module docstring); 0.03 was chosen on the design half
-    zbuffer_cell: float = 0.0
     occlusion_tolerance: float = 0.03
     resolution: bool = True
     ppm_full: float = 500.0
@@ -215,8 +188,7 @@ class CoverageParams:
     saturation: bool = True
     frustum: bool = True
     max_points: int = 3000
-    # chosen on the design half of the realistic plan-quality study (realization 0) from matching
-    # windows (10, 30) and (15, 40) degrees x scales 3e-4 ... 3e-2 (README "Reward models")
+    # the view graph's window and scale: chosen on the design half of the realistic plan-quality study
     view_graph: bool = False
     match_full: float = 10.0
     match_cutoff: float = 30.0
@@ -228,30 +200,30 @@ class CoverageParams:
     link_overlap: float = 0.1
     registration_tau: float = 0.02
     ground_control: bool = True
-    # 0: parts by the pair rule at any N; 8 (vp_recon.config.MATCH_POSES_FROM) follows the
-    # reconstruction's exhaustive matching below 8 cameras: measured and not kept (module docstring)
-    exhaustive_below: int = 0
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.zbuffer_cell) and self.zbuffer_cell >= 0):
-            raise ValueError(f"zbuffer_cell must be finite and >= 0 (metres), got {self.zbuffer_cell}")
-        if not ZBUFFER_CELLS[0] <= int(self.zbuffer_width) <= ZBUFFER_CELLS[1] and not self.zbuffer_cell:
+        if not ZBUFFER_CELLS[0] <= int(self.zbuffer_width) <= ZBUFFER_CELLS[1]:
             raise ValueError(f"zbuffer_width must be in [{ZBUFFER_CELLS[0]}, {ZBUFFER_CELLS[1]}], got {self.zbuffer_width}")
 
-
-def ablations() -> dict[str, tuple[str, CoverageParams]]:
-    """Ingredient ablations of ``coverage`` (name -> spec) measured by the plan-quality study."""
-    base = CoverageParams()
-    out = {
-        "coverage-no-occlusion": ("coverage", replace(base, occlusion=False)),
-        "coverage-no-resolution": ("coverage", replace(base, resolution=False)),
-        "coverage-no-window": ("coverage", replace(base, window=False)),
-        "coverage-no-saturation": ("coverage", replace(base, saturation=False)),
-        "coverage-cone": ("coverage", replace(base, frustum=False)),
-        # z-buffer cells of 3 cm on the plant (an option, measured and not kept)
-        "coverage-object-cells": ("coverage", replace(base, zbuffer_cell=0.03)),
-    }
-    return out
+    def unoccluded(self, inside: torch.Tensor, depth: torch.Tensor, u: torch.Tensor, v: torch.Tensor, K: int,
+                   image: CameraModel) -> torch.Tensor:
+        """vis_i (B, N, K P): ``inside`` and not hidden by a nearer point of its realization in its
+        cell of the z-buffer (``zbuffer_width`` cells across the image at image coordinates u, v =
+        x / depth, y / depth). One buffer per (plan, camera, realization): points of other winds
+        do not occlude. A subclass may size the cells otherwise (the plan-quality benchmark's
+        ablations do)."""
+        B, N, KP = inside.shape
+        tx, ty = image.tan_half_fov, image.tan_half_fov_vertical
+        k_of = torch.arange(K).repeat_interleave(KP // K).view(1, 1, KP)
+        bn = torch.arange(B * N).view(B, N, 1)
+        gw = max(1, int(self.zbuffer_width))
+        gh = max(1, int(round(gw * image.height / image.width)))
+        iu = ((u / tx + 1.0) * 0.5 * gw).floor().clamp(0, gw - 1).long()
+        iv = ((v / ty + 1.0) * 0.5 * gh).floor().clamp(0, gh - 1).long()
+        key = ((bn * K + k_of) * gh + iv) * gw + iu
+        inf = torch.full((B * N * K * gh * gw,), math.inf, dtype=depth.dtype)
+        zmin = inf.scatter_reduce(0, key[inside], depth[inside], reduce="amin", include_self=True)
+        return inside & (depth <= zmin[key.clamp_min(0)] * (1.0 + self.occlusion_tolerance))
 
 
 def _window(theta_deg: torch.Tensor, p: CoverageParams) -> torch.Tensor:
@@ -454,55 +426,6 @@ def view_graph(cameras: Any, realizations: Any, params: CoverageParams = Coverag
     return E[0].numpy()
 
 
-def _object_cells(inside: torch.Tensor, depth: torch.Tensor, K: int, p: CoverageParams,
-                  image: CameraModel) -> tuple[torch.Tensor, torch.Tensor]:
-    """Cells (gw, gh) (B, N, K P) across and down the z-buffer of each camera and realization
-    under ``zbuffer_cell`` (module docstring, vis_i): the median depth is a realization's own, so
-    that eq. 7's mean over the winds is the mean of the rewards of each wind."""
-    B, N, KP = inside.shape
-    seen = torch.where(inside, depth, torch.full((), math.nan, dtype=depth.dtype)).view(B, N, K, KP // K)
-    d_med = torch.nan_to_num(seen.nanmedian(dim=-1).values, nan=1.0)    # a camera seeing nothing: any grid
-    gw = (2.0 * image.tan_half_fov * d_med / p.zbuffer_cell).round().clamp(*ZBUFFER_CELLS).long()
-    gw = gw.repeat_interleave(KP // K, dim=-1)
-    gh = (gw.to(torch.float64) * image.height / image.width).round().clamp_min(1).long()
-    return gw, gh
-
-
-def _unoccluded(inside: torch.Tensor, depth: torch.Tensor, u: torch.Tensor, v: torch.Tensor, K: int,
-                p: CoverageParams, image: CameraModel) -> torch.Tensor:
-    """inside & not hidden by a nearer point of its realization in its z-buffer cell (B, N, K P).
-
-    One buffer per (plan, camera, realization): points of other winds do not occlude. The grid
-    fixed in the image is one dense array (B N K buffers of its cells); the grids of ``zbuffer_cell`` (up to
-    1024 x 768 cells a camera) keep only the cells some point falls in (``torch.unique`` of the
-    cell keys), so their memory follows the points."""
-    B, N, KP = inside.shape
-    dt = depth.dtype
-    tx, ty = image.tan_half_fov, image.tan_half_fov_vertical
-    k_of = torch.arange(K).repeat_interleave(KP // K).view(1, 1, KP)
-    bn = torch.arange(B * N).view(B, N, 1)
-    if not p.zbuffer_cell:
-        gw = max(1, int(p.zbuffer_width))
-        gh = max(1, int(round(gw * image.height / image.width)))
-        iu = ((u / tx + 1.0) * 0.5 * gw).floor().clamp(0, gw - 1).long()
-        iv = ((v / ty + 1.0) * 0.5 * gh).floor().clamp(0, gh - 1).long()
-        key = ((bn * K + k_of) * gh + iv) * gw + iu
-        inf = torch.full((B * N * K * gh * gw,), math.inf, dtype=dt)
-        zmin = inf.scatter_reduce(0, key[inside], depth[inside], reduce="amin", include_self=True)
-        return inside & (depth <= zmin[key.clamp_min(0)] * (1.0 + p.occlusion_tolerance))
-    gw, gh = _object_cells(inside, depth, K, p, image)
-    iu = torch.minimum(((u / tx + 1.0) * 0.5 * gw).floor().clamp_min(0), (gw - 1).to(dt)).long()
-    iv = torch.minimum(((v / ty + 1.0) * 0.5 * gh).floor().clamp_min(0), (gh - 1).to(dt)).long()
-    stride = ZBUFFER_CELLS[1] + 1
-    key = ((bn * K + k_of) * stride + iv) * stride + iu
-    cells, which = torch.unique(key[inside], return_inverse=True)
-    z_in = depth[inside]
-    zmin = torch.full((len(cells),), math.inf, dtype=dt).scatter_reduce(0, which, z_in, reduce="amin")
-    vis = torch.zeros_like(inside)
-    vis[inside] = z_in <= zmin[which] * (1.0 + p.occlusion_tolerance)
-    return vis
-
-
 def _point_coverage(cams: torch.Tensor, pts: torch.Tensor, p: CoverageParams, image: CameraModel,
                     max_elements: int) -> tuple[torch.Tensor, torch.Tensor]:
     """cov(p) (B, K P) of plans (B, N, 6) on realizations (K, P, 3), flattened realization-major,
@@ -528,7 +451,7 @@ def _point_coverage(cams: torch.Tensor, pts: torch.Tensor, p: CoverageParams, im
         inside = front & (depth >= math.cos(0.5 * image.fov) * r)
         u = (xs / safe).clamp(-tx, tx)
         v = (ys / safe).clamp(-ty, ty)
-    vis = _unoccluded(inside, depth, u, v, K, p, image) if p.occlusion else inside
+    vis = p.unoccluded(inside, depth, u, v, K, image) if p.occlusion else inside
     q = vis.to(dt)
     seen_pt = q                                                    # visible (registration's links: any resolution)
     if p.resolution:
@@ -556,8 +479,6 @@ def _point_coverage(cams: torch.Tensor, pts: torch.Tensor, p: CoverageParams, im
         seen = seen_pt.mean(-1)                                    # (B, N): what each camera images
         same = model_parts(L / torch.minimum(seen[:, :, None], seen[:, None, :]).clamp_min(1e-12),
                            p.link_overlap)
-        if N < p.exhaustive_below:  # every pair matched: the ground and the markers link the parts
-            same = torch.ones_like(same)
         var = placement_error(cams, same, flat[0, 0], p.position_sigma, p.attitude_sigma)
         if p.ground_control:  # the markers place the whole: what the G parts share is gone
             size = same.to(dt).sum(-1)                              # (B, N): cameras in camera i's part
@@ -599,47 +520,93 @@ def make_reward(spec: Union[str, tuple], realizations: Any, fov: float = DEFAULT
                 point_weights: Any = None) -> RewardFunction:
     """A function cams (..., N, 6) -> rewards of the named model on these realizations.
 
-    ``spec`` is a name of :data:`REWARD_MODELS` or ``("coverage", CoverageParams)`` (``coverage-graph``
-    is ``coverage`` with ``view_graph=True``). ``image``
+    ``spec`` is a name of :data:`REWARD_MODELS` or ``(name, CoverageParams)`` (the parameters of a
+    model that takes them, :attr:`RewardModel.coverage`; the others ignore them). ``image``
     gives the image size the resolution term uses (default 2000 x 1500, the paper's) and its
     field of view is ``fov``. ``fixed_cameras`` (M, 6): cameras already flown, scored with every
     plan (R(z ∪ F), module docstring); ``point_weights`` (K, P): w_p of every point (None: 1).
     """
     name, params = (spec, None) if isinstance(spec, str) else spec
-    check_reward_model(name)
+    model = reward_model(name)
     F = check_fixed_cameras(fixed_cameras)
     R = check_realizations(realizations)
     W = None if point_weights is None else _check_weights(point_weights, R.shape[:2])
+    return model.make(R, W, F, fov, theta_match, image, dtype, params)
 
-    def with_fixed(cams: Any) -> np.ndarray:
-        """The plans (..., N, 6) with the fixed cameras appended: (..., N + M, 6)."""
-        z = np.asarray(cams, dtype=np.float64)
-        if not len(F) or z.ndim < 2:
-            return z
-        return np.concatenate([z, np.broadcast_to(F, z.shape[:-2] + F.shape)], axis=-2)
 
-    if name == "paper":
-        prep = prepare_points(R, dtype, W)
+def _with_fixed(cams: Any, F: np.ndarray) -> np.ndarray:
+    """The plans (..., N, 6) with the fixed cameras F (M, 6) appended: (..., N + M, 6)."""
+    z = np.asarray(cams, dtype=np.float64)
+    if not len(F) or z.ndim < 2:
+        return z
+    return np.concatenate([z, np.broadcast_to(F, z.shape[:-2] + F.shape)], axis=-2)
 
-        def paper(cams: Any) -> np.ndarray:
-            return np.asarray(noisy_reward(with_fixed(cams), prep, fov, theta_match, dtype=dtype))
-        return paper
-    cam_model = image or CameraModel(fov=fov)
-    if abs(cam_model.fov - fov) > 1e-12:
-        cam_model = CameraModel(cam_model.width, cam_model.height, fov)
-    params = params or CoverageParams()
-    if name == "coverage-graph":  # the name is the view graph, whatever params say
-        params = replace(params, view_graph=True)
+
+def _paper_reward(R: np.ndarray, W: Optional[np.ndarray], F: np.ndarray, fov: float, theta_match: float,
+                  image: Optional[CameraModel], dtype: torch.dtype, params: None) -> RewardFunction:
+    """``paper``: eqs. 2-7 (:func:`vp_planner.reward.noisy_reward`), in ``dtype``; no image size."""
+    prep = prepare_points(R, dtype, W)
+
+    def paper(cams: Any) -> np.ndarray:
+        return np.asarray(noisy_reward(_with_fixed(cams, F), prep, fov, theta_match, dtype=dtype))
+    return paper
+
+
+def _coverage_reward(R: np.ndarray, W: Optional[np.ndarray], F: np.ndarray, fov: float, theta_match: float,
+                     image: Optional[CameraModel], dtype: torch.dtype, params: CoverageParams) -> RewardFunction:
+    """The ``coverage`` family: :func:`coverage_reward` of ``params`` on the realizations subsampled
+    once (``max_points``), with ``image``'s size at field of view ``fov``; its window stands for
+    theta_match and it sums in float32 whatever ``dtype``."""
+    image = image or CameraModel(fov=fov)
+    if abs(image.fov - fov) > 1e-12:
+        image = CameraModel(image.width, image.height, fov)
     idx = _subsample(R.shape[1], params.max_points, 0)
     pts = R if idx is None else R[:, idx]
     w = None if W is None else (W if idx is None else W[:, idx])
+    flat = replace(params, max_points=0)
 
     def coverage(cams: Any) -> np.ndarray:
-        return np.asarray(coverage_reward(with_fixed(cams), pts, replace(params, max_points=0), cam_model,
-                                          weights=w))
+        return np.asarray(coverage_reward(_with_fixed(cams, F), pts, flat, image, weights=w))
     return coverage
 
 
-def params_dict(params: CoverageParams) -> dict:
-    """The parameters as a plain dict (for plan.json and the study's output)."""
-    return {f.name: getattr(params, f.name) for f in fields(params)}
+@dataclass(frozen=True)
+class RewardModel:
+    """One reward model of the registry: its ``name`` (the ``reward`` parameter, the PlanViews goal
+    field, ``--reward``), a one-line ``summary``, whether it is of the ``coverage`` family (it
+    takes :class:`CoverageParams`, its registration term the flight's reported-pose errors, and
+    ``fixes`` the flags its name sets whatever the parameters say), and ``build``, how it is made
+    on the checked realizations: ``build(R, W, F, fov, theta_match, image, dtype, params)``
+    (:meth:`make`)."""
+
+    name: str
+    summary: str
+    build: Callable[..., RewardFunction]
+    coverage: bool = True
+    fixes: tuple[tuple[str, Any], ...] = ()
+
+    def params(self, params: Optional[CoverageParams] = None) -> Optional[CoverageParams]:
+        """The model's :class:`CoverageParams` (None for a model that takes none): ``params`` (or
+        the defaults) with the flags the name fixes."""
+        if not self.coverage:
+            return None
+        return replace(params or CoverageParams(), **dict(self.fixes))
+
+    def make(self, R: np.ndarray, W: Optional[np.ndarray], F: np.ndarray, fov: float, theta_match: float,
+             image: Optional[CameraModel], dtype: torch.dtype, params: Optional[CoverageParams] = None
+             ) -> RewardFunction:
+        """The reward function on checked realizations R (K, P, 3), point weights W (K, P) or None
+        and fixed cameras F (M, 6) (:func:`make_reward` checks them)."""
+        return self.build(R, W, F, fov, theta_match, image, dtype, self.params(params))
+
+
+#: The reward models (one home): names, what each is, how each is made.
+REGISTRY: tuple[RewardModel, ...] = (
+    RewardModel("paper", "eqs. 2-7", _paper_reward, coverage=False),
+    RewardModel("coverage", "expected reconstructed fraction", _coverage_reward),
+    RewardModel("coverage-graph", "coverage times the view graph's connectivity", _coverage_reward,
+                fixes=(("view_graph", True),)),
+)
+_BY_NAME: dict[str, RewardModel] = {m.name: m for m in REGISTRY}
+#: Reward models by name (``reward`` parameter, PlanViews goal field, ``--reward``).
+REWARD_MODELS: tuple[str, ...] = tuple(_BY_NAME)

@@ -6,8 +6,8 @@ never the other way); the objective the optimizers maximize on it: :mod:`vp_plan
 Why a shell-and-target parameterization
 ---------------------------------------
 The paper optimizes z = [c_1, v_1, ..., c_N, v_N] in R^{6N}. With a plain box for positions and
-v in [-1, 1]^3, 91% of random plans score exactly 0 (a camera too close, looking away from the
-plant, or every pair over theta_match; docs: stack notes), so a 100-evaluation optimizer learns
+v in [-1, 1]^3, most random plans score exactly 0 (a camera too close, looking away from the
+plant, or every pair over theta_match), so a 100-evaluation optimizer learns
 almost nothing. Here every camera is still 6 numbers (dim = 6N, as in the paper), but each
 number in [0, 1] has a geometric meaning that makes almost every plan look at the scene:
 

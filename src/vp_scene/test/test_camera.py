@@ -114,7 +114,7 @@ def test_intrinsics_and_projection() -> None:
 
 def test_roll_and_the_optical_frame_back_to_the_body() -> None:
     """roll_of: 0 for the convention's poses (nadir included), the angle of a turn about the
-    optical axis otherwise; body_from_optical inverts world_to_camera's rotation (issue 20: a
+    optical axis otherwise; body_from_optical inverts world_to_camera's rotation (a
     flight's poses read from COLMAP keep their roll, so that it can be refused)."""
     from scipy.spatial.transform import Rotation
 
@@ -130,7 +130,7 @@ def test_roll_and_the_optical_frame_back_to_the_body() -> None:
 
 
 def test_the_torch_axes_and_the_half_fov_are_the_conventions() -> None:
-    """Issue 19 (the camera's single home): the planner's torch rewards take the optical axes from
+    """The planner's torch rewards take the optical axes from
     here (they re-derived them), and tan(fov / 2) has one definition."""
     import torch
 
@@ -182,7 +182,7 @@ def test_poses_expressed_in_a_turned_and_shifted_frame() -> None:
 
 
 def test_direction_and_its_inverse_have_one_home() -> None:
-    """Issue 39, item 3: azimuth/elevation -> direction was written 3 times (space, patterns,
+    """Azimuth/elevation -> direction was written 3 times (space, patterns,
     designs) and its inverse twice; vp_scene.camera holds both, vectorized, and they invert."""
     from vp_scene.camera import azimuth_elevation, direction
 

@@ -1,4 +1,4 @@
-"""vp_scene.capture: what a flight does to a plan (issue 18, part 1)."""
+"""vp_scene.capture: what a flight does to a plan."""
 from __future__ import annotations
 
 import math

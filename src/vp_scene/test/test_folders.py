@@ -10,7 +10,7 @@ from vp_scene.folders import new_run_folder
 
 
 def test_two_plans_in_the_same_second_get_two_folders(tmp_path: Path) -> None:
-    """Issue 10, item 5: the recon node named its folder plan-<seconds>, so two plans that
+    """The recon node named its folder plan-<seconds>, so two plans that
     started in the same second wrote into one folder, the second overwriting the first."""
     now = time.time()
     first = new_run_folder(tmp_path, now=now)

@@ -1,5 +1,5 @@
 """vp_scene.images: an image's size is read from its header and checked before anything is
-decoded; a truncated or corrupt PNG or JPEG is refused (Hardening III, items 5 and 6), for a
+decoded; a truncated or corrupt PNG or JPEG is refused, for a
 file and for the fleet's ``sensor_msgs/CompressedImage``."""
 from __future__ import annotations
 

@@ -279,7 +279,7 @@ BAD_FILES = [
     ("field.yaml", "plants: [{x: 0, y: 0}, {x: 1, y: 0}]\njitter: 0.6",
      "field.yaml: jitter must be less than half the smallest distance between two plants (0.5 m), got 0.6"),
     ("field.yaml", "plants: [{x: .inf, y: 0}]", "field.yaml: plants[0].x must be a number (metres), got inf"),
-    # issue 19, item 3: a plant at x = 1e9 was planned (reward 0, cameras 1e9 m up)
+    # a plant at x = 1e9 was planned (reward 0, cameras 1e9 m up)
     ("field.yaml", "plants: [{x: 0, y: 0}, {x: 1000000000, y: 0}]",
      "field.yaml: plant 1 stands at x = 1e+09, y = 0 m, outside the field's extent of +-100 m"),
     ("field.yaml", "plants: [{x: 0, y: -100.5}]", "field.yaml: plant 0 stands at x = 0, y = -100.5 m, outside"),
@@ -308,7 +308,7 @@ def test_bad_file_is_one_line_naming_file_and_field(tmp_path: Path, name: str, t
 
 
 def test_extent_is_checked_for_every_kind_of_layout() -> None:
-    """Issue 19, item 3: one extent check for files, built-in layouts and rebuilt placements."""
+    """One extent check for files, built-in layouts and rebuilt placements."""
     from vp_scene.layout import MAX_EXTENT, builtin_layout
 
     assert MAX_EXTENT == 100.0
@@ -342,7 +342,7 @@ def test_command_line_scenario_is_a_name_or_a_file_read_at_once(tmp_path: Path) 
 
 
 def test_a_huge_layout_file_is_refused_before_it_is_parsed(tmp_path: Path, monkeypatch) -> None:
-    """Hardening III, item 11: a YAML layout of 100,000 plants (2.4 MB) was parsed whole (18 s,
+    """A YAML layout of 100,000 plants (2.4 MB) was parsed whole (18 s,
     640 MB) before its plant count was refused. A file over MAX_LAYOUT_BYTES is refused unparsed,
     in one line naming it; a layout of MAX_PLANTS plants with every key and a comment a plant is
     well under the cap."""
@@ -412,7 +412,7 @@ def count_layout_resolutions(monkeypatch) -> list:
 
 
 def test_a_scene_build_resolves_its_layout_once(tmp_path: Path, monkeypatch) -> None:
-    """Issue 19 (the house): build.py and scenario.py each resolved the layout; make_scene is the
+    """build.py and scenario.py each resolved the layout; make_scene is the
     one place now, and a models folder is read after the layout is checked."""
     path = _write(tmp_path, "two.yaml", "plants:\n- {x: 0, y: 0}\n- {x: 1, y: 0}\n")
     calls = count_layout_resolutions(monkeypatch)

@@ -1,4 +1,4 @@
-"""vp_scene.messages, the one home of the suite's ROS message conversions (issue 19, the house):
+"""vp_scene.messages, the one home of the suite's ROS message conversions:
 round trips, the drones' reports, scores, and no conversion code left in the node files."""
 from __future__ import annotations
 
@@ -109,7 +109,7 @@ def test_scores() -> None:
     assert agg.method == "ring" and math.isnan(agg.reward) and agg.reward_model == ""
     assert agg.chamfer == pytest.approx(2.0) and agg.registered_images == 3 and agg.num_points == 200
     assert agg.accuracy == pytest.approx(0.7) and agg.fscore == pytest.approx(0.6)
-    # the metrics without a ground truth (issue 20, part 4): the realization's, the aggregate's means
+    # the metrics without a ground truth: the realization's, the aggregate's means
     assert (one.mean_reprojection_error, one.mean_track_length, one.coverage_of_prior, one.coverage_tau) == \
         (0.5, 3.0, 0.8, 0.02) and list(one.coverage_of_prior_per_plant) == [0.7, 0.9]
     assert agg.mean_reprojection_error == pytest.approx(0.6) and agg.mean_track_length == pytest.approx(2.5)
@@ -182,7 +182,7 @@ def test_no_conversion_code_left_in_the_node_files() -> None:
 
 def test_images_and_camera_info_round_trip() -> None:
     """Image (rgb8, and bgr8 / mono8 / padded rows read), CompressedImage (PNG lossless, JPEG
-    close), CameraInfo (K, zero plumb_bob) -> numpy and back (issue 20, part 1)."""
+    close), CameraInfo (K, zero plumb_bob) -> numpy and back."""
     from sensor_msgs.msg import Image
 
     from vp_scene.camera import intrinsics

@@ -1,4 +1,4 @@
-"""The nodes' "newest plan wins" worker (vp_scene.node_runtime.NewestWins, issue 19, the house:
+"""The nodes' "newest plan wins" worker (vp_scene.node_runtime.NewestWins:
 the dispatcher and recon nodes share it)."""
 import threading
 import time

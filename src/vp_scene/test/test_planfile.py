@@ -26,7 +26,7 @@ def test_angles_default_only_when_absent(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("value", [0, 0.0, -0.5, math.pi, "wide", True, [1.0]])
 def test_bad_fov_names_field_and_file(tmp_path: Path, value) -> None:
-    """Issue 10, item 12: ``fov: 0`` silently became pi/2, ``fov: "wide"`` named neither field nor file."""
+    """``fov: 0`` silently became pi/2, ``fov: "wide"`` named neither field nor file."""
     path = write(tmp_path, fov=value)
     with pytest.raises(PlanFileError) as err:
         load_plan(path)

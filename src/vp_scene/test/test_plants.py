@@ -139,7 +139,7 @@ def test_bad_ply_raises_naming_file_and_problem(tmp_path: Path, case: str, expec
         path.write_bytes(b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n")
     elif case == "bad_header_line":
         path.write_bytes(b"ply\nformat ascii 1.0\nelement vertex many\nend_header\n")
-    elif case == "absurd_coordinates":  # issue 10, item 9: was accepted, planned with cameras at 3e9 m
+    elif case == "absurd_coordinates":  # was accepted, planned with cameras at 3e9 m
         write_ply(path, pts + 1e9, cols)
     elif case == "millimetres":
         write_ply(path, pts * 1000.0, cols)

@@ -112,7 +112,7 @@ def test_check_cameras_errors() -> None:
 
 
 def test_the_soil_does_not_repeat_and_renders_the_same_twice() -> None:
-    """Issue 42: one soil texture tiled every 4.1 m gave views across a row's ends hundreds of
+    """One soil texture tiled every 4.1 m gave views across a row's ends hundreds of
     false matches. Every square of the ground has its own texture: the soil photographed at x and
     at x + 4.1 m differs, and the same view renders the same twice (the squares are kept)."""
     from vp_scene.render import (SOIL_TEXELS, _SOIL, ground_meshes, soil_square_mesh, soil_squares, soil_texture,

@@ -10,18 +10,21 @@ from .layout import Layout, resolve_layout
 from .limits import check_scene_size
 from .plants import PlantModel
 from .scenario import make_scene
+from .scene_spec import SCENE
 from .wind import NoisyScene, WindConfig, make_noisy_scene
 
 __all__ = ["build_noisy_scene", "scene_shape"]
 
 
-def build_noisy_scene(scenario: Union[str, dict, Layout] = "one_plant",
-                      models: Union[None, str, Path, Sequence[PlantModel]] = None,
-                      seed: int = 0, points_per_plant: int = 4000, plant_spacing: float = 0.6,
-                      row_spacing: float = 0.76, levels: int = 10, realizations: int = 5,
-                      wind_variance: float = 0.002,
-                      wind_direction: float = 0.0) -> tuple[NoisyScene, list[PlantModel]]:
-    """Build the scene and its K wind realizations (paper Sec. V-A).
+def build_noisy_scene(scenario: Union[str, dict, Layout] = SCENE.scenario,
+                      models: Union[None, str, Path, Sequence[PlantModel]] = SCENE.models,
+                      seed: int = SCENE.seed, points_per_plant: int = SCENE.points_per_plant,
+                      plant_spacing: float = SCENE.plant_spacing, row_spacing: float = SCENE.row_spacing,
+                      levels: int = SCENE.levels, realizations: int = SCENE.realizations,
+                      wind_variance: float = SCENE.wind_variance,
+                      wind_direction: float = SCENE.wind_direction) -> tuple[NoisyScene, list[PlantModel]]:
+    """Build the scene and its K wind realizations (paper Sec. V-A); the arguments and their
+    defaults are :class:`vp_scene.scene_spec.SceneSpec`'s.
 
     Args:
         scenario: a built-in layout name, a layout file (.yaml, .yml, .json), a layout dict or a

@@ -283,7 +283,7 @@ def azimuth_elevation(directions: ArrayLike) -> tuple[NDArray[np.float64], NDArr
     inverse of :func:`direction`, atan2(y, x) and asin(z / |d|) (clipped to [-1, 1]).
 
     Python's ``math.atan2`` and ``math.asin``, element by element: numpy's ``arctan2`` and ``arcsin``
-    differ from them in the last bit for about 8 % of inputs, and the structured initial design
+    differ from them in the last bit for some inputs, and the structured initial design
     (:func:`vp_planner.designs.structured_plans`) is pinned bit for bit with math's
     (tests/test_reference_plans.py)."""
     d = np.asarray(directions, dtype=np.float64)

@@ -31,9 +31,7 @@ spaces them (:meth:`CaptureModel.marker_count`; the paper's three scenes get 4, 
 positions as surveyed, each ``gcp_sigma`` m (0.01: an RTK rover on a tripod) off per axis (one
 survey of the field, the same in every realization: :meth:`CaptureModel.lay_markers`). Why by
 default: a plot flown for centimetre-level 3D models is flown with ground control, and without it
-the registration is most of a small plan's error (one_plant, egp plan, realizations 0 and 2: map
-Chamfer x100 3.54 and 5.13 with the reports alone, 1.46 and 1.91 with 4 markers; shape 1.27-1.63;
-measured 2026-11-27, :mod:`vp_recon.gcp`).
+the registration is most of a small plan's error (:mod:`vp_recon.gcp`).
 
 Every draw is seeded by ``(seed, realization k, camera i, stream)`` (numpy's SeedSequence
 entropy list), so a capture is reproducible, the same camera in another realization draws
@@ -151,7 +149,7 @@ class CaptureModel:
 
     def to_dict(self) -> dict:
         """JSON form (recon.json, plan records): kind and every figure (records made before the
-        ground markers, 2026-11-27, have no ``gcp_*`` keys: their captures had none)."""
+        ground markers have no ``gcp_*`` keys: their captures had none)."""
         return {k: (float(v) if k in self._FIGURES else v) for k, v in asdict(self).items()}
 
     def marker_count(self, points: ArrayLike) -> int:
@@ -224,7 +222,7 @@ class CaptureModel:
         return np.clip(np.rint(noisy), 0, 255).astype(np.uint8)
 
 
-#: No error at all: today's (before issue 18) reconstruction of a plan, bit for bit.
+#: No error at all: the planned poses flown and known exactly, noise-free images.
 IDEAL = CaptureModel("ideal", 0.0, 0.0, 0.0, 0.0, 0.0, gcp_markers=0)
 #: The defaults of an RTK multirotor (module docstring).
 REALISTIC = CaptureModel()

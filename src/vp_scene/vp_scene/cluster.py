@@ -81,8 +81,8 @@ class OneThread(WorkerPlugin):
 CLOSE_TIMEOUT_S = 60.0
 
 #: s the client tries to reach a scheduler's address (Dask retries a refused connection until then;
-#: its default, 30 s, kept a user waiting 31 s to learn that nothing listens at an address; a
-#: scheduler just started listens within about 1 s: 0.7 s measured with the 2 cores loaded 2x)
+#: its default, 30 s, keeps a user waiting that long to learn that nothing listens at an address,
+#: while a scheduler just started listens within about a second)
 CONNECT_TIMEOUT_S = 10.0
 
 
@@ -113,9 +113,9 @@ class _Silence(logging.Filter):
 
 
 def close_cluster(cluster: object, timeout: float = CLOSE_TIMEOUT_S) -> None:
-    """Close a local cluster; a worker slow to stop (a loaded machine: a benchmark ended with a
-    nanny's TimeoutError after all its results were cached, and wrote none of them) is a warning,
-    not a failure of the work already done: the workers are daemon processes of this one and end
+    """Close a local cluster; a worker slow to stop (a loaded machine: a nanny's TimeoutError would
+    end a run whose results are all in, before it writes them) is a warning, not a failure of the
+    work already done: the workers are daemon processes of this one and end
     with it."""
     try:
         cluster.close(timeout=timeout)
@@ -226,9 +226,9 @@ def open_client(scheduler: Optional[str] = None, workers: int = 1, quiet: bool =
         stack.callback(log.removeFilter, silence)  # last: after the client closed
         if scheduler == 'local':
             security = Security.temporary()  # per run, in memory (needs the cryptography package)
-            # a worker is never paused for its memory: a reconstruction's working set (5-9 GB for
-            # row_12's 12 views at 2000 x 1500) stays with the process after the task (malloc), so a
-            # worker at Dask's 80 % pause threshold took no further task and the study waited with no
+            # a worker is never paused for its memory: a reconstruction's working set (gigabytes for a
+            # field's views) stays with the process after the task (malloc), so a worker at Dask's
+            # 80 % pause threshold would take no further task and the work would wait with no
             # message (the pause is logged below ERROR); unpaused, it runs on, and at 95 % its
             # nanny restarts it and the task is retried (Dask's allowed failures), which is reported
             with dask.config.set({'distributed.nanny.pre-spawn-environ': env, 'distributed.worker.memory.pause': False}):
@@ -259,9 +259,8 @@ def open_client(scheduler: Optional[str] = None, workers: int = 1, quiet: bool =
 class KeptLocalCluster:
     """A local cluster kept open for a node's life (the recon node's ``scheduler: local``).
 
-    Starting a local cluster costs seconds (the worker processes import the suite and torch):
-    measured 8 s between a plan's arrival and its first capture request in a ``make run`` on a
-    loaded machine, every plan. :meth:`warm` opens it in the background as the node starts (while
+    Starting a local cluster costs seconds (the worker processes import the suite and torch), for
+    every plan if it were opened per plan. :meth:`warm` opens it in the background as the node starts (while
     the planner plans), :meth:`get` hands out the open client (opening it, or a new one when the
     worker count changed or the cluster died, under a lock), :meth:`close` ends it. Remote
     schedulers are the user's: they stay per plan (:func:`open_client`)."""

@@ -53,8 +53,8 @@ __all__ = ["POSES_FILE", "MAX_POSES", "POSES_COLUMNS", "DISTORTION_COLUMNS", "CO
 PathLike = Union[str, os.PathLike]
 
 POSES_FILE = "poses.csv"
-#: The most images a pose file may list, counted as it is read (a 400,000-row poses.csv, 829 MB, was
-#: read whole before its size mattered). Its readers take far fewer: the planner chooses among at
+#: The most images a pose file may list, counted as it is read (a huge file is refused before it is
+#: read whole). Its readers take far fewer: the planner chooses among at
 #: most 2000 candidate views, a reconstruction reads at most 768 megapixels of images.
 MAX_POSES = 10_000
 POSES_COLUMNS = ("image", "x", "y", "z", "qx", "qy", "qz", "qw", "frame", "fx", "fy", "cx", "cy", "width", "height")

@@ -1,12 +1,12 @@
-"""Ground control points: markers of known position on the soil (one home; issue 40, direction 4).
+"""Ground control points: markers of known position on the soil (one home).
 
 Photogrammetry places a model in the world from two kinds of known things: the poses the
 aircraft reports (RTK: about 2 cm and half a degree) and ground control points (GCPs), marks
 on the ground whose positions were surveyed (an RTK rover on a tripod, a total station: about
 1 cm or better). The poses alone place a small plan badly: the model's scale comes from the
 spread of a few camera centres, each 2 cm off, and is then carried to the plant two metres away
-(a 4-camera arc 0.5 m wide: scale 1-4 % off, the plant 2-8 cm off in ``map``; measured
-2026-11-27 on Table I's seed-0 plans). Markers around the plant, surveyed to a centimetre, hold
+(a 4-camera arc 0.5 m wide: the scale percents off, the plant centimetres off in ``map``).
+Markers around the plant, surveyed to a centimetre, hold
 the scale and the position where the plant is.
 
 Here:

@@ -40,8 +40,7 @@ x = (j - (columns - 1) / 2) plant_spacing, y = (i - (rows - 1) / 2) row_spacing,
 Limits: a file of at most :data:`MAX_LAYOUT_BYTES` (checked before it is parsed), 1 to
 :data:`MAX_PLANTS` plants, at least :data:`MIN_PLANT_DISTANCE` m apart (before
 jitter), every plant within :data:`MAX_EXTENT` m of the origin of ``map`` in x and in y (a field
-of 200 m x 200 m; beyond, a plan is not a drone sortie: a plant at x = 1e9 was planned with
-cameras 1e9 m up), scale in (0, :data:`MAX_SCALE`], no key given twice in one mapping (YAML and
+of 200 m x 200 m; beyond, a plan is not a drone sortie), scale in (0, :data:`MAX_SCALE`], no key given twice in one mapping (YAML and
 JSON would keep the last silently; :func:`parse_json`, and a YAML loader that refuses them, name
 the key and its line). Every error is a :class:`LayoutError` of one line that names the source
 (the file) and the field, e.g. ``field.yaml: grid.rows must be an integer >= 1, got 'three'``.
@@ -61,6 +60,8 @@ from typing import Any, Iterable, NoReturn, Optional, Union
 
 import numpy as np
 
+from .scene_spec import SCENE
+
 __all__ = ["LayoutError", "PlantSpec", "Layout", "BUILTIN_LAYOUTS", "LAYOUT_SUFFIXES", "MAX_PLANTS", "MAX_LAYOUT_BYTES",
            "MIN_PLANT_DISTANCE", "MAX_SCALE", "MAX_EXTENT", "grid_layout", "builtin_layout", "layout_from_dict",
            "load_layout", "read_scenario", "resolve_layout", "is_layout_file", "parse_json"]
@@ -77,10 +78,9 @@ BUILTIN_LAYOUTS: dict[str, tuple[int, int]] = {
 LAYOUT_SUFFIXES = (".yaml", ".yml", ".json")
 #: At most this many plants in a layout.
 MAX_PLANTS = 200
-#: A layout file is at most this many bytes, checked before it is parsed: a 100,000-plant YAML
-#: took 18 s and 640 MB to parse before its plant count was refused (PyYAML parses about 0.2 MB
-#: a second: 256 KiB in about 1 s). MAX_PLANTS plants with every key and a comment each take
-#: 30 KiB.
+#: A layout file is at most this many bytes, checked before it is parsed: PyYAML takes seconds and
+#: hundreds of MB on a huge file before its plant count could be refused. MAX_PLANTS plants with
+#: every key and a comment each take 30 KiB.
 MAX_LAYOUT_BYTES = 256 * 1024
 #: m: the plants of a layout file stand at least this far apart (before jitter).
 MIN_PLANT_DISTANCE = 0.1
@@ -92,7 +92,7 @@ MAX_EXTENT = 100.0
 _TOP_KEYS = ("name", "plants", "grid", "jitter")
 _PLANT_KEYS = ("x", "y", "yaw", "scale", "model")
 _GRID_KEYS = ("rows", "columns", "plant_spacing", "row_spacing", "jitter", "yaw", "scale", "model")
-_GRID_DEFAULTS = {"plant_spacing": 0.6, "row_spacing": 0.76, "jitter": 0.0}
+_GRID_DEFAULTS = {"plant_spacing": SCENE.plant_spacing, "row_spacing": SCENE.row_spacing, "jitter": 0.0}
 _TOLERANCE = 1e-9  # m: 0.3 - 0.2 is 0.1 for the distance rule
 
 Scenario = Union[str, dict, "Layout"]
@@ -145,7 +145,7 @@ class Layout:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "plants", tuple(self.plants))
-        for i, p in enumerate(self.plants):  # the one extent check of every layout (issue 19, item 3)
+        for i, p in enumerate(self.plants):  # the one extent check of every layout
             if not (abs(p.x) <= MAX_EXTENT and abs(p.y) <= MAX_EXTENT):
                 _fail(self.where, f"plant {i} stands at x = {p.x:g}, y = {p.y:g} m, outside the field's "
                                   f"extent of +-{MAX_EXTENT:g} m about the origin of map")
@@ -282,7 +282,8 @@ def _closest_pair(xy: np.ndarray) -> tuple[int, int, float]:
 # construction
 # --------------------------------------------------------------------------------------------
 
-def grid_layout(name: str, rows: int, columns: int, plant_spacing: float = 0.6, row_spacing: float = 0.76,
+def grid_layout(name: str, rows: int, columns: int, plant_spacing: float = SCENE.plant_spacing,
+                row_spacing: float = SCENE.row_spacing,
                 jitter: float = 0.0, yaw: Optional[float] = None, scale: Optional[float] = None,
                 model: Optional[str] = None, source: str = "") -> Layout:
     """A rows x columns grid centred at the origin, row after row (the caller checks the values):
@@ -304,7 +305,8 @@ def _positive(name: str, value: object) -> float:
     return v
 
 
-def builtin_layout(name: str, plant_spacing: float = 0.6, row_spacing: float = 0.76) -> Layout:
+def builtin_layout(name: str, plant_spacing: float = SCENE.plant_spacing,
+                   row_spacing: float = SCENE.row_spacing) -> Layout:
     """The built-in layout ``name`` (:data:`BUILTIN_LAYOUTS`) with these spacings (m, > 0)."""
     if name not in BUILTIN_LAYOUTS:
         raise LayoutError(f"unknown scenario {name!r}; expected one of {', '.join(BUILTIN_LAYOUTS)}, "
@@ -516,8 +518,8 @@ def read_scenario(text: str) -> Optional[Layout]:
     return load_layout(text)
 
 
-def resolve_layout(scenario: Scenario, plant_spacing: float = 0.6, row_spacing: float = 0.76,
-                   source: str = "scenario") -> Layout:
+def resolve_layout(scenario: Scenario, plant_spacing: float = SCENE.plant_spacing,
+                   row_spacing: float = SCENE.row_spacing, source: str = "scenario") -> Layout:
     """The layout of a scenario: a built-in name (with these spacings), a path to a layout file,
     a dict of the file format (errors name ``source``) or a Layout (returned as it is).
     The spacings are checked (> 0) whatever the scenario, as they always were."""

@@ -8,7 +8,7 @@ Open3D, then trimmed:
 * vertices of the lowest ``DENSITY_QUANTILE`` (8%) octree density (extrapolated surface),
 * vertices farther than ``MAX_DISTANCE`` (0.008 model units) from every input point,
 
-and cached on disk under a hash of the point cloud and the recipe (about 13 s per Corn50 plant).
+and cached on disk under a hash of the point cloud and the recipe (seconds per plant).
 
 A placed mesh follows its points exactly: :func:`vp_scene.scenario.place_mesh` (yaw, scale,
 translation), then :func:`vp_scene.wind.displace` with the plant's ``z_range`` and the

@@ -2,10 +2,10 @@
 
 A console script imports the module that holds ``main`` before ``main`` can install anything,
 and the suite's node modules import torch, trimesh, pycolmap, Open3D and rclpy at their top.
-During those seconds Python's default handlers were in charge: SIGINT raised KeyboardInterrupt
-wherever the import happened to be (a 24-48 line traceback, or nothing at all where a library
-catches BaseException around its optional imports, as trimesh's ``__init__`` does: the node
-kept running), and SIGTERM ended the process by the default action (exit 143). Here the
+During those seconds Python's default handlers would be in charge: SIGINT raises KeyboardInterrupt
+wherever the import happens to be (a long traceback, or nothing at all where a library catches
+BaseException around its optional imports, as trimesh's ``__init__`` does: the node keeps
+running), and SIGTERM ends the process by the default action (exit 143). Here the
 entry installs a handler that ends the process at once, quietly, with exit 0 (nothing has been
 started yet that could be lost), then imports the node module and runs its ``main``, whose
 :func:`vp_scene.node_runtime.run_node` replaces the handler with the node's own shutdown.
@@ -14,8 +14,8 @@ started yet that could be lost), then imports the node module and runs its ``mai
 after each of them: pycolmap (through glog) installs a SIGTERM handler of its own at import that
 prints a stack trace and kills the process; only the rest of that one import remains exposed.
 
-What no Python code can cover: the interpreter's own start, before this module runs (about 0.05 s
-on an idle machine, seconds on a busy one). A signal then ends the process by Python's defaults
+What no Python code can cover: the interpreter's own start, before this module runs (a fraction of
+a second on an idle machine, seconds on a busy one). A signal then ends the process by Python's defaults
 (SIGINT: KeyboardInterrupt; SIGTERM: exit 143). The tests send their signals from the moment the
 handler is installed (``/proc/<pid>/status`` shows SIGTERM caught).
 

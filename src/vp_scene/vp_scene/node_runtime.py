@@ -16,7 +16,7 @@ Process contract of ``scene``, ``planner`` and ``recon``:
 Why not rclpy's own signal handlers: they shut the context down the moment the signal arrives, so
 whatever the node is still doing (answering an action client, publishing, finishing its
 constructor) fails with RCLError tracebacks, and a main thread blocked in a
-MultiThreadedExecutor's wait was seen to miss the shutdown (issue 10, items 4, 6 and 10). Here
+MultiThreadedExecutor's wait can miss the shutdown. Here
 the handler only notes the time of the signal (or, while the node is being constructed, ends the
 process: raising an exception into the constructor was swallowed where a library's import catches
 BaseException, as trimesh's does); the executor spins in a thread of its own; the main thread polls
@@ -28,8 +28,7 @@ process at the deadline whatever happens.
 The handler takes no lock: Python runs it in the main thread between two bytecodes, possibly
 while that thread holds a lock, and taking the same lock there never returns. It did: the handler
 set a ``threading.Event`` that the main thread was waiting on, a signal that landed while
-``Event.wait`` held the event's lock hung the node for good, before its watchdog was started (one
-node in about 50 when ``make run``'s supervisor was killed with SIGKILL on a busy machine; gdb: the
+``Event.wait`` held the event's lock hung the node for good, before its watchdog was started (the
 main thread in the handler, in ``Condition.__enter__``). So the handler writes a float, the main
 thread sleeps in steps of :data:`POLL_S` and starts the watchdog itself.
 

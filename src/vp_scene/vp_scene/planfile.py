@@ -5,7 +5,8 @@ A plan file is a JSON object with (written by ``python -m vp_planner.cli``)
 * ``cameras``: N rows [cx, cy, cz, vx, vy, vz] (:mod:`vp_scene.camera`), or ``poses``: N rows
   [x, y, z, qx, qy, qz, qw] (a flight plan from elsewhere; +x of each pose = optical axis);
 * ``scene``: the arguments of :func:`vp_scene.build.build_noisy_scene` that rebuild the scene
-  the plan was made for (``scenario`` required; the others default as there). ``scenario`` is a
+  the plan was made for (:data:`vp_scene.scene_spec.SCENE_KEYS`; ``scenario`` required, the
+  others default as there). ``scenario`` is a
   built-in layout name or a layout object (:meth:`vp_scene.layout.Layout.to_dict`: the planner
   writes a layout file's content here, so that the plan file is self-contained), checked here
   with the layout parser (errors name ``scene.scenario.<field>``);
@@ -38,12 +39,10 @@ from numpy.typing import NDArray
 
 from .camera import check_coordinates, check_image_side, poses_to_cameras
 from .layout import LayoutError, layout_from_dict, parse_json
+from .scene_spec import SCENE_KEYS
 
-__all__ = ["SCENE_KEYS", "AGREEMENT", "PlanFileError", "PlanFile", "load_plan", "write_plan"]
+__all__ = ["AGREEMENT", "PlanFileError", "PlanFile", "load_plan", "write_plan"]
 
-#: Keys of the ``scene`` object (the keyword arguments of build_noisy_scene).
-SCENE_KEYS = ("scenario", "models", "seed", "points_per_plant", "plant_spacing", "row_spacing", "levels",
-              "realizations", "wind_variance", "wind_direction")
 
 PathLike = Union[str, os.PathLike]
 

@@ -113,7 +113,7 @@ class Renderer:
     """Offscreen renderer of coloured meshes.
 
     One pyrender ``OffscreenRenderer`` (OpenGL context) per image size is created on first use
-    and shared by every Renderer of that size (creating a context costs about 0.5 s); rendering
+    and shared by every Renderer of that size (creating a context is slow); rendering
     is serialized with a lock. :func:`release_contexts` frees them.
 
     Args:
@@ -181,7 +181,7 @@ class Renderer:
         """The pyrender meshes of soil square (i, j) in this renderer's OpenGL context, kept
         between renders (:data:`_SQUARES`): pyrender uploads a mesh and its 12 MB texture once
         per context while the same mesh object is in every scene (building them again for every
-        render cost 1.1 s for 16 squares). At most :data:`_SQUARES_KEPT` per context."""
+        render would cost seconds). At most :data:`_SQUARES_KEPT` per context."""
         with _LOCK:
             kept = _SQUARES.setdefault((self.width, self.height), {})
             if (i, j) not in kept:
@@ -250,10 +250,8 @@ def soil_texture(size: int = SOIL_TEXELS, seed: int | Sequence[int] = 7) -> NDAr
     lighter disc of 1-5 texels, 2-10 mm on the 2 mm texels of :func:`ground_meshes`) per 600
     texels and a thin straw stroke per 8000. A field's soil is that rough; the clods are what SIFT
     finds on it at a few metres, and the ground does not move in the wind: it anchors a flight's
-    structure from motion. (Measured: the earlier, smoother soil of 60 stones per 1024^2 texels
-    gave 1,200-1,500 SIFT keypoints per 2000 x 1500 view and a 30-degree ring of 4
-    procedural-plant views registered 2 of 4 images; this one registers 4 of 4, and 6 of 6 for the
-    ring of 6.) Straw stays one texel wide: its excess green (about 0.09) is above the plant mask's
+    structure from motion (a smoother soil gives too few keypoints to register a ring of a few
+    views). Straw stays one texel wide: its excess green (about 0.09) is above the plant mask's
     threshold, the mask's opening removes it. ``seed``: an int or a sequence of non-negative ints
     (numpy's ``default_rng``), one texture per seed.
     """
@@ -335,11 +333,10 @@ def ground_meshes(meshes: Sequence, margin: float = GROUND_MARGIN, texel: float 
     (:func:`soil_squares`; a plant under 1 m across at the origin stands on 3 x 3 squares, 12.3 m a side).
 
     The soil does not repeat: square (i, j) has its own texture (:func:`soil_tile_seed`), so no
-    two places of a field look alike. (One texture tiled every 4.1 m did: views across a row's
-    ends verified hundreds of false matches between soil 4.1 m apart, and the model of a 12-plant
-    row bent; issue 42.) Where two squares meet the soil's tone steps, as it does between real
-    patches of soil. A texture is built once per process (0.1 s) and :class:`Renderer` keeps each
-    square's OpenGL mesh between renders.
+    two places of a field look alike (one texture tiled over a field makes views across a row's
+    ends match soil with its repeat, and bends the row's model). Where two squares meet the soil's
+    tone steps, as it does between real patches of soil. A texture is built once per process and
+    :class:`Renderer` keeps each square's OpenGL mesh between renders.
     """
     return [soil_square_mesh(i, j, texel, seed) for i, j in soil_squares(meshes, margin, texel)]
 

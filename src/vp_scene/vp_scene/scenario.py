@@ -23,6 +23,7 @@ from .limits import check_seed
 from .plants import PlantModel
 from .ply import load_models
 from .procedural import procedural_corn, procedural_name_seed, procedural_seed
+from .scene_spec import SCENE
 
 __all__ = ["SCENARIOS", "PlacedPlant", "Scene", "layout", "make_scene", "place_points", "place_mesh",
            "scene_of_cloud"]
@@ -88,7 +89,8 @@ def _check_int(name: str, value: object, minimum: int) -> int:
     return int(value)
 
 
-def layout(scenario: Union[str, dict, Layout], plant_spacing: float = 0.6, row_spacing: float = 0.76) -> np.ndarray:
+def layout(scenario: Union[str, dict, Layout], plant_spacing: float = SCENE.plant_spacing,
+           row_spacing: float = SCENE.row_spacing) -> np.ndarray:
     """Stalk positions (n, 3) of a scenario's layout on the ground, before jitter.
 
     one_plant: the origin; three_row: 3 plants along x, ``plant_spacing`` apart; six_rect: two
@@ -152,8 +154,8 @@ def _wrap(yaw: float) -> float:
 
 
 def make_scene(scenario: Union[str, dict, Layout], models: Union[None, str, Path, Sequence[PlantModel]] = None,
-               seed: int = 0, points_per_plant: int = 4000, plant_spacing: float = 0.6,
-               row_spacing: float = 0.76) -> Scene:
+               seed: int = SCENE.seed, points_per_plant: int = SCENE.points_per_plant,
+               plant_spacing: float = SCENE.plant_spacing, row_spacing: float = SCENE.row_spacing) -> Scene:
     """Build a scene (paper Sec. V-A) after a layout (:func:`vp_scene.layout.resolve_layout`:
     a built-in name with these spacings, a layout file path or a layout dict; a Layout is taken
     as it is: :func:`vp_scene.build.build_noisy_scene` resolves the layout once, checks the

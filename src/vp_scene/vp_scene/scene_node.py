@@ -19,8 +19,8 @@ codes and parameter types follow :mod:`vp_scene.node_runtime`.
 """
 from __future__ import annotations
 
-import math
 import sys
+from dataclasses import fields
 from pathlib import Path
 from typing import Any, Optional
 
@@ -33,52 +33,33 @@ from vp_interfaces.msg import SceneDescription
 
 from .build import build_noisy_scene
 from .cloud import numpy_to_pointcloud2
-from .limits import MAX_POINTS_PER_PLANT, MAX_REALIZATIONS, MAX_SEED, check_seed
+from .limits import check_seed
 from .messages import scene_description_msg
 from .node_runtime import INT_MAX, LATCHED, Param, declare_typed, run_node, typed_values
+from .scene_spec import SCENE_KEYS, SceneSpec
 from .wind import NoisyScene
 
 
-DEFAULTS: dict[str, Any] = {
-    "scenario": "one_plant",
-    "models_folder": "",
-    "seed": 0,
-    "levels": 10,
-    "realizations": 5,
-    "wind_variance": 0.002,
-    "wind_direction": 0.0,
-    "points_per_plant": 4000,
-    "plant_spacing": 0.6,
-    "row_spacing": 0.76,
-    "frame_id": "map",
+def _scene_param(f: Any) -> Param:
+    """The parameter of a scene's argument (a field of :class:`vp_scene.scene_spec.SceneSpec`):
+    its default, help, range (no upper end: INT_MAX) and what the range cannot say."""
+    m = f.metadata
+    rng = None
+    if m["range"] is not None:
+        lo, hi = m["range"]
+        rng = (lo, INT_MAX if hi is None else hi)
+    return Param(f.default, m["help"], rng, False, m["limits"])
+
+
+#: The node's parameters: the arguments of a scene (:class:`vp_scene.scene_spec.SceneSpec`, the
+#: ranges the scene enforces), its models as ``models_folder`` ('' for procedural corn), and the
+#: frame. Every parameter is read again on a change (the scene is rebuilt), none is read_only.
+SPECS = {
+    **{f.name: _scene_param(f) for f in fields(SceneSpec) if f.name != "models"},
+    "models_folder": Param("", "folder of PLY plant models; empty: built-in procedural corn"),
+    "frame_id": Param("map", "frame of the published clouds", None, False, "not empty"),
 }
-_DESCRIPTIONS = {
-    "scenario": "one_plant | three_row | six_rect | grid_3x3 | row_12, or a layout file (.yaml, .yml, .json)",
-    "models_folder": "folder of PLY plant models; empty: built-in procedural corn",
-    "seed": "seed of the layout (yaw, scale, model choice) and of the wind draws",
-    "levels": "L, height levels of the wind model",
-    "realizations": "K, wind realizations",
-    "wind_variance": "variance of n_wind ~ N(0, variance)",
-    "wind_direction": "wind direction, rad from +x",
-    "points_per_plant": "points sampled per plant",
-    "plant_spacing": "m between plants in a row",
-    "row_spacing": "m between rows",
-    "frame_id": "frame of the published clouds",
-}
-#: The ranges the scene enforces (its layout, wind and sampling rules); every parameter is read
-#: again on a change (the scene is rebuilt), none is read_only.
-_RANGES = {
-    "seed": (0, MAX_SEED),
-    "levels": (1, INT_MAX),
-    "realizations": (1, MAX_REALIZATIONS),
-    "wind_variance": (0.0, math.inf),
-    "points_per_plant": (1, MAX_POINTS_PER_PLANT),
-    "plant_spacing": (0.0, math.inf),
-    "row_spacing": (0.0, math.inf),
-}
-_CONSTRAINTS = {"plant_spacing": "> 0", "row_spacing": "> 0", "frame_id": "not empty"}
-SPECS = {name: Param(default, _DESCRIPTIONS[name], _RANGES.get(name), False, _CONSTRAINTS.get(name, ""))
-         for name, default in DEFAULTS.items()}
+DEFAULTS: dict[str, Any] = {name: spec.default for name, spec in SPECS.items()}
 
 
 def check_params(values: dict[str, Any]) -> dict[str, Any]:
@@ -95,11 +76,8 @@ def check_params(values: dict[str, Any]) -> dict[str, Any]:
 def build_from_params(values: dict[str, Any]) -> NoisyScene:
     """Build the noisy scene that the parameter values describe (ValueError naming the problem)."""
     p = check_params(values)
-    noisy, _models = build_noisy_scene(
-        scenario=p["scenario"], models=p["models_folder"] or None, seed=p["seed"],
-        points_per_plant=p["points_per_plant"], plant_spacing=p["plant_spacing"],
-        row_spacing=p["row_spacing"], levels=p["levels"], realizations=p["realizations"],
-        wind_variance=p["wind_variance"], wind_direction=p["wind_direction"])
+    noisy, _models = build_noisy_scene(**{k: p[k] for k in SCENE_KEYS if k != "models"},
+                                       models=p["models_folder"] or None)
     return noisy
 
 

@@ -121,7 +121,7 @@ def photograph(noisy_scene: object, k: int, cameras: ArrayLike, capture: Capture
 def warm_up(noisy_scene: object, capture: CaptureModel, width: int, height: int, fov: float) -> float:
     """Photograph realization 0 of ``noisy_scene`` once, from 3 m south of and 2 m above its centre,
     and forget the picture: the process's OpenGL context, its shaders and the soil's texture are
-    set up (about 1.3 s of CPU the first time, more beside other renders), so that the first
+    set up (seconds of CPU the first time), so that the first
     photograph a drone takes costs what the later ones do. Seconds it took."""
     t0 = time.perf_counter()
     centre = np.asarray(noisy_scene.points, dtype=np.float64).reshape(-1, 3).mean(axis=0)

@@ -10,7 +10,7 @@ exactly the goal on arrival) and the goal's orientation (identity before the fir
 is ignored with a log line. Signals, exit codes and parameter types follow
 :mod:`vp_scene.node_runtime`.
 
-With ``camera:=true`` the drone also takes pictures (issue 20, part 1): on a
+With ``camera:=true`` the drone also takes pictures: on a
 ``vp_interfaces/CaptureTrigger`` on ``/fleet/capture`` for a plan in which ``/fleet/assignment``
 gives it poses (its route's, in their ``order``), each time it settles at the next of those
 poses' goals (not at an earlier plan's: a trigger can arrive before the new goal), it flies

@@ -20,6 +20,7 @@ import numpy as np
 
 from .limits import check_seed
 from .scenario import Scene
+from .scene_spec import SCENE
 
 __all__ = ["WindConfig", "NoisyScene", "draw_n_wind", "levels_of", "displace", "make_noisy_scene", "noisy_scene_of"]
 
@@ -35,10 +36,10 @@ class WindConfig:
         direction: horizontal wind direction, rad from +x.
     """
 
-    levels: int = 10
-    realizations: int = 5
-    variance: float = 0.002
-    direction: float = 0.0
+    levels: int = SCENE.levels
+    realizations: int = SCENE.realizations
+    variance: float = SCENE.wind_variance
+    direction: float = SCENE.wind_direction
 
     def __post_init__(self) -> None:
         for name in ("levels", "realizations"):
