@@ -143,3 +143,39 @@ def test_the_soil_does_not_repeat_and_renders_the_same_twice() -> None:
     assert np.array_equal(images[0], images[2]) and np.array_equal(images[0], again[0])
     diff = np.abs(images[0].astype(np.int16) - images[1].astype(np.int16)).mean()
     assert diff > 3.0, diff  # the tiled soil: these two views were the same picture (0.02; distinct squares 5.6)
+
+
+def test_a_thread_renders_while_the_thread_that_rendered_before_is_still_alive() -> None:
+    """The shared context is current in no thread between renders: a Dask worker's task renders
+    in a thread of its pool while the thread that rendered last still lives (a task that seceded
+    to wait for its flights); before, eglMakeCurrent failed there with EGL_BAD_ACCESS."""
+    import threading
+
+    sphere = trimesh.creation.icosphere(radius=0.3)
+    sphere.visual.vertex_colors = [30, 160, 40, 255]
+    cam = np.array([[2.0, 0.0, 0.5, -1.0, 0.0, -0.2]])
+    drawn: dict = {}
+    first_done, release = threading.Event(), threading.Event()
+
+    def render(k: int, linger: bool) -> None:
+        try:
+            images, _, _ = Renderer(72, 54).render([sphere], cam)
+            drawn[k] = int(np.count_nonzero(foreground_mask(images[0])))
+        except Exception as exc:  # noqa: BLE001 - reported by the assertion below
+            drawn[k] = repr(exc)
+        first_done.set()
+        if linger:
+            release.wait(60.0)
+
+    first = threading.Thread(target=render, args=(0, True))
+    first.start()
+    try:
+        assert first_done.wait(60.0)
+        second = threading.Thread(target=render, args=(1, False))
+        second.start()
+        second.join(60.0)
+    finally:
+        release.set()
+        first.join(60.0)
+    assert isinstance(drawn[0], int) and drawn[0] > 0, drawn
+    assert drawn[1] == drawn[0], drawn

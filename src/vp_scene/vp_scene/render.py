@@ -97,12 +97,27 @@ _SQUARES: dict = {}
 _SQUARES_KEPT: int = 64
 
 
+def _leave_current(renderer: object) -> None:
+    """Leave ``renderer``'s OpenGL context current in no thread. EGL binds a context to one thread
+    at a time and pyrender's EGL platform never lets go of it (its ``make_uncurrent`` does
+    nothing), so a context last used by a thread that is still alive (a Dask worker's pool, a task
+    that seceded to wait for others) could not be made current by any other thread
+    (EGL_BAD_ACCESS). OSMesa's contexts are not bound to threads."""
+    display = getattr(getattr(renderer, "_platform", None), "_egl_display", None)
+    if display is None:
+        return
+    from OpenGL.EGL import EGL_NO_CONTEXT, EGL_NO_SURFACE, eglMakeCurrent
+
+    eglMakeCurrent(display, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT)
+
+
 def release_contexts() -> None:
     """Delete every cached OpenGL context (the next :class:`Renderer` creates a new one)."""
     with _LOCK:
         for r in _CONTEXTS.values():
             try:
                 r.delete()
+                _leave_current(r)
             except Exception:  # noqa: BLE001 - best effort
                 pass
         _CONTEXTS.clear()
@@ -114,7 +129,8 @@ class Renderer:
 
     One pyrender ``OffscreenRenderer`` (OpenGL context) per image size is created on first use
     and shared by every Renderer of that size (creating a context is slow); rendering
-    is serialized with a lock. :func:`release_contexts` frees them.
+    is serialized with a lock, and the context is current in no thread between renders, so any
+    thread may render. :func:`release_contexts` frees them.
 
     Args:
         width, height: image size in pixels.
@@ -133,6 +149,7 @@ class Renderer:
             if key not in _CONTEXTS:
                 try:
                     _CONTEXTS[key] = self._pr.OffscreenRenderer(self.width, self.height)
+                    _leave_current(_CONTEXTS[key])
                 except Exception as exc:  # noqa: BLE001
                     raise RenderError(f"cannot create a {self.width}x{self.height} offscreen renderer: "
                                       f"{type(exc).__name__}: {exc}") from exc
@@ -217,13 +234,16 @@ class Renderer:
             scene.set_pose(node, camera_to_world_gl(c))
             try:
                 with _LOCK:
-                    color, depth = self._renderer.render(scene, flags=flags)
-                    if seg_map:
-                        for n in seg_map:
-                            n.mesh.is_visible = True
-                        seg, _ = self._renderer.render(scene, flags=pr.RenderFlags.SEG, seg_node_map=seg_map)
-                        for n in seg_map:
-                            n.mesh.is_visible = False
+                    try:
+                        color, depth = self._renderer.render(scene, flags=flags)
+                        if seg_map:
+                            for n in seg_map:
+                                n.mesh.is_visible = True
+                            seg, _ = self._renderer.render(scene, flags=pr.RenderFlags.SEG, seg_node_map=seg_map)
+                            for n in seg_map:
+                                n.mesh.is_visible = False
+                    finally:  # any thread may render next (:func:`_leave_current`)
+                        _leave_current(self._renderer)
             except Exception as exc:  # noqa: BLE001
                 raise RenderError(f"rendering failed: {type(exc).__name__}: {exc}") from exc
             color = np.ascontiguousarray(color[..., :3], dtype=np.uint8)
