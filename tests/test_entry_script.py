@@ -113,13 +113,21 @@ def test_two_sorties(ros_env, tmp_path) -> None:
     images; summary.json has one record per sortie. As `make run ROUNDS=2` flies it: the default
     realistic capture (ground markers), drones whose images the recon takes (source fleet), the
     first sortie's read back from its capture sets with the field's markers, so that the two
-    sets are one reconstruction placed on the same ground control."""
+    sets are one reconstruction placed on the same ground control.
+
+    The same mission runs with --managed: the planner and the dispatcher start unconfigured
+    (managed:=true) and the script configures and activates them, as a lifecycle manager would,
+    before the mission flies (the unmanaged start: test_end_to_end_small_mission)."""
     out = tmp_path / "run"
     proc = subprocess.run([sys.executable, str(SCRIPT), *SMALL_REALISTIC, "--realizations", "1", "--method", "circle",
                            "--evals", "16", "--rounds", "2", "--cameras2", "2", "--drones", "4", "--out", str(out),
-                           "--timeout", "500"], env=ros_env, capture_output=True, text=True, timeout=560)
+                           "--managed", "--timeout", "500"], env=ros_env, capture_output=True, text=True, timeout=560)
     log = proc.stdout + proc.stderr
     assert proc.returncode == 0, log[-6000:]
+    for node in ("planner", "dispatcher"):
+        assert f"{node}: configured and activated (lifecycle)" in proc.stdout, proc.stdout[-3000:]
+        assert log.index(f"{node} configured") < log.index(f"{node} ready"), log[-3000:]
+    assert "Chamfer distance x100" in proc.stdout
     assert "second sortie: 2 cameras given the 4 flown" in log
     assert "with 4 cameras already flown" in log  # the planner counted them
     assert "with the 4 images of the cameras already flown" in log  # the recon read sortie 1's back
@@ -141,20 +149,6 @@ def test_two_sorties(ros_env, tmp_path) -> None:
     assert [len(m.fixed_poses) for m in infos] == [0, 4]  # the second plan names the cameras flown
     np.testing.assert_allclose([[p.position.x, p.position.y, p.position.z] for p in infos[1].fixed_poses],
                                np.asarray(first["cameras"])[:, :3], atol=1e-9)
-
-
-def test_the_script_drives_managed_lifecycle_nodes(ros_env, tmp_path) -> None:
-    """--managed: the planner and the dispatcher start unconfigured (managed:=true) and the script
-    configures and activates them, as a lifecycle manager would, before the mission flies."""
-    proc = subprocess.run([sys.executable, str(SCRIPT), *SMALL, "--realizations", "1", "--method", "circle",
-                           "--evals", "16", "--drones", "2", "--managed", "--out", str(tmp_path / "run"),
-                           "--timeout", "400"], env=ros_env, capture_output=True, text=True, timeout=460)
-    log = proc.stdout + proc.stderr
-    assert proc.returncode == 0, log[-6000:]
-    for node in ("planner", "dispatcher"):
-        assert f"{node}: configured and activated (lifecycle)" in proc.stdout, proc.stdout[-3000:]
-        assert log.index(f"{node} configured") < log.index(f"{node} ready"), log[-3000:]
-    assert "Chamfer distance x100" in proc.stdout
 
 
 def test_the_reconstruction_goes_to_the_planner_thinned() -> None:

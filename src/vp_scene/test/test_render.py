@@ -115,8 +115,8 @@ def test_the_soil_does_not_repeat_and_renders_the_same_twice() -> None:
     """One soil texture tiled every 4.1 m gave views across a row's ends hundreds of
     false matches. Every square of the ground has its own texture: the soil photographed at x and
     at x + 4.1 m differs, and the same view renders the same twice (the squares are kept)."""
-    from vp_scene.render import (SOIL_TEXELS, _SOIL, ground_meshes, soil_square_mesh, soil_squares, soil_texture,
-                                 soil_tile_seed)
+    from vp_scene.render import (SOIL_TEXELS, ground_meshes, make_soil_texture, soil_square_mesh, soil_squares,
+                                 soil_texture, soil_tile_seed)
 
     period = 0.002 * SOIL_TEXELS
     plant = trimesh.creation.box((0.4, 0.4, 1.0))
@@ -131,8 +131,7 @@ def test_the_soil_does_not_repeat_and_renders_the_same_twice() -> None:
     corr = np.corrcoef(grey)
     assert np.all(np.abs(corr[np.triu_indices(3, 1)]) < 0.2), corr  # distinct squares, not shifted copies
     first = soil_texture(SOIL_TEXELS, soil_tile_seed(1, 0)).copy()
-    _SOIL.clear()
-    assert np.array_equal(soil_texture(SOIL_TEXELS, soil_tile_seed(1, 0)), first)  # seeded: every process agrees
+    assert np.array_equal(make_soil_texture(SOIL_TEXELS, soil_tile_seed(1, 0)), first)  # seeded: every process agrees
     assert soil_square_mesh(1, 0).bounds[0, 0] == pytest.approx(0.5 * period)
 
     r = Renderer(W, H, math.radians(50))
@@ -143,6 +142,36 @@ def test_the_soil_does_not_repeat_and_renders_the_same_twice() -> None:
     assert np.array_equal(images[0], images[2]) and np.array_equal(images[0], again[0])
     diff = np.abs(images[0].astype(np.int16) - images[1].astype(np.int16)).mean()
     assert diff > 3.0, diff  # the tiled soil: these two views were the same picture (0.02; distinct squares 5.6)
+
+
+def test_a_soil_texture_is_built_once_per_machine_and_a_corrupt_entry_again(tmp_path, monkeypatch) -> None:
+    """soil_texture keeps what make_soil_texture makes on disk: another process reads the same
+    bytes back; a truncated or foreign entry is built again; an unwritable folder only costs time."""
+    from vp_scene import render
+    from vp_scene.render import make_soil_texture, soil_texture
+
+    monkeypatch.setenv("VP_SOIL_CACHE", str(tmp_path / "soil"))
+    monkeypatch.setattr(render, "_SOIL", {})
+    made = make_soil_texture(256, (7, 3, 4))
+    assert np.array_equal(soil_texture(256, (7, 3, 4)), made)
+    (entry,) = (tmp_path / "soil").glob("*.npy")
+    assert entry.name.endswith("-256-7-3-4.npy") and np.array_equal(np.load(entry), made)
+    calls = []
+    monkeypatch.setattr(render, "make_soil_texture", lambda *a: calls.append(a) or made)
+    monkeypatch.setattr(render, "_soil_recipe", lambda: entry.name.split("-")[0])
+    render._SOIL.clear()  # a new process: read from disk, nothing built
+    assert np.array_equal(soil_texture(256, (7, 3, 4)), made) and calls == []
+    for bad in (entry.read_bytes()[:1000], np.zeros((2, 2), np.float64)):  # truncated; a foreign array
+        if isinstance(bad, bytes):
+            entry.write_bytes(bad)
+        else:
+            np.save(entry, bad)
+        render._SOIL.clear()
+        assert np.array_equal(soil_texture(256, (7, 3, 4)), made)
+    assert len(calls) == 2 and np.array_equal(np.load(entry), made)  # built again, and kept again
+    monkeypatch.setenv("VP_SOIL_CACHE", "/proc/no-such-folder")
+    render._SOIL.clear()
+    assert np.array_equal(soil_texture(256, (7, 3, 4)), made)
 
 
 def test_a_thread_renders_while_the_thread_that_rendered_before_is_still_alive() -> None:

@@ -23,10 +23,12 @@ is used when set, else ``egl`` is tried and, when no EGL context can be created,
 """
 from __future__ import annotations
 
+import hashlib
 import math
 import os
 import sys
 import threading
+from pathlib import Path
 from typing import Optional, Sequence
 
 import numpy as np
@@ -35,8 +37,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from vp_scene.camera import camera_to_world_gl, check_cameras, intrinsics, principal_point_gl
 
-__all__ = ["SKY_COLOR", "KEY_TOLERANCE", "RenderError", "foreground_mask", "ground_meshes", "marker_meshes",
-           "soil_squares", "soil_square_mesh", "soil_texture", "soil_tile_seed", "Renderer", "release_contexts"]
+__all__ = ["SKY_COLOR", "KEY_TOLERANCE", "RenderError", "default_soil_cache", "foreground_mask", "ground_meshes",
+           "make_soil_texture", "marker_meshes", "soil_squares", "soil_square_mesh", "soil_texture", "soil_tile_seed",
+           "Renderer", "release_contexts"]
 
 #: Uniform background colour (pure blue: never a plant colour, corn is green / yellow / brown).
 SKY_COLOR: tuple[int, int, int] = (0, 0, 255)
@@ -254,7 +257,7 @@ class Renderer:
         return images, masks, (depths if keep_depth else None)
 
 
-#: Soil textures (RGB uint8), each built once per process by :func:`soil_texture`.
+#: Soil textures (RGB uint8) of this process, by :func:`soil_texture`.
 _SOIL: dict = {}
 #: Texels across one soil texture (a square of ``SOIL_TEXELS * texel`` metres of ground).
 SOIL_TEXELS: int = 2048
@@ -262,7 +265,60 @@ SOIL_TEXELS: int = 2048
 GROUND_MARGIN: float = 5.5
 
 
+def default_soil_cache() -> Path:
+    """``$VP_SOIL_CACHE`` or ``$XDG_CACHE_HOME/vp_suite/soil`` (default ``~/.cache/vp_suite/soil``)."""
+    env = os.environ.get("VP_SOIL_CACHE")
+    if env:
+        return Path(env)
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "vp_suite" / "soil"
+
+
+def _soil_recipe() -> str:
+    """A digest of :func:`make_soil_texture`'s code and constants: a cached texture made by other
+    code is never read back."""
+    h = hashlib.sha256()
+
+    def add(code) -> None:  # nested code objects by their own bytes (their repr holds an address)
+        h.update(code.co_code)
+        for c in code.co_consts:
+            add(c) if hasattr(c, "co_code") else h.update(repr(c).encode())
+    add(make_soil_texture.__code__)
+    return h.hexdigest()[:16]
+
+
 def soil_texture(size: int = SOIL_TEXELS, seed: int | Sequence[int] = 7) -> NDArray[np.uint8]:
+    """:func:`make_soil_texture`, built once per machine: kept in this process and on disk under
+    :func:`default_soil_cache` (``<recipe>-<size>-<seed>.npy``, 12.6 MB a 2048-texel square), as
+    every process that renders a ground (a node, a Dask worker, a flight) would otherwise build
+    each square's texture again. The bytes are :func:`make_soil_texture`'s: an entry that does not
+    load as a (size, size, 3) uint8 array is built again; an unwritable folder is ignored."""
+    key = (int(size), tuple(np.atleast_1d(seed).tolist()))
+    if key in _SOIL:
+        return _SOIL[key]
+    folder = default_soil_cache()
+    path = folder / f"{_soil_recipe()}-{key[0]}-{'-'.join(map(str, key[1]))}.npy"
+    out = None
+    if path.is_file():
+        try:
+            out = np.load(path, allow_pickle=False)
+        except (OSError, ValueError):  # a corrupt or truncated entry: built again below
+            out = None
+        if out is not None and (out.shape != (key[0], key[0], 3) or out.dtype != np.uint8):
+            out = None
+    if out is None:
+        out = make_soil_texture(size, seed)
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            tmp = path.with_name(f"{path.stem}.{os.getpid()}.{threading.get_ident()}.tmp.npy")
+            np.save(tmp, out)
+            tmp.replace(path)
+        except OSError:
+            pass
+    _SOIL[key] = out
+    return out
+
+
+def make_soil_texture(size: int = SOIL_TEXELS, seed: int | Sequence[int] = 7) -> NDArray[np.uint8]:
     """A seeded soil texture: brown multi-scale value noise with clods, stones and straw.
 
     Built from the sum of upsampled random grids (periodic: each grid is wrapped by two cells
@@ -277,9 +333,6 @@ def soil_texture(size: int = SOIL_TEXELS, seed: int | Sequence[int] = 7) -> NDAr
     """
     import cv2
 
-    key = (int(size), tuple(np.atleast_1d(seed).tolist()))
-    if key in _SOIL:
-        return _SOIL[key]
     rng = np.random.default_rng(seed)
     field = np.zeros((size, size), np.float32)
     for cell, amp in ((256, 0.3), (64, 0.25), (16, 0.25), (4, 0.2)):
@@ -304,9 +357,7 @@ def soil_texture(size: int = SOIL_TEXELS, seed: int | Sequence[int] = 7) -> NDAr
         length = rng.uniform(8, 30)
         p2 = (int(x + length * np.cos(a)), int(y + length * np.sin(a)))
         cv2.line(img, (int(x), int(y)), p2, (190.0, 165.0, 100.0), 1)
-    out = np.clip(img, 0, 255).astype(np.uint8)
-    _SOIL[key] = out
-    return out
+    return np.clip(img, 0, 255).astype(np.uint8)
 
 
 def soil_tile_seed(i: int, j: int, seed: int = 7) -> tuple[int, int, int]:
