@@ -161,11 +161,9 @@ def test_a_soil_texture_is_built_once_per_machine_and_a_corrupt_entry_again(tmp_
     monkeypatch.setattr(render, "_soil_recipe", lambda: entry.name.split("-")[0])
     render._SOIL.clear()  # a new process: read from disk, nothing built
     assert np.array_equal(soil_texture(256, (7, 3, 4)), made) and calls == []
-    for bad in (entry.read_bytes()[:1000], np.zeros((2, 2), np.float64)):  # truncated; a foreign array
-        if isinstance(bad, bytes):
-            entry.write_bytes(bad)
-        else:
-            np.save(entry, bad)
+    for spoil in (lambda: entry.write_bytes(entry.read_bytes()[:1000]),  # truncated
+                  lambda: np.save(entry, np.zeros((2, 2), np.float64))):  # a foreign array
+        spoil()
         render._SOIL.clear()
         assert np.array_equal(soil_texture(256, (7, 3, 4)), made)
     assert len(calls) == 2 and np.array_equal(np.load(entry), made)  # built again, and kept again

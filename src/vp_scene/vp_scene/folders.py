@@ -6,7 +6,8 @@ a folder in use by a live run locked against every other (:class:`FolderLock`, :
 every result file written whole or not at all (:func:`write_atomic`; a file that cannot be
 written is an :class:`OutputError`: one line naming it and why, "the disk is full" for a full
 disk or a short write), and scratch folders that a killed run leaves are removed by the next
-(:class:`OwnedFolder`, :func:`remove_abandoned`: only those whose owner process is gone)."""
+(:class:`OwnedFolder`, :func:`remove_abandoned`: only those whose owner process is gone); and the
+per-user cache folders (:func:`user_cache`)."""
 from __future__ import annotations
 
 import errno
@@ -16,12 +17,13 @@ import os
 import re
 import shutil
 import tempfile
+import threading
 import time
 from pathlib import Path
 from typing import Callable, Optional, Sequence, Union
 
 __all__ = ["new_run_folder", "remove_if_empty", "OutputExists", "ResultFolder", "move_aside", "FolderLock",
-           "FolderInUse", "OutputError", "write_atomic", "OwnedFolder", "remove_abandoned"]
+           "FolderInUse", "OutputError", "write_atomic", "user_cache", "OwnedFolder", "remove_abandoned"]
 
 PathLike = Union[str, os.PathLike]
 
@@ -46,10 +48,11 @@ def _why(exc: OSError) -> str:
 def write_atomic(path: PathLike, write: Callable[[Path], object]) -> Path:
     """Write the file ``path`` whole or not at all: ``write(tmp)`` writes a hidden temporary
     sibling, which is then renamed over ``path`` (a reader never sees half a file; a failed write
-    leaves no temporary). OutputError naming ``path`` when anything fails (the folder missing, a
-    full disk, a folder where the file goes)."""
+    leaves no temporary; each process and thread writes a temporary of its own, so two writers of
+    one path never write into one file). OutputError naming ``path`` when anything fails (the
+    folder missing, a full disk, a folder where the file goes)."""
     path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp")
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{threading.get_ident()}.tmp")
     try:
         write(tmp)
         os.replace(tmp, path)
@@ -60,6 +63,14 @@ def write_atomic(path: PathLike, write: Callable[[Path], object]) -> Path:
             pass
         raise OutputError(f"could not write {path}: {_why(exc)}") from None
     return path
+
+
+def user_cache(name: str, env: str) -> Path:
+    """A per-user cache folder: ``$<env>`` when set, else ``$XDG_CACHE_HOME/vp_suite/<name>``
+    (default ``~/.cache/vp_suite/<name>``)."""
+    if os.environ.get(env):
+        return Path(os.environ[env])
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "vp_suite" / name
 
 
 def _process_alive(pid: int) -> bool:

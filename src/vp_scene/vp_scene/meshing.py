@@ -25,6 +25,7 @@ from typing import Optional, Union
 import numpy as np
 import trimesh
 
+from vp_scene.folders import user_cache, write_atomic
 from vp_scene.scenario import place_mesh
 from vp_scene.wind import displace
 
@@ -44,11 +45,7 @@ PathLike = Union[str, os.PathLike]
 
 def default_mesh_cache() -> Path:
     """``$VP_MESH_CACHE`` or ``$XDG_CACHE_HOME/vp_suite/meshes`` (default ``~/.cache/vp_suite/meshes``)."""
-    env = os.environ.get("VP_MESH_CACHE")
-    if env:
-        return Path(env)
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "vp_suite" / "meshes"
+    return user_cache("meshes", "VP_MESH_CACHE")
 
 
 def _content_hash(points: np.ndarray, colors: np.ndarray) -> str:
@@ -121,13 +118,14 @@ def model_mesh(model: object, mesh_cache: Optional[PathLike] = None) -> trimesh.
             mesh = None
     if mesh is None:
         mesh = poisson_mesh(model.points, model.colors)
+        def write(tmp: Path) -> None:
+            with open(tmp, "wb") as fh:
+                np.savez(fh, vertices=np.asarray(mesh.vertices), faces=np.asarray(mesh.faces),
+                         colors=np.asarray(mesh.visual.vertex_colors))
         try:
             folder.mkdir(parents=True, exist_ok=True)
-            tmp = folder / f"{key}.{os.getpid()}.tmp.npz"
-            np.savez(tmp, vertices=np.asarray(mesh.vertices), faces=np.asarray(mesh.faces),
-                     colors=np.asarray(mesh.visual.vertex_colors))
-            tmp.replace(path)
-        except OSError:
+            write_atomic(path, write)
+        except OSError:  # an unwritable cache (OutputError included): the mesh is rebuilt next time
             pass
     _MEMORY[key] = mesh
     return mesh

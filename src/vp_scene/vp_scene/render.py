@@ -23,6 +23,7 @@ is used when set, else ``egl`` is tried and, when no EGL context can be created,
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import math
 import os
@@ -36,6 +37,7 @@ import trimesh
 from numpy.typing import ArrayLike, NDArray
 
 from vp_scene.camera import camera_to_world_gl, check_cameras, intrinsics, principal_point_gl
+from vp_scene.folders import user_cache, write_atomic
 
 __all__ = ["SKY_COLOR", "KEY_TOLERANCE", "RenderError", "default_soil_cache", "foreground_mask", "ground_meshes",
            "make_soil_texture", "marker_meshes", "soil_squares", "soil_square_mesh", "soil_texture", "soil_tile_seed",
@@ -267,12 +269,10 @@ GROUND_MARGIN: float = 5.5
 
 def default_soil_cache() -> Path:
     """``$VP_SOIL_CACHE`` or ``$XDG_CACHE_HOME/vp_suite/soil`` (default ``~/.cache/vp_suite/soil``)."""
-    env = os.environ.get("VP_SOIL_CACHE")
-    if env:
-        return Path(env)
-    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "vp_suite" / "soil"
+    return user_cache("soil", "VP_SOIL_CACHE")
 
 
+@functools.cache
 def _soil_recipe() -> str:
     """A digest of :func:`make_soil_texture`'s code and constants: a cached texture made by other
     code is never read back."""
@@ -307,12 +307,14 @@ def soil_texture(size: int = SOIL_TEXELS, seed: int | Sequence[int] = 7) -> NDAr
             out = None
     if out is None:
         out = make_soil_texture(size, seed)
+
+        def write(tmp: Path) -> None:
+            with open(tmp, "wb") as fh:
+                np.save(fh, out)
         try:
             folder.mkdir(parents=True, exist_ok=True)
-            tmp = path.with_name(f"{path.stem}.{os.getpid()}.{threading.get_ident()}.tmp.npy")
-            np.save(tmp, out)
-            tmp.replace(path)
-        except OSError:
+            write_atomic(path, write)
+        except OSError:  # an unwritable cache (OutputError included): built again by the next process
             pass
     _SOIL[key] = out
     return out
