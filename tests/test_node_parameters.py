@@ -1,7 +1,8 @@
-"""Start parameters of the planner, recon and dispatcher nodes (real processes): a wrong type or a
-bad value is one log line and exit 2, an integer where a float is expected is simply a float
-(issue 10, items 7 and 12; issue 11 for the dispatcher). Every node's parameter descriptors, asked
-over DDS through DescribeParameters: descriptions, ranges, read_only, enforced (issue 19)."""
+"""Start parameters of the planner, recon and dispatcher nodes: a wrong type or a bad value is
+one log line and exit 2 (one case a node as a real process, every case through the node's
+constructor in this process), an integer where a float is expected is simply a float. Every
+node's parameter descriptors, asked over DDS through DescribeParameters: descriptions, ranges,
+read_only, enforced."""
 from __future__ import annotations
 
 import math
@@ -12,7 +13,8 @@ READY = {"planner": "planner ready", "recon": "recon ready", "dispatcher": "disp
 PKG = {"planner": "vp_planner", "recon": "vp_recon", "dispatcher": "vp_planner"}
 
 
-@pytest.mark.parametrize("exe, params, text", [
+#: (node, bad start parameters, the text of the one line the node exits with)
+BAD = [
     ("planner", {"num_cameras": 4.0}, "'num_cameras' must be an integer"),
     ("planner", {"fov": "wide"}, "'fov' must be a number"),
     ("planner", {"min_standoff": float("nan")}, "'min_standoff' must be a finite number"),
@@ -45,13 +47,46 @@ PKG = {"planner": "vp_planner", "recon": "vp_recon", "dispatcher": "vp_planner"}
     ("dispatcher", {"drones": ["d0"], "goal_topic": "/goal"}, "goal_topic must contain {drone}"),
     ("dispatcher", {"drones": ["d0"], "pose_timeout": 0}, "pose_timeout must be > 0"),
     ("dispatcher", {"drones": ["d0"], "fleet_yaw": 0.5}, "fleet_frame is frame_id ('map')"),
-])
+]
+#: one case a node checked as a real process: the one line, exit 2, no traceback (the rest in process)
+AS_PROCESS = [next(case for case in BAD if case[0] == exe) for exe in READY]
+NODE_CLASS = {"planner": ("vp_planner.planner_node", "PlannerNode"), "recon": ("vp_recon.recon_node", "ReconNode"),
+              "dispatcher": ("vp_planner.dispatcher_node", "DispatcherNode")}
+
+
+@pytest.mark.parametrize("exe, params, text", AS_PROCESS)
 def test_bad_parameter_is_one_line_and_exit_2(exe, params, text, ros_env, start_node) -> None:
     node = start_node(PKG[exe], exe, params, ros_env)
     assert node.wait(30.0) == 2, node.output()
     out = node.output()
     assert text in out and "Traceback" not in out, out
     assert len([ln for ln in out.splitlines() if ln.strip()]) == 1, out
+
+
+@pytest.mark.parametrize("exe, params, text", BAD)
+def test_bad_parameter_is_refused_by_the_node_constructor(exe, params, text, ros_env) -> None:
+    """Every bad start parameter, given on the command line's ``--ros-args`` as a start gives it:
+    the node's constructor raises the ValueError whose one line :func:`vp_scene.node_runtime.run_node`
+    logs before exit 2 (that path, as a process: the test above). In this process, one import a node."""
+    import importlib
+
+    import rclpy
+
+    from node_process import node_command
+
+    module, cls = NODE_CLASS[exe]
+    make_node = getattr(importlib.import_module(module), cls)
+    cmd = node_command(PKG[exe], exe, params)
+    args = cmd[cmd.index("--ros-args"):]
+    rclpy.init(args=args, domain_id=int(ros_env["ROS_DOMAIN_ID"]))
+    try:
+        with pytest.raises(ValueError) as err:
+            node = make_node()
+            node.destroy_node()
+    finally:
+        rclpy.shutdown()
+    line = " ".join(str(err.value).split())
+    assert text in line, line
 
 
 @pytest.mark.parametrize("exe, params", [

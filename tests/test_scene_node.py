@@ -18,6 +18,8 @@ from vp_scene.build import build_noisy_scene
 from vp_scene.cloud import pointcloud2_to_numpy
 from vp_scene.layout import Layout, load_layout
 
+from node_process import node_command  # tools/, on sys.path through conftest.py
+
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 TOPICS = (("/scene/points", PointCloud2), ("/scene/noisy_points", PointCloud2),
           ("/scene/description", SceneDescription))
@@ -141,10 +143,14 @@ def _absurd_folder(tmp_path: Path) -> str:
     return str(folder)
 
 
-@pytest.mark.parametrize("case", ["unknown_scenario", "zero_realizations", "missing_folder", "corrupt_ply",
-                                  "absurd_plant", "wrong_type", "bad_layout_file", "missing_layout_file", "far_layout"])
-def test_bad_start_parameter_exits_nonzero(case, tmp_path, ros_env, start_node, ros_node) -> None:
-    params, expected = {
+#: the bad start configurations of the scene node (:func:`bad_start`)
+BAD_STARTS = ["unknown_scenario", "zero_realizations", "missing_folder", "corrupt_ply", "absurd_plant", "wrong_type",
+              "bad_layout_file", "missing_layout_file", "far_layout"]
+
+
+def bad_start(case: str, tmp_path: Path) -> tuple[dict, list]:
+    """(start parameters, texts the node's one error line holds) of a bad start configuration."""
+    return {
         "unknown_scenario": ({"scenario": "nine_square"}, ["unknown scenario", "nine_square"]),
         "zero_realizations": ({"realizations": 0}, ["realizations", ">= 1"]),
         "missing_folder": ({"models_folder": str(tmp_path / "no_such_folder")}, ["not found", "no_such_folder"]),
@@ -158,6 +164,33 @@ def test_bad_start_parameter_exits_nonzero(case, tmp_path, ros_env, start_node, 
         "missing_layout_file": ({"scenario": str(tmp_path / "no_field.yaml")},
                                 [f"layout file not found: {tmp_path}/no_field.yaml"]),
     }[case]
+
+
+@pytest.mark.parametrize("case", BAD_STARTS)
+def test_a_bad_start_is_refused_by_the_node_constructor(case, tmp_path, ros_env) -> None:
+    """Every bad start configuration, given as a start gives it (``--ros-args -p``): the scene
+    node's constructor raises the ValueError or OSError that :func:`vp_scene.node_runtime.run_node`
+    logs as one line before exit 2 (that path, as a process: the test below). In this process."""
+    import rclpy
+
+    from vp_scene.scene_node import SceneNode
+
+    params, expected = bad_start(case, tmp_path)
+    cmd = node_command("vp_scene", "scene", params)
+    rclpy.init(args=cmd[cmd.index("--ros-args"):], domain_id=int(ros_env["ROS_DOMAIN_ID"]))
+    try:
+        with pytest.raises((ValueError, OSError)) as err:
+            SceneNode().destroy_node()
+    finally:
+        rclpy.shutdown()
+    line = " ".join(str(err.value).split())
+    for text in expected:
+        assert text in line, f"{text!r} not in {line!r}"
+
+
+@pytest.mark.parametrize("case", ["corrupt_ply", "wrong_type", "far_layout"])
+def test_bad_start_parameter_exits_nonzero(case, tmp_path, ros_env, start_node, ros_node) -> None:
+    params, expected = bad_start(case, tmp_path)
     client = ros_node(ros_env)
     got = subscribe_all(client)
     node = start_node("vp_scene", "scene", params, ros_env)
