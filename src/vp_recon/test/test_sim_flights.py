@@ -25,9 +25,13 @@ def test_a_flight_is_scored_under_its_own_draw_and_a_bad_plan_is_a_scored_failur
     realizations), its capture seeded by the draw; a plan whose cameras see nothing fails with the
     reconstruction's code and reason, no exception."""
     import vp_recon.pipeline as pipeline
+    import vp_recon.tasks as tasks
 
     seen = []
     real = pipeline.reconstruct_realization
+    released = []
+    real_release = tasks.release_heap
+    monkeypatch.setattr(tasks, "release_heap", lambda: released.append(len(seen)) or real_release())
 
     def spy(noisy, k, cams, cfg, *a, **kw):
         seen.append((np.asarray(noisy.n_wind).copy(), cfg.capture.seed, cfg.width, cfg.sift_first_octave))
@@ -46,6 +50,27 @@ def test_a_flight_is_scored_under_its_own_draw_and_a_bad_plan_is_a_scored_failur
     away[:, 3:] = -away[:, 3:]  # every camera looks away from the plant
     bad = fly_plan(noisy_scene.scene, noisy_scene.config, away, FlightDraw(1, 0.0, 2 ** 31 + 1), SMALL)
     assert bad.failed and bad.error_code == 4 and "plant" in bad.reason and bad.value == math.inf
+    assert released == [1, 2]  # after each flight, the failed one too: the heap it freed given back
+
+
+def test_the_heap_a_reconstruction_freed_goes_back_to_the_system():
+    """Freed blocks between blocks still in use stay in the process (glibc keeps them) until
+    :func:`vp_recon.tasks.release_heap` returns their pages."""
+    from vp_recon.tasks import release_heap
+
+    def rss() -> int:
+        with open("/proc/self/statm") as fh:
+            return int(fh.read().split()[1]) * 4096
+
+    release_heap()
+    start = rss()
+    blocks = [bytearray(64 * 1024) for _ in range(4000)]  # 262 MB from the heap (below mmap's threshold)
+    kept = blocks[::50]  # a block in use every 3 MB: no free run at the heap's top to trim
+    del blocks
+    held = rss()
+    release_heap()
+    assert held - start > 200e6 and held - rss() > 150e6, (start, held, rss())
+    assert len(kept) == 80
 
 
 def test_the_simulator_flies_a_batch_in_order_and_stops_when_asked(noisy_scene):

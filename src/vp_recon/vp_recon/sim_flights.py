@@ -7,7 +7,8 @@ prior's plants displaced by the flight's own wind (``draw.n_wind``, a one-realiz
 :func:`vp_recon.pipeline.render_flight` gives every flight), reconstructed by
 :func:`vp_recon.pipeline.reconstruct_captured` at the flight's setting and scored against the
 displaced prior. A reconstruction that fails is a :class:`~vp_scene.flights.FlightScore` with its
-error code and reason, never an exception.
+error code and reason, never an exception. The heap a flight freed goes back to the system
+(:func:`vp_recon.tasks.release_heap`).
 
 :class:`SceneFlights` is the :class:`vp_scene.flights.FlightSimulator` of a prior scene: its
 flights run in this process, one after the other, or on a Dask client (one flight a task,
@@ -60,6 +61,7 @@ def fly_plan(scene: object, wind: WindConfig, cameras: NDArray[np.float64], draw
     under ``draw`` (module docstring); its score, or its failure. ``ground``: the world under the
     plants (:class:`vp_recon.config.ReconConfig`: soil for a field, False for a rig's backdrop)."""
     from .pipeline import reconstruct_realization
+    from .tasks import release_heap
 
     t0 = time.perf_counter()
     try:
@@ -72,6 +74,8 @@ def fly_plan(scene: object, wind: WindConfig, cameras: NDArray[np.float64], draw
     except (ValueError, RuntimeError, MemoryError) as exc:  # a scene or plan the pipeline cannot take
         return FlightScore(draw=draw, failed=True, error_code=UNKNOWN, reason=f"{type(exc).__name__}: {exc}",
                            seconds=time.perf_counter() - t0)
+    finally:  # flights follow each other in one process (a Dask worker's, the planner's)
+        release_heap()
     coverage = getattr(res.coverage, "fraction", None)
     return FlightScore(draw=draw, chamfer=float(res.chamfer), chamfer_shape=float(res.chamfer_shape),
                        coverage=None if coverage is None else float(coverage), images=int(res.images),

@@ -4,6 +4,9 @@ and message) and the queue of a loop's capture sets on a cluster (:class:`Cluste
 :func:`vp_recon.pipeline.reconstruct_sets`)."""
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
+import gc
 from collections import deque
 from typing import Callable, Iterator, Optional
 
@@ -11,17 +14,45 @@ from .errors import ReconError
 from .progress import STAGES, ProgressFn, ReconCancelled, tick
 from .results import RealizationResult
 
-__all__ = ["worker_call", "worker_result", "ClusterQueue"]
+__all__ = ["release_heap", "worker_call", "worker_result", "ClusterQueue"]
+
+
+def release_heap() -> None:
+    """Give the heap a reconstruction freed back to the system: a garbage collection, then glibc's
+    ``malloc_trim(0)``. A reconstruction's images, features and depth maps are freed when it
+    returns, but glibc keeps most of those pages (its arenas, fragmented by the C++ libraries'
+    threads), so that a process that reconstructs again and again (a Dask worker flying a plan's
+    flights, the reconstruction's tasks) grows with every reconstruction until the worker pauses
+    at Dask's memory threshold; with the tasks that wait on it long-running, a cluster of paused
+    workers waits for ever. Nothing where the C library is not glibc."""
+    gc.collect()
+    if _LIBC is not None:
+        _LIBC.malloc_trim(0)
+
+
+def _glibc() -> Optional[ctypes.CDLL]:
+    name = ctypes.util.find_library("c")
+    try:
+        libc = ctypes.CDLL(name) if name else None
+        return libc if libc is not None and hasattr(libc, "malloc_trim") else None
+    except OSError:
+        return None
+
+
+_LIBC = _glibc()
 
 
 def worker_call(reconstruct: Callable, *args, **kwargs) -> tuple:
     """``reconstruct(*args, **kwargs)`` on a Dask worker (:func:`vp_recon.pipeline.reconstruct_set`):
     ('ok', result) or ('error', code, message) (a ReconError travels as its fields: the
-    exception's own pickling is not part of its contract)."""
+    exception's own pickling is not part of its contract); the heap it freed goes back to the
+    system (:func:`release_heap`)."""
     try:
         return ("ok", reconstruct(*args, **kwargs))
     except ReconError as exc:
         return ("error", exc.code, str(exc))
+    finally:
+        release_heap()
 
 
 def worker_result(out: tuple, k: int) -> RealizationResult:
