@@ -271,8 +271,7 @@ def committed_markdown(rel: str, title: str) -> str:
 
 #: (section title, results file, renderer), in the order of docs/results.md
 CURRENT = [
-    ("Table I after: egp's plans checked by simulated flights (one_plant, three_row; six_rect's egp planned "
-     "before them): 3 planning seeds x 5 realizations",
+    ("Table I after: egp's plans checked by simulated flights: 3 planning seeds x 5 realizations",
      'results/rerun/issue52_table1_combined/table1_combined.json', lambda rel, t: combined_section(rel, t, 'Table I')),
     ('Table I before the simulated flights, the registration in the reward: 3 planning seeds x 5 realizations',
      'results/rerun/issue42_table1_combined/table1_combined.json', lambda rel, t: combined_section(rel, t, 'Table I')),
