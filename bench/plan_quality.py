@@ -78,6 +78,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument('--flight-sift-octave', type=int, default=fs.sift_first_octave, choices=(-1, 0),
                     help="flights: their SIFT first octave")
     ap.add_argument('--flight-dense-scale', type=float, default=fs.dense_scale, help="flights: their dense scale")
+    ap.add_argument('--flight-draws-from', type=int, default=0,
+                    help="flights: plan j flies the planner's draw j + this (0: the planner's first draws; another "
+                         "value flies every plan again under new draws, and the analysis ranks by the mean of a "
+                         "setting's flights beside each one alone)")
     ap.add_argument('--limit', type=int, default=0, help='reconstruct only the first n plans (0: all)')
     ap.add_argument('--ids', nargs='+', default=None,
                     help='reconstruct only these plan ids, in this order (e.g. to do the rarer families first)')
@@ -249,13 +253,15 @@ def flight_settings(args):
     return FlightSettings(args.flight_width, args.flight_height, args.flight_sift_octave, args.flight_dense_scale)
 
 
-def flight_tag(settings) -> str:
-    """The name of a flight setting in the cache and the report (``flight-2000x1500o0d0.5``)."""
-    return f'flight-{settings.width}x{settings.height}o{settings.sift_first_octave}d{settings.dense_scale:g}'
+def flight_tag(settings, draws_from: int = 0) -> str:
+    """The name of a flight setting in the cache and the report (``flight-2000x1500o0d0.5``; flown
+    under draws from ``draws_from`` on: ``...-draws1000``)."""
+    tag = f'flight-{settings.width}x{settings.height}o{settings.sift_first_octave}d{settings.dense_scale:g}'
+    return tag + (f'-draws{draws_from}' if draws_from else '')
 
 
-def flight_path(scenario: str, models: str, plan: dict, settings) -> Path:
-    return CACHE / models_tag(models) / scenario / flight_tag(settings) / f'{plan["id"]}.json'
+def flight_path(scenario: str, models: str, plan: dict, settings, draws_from: int = 0) -> Path:
+    return CACHE / models_tag(models) / scenario / flight_tag(settings, draws_from) / f'{plan["id"]}.json'
 
 
 def flight_cell(scenario: str, models: str, plan: dict, index: int, settings) -> dict:
@@ -275,18 +281,20 @@ def flight_cell(scenario: str, models: str, plan: dict, index: int, settings) ->
 
 def run_flights(args, client, study: dict) -> dict:
     """One simulated flight of every plan of the study (cached), flight j the plan set's j-th."""
-    settings = flight_settings(args)
-    tasks = [Task((s, p['id']), flight_cell, (s, args.models, p, j, settings),
-                  flight_path(s, args.models, p, settings), f'{s} {p["id"]} flight')
+    settings, first = flight_settings(args), args.flight_draws_from
+    tasks = [Task((s, p['id']), flight_cell, (s, args.models, p, first + j, settings),
+                  flight_path(s, args.models, p, settings, first), f'{s} {p["id"]} flight')
              for s in args.scenarios for j, p in enumerate(study[s])]
-    return run_tasks(client, tasks, f'flying ({flight_tag(settings)})')
+    return run_tasks(client, tasks, f'flying ({flight_tag(settings, first)})')
 
 
 def flight_predictors(scenario: str, models: str, plans: list[dict]) -> dict:
     """The simulated flights found in the cache, as predictors beside the reward models:
     {flight tag: {'reward': minus each plan's map Chamfer (-inf for a failed flight), ...}}, for
-    the settings that flew every plan of ``plans``."""
-    out = {}
+    the settings that flew every plan of ``plans``; a setting flown under several draw sets also as
+    ``<setting>-mean<k>``, minus the mean of a plan's k flights (-inf when one failed), as the
+    planner scores a plan it flew k times (:attr:`vp_planner.flight_planning.PoolPlan.score`)."""
+    out, by_setting = {}, {}
     for folder in sorted((CACHE / models_tag(models) / scenario).glob('flight-*')):
         recs = [folder / f'{p["id"]}.json' for p in plans]
         if not all(f.is_file() for f in recs):
@@ -295,6 +303,13 @@ def flight_predictors(scenario: str, models: str, plans: list[dict]) -> dict:
         vals = [-math.inf if r['failed'] or r['chamfer'] is None else -float(r['chamfer']) for r in scores]
         out[folder.name] = {'reward': vals, 'ms_per_plan': 1000 * float(np.mean([r['seconds'] for r in scores])),
                             'failed': int(sum(r['failed'] for r in scores))}
+        by_setting.setdefault(folder.name.split('-draws')[0], []).append(out[folder.name])
+    for setting, sets in by_setting.items():
+        if len(sets) > 1:
+            vals = np.mean([r['reward'] for r in sets], axis=0)  # -inf where any flight failed
+            out[f'{setting}-mean{len(sets)}'] = {
+                'reward': vals.tolist(), 'ms_per_plan': float(sum(r['ms_per_plan'] for r in sets)),
+                'failed': int(np.sum(~np.isfinite(vals)))}
     return out
 
 

@@ -174,3 +174,28 @@ def test_analyze_scores_todays_rewards_against_a_reports_records(tmp_path):
     assert result["variants"][variant]["recon_hours"]["one_plant"] == 1.5
     assert set(result["variants"]) == {variant, variant.replace("/dense", "/sparse"), variant.replace("/dense", "/shape")}
     assert (tmp_path / "plan_quality.json").exists()
+
+
+def test_flights_under_several_draw_sets_rank_by_their_mean_a_failure_last(tmp_path, monkeypatch):
+    import json
+
+    import bench.plan_quality as pq
+    from vp_scene.flights import FlightSettings
+
+    monkeypatch.setattr(pq, "CACHE", tmp_path)
+    plans = [{"id": f"p-{i}"} for i in range(3)]
+    setting = FlightSettings(1000, 750, 0, 0.5)
+    chamfers = {0: [0.010, 0.020, 0.030], 1000: [0.030, None, 0.010]}   # p-1 fails under the second draws
+    for first, values in chamfers.items():
+        for p, c in zip(plans, values):
+            path = pq.flight_path("one_plant", "", p, setting, first)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(json.dumps({"chamfer": c, "failed": c is None, "seconds": 2.0}))
+    got = pq.flight_predictors("one_plant", "", plans)
+    assert set(got) == {"flight-1000x750o0d0.5", "flight-1000x750o0d0.5-draws1000", "flight-1000x750o0d0.5-mean2"}
+    mean = got["flight-1000x750o0d0.5-mean2"]
+    assert mean["reward"][0] == pytest.approx(-0.020) and mean["reward"][2] == pytest.approx(-0.020)
+    assert mean["reward"][1] == -math.inf and mean["failed"] == 1
+    assert mean["ms_per_plan"] == pytest.approx(4000.0)                 # both flights' cost
+    (tmp_path / pq.models_tag("") / "one_plant" / "flight-1000x750o0d0.5-draws1000" / "p-2.json").unlink()
+    assert set(pq.flight_predictors("one_plant", "", plans)) == {"flight-1000x750o0d0.5"}  # a set not complete: left out
