@@ -13,6 +13,8 @@ Fixtures:
     ros_node      -> factory ``ros_node(env_or_domain_id, name='test_client') -> RosTestNode``:
                      an rclpy context + node + executor in the test process on the same domain;
                      torn down after the test.
+    module_nodes  -> (ros_env, start_node, ros_node), shared by a module's tests (nodes that
+                     only answer goals).
 """
 from __future__ import annotations
 
@@ -22,8 +24,9 @@ import os
 import sys
 import tempfile
 import time
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Callable, Iterable, Optional, Union
+from typing import Any, Callable, Iterable, Iterator, Optional, Union
 
 import pytest
 
@@ -82,9 +85,9 @@ def make_ros_env(domain_id: int, base: Optional[dict] = None) -> dict:
     return env
 
 
-@pytest.fixture
-def ros_env():
-    """dict: os.environ with LOCALHOST discovery and a reserved, unique ROS_DOMAIN_ID."""
+@contextmanager
+def leased_ros_env() -> Iterator[dict]:
+    """os.environ with LOCALHOST discovery and a reserved ROS_DOMAIN_ID, released on exit."""
     lease = DomainLease()
     try:
         yield make_ros_env(lease.domain_id)
@@ -93,8 +96,31 @@ def ros_env():
 
 
 @pytest.fixture
+def ros_env():
+    """dict: os.environ with LOCALHOST discovery and a reserved, unique ROS_DOMAIN_ID."""
+    with leased_ros_env() as env:
+        yield env
+
+
+@pytest.fixture
 def start_node(tmp_path: Path):
     """Factory: ``start_node(pkg, exe, params, env, args=()) -> NodeProcess``; stopped at teardown."""
+    with starting_nodes(tmp_path) as start:
+        yield start
+
+
+@pytest.fixture(scope="module")
+def module_nodes(tmp_path_factory):
+    """``(ros_env, start_node, ros_node)`` shared by a module's tests, the nodes stopped after the
+    last one: for tests that only send goals to a node, each starting it again would cost its start."""
+    with leased_ros_env() as env, starting_nodes(tmp_path_factory.mktemp("nodes")) as start, \
+            making_ros_nodes() as make:
+        yield env, start, make
+
+
+@contextmanager
+def starting_nodes(folder: Path) -> Iterator[Callable[..., NodeProcess]]:
+    """A ``start_node`` factory whose nodes log into ``folder`` and are stopped on exit."""
     started: list[NodeProcess] = []
 
     def _start(pkg: str, exe: str, params: Optional[dict] = None, env: Optional[dict] = None,
@@ -105,14 +131,16 @@ def start_node(tmp_path: Path):
             cmd = node_command(pkg, exe, params, args)
         except FileNotFoundError as exc:
             pytest.fail(f"{pkg}/{exe} is not installed: {exc}")
-        log = tmp_path / f"{pkg}-{exe}-{len(started)}.log"
+        log = folder / f"{pkg}-{exe}-{len(started)}.log"
         node = NodeProcess(cmd, env, log)
         started.append(node)
         return node
 
-    yield _start
-    for node in reversed(started):
-        node.stop()
+    try:
+        yield _start
+    finally:
+        for node in reversed(started):
+            node.stop()
 
 
 class RosTestNode:
@@ -191,9 +219,9 @@ class RosTestNode:
         self.context.try_shutdown()
 
 
-@pytest.fixture
-def ros_node():
-    """Factory: ``ros_node(env_or_domain_id, name='test_client') -> RosTestNode`` (closed at teardown)."""
+@contextmanager
+def making_ros_nodes() -> Iterator[Callable[..., RosTestNode]]:
+    """A ``ros_node`` factory whose test nodes are closed on exit."""
     made: list[RosTestNode] = []
 
     def _make(env_or_domain: Union[dict, int], name: str = "test_client") -> RosTestNode:
@@ -202,6 +230,16 @@ def ros_node():
         made.append(n)
         return n
 
-    yield _make
-    for n in reversed(made):
-        n.close()
+    try:
+        yield _make
+    finally:
+        for n in reversed(made):
+            n.close()
+
+
+@pytest.fixture
+def ros_node():
+    """Factory: ``ros_node(env_or_domain_id, name='test_client') -> RosTestNode`` (closed at teardown)."""
+    with making_ros_nodes() as make:
+        yield make
+
