@@ -199,3 +199,28 @@ def test_flights_under_several_draw_sets_rank_by_their_mean_a_failure_last(tmp_p
     assert mean["ms_per_plan"] == pytest.approx(4000.0)                 # both flights' cost
     (tmp_path / pq.models_tag("") / "one_plant" / "flight-1000x750o0d0.5-draws1000" / "p-2.json").unlink()
     assert set(pq.flight_predictors("one_plant", "", plans)) == {"flight-1000x750o0d0.5"}  # a set not complete: left out
+
+
+def test_a_second_draw_set_flies_under_its_own_draws_into_its_own_cache(tmp_path, monkeypatch):
+    """run_flights with --flight-draws-from K: plan j's task flies draw K + j and writes under the
+    K set's tag, never reading the first set's records."""
+    import argparse
+
+    import bench.plan_quality as pq
+
+    monkeypatch.setattr(pq, "CACHE", tmp_path)
+    seen = {}
+
+    def fake_run_tasks(client, tasks, desc):
+        for t in tasks:
+            monkeypatch.setattr(pq, "cached", lambda path, compute, t=t: seen.setdefault(t.key, (path, t.args)))
+            t.fn(*t.args)
+        return {}
+
+    monkeypatch.setattr(pq, "run_tasks", fake_run_tasks)
+    args = argparse.Namespace(scenarios=["one_plant"], models="", flight_width=1000, flight_height=750,
+                              flight_sift_octave=0, flight_dense_scale=0.5, flight_draws_from=1000)
+    pq.run_flights(args, None, {"one_plant": [{"id": "a-0"}, {"id": "b-1"}]})
+    (path0, args0), (path1, args1) = seen[("one_plant", "a-0")], seen[("one_plant", "b-1")]
+    assert path0.parent.name == path1.parent.name == "flight-1000x750o0d0.5-draws1000"
+    assert (args0[3], args1[3]) == (1000, 1001)
