@@ -264,26 +264,27 @@ def flight_path(scenario: str, models: str, plan: dict, settings, draws_from: in
     return CACHE / models_tag(models) / scenario / flight_tag(settings, draws_from) / f'{plan["id"]}.json'
 
 
-def flight_cell(scenario: str, models: str, plan: dict, index: int, settings, draws_from: int = 0) -> dict:
+def flight_cell(scenario: str, models: str, plan: dict, j: int, settings, draws_from: int = 0) -> dict:
     """One simulated flight of a plan (cached under the draw set that starts at ``draws_from``), as
-    the planner flies it: over the scene's plants, under the draw of flight ``index`` of a planning
-    run of seed 0 (the planner's own wind and capture noise, never the study's realizations), the
-    realistic capture with ground markers."""
+    the planner flies it: over the scene's plants, under the draw of flight ``draws_from + j`` of a
+    planning run of seed 0 (the planner's own wind and capture noise, never the study's
+    realizations), the realistic capture with ground markers."""
     from vp_recon.sim_flights import fly_plan
     from vp_scene.capture import REALISTIC
     from vp_scene.flights import flight_draws
 
     def compute() -> dict:
         noisy, _ = scene(scenario, models)
-        draw = flight_draws(0, 1, noisy.config.variance, start=index)[0]
+        draw = flight_draws(0, 1, noisy.config.variance, start=draws_from + j)[0]
         return fly_plan(noisy.scene, noisy.config, np.asarray(plan['cameras']), draw, settings, REALISTIC).to_dict()
     return cached(flight_path(scenario, models, plan, settings, draws_from), compute)
 
 
 def run_flights(args, client, study: dict) -> dict:
-    """One simulated flight of every plan of the study (cached), flight j the plan set's j-th."""
+    """One simulated flight of every plan of the study (cached): the plan set's j-th plan flies the
+    draw ``--flight-draws-from`` + j."""
     settings, first = flight_settings(args), args.flight_draws_from
-    tasks = [Task((s, p['id']), flight_cell, (s, args.models, p, first + j, settings, first),
+    tasks = [Task((s, p['id']), flight_cell, (s, args.models, p, j, settings, first),
                   flight_path(s, args.models, p, settings, first), f'{s} {p["id"]} flight')
              for s in args.scenarios for j, p in enumerate(study[s])]
     return run_tasks(client, tasks, f'flying ({flight_tag(settings, first)})')

@@ -208,19 +208,28 @@ def test_a_second_draw_set_flies_under_its_own_draws_into_its_own_cache(tmp_path
 
     import bench.plan_quality as pq
 
+    import types
+
+    import vp_recon.sim_flights
+    import vp_scene.flights
+
     monkeypatch.setattr(pq, "CACHE", tmp_path)
-    seen = {}
+    flown = {}  # plan id -> (cache path, first draw index asked of flight_draws)
 
-    def fake_run_tasks(client, tasks, desc):
-        for t in tasks:
-            monkeypatch.setattr(pq, "cached", lambda path, compute, t=t: seen.setdefault(t.key, (path, t.args)))
-            t.fn(*t.args)
-        return {}
+    def fake_cached(path, compute):  # the computation runs with the flight itself stubbed
+        flown[path.stem] = (path, compute())
+        return flown[path.stem][1]
 
-    monkeypatch.setattr(pq, "run_tasks", fake_run_tasks)
+    noisy = types.SimpleNamespace(scene=None, config=types.SimpleNamespace(variance=0.01))
+    monkeypatch.setattr(pq, "cached", fake_cached)
+    monkeypatch.setattr(pq, "scene", lambda scenario, models: (noisy, None))
+    monkeypatch.setattr(vp_scene.flights, "flight_draws", lambda seed, n, variance, start: [start])
+    monkeypatch.setattr(vp_recon.sim_flights, "fly_plan",
+                        lambda *a: types.SimpleNamespace(to_dict=lambda: a[3]))  # the draw flown
+    monkeypatch.setattr(pq, "run_tasks", lambda client, tasks, desc: {t.key: t.fn(*t.args) for t in tasks})
     args = argparse.Namespace(scenarios=["one_plant"], models="", flight_width=1000, flight_height=750,
                               flight_sift_octave=0, flight_dense_scale=0.5, flight_draws_from=1000)
-    pq.run_flights(args, None, {"one_plant": [{"id": "a-0"}, {"id": "b-1"}]})
-    (path0, args0), (path1, args1) = seen[("one_plant", "a-0")], seen[("one_plant", "b-1")]
+    pq.run_flights(args, None, {"one_plant": [{"id": "a-0", "cameras": []}, {"id": "b-1", "cameras": []}]})
+    (path0, draw0), (path1, draw1) = flown["a-0"], flown["b-1"]
     assert path0.parent.name == path1.parent.name == "flight-1000x750o0d0.5-draws1000"
-    assert (args0[3], args1[3]) == (1000, 1001)
+    assert (draw0, draw1) == (1000, 1001)
