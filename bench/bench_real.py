@@ -11,12 +11,15 @@ flight") is a candidate set: a rig's stops, a gantry's positions, a flight's ima
    planning cloud.
 3. For every N of ``--ns`` (6, 8, 12): each method's plan among the views
    (``python -m vp_planner.cli --candidates``'s planning: :func:`vp_planner.optimizers.plan_views`
-   with the candidates, on the prior, the default reward) and ``--random`` random subsets (20),
+   with the candidates, on the prior, the default reward; a method with simulated flights, egp,
+   flies them over the first pass as step 5 does, on ``--workers`` local Dask workers) and
+   ``--random`` random subsets (20),
    each reconstructed with the prior (crop box, pairs, masks) and scored against the reference:
    Chamfer x100 in the folder's frame (``chamfer``) and after a rigid ICP onto the reference
    (``shape``); a failure is counted with its reason (ranked last).
 4. Spearman's rho of the default reward against -Chamfer over all those plans (a failure ranks
-   last), and the bar: egp's Chamfer at most the evenly spaced plan's (``circle``) for each N.
+   last), and the bars: egp's Chamfer at most the evenly spaced plan's (``circle``), and at most
+   every other method's, for each N.
 5. The simulated flight of every plan (:func:`flight_record`): the first pass's cloud meshed as the
    world meshes a scanned plant and photographed from the plan's candidate poses (the rig's
    camera, its backdrop a blue screen, no wind, no ground markers), reconstructed at the real
@@ -27,13 +30,14 @@ Records are cached under ``<out>/cache/real/<scan>/`` (one file a subset: a subs
 is reconstructed once); the report is ``<out>/real/<scan>.json`` and ``.md``.
 
     python -m bench.bench_real --scan FOLDER [--ns 6 8 12] [--methods egp circle arc sa random]
-        [--random 20] [--evaluations 100] [--threads 2] [--out results]
+        [--random 20] [--evaluations 100] [--threads 2] [--workers 2] [--out results]
 """
 from __future__ import annotations
 
 import argparse
 import math
 import time
+from contextlib import nullcontext
 from pathlib import Path
 
 import numpy as np
@@ -63,7 +67,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument('--evaluations', type=int, default=100, help='reward evaluations of a plan')
     ap.add_argument('--initial', type=int, default=50, help="egp's initial design")
     ap.add_argument('--seed', type=seed_arg, default=0)
+    ap.add_argument('--workers', type=int, default=2, help="the local Dask workers egp's planning flights fly on")
     args = ap.parse_args(argv)
+    if args.workers < 1:
+        ap.error(f'--workers must be >= 1, got {args.workers}')
     from vp_planner.methods import BY_NAME
 
     bad = [m for m in args.methods if m not in BY_NAME or BY_NAME[m].candidates is None]
@@ -113,22 +120,31 @@ RIG_CAPTURE = dict(hover_position_sigma=0.0, hover_attitude_sigma=0.0, report_po
                    report_attitude_sigma=0.1, gcp_markers=0)
 
 
-def flight_record(prior_model, cams: np.ndarray, idx: list, index: int, seed: int, size: tuple, fov: float) -> dict:
-    """One plan's simulated flight over the first pass (module docstring, step 5): its
-    :class:`vp_scene.flights.FlightScore` as a dict (map Chamfer x100 as ``chamfer``), flight
-    ``index`` of a planning run of ``seed`` (the planner's draws)."""
-    from vp_recon.sim_flights import fly_plan
+def rig_flights(prior_model, size: tuple, fov: float, client=None):
+    """The simulated flights of plans among the scan's views over its first pass (module docstring,
+    step 5): a :class:`vp_recon.sim_flights.SceneFlights` of the first pass's cloud meshed as the
+    world meshes a scanned plant, no wind, the rig's capture (:data:`RIG_CAPTURE`), its backdrop a
+    blue screen, reconstructed at the real reconstruction's setting; ``client``: the Dask client
+    egp's planning flies on (None: in this process)."""
+    from vp_recon.sim_flights import SceneFlights
     from vp_scene.capture import CaptureModel
-    from vp_scene.flights import FlightSettings, flight_draws
+    from vp_scene.flights import FlightSettings
     from vp_scene.scenario import scene_of_cloud
     from vp_scene.wind import WindConfig
 
-    scene = scene_of_cloud(prior_model.points, prior_model.colors)
-    draw = flight_draws(seed, 1, 0.0, start=index)[0]
     settings = FlightSettings(width=int(size[0]), height=int(size[1]), sift_first_octave=-1, dense_scale=1.0)
-    score = fly_plan(scene, WindConfig(variance=0.0), cams[sorted(idx)], draw, settings,
-                     CaptureModel.named('realistic', **RIG_CAPTURE), fov=fov, ground=False)
-    rec = score.to_dict()
+    return SceneFlights(scene_of_cloud(prior_model.points, prior_model.colors), WindConfig(variance=0.0), settings,
+                        CaptureModel.named('realistic', **RIG_CAPTURE), client=client, fov=fov, ground=False)
+
+
+def flight_record(prior_model, cams: np.ndarray, idx: list, index: int, seed: int, size: tuple, fov: float) -> dict:
+    """One plan's simulated flight over the first pass (:func:`rig_flights`): its
+    :class:`vp_scene.flights.FlightScore` as a dict (map Chamfer x100 as ``chamfer``), flight
+    ``index`` of a planning run of ``seed`` (the planner's draws)."""
+    from vp_scene.flights import flight_draws
+
+    draw = flight_draws(seed, 1, 0.0, start=index)[0]
+    rec = rig_flights(prior_model, size, fov).fly([cams[sorted(idx)]], [draw])[0].to_dict()
     for key in ('chamfer', 'chamfer_shape'):
         rec[key] = None if rec[key] is None else 100.0 * rec[key]
     return rec
@@ -174,7 +190,13 @@ def run(args: argparse.Namespace) -> dict:
     from vp_recon.outputs import write_ply
     from vp_recon.pipeline import Prior, ReconConfig
     from vp_scene.camera import CameraModel, poses_to_cameras
-    from vp_scene.ply import load_points
+    from vp_scene.cluster import open_client
+    from vp_scene.ply import load_ply, load_points
+
+    def flown(done: int, total: int, score) -> None:
+        print(f'planning flight {done}/{total}: ' + (f'failed ({score.reason[:80]})' if score.failed else
+                                                         f'chamfer x100 {100 * score.chamfer:.3f}, '
+                                                         f'{score.seconds:.0f} s'), flush=True)
 
     scan = args.scan.resolve()
     cache = Path(args.out) / 'cache' / 'real' / scan.name
@@ -217,19 +239,29 @@ def run(args: argparse.Namespace) -> dict:
     prior = Prior(points=prior_points, plant=np.zeros(len(prior_points), np.int64))
     fov, size = views.horizontal_fov, views.size
 
+    first_pass = load_ply(cache / f'prior-{"-".join(map(str, sorted(first)))}.ply')
+    prior_model = type(first_pass)('prior', first_pass.points[keep], first_pass.colors[keep])
+
     plans = []
     for n in args.ns:
         for method in args.methods:
-            def plan(method=method, n=n) -> dict:
-                q = PlanRequest.of(method, n, evaluations=args.evaluations,
-                                   initial_evaluations=min(args.initial, args.evaluations), seed=args.seed,
-                                   candidates=cams, fov=fov, image_size=size)
-                res = plan_views(q, prior_points[None])
+            q = PlanRequest.of(method, n, evaluations=args.evaluations,
+                               initial_evaluations=min(args.initial, args.evaluations), seed=args.seed,
+                               candidates=cams, fov=fov, image_size=size)
+            n_flights = q.flights.flights_of(method)
+
+            def plan(q=q, n_flights=n_flights) -> dict:
+                with open_client('local', args.workers, quiet=True) if n_flights else nullcontext() as client:
+                    sim = rig_flights(prior_model, size, fov, client) if n_flights else None
+                    res = plan_views(q, prior_points[None], simulator=sim, on_flight=flown)
                 return {'selected': res.selected, 'reward': res.reward, 'evaluations': res.evaluations,
-                        'seconds': res.seconds}
-            p = cached(cache / f'plan-{method}-n{n}-e{args.evaluations}-s{args.seed}.json', plan)
+                        'seconds': res.seconds, 'chosen_by': res.chosen_by, 'flight_score': res.flight_score,
+                        'flights': res.flights, 'flights_note': res.flights_note}
+            tag = f'-f{n_flights}' if n_flights else ''
+            p = cached(cache / f'plan-{method}-n{n}-e{args.evaluations}-s{args.seed}{tag}.json', plan)
             plans.append({'n': n, 'method': method, 'selected': p['selected'], 'reward': p['reward'],
-                          'planning_seconds': p['seconds']})
+                          'planning_seconds': p['seconds'], 'chosen_by': p.get('chosen_by'),
+                          'planning_flights': len(p.get('flights') or [])})
         rng = np.random.default_rng([args.seed, n])
         reward = make_reward(DEFAULT_REWARD_MODEL, prior_points[None], fov, image=CameraModel(*size, fov))
         for j in range(args.random):
@@ -241,10 +273,6 @@ def run(args: argparse.Namespace) -> dict:
         score = make_reward(model, prior_points[None], fov, image=CameraModel(*size, fov))
         for p in plans:
             p.setdefault('rewards', {})[model] = float(score(cams[sorted(p['selected'])][None])[0])
-    from vp_scene.ply import load_ply
-
-    first_pass = load_ply(cache / f'prior-{"-".join(map(str, sorted(first)))}.ply')
-    prior_model = type(first_pass)('prior', first_pass.points[keep], first_pass.colors[keep])
     for j, p in enumerate(plans):
         rec = subset_record(p['selected'], 'subset', prior, reference)
         p.update({k: rec.get(k) for k in ('registered', 'points', 'chamfer', 'shape', 'coverage_of_prior', 'error',
@@ -313,13 +341,22 @@ def analyse(plans: list, ns: list) -> dict:
         if egp is not None and circle is not None:
             ce, cc = egp.get('chamfer'), circle.get('chamfer')
             bar = ce is not None and (cc is None or ce <= cc)
+        others = [p.get('chamfer') for m, p in by.items() if m != 'egp']
+        lowest = None
+        if egp is not None and others:  # a failed plan (None) is beaten by any reconstruction
+            ce = egp.get('chamfer')
+            lowest = ce is not None and all(c is None or ce <= c for c in others)
         out['by_n'][str(n)] = {
             'random': {'chamfer': summary({i: p.get('chamfer') for i, p in enumerate(rand)}),
                        'shape': summary({i: p.get('shape') for i, p in enumerate(rand)}),
                        'failures': sorted({p['error'] for p in rand if p.get('error')})},
             'spearman': spearman_of([p['reward'] for p in here], [p.get('chamfer') for p in here]),
-            'egp_at_most_circle': bar}
+            'egp_at_most_circle': bar, 'egp_lowest': lowest}
     return out
+
+
+def _yes(b) -> str:
+    return "yes" if b else "no" if b is not None else "-"
 
 
 def markdown(data: dict) -> str:
@@ -350,7 +387,15 @@ def markdown(data: dict) -> str:
               f'{num(a["spearman_reward_vs_minus_shape"], 3)}); per N: '
               + ', '.join(f'{n}: {num(a["by_n"][str(n)]["spearman"], 3)}' for n in data['ns'])
               + f'. Failed plans: {a["failed"]}. egp\'s Chamfer at most the evenly spaced plan\'s: '
-              + ', '.join(f'N={n} {"yes" if b else "no" if b is not None else "-"}' for n, b in bars.items()) + '.']
+              + ', '.join(f'N={n} {"yes" if b else "no" if b is not None else "-"}' for n, b in bars.items())
+              + '; at most every other method\'s: '
+              + ', '.join(f'N={n} {_yes(a["by_n"][str(n)].get("egp_lowest"))}' for n in data['ns']) + '.']
+    chosen = [p for p in data['plans'] if p.get('planning_flights')]
+    if chosen:
+        lines += ['', 'Planned with simulated flights over the first pass (the same flight as below, under '
+                  'the planner\'s draws): ' + ', '.join(f'{p["method"]} N={p["n"]} {p["planning_flights"]} flights, '
+                                                       f'chosen by {p["chosen_by"]}, {num(p["planning_seconds"], 0)} s'
+                                                       for p in chosen) + '.']
     if a.get('flights'):
         lines += ['', f'The simulated flight of every plan over the first pass (step 5), its map Chamfer against '
                   f'the real reconstruction\'s: Spearman **{num(a["spearman_flight_vs_minus_chamfer"], 3)}** over '
