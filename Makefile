@@ -32,6 +32,9 @@ RECON_ARGS ?=
 RUN_ARGS ?=
 IMAGES   ?=
 PRIOR    ?=
+# make test TEST_WORKERS=K: the suite's files on K pytest workers (each test's own processes run 1 thread;
+# the tests mostly compute, so more workers than cores only slows each test)
+TEST_WORKERS ?= 2
 # make view RUN=out/<run folder> [PORT=8080]: the run's recording in the browser (README "Looking at a plan")
 RUN      ?= $(OUT)
 PORT     ?= 8080
@@ -46,7 +49,7 @@ setup:
 	@tools/setup.sh
 
 test: setup
-	@$(ENV) python -m pytest -q -p no:cacheprovider --durations=20 tests src/vp_scene/test src/vp_planner/test src/vp_recon/test
+	@$(ENV) python -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile --durations=20 tests src/vp_scene/test src/vp_planner/test src/vp_recon/test
 
 run: setup
 	@$(ENV) python tools/run_suite.py --scenario $(SCENE_ARG) --method $(METHOD) --cameras $(CAMERAS) \
