@@ -293,7 +293,9 @@ CURRENT = [
     ('Coverage of the prior against the Chamfer', 'results/coverage_check.json', committed_markdown),
     ('Reconstruction stages', 'results/bench_recon.json', own_markdown('bench.bench_recon')),
     ('Cheaper reconstruction settings', 'results/bench_recon_speed.json', committed_markdown),
-    ('make run on a soil that does not repeat',
+    ("make run after: egp's plans checked by simulated flights",
+     'results/rerun/issue52_make_run/bench_make_run.json', own_markdown('bench.bench_make_run')),
+    ('make run before the simulated flights (a soil that does not repeat)',
      'results/rerun/issue42_make_run_soil/bench_make_run.json', own_markdown('bench.bench_make_run')),
     ('make run: wall time per setting', 'results/bench_make_run.json', own_markdown('bench.bench_make_run')),
     ('Planners: final reward', 'results/bench_planners.json', own_markdown('bench.bench_planners')),
@@ -384,7 +386,7 @@ SUPERSEDED = [
      committed_markdown, 'Superseded by the same check with the fields (issue 40).'),
     ('make run with the registration in the reward',
      'results/rerun/issue42_make_run/bench_make_run.json', own_markdown('bench.bench_make_run'),
-     'Rendered over the soil tiled every 4.1 m; superseded by make run on a soil that does not repeat (its '
+     'Rendered over the soil tiled every 4.1 m; superseded by make run before the simulated flights (its '
      'drones build a texture per 4.1 m square before their first picture).'),
     ('make run with the drones\' camera thread, the images\' heartbeat and the dense pair budget',
      'results/rerun/issue40_make_run_camera_thread/bench_make_run.json', own_markdown('bench.bench_make_run'),
