@@ -246,12 +246,6 @@ def test_scene_planner_recon_and_dispatcher_on_three_hosts(lab, ros_env, tmp_pat
                                              str(CLOUD_POINTS), "--rate", "2", "--trigger", str(trigger_clouds)], env)
     discovered = wait(lambda: events(talker, "discovered"), 60, "discovery across hosts", talker, listener)
     discovery = [discovered[0]["seconds"]]
-    for k, host in enumerate(("scene", "planner", "scene")):  # more samples: it varies from run to run
-        probe = lab.probe(host, f"discovery{k}", ["talk", "--seconds", "12", "--clouds", "0"], env)
-        wait(lambda: events(probe, "discovered") or events(probe, "end"), 40, "a discovery sample", probe)
-        assert events(probe, "discovered"), probe.output()[-2000:]
-        discovery.append(events(probe, "discovered")[0]["seconds"])
-        probe.stop()
 
     # latency of large clouds across hosts (planner host -> recon host), measured before the nodes
     # start: on real machines they would not share the CPU with the other hosts' nodes
