@@ -409,6 +409,7 @@ def test_a_capture_set_crosses_hosts(lab, ros_env, tmp_path, capsys) -> None:
                      name=f"sim_{d}") for k, d in enumerate(drones)]
     recon = lab.node("recon", "vp_recon", "recon", {"source": "fleet", **size, "capture": "ideal",
                                                     "max_realizations": 1, "dense": False, "num_threads": 1,
+                                                    "sift_first_octave": 0,  # the images cross; SIFT as make run
                                                     "capture_timeout": 240.0, "scene_timeout": 120.0,
                                                     "record_captures": False,
                                                     "output_folder": str(tmp_path / "recon")}, env)

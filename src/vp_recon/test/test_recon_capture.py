@@ -60,12 +60,15 @@ def test_realistic_capture_reconstructs_and_a_plan_without_baseline_does_not_pas
     way. With exact poses on noise-free renders (ideal) it scored 2.37 against the ring's 1.27
     (Chamfer x100, measured); flown (hover and localization errors, sensor noise, SfM with the
     reported poses as priors, registered to the reported centres) it fails or scores far worse."""
-    cfg = ReconConfig(width=2000, height=1500, num_threads=1)
-    assert cfg.capture == REALISTIC and cfg.sparse_mode_used == "anchored" and cfg.ground_used
+    default = ReconConfig(width=2000, height=1500, num_threads=1)
+    assert default.capture == REALISTIC and default.sparse_mode_used == "anchored" and default.ground_used
+    # make run's reconstruction settings (SIFT on the image as it is, dense at 0.7): what is checked is
+    # the capture model; the recon node's doubled first octave scores the same here, at several times the cost
+    cfg = ReconConfig(width=2000, height=1500, num_threads=1, sift_first_octave=0, dense_scale=0.7)
     assert not ReconConfig(capture=IDEAL).ground_used  # the ideal capture keeps its blue screen
     good = reconstruct_realization(scene, 1, ring(6), cfg)
     assert good.images >= 4 and good.capture["kind"] == "realistic" and good.sparse_mode == "anchored"
-    assert good.chamfer < 0.06 and good.chamfer_shape <= good.chamfer + 1e-3  # measured 0.034 / 0.026
+    assert good.chamfer < 0.06 and good.chamfer_shape <= good.chamfer + 1e-3  # measured 0.016 / 0.014
     # the self-check's figure: registered centres within a few sigma (0.02 m) of the reported ones
     assert 0.0 < good.centre_residual < 0.1, good.centre_residual
     base = ring(1, arc=0.0)[0]
@@ -75,7 +78,7 @@ def test_realistic_capture_reconstructs_and_a_plan_without_baseline_does_not_pas
     except ReconError as exc:
         assert exc.code == RECONSTRUCTION_FAILED and "registered" in str(exc)
     else:
-        assert bad.chamfer >= 2 * good.chamfer, (bad.chamfer, good.chamfer)  # measured 0.378 vs 0.034
+        assert bad.chamfer >= 2 * good.chamfer, (bad.chamfer, good.chamfer)  # measured 0.12 vs 0.016
 
 
 def test_a_plan_that_does_not_register_names_the_images_registered(scene) -> None:
