@@ -282,6 +282,8 @@ CURRENT = [
     ('Table I, realistic capture before the anchored model: 3 planning seeds x 5 realizations',
      'results/rerun/table1_combined/table1_combined.json', lambda rel, t: combined_section(rel, t, 'Table I')),
     ('Table I, seed 0: the plans, their rewards, paired differences', 'results/table1.json', table1_seed0_section),
+    ("row_12 planning with egp's simulated flights (seed 0, plan only)",
+     'results/rerun/issue52_row12_planning/bench_fields.json', committed_markdown),
     ('Fields before the anchored model: 3 planning seeds x 5 realizations',
      'results/rerun/fields_combined/fields_combined.json', lambda rel, t: combined_section(rel, t, 'Fields')),
     ('Plan-quality study, realistic capture', 'results/plan_quality.json', own_markdown('bench.plan_quality')),
