@@ -32,8 +32,8 @@ DEADLINE_S = 420  # a loaded 2-core box: generous
 
 def _slice_args(out: Path, workers: int) -> argparse.Namespace:
     return table1.parse_args(["--models", "", "--scenarios", "one_plant", "--rows", "circle", "arc",
-                              "--seeds", "1", "--evals", "4", "--init", "2", "--width", "1000",
-                              "--height", "750", "--realizations", "1", "--threads", "1", "--capture", "ideal",
+                              "--seeds", "1", "--evals", "4", "--init", "2", "--width", "640",
+                              "--height", "480", "--realizations", "1", "--threads", "1", "--capture", "ideal",
                               "--scheduler", "local", "--workers", str(workers), "--out", str(out)])
 
 

@@ -50,7 +50,7 @@ def test_table1_slice_on_a_scheduler_and_two_workers_in_namespaces(lab, tmp_path
                                    "--nworkers", "1", "--no-dashboard", "--name", host], env)
     out = tmp_path / "client.json"
     argv = ["--models", "", "--scenarios", "one_plant", "--rows", "circle", "arc", "--seeds", "1", "--evals", "4",
-            "--init", "2", "--width", "1000", "--height", "750", "--realizations", "1", "--threads", "1", "--capture", "ideal",
+            "--init", "2", "--width", "640", "--height", "480", "--realizations", "1", "--threads", "1", "--capture", "ideal",
             "--scheduler", sched, "--out", str(tmp_path / "client")]
     code = CLIENT.format(argv=argv, out=str(out))
     res = subprocess.run(["ip", "netns", "exec", lab.ns["scene"], sys.executable, "-c", code], env=env,
