@@ -33,7 +33,8 @@ RUN_ARGS ?=
 IMAGES   ?=
 PRIOR    ?=
 # make test TEST_WORKERS=K: the suite's files on K pytest workers (each test's own processes run 1 thread;
-# the tests mostly compute, so more workers than cores only slows each test)
+# the tests mostly compute, so more workers than cores only slows each test); the heaviest folders are
+# collected first and the many short unit tests last, so that the two workers end together
 TEST_WORKERS ?= 2
 # make view RUN=out/<run folder> [PORT=8080]: the run's recording in the browser (README "Looking at a plan")
 RUN      ?= $(OUT)
@@ -49,7 +50,8 @@ setup:
 	@tools/setup.sh
 
 test: setup
-	@$(ENV) python -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile --durations=20 tests src/vp_scene/test src/vp_planner/test src/vp_recon/test
+	@$(ENV) python -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile --durations=20 \
+	  src/vp_recon/test tests src/vp_planner/test src/vp_scene/test
 
 run: setup
 	@$(ENV) python tools/run_suite.py --scenario $(SCENE_ARG) --method $(METHOD) --cameras $(CAMERAS) \

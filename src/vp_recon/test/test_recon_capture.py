@@ -100,7 +100,7 @@ def test_parts_that_share_no_matches_are_each_registered_to_map(scene, tmp_path)
     from vp_recon.config import SparseOptions
     from vp_recon.sparse import sparse_reconstruct
 
-    cfg = ReconConfig(width=2000, height=1500, num_threads=1)  # 1000 x 750: too few points a side
+    cfg = ReconConfig(width=1600, height=1200, num_threads=1)  # 1000 x 750: too few points a side
     near = ring(4, arc=math.radians(45))
     far = near.copy()
     far[:, [0, 1, 3, 4]] *= -1  # the same arc turned 180 degrees about the plant's axis
@@ -123,9 +123,9 @@ def test_parts_that_share_no_matches_are_each_registered_to_map(scene, tmp_path)
     on = sp.points[np.all((sp.points >= lo) & (sp.points <= hi), axis=1)]
     on = on[silhouette_filter(on, sp.cameras, views.K, masks)]  # as the pipeline cleans them
     d, _ = cKDTree(truth).query(on)
-    assert len(on) > 100 and np.median(d) < 0.02, (len(on), np.median(d))  # measured 252, 0.012
+    assert len(on) > 100 and np.median(d) < 0.02, (len(on), np.median(d))  # measured 217, 0.011
     recall = []
     for side in (near, far):
         facing = truth[(truth[:, :2] @ side[0, :2]) > 0.05]  # plant points on that part's side
         recall.append(float(np.mean(cKDTree(on).query(facing)[0] < 0.05)))
-    assert min(recall) > 0.1, recall  # measured 0.26 and 0.53
+    assert min(recall) > 0.1, recall  # measured 0.28 and 0.45
