@@ -30,11 +30,14 @@ cloudpickle.register_pickle_by_value(sys.modules[__name__])
 DEADLINE_S = 420  # a loaded 2-core box: generous
 
 
+#: the Table I slice the cluster tests run (procedural plant, circle and arc, ideal capture, small images)
+SLICE_ARGV = ["--models", "", "--scenarios", "one_plant", "--rows", "circle", "arc", "--seeds", "1", "--evals", "4",
+              "--init", "2", "--width", "640", "--height", "480", "--realizations", "1", "--threads", "1",
+              "--capture", "ideal"]
+
+
 def _slice_args(out: Path, workers: int) -> argparse.Namespace:
-    return table1.parse_args(["--models", "", "--scenarios", "one_plant", "--rows", "circle", "arc",
-                              "--seeds", "1", "--evals", "4", "--init", "2", "--width", "640",
-                              "--height", "480", "--realizations", "1", "--threads", "1", "--capture", "ideal",
-                              "--scheduler", "local", "--workers", str(workers), "--out", str(out)])
+    return table1.parse_args([*SLICE_ARGV, "--scheduler", "local", "--workers", str(workers), "--out", str(out)])
 
 
 def _in_process(args) -> tuple[dict, dict]:

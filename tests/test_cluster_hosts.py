@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from test_across_hosts import lab  # noqa: F401  (the fixture: namespaces, bridge, teardown; tests/ is on sys.path)
-from test_cluster import _in_process, _slice_args, _without_times
+from test_cluster import SLICE_ARGV, _in_process, _slice_args, _without_times
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -49,9 +49,7 @@ def test_table1_slice_on_a_scheduler_and_two_workers_in_namespaces(lab, tmp_path
         lab.start(host, "worker", [dask, "worker", sched, "--host", lab.addr[host], "--nthreads", "1",
                                    "--nworkers", "1", "--no-dashboard", "--name", host], env)
     out = tmp_path / "client.json"
-    argv = ["--models", "", "--scenarios", "one_plant", "--rows", "circle", "arc", "--seeds", "1", "--evals", "4",
-            "--init", "2", "--width", "640", "--height", "480", "--realizations", "1", "--threads", "1", "--capture", "ideal",
-            "--scheduler", sched, "--out", str(tmp_path / "client")]
+    argv = [*SLICE_ARGV, "--scheduler", sched, "--out", str(tmp_path / "client")]
     code = CLIENT.format(argv=argv, out=str(out))
     res = subprocess.run(["ip", "netns", "exec", lab.ns["scene"], sys.executable, "-c", code], env=env,
                          capture_output=True, text=True, timeout=480)
