@@ -24,8 +24,13 @@ class FakeSimulator:
     def __init__(self, workers: int = 2, fail_all: bool = False, stop_after: int = 0) -> None:
         self.workers, self.wind_variance = workers, 0.002
         self.flown, self.fail_all, self.stop_after = [], fail_all, stop_after
+        self.batches, self.warmed = [], []
+
+    def warm_up(self):
+        self.warmed.append(len(self.flown))
 
     def fly(self, plans, draws, on_flight=None, should_stop=None):
+        self.batches.append(len(plans))
         out = []
         for i, (cams, draw) in enumerate(zip(plans, draws)):
             self.flown.append((np.asarray(cams).copy(), draw))
@@ -57,6 +62,8 @@ def test_the_flights_choose_the_patterns_are_always_flown_and_the_draws_are_the_
     assert seen == [(i, 7) for i in range(1, 8)]
     sources = [r["source"] for r in res.flights]
     assert sources[:3] == ["circle", "arc", "structured"]  # the patterns first, always
+    assert sim.warmed == [0]  # readied once, before any flight (while the cheap stage computed)
+    assert sim.batches == [5, 2]  # the pool in one batch (no worker waits for the other's flight), then the confirmation
     flown = {i: [r for r in res.flights if r["plan"] == i] for i in {r["plan"] for r in res.flights}}
     most = max(len(rs) for rs in flown.values())
     scores = {i: np.mean([r["chamfer"] for r in rs]) for i, rs in flown.items()}

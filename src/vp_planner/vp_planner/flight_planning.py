@@ -18,8 +18,10 @@ evaluations, :func:`flight_stage` spends the flight budget F:
    already in the pool (centres matched camera to camera, :func:`plan_distance`), so that the
    flights see different plans, not one plan and its neighbours.
 2. **The flights.** The patterns are always flown (the chosen plan is never one the simulator
-   scores worse than the best fixed pattern), then the pool in order, in batches of the
-   simulator's workers, one flight a plan (each flight its own wind and capture draw).
+   scores worse than the best fixed pattern), then the pool in order, one flight a plan (each
+   flight its own wind and capture draw), handed to the simulator as one batch: its workers
+   each take the next flight as they finish one (batches of the workers' count would wait for
+   their slowest flight).
 3. **The confirmation.** The last ``confirm`` flights fly the best plans again under new draws
    (one wind realization decides little between close plans, and the best of many single flights
    is the luckiest as much as the best); a plan's score is the mean of its flights' map Chamfer
@@ -202,9 +204,7 @@ def flight_stage(space: Any, obj: Objective, simulator: FlightSimulator, flights
         if stop():
             raise PlanningCancelled()
 
-    order = list(range(min(len(pool), flights - confirm)))
-    for b0 in range(0, len(order), q):
-        fly(order[b0:b0 + q])
+    fly(list(range(min(len(pool), flights - confirm))))  # one batch: a worker takes the next flight when free
     while len(records) < flights:  # confirmation: the best plans flown again, one more flight each
         ranked = sorted(range(len(pool)), key=lambda i: (pool[i].score, -pool[i].reward))
         ranked = [i for i in ranked if pool[i].flights and math.isfinite(pool[i].score)] or ranked[:1]

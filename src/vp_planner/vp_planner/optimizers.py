@@ -248,6 +248,10 @@ def plan_views(request: PlanRequest, realizations: Any, callback: Optional[Callb
                           shell_depth=q.cameras.shell_depth, reward_model=spec, image_size=q.cameras.image_size,
                           fixed_cameras=F, point_weights=W)
     obj = Objective(space, budget, callback=callback, dtype=getattr(torch, q.reward.dtype), should_stop=should_stop)
+    n_flights = q.flights.flights_of(q.method)
+    warm_up = getattr(simulator, "warm_up", None) if n_flights else None
+    if callable(warm_up):  # the simulator's workers get ready while the cheap stage computes
+        warm_up()
     rng = np.random.default_rng(q.seed)
     torch.manual_seed(q.seed)
     info: dict = {}
@@ -264,7 +268,6 @@ def plan_views(request: PlanRequest, realizations: Any, callback: Optional[Callb
         if not stopped:
             raise NoFeasiblePlanError(f"no feasible plan among the {obj.count} evaluated plans")
         best = np.zeros((0, 6))
-    n_flights = q.flights.flights_of(q.method)
     outcome, note = None, ""
     if n_flights and simulator is None:
         note = "no flight simulator: the cheap reward chose"

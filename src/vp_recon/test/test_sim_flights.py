@@ -84,6 +84,27 @@ def test_the_simulator_flies_a_batch_in_order_and_stops_when_asked(noisy_scene):
     assert scores[1].failed and scores[1].reason == "cancelled" and scores[1].draw == draws[1]
 
 
+def test_the_workers_are_readied_for_the_flights_one_warm_up_a_worker(noisy_scene):
+    """warm_up: one task on every worker of the client, returned at once, which makes the
+    renderer's context at the flight's size there (a size no other test renders at); in process,
+    nothing."""
+    from distributed import Client, LocalCluster
+
+    from vp_scene import render
+
+    odd = FlightSettings(width=336, height=252, sift_first_octave=-1, dense_scale=1.0)
+    assert SceneFlights(noisy_scene.scene, noisy_scene.config, odd).warm_up() == []
+    assert (336, 252) not in render._CONTEXTS
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None) as cluster, \
+            Client(cluster) as client:
+        sim = SceneFlights(noisy_scene.scene, noisy_scene.config, odd, client=client)
+        tasks = sim.warm_up()
+        assert len(tasks) == 2 and all(s > 0 for s in client.gather(tasks))
+        ran_on = sorted(w for t in tasks for w in client.who_has(t)[t.key])
+        assert ran_on == sorted(client.scheduler_info()["workers"])  # one a worker
+    assert (336, 252) in render._CONTEXTS  # the workers are threads of this process here
+
+
 def test_a_batch_given_flat_is_read_into_plans_and_draws_and_a_bad_one_is_named():
     """The SimulateFlights goal's form: 6 numbers a camera plan after plan, one count, index, wind
     and capture seed a plan; a capture seed an evaluation could have (below 2^31) is refused."""

@@ -125,14 +125,14 @@ def render_flight(noisy_scene: object, k: int, cameras: ArrayLike, config: Optio
     cfg = (config or ReconConfig()).validate()
     try:
         shot = photograph(noisy_scene, k, cameras, cfg.capture, cfg.width, cfg.height, cfg.fov, ground=cfg.ground,
-                          mesh_cache=cfg.mesh_cache, indices=indices)
+                          mesh_cache=cfg.mesh_cache, indices=indices, masks=cfg.capture.ideal)
     except RenderError as exc:
         raise ReconError(UNKNOWN, str(exc)) from exc
     except ValueError as exc:  # the cameras or their indices
         raise ReconError(EMPTY_PLAN, str(exc)) from None
     ids = list(range(len(shot.images))) if indices is None else [int(i) for i in indices]
     return CapturedViews(names=[f"view_{i:03d}.png" for i in ids], images=shot.images, reported=shot.reported,
-                         K=shot.K, masks=shot.masks if cfg.capture.ideal else None, fov=cfg.fov, realization=k,
+                         K=shot.K, masks=shot.masks, fov=cfg.fov, realization=k,
                          seconds=shot.seconds, control=shot.control)
 
 

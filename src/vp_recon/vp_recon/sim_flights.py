@@ -37,7 +37,7 @@ from vp_scene.wind import WindConfig, noisy_scene_of
 from .config import MAX_CAMERAS, ReconConfig
 from .errors import UNKNOWN, ReconError
 
-__all__ = ["fly_plan", "flight_config", "flight_batch", "SceneFlights", "POLL_S"]
+__all__ = ["fly_plan", "warm_worker", "flight_config", "flight_batch", "SceneFlights", "POLL_S"]
 
 #: s between two looks at ``should_stop`` (and at the flights done) while a batch flies on a cluster.
 POLL_S = 0.1
@@ -80,6 +80,28 @@ def fly_plan(scene: object, wind: WindConfig, cameras: NDArray[np.float64], draw
     return FlightScore(draw=draw, chamfer=float(res.chamfer), chamfer_shape=float(res.chamfer_shape),
                        coverage=None if coverage is None else float(coverage), images=int(res.images),
                        seconds=time.perf_counter() - t0)
+
+
+def warm_worker(scene: object, wind: WindConfig, settings: FlightSettings = FlightSettings(),
+                capture: CaptureModel = REALISTIC, fov: float = np.pi / 2) -> float:
+    """Ready this process for the flights of ``scene``: the reconstruction's modules imported and
+    the renderer's context at the flight's size set up with the soil under the prior
+    (:func:`vp_scene.sim_drone.warm_up`: the windless prior photographed once, nothing kept),
+    which a process's first flight would otherwise spend before its own work. The seconds it
+    took. A warm-up that fails is ignored: the flights meet and score whatever made it fail."""
+    from vp_scene.sim_drone import warm_up
+
+    from . import pipeline  # noqa: F401 - imported for the flights (pycolmap, Open3D, OpenCV)
+    from .tasks import release_heap
+
+    t0 = time.perf_counter()
+    try:
+        warm_up(noisy_scene_of(scene, wind, [0.0], seed=0), capture, settings.width, settings.height, fov)
+    except (ValueError, RuntimeError, MemoryError):  # a RenderError is a RuntimeError
+        pass
+    finally:
+        release_heap()
+    return time.perf_counter() - t0
 
 
 def flight_batch(cameras: Sequence[float], cameras_per_plan: Sequence[int], indices: Sequence[int],
@@ -128,7 +150,8 @@ class SceneFlights:
     ``distributed.Client``, or a callable that gives one as a context manager for each batch (a
     Dask task's ``distributed.worker_client``, so that the task leaves its worker to the flights only
     while it waits for them), or None: in this process. ``workers`` is the number of flights flown at
-    once (the cluster's workers, 1 in process)."""
+    once (the cluster's workers, 1 in process); :meth:`warm_up` readies them while the planner
+    computes."""
 
     scene: object
     wind: WindConfig = dataclasses.field(default_factory=WindConfig)
@@ -138,6 +161,7 @@ class SceneFlights:
     fov: float = np.pi / 2
     mesh_cache: Optional[str] = None
     ground: Optional[bool] = None
+    _warming: list = dataclasses.field(default_factory=list, init=False, repr=False)
 
     @property
     def wind_variance(self) -> float:
@@ -152,6 +176,21 @@ class SceneFlights:
 
             return max(1, len(get_client().scheduler_info().get("workers", {})))
         return max(1, len(self.client.scheduler_info().get("workers", {})))
+
+    def warm_up(self) -> list:
+        """Start :func:`warm_worker` on every worker of the client, one task each, and return at
+        once with their futures (kept here too: the planner calls it before its cheap stage, which
+        leaves the workers idle, and never waits); the first flights queue behind them. In
+        process, or on a Dask task's client (its worker is the planner's), nothing: []."""
+        if self.client is None or callable(self.client):
+            return []
+        client = self.client
+        scene = client.scatter(self.scene, broadcast=True, hash=False)
+        args = (self.wind, self.settings, self.capture, self.fov)
+        tasks = [client.submit(warm_worker, scene, *args, workers=[w], allow_other_workers=False, pure=False)
+                 for w in client.scheduler_info().get("workers", {})]
+        self._warming = [scene, *tasks]
+        return tasks
 
     def fly(self, plans: Sequence[NDArray[np.float64]], draws: Sequence[FlightDraw],
             on_flight: Optional[OnFlight] = None, should_stop: Optional[Callable[[], bool]] = None

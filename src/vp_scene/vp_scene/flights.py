@@ -167,7 +167,9 @@ class FlightSimulator(Protocol):
     that fails is a scored failure, never an exception; ``should_stop()`` True ends the batch early
     (the flights not flown are failures with reason 'cancelled'). ``workers``: how many flights it
     flies at once (the planner's batch size); ``wind_variance``: the variance of n_wind in the
-    scene's wind model (the planner draws the flights' winds with it)."""
+    scene's wind model (the planner draws the flights' winds with it). A simulator may also offer
+    ``warm_up()``, which starts readying its workers and returns at once; the planner calls it
+    before its cheap stage."""
 
     workers: int
     wind_variance: float

@@ -160,9 +160,11 @@ class Renderer:
                                       f"{type(exc).__name__}: {exc}") from exc
             self._renderer = _CONTEXTS[key]
 
-    def _scene(self, meshes: Sequence, ground: bool, markers: Sequence = ()) -> tuple[object, dict]:
-        """The pyrender scene, and the segmentation map of the ``ground`` mode (else empty);
-        ``markers``: textured meshes of the ground (:func:`marker_meshes`), segmented as ground.
+    def _scene(self, meshes: Sequence, ground: bool, markers: Sequence = (), segment: bool = True
+               ) -> tuple[object, dict]:
+        """The pyrender scene, and the segmentation map of the ``ground`` mode with ``segment``
+        (else empty); ``markers``: textured meshes of the ground (:func:`marker_meshes`), segmented
+        as ground.
 
         pyrender culls back faces in its segmentation pass whatever the flags, so that pass draws
         its own two-sided copies of the meshes (hidden in the colour pass)."""
@@ -172,7 +174,7 @@ class Renderer:
         items = [(m, (255, 255, 255)) for m in meshes] + [(m, (0, 0, 0)) for m in markers]
         seg_map: dict = {}
         for m, seg_color in items:
-            pm, two_sided = self._pyrender_mesh(m, with_segmentation=ground)
+            pm, two_sided = self._pyrender_mesh(m, with_segmentation=ground and segment)
             scene.add(pm)
             if two_sided is not None:
                 seg_map[scene.add(two_sided)] = seg_color
@@ -180,7 +182,8 @@ class Renderer:
             for square in soil_squares(meshes):
                 pm, two_sided = self._soil_square(*square)
                 scene.add(pm)
-                seg_map[scene.add(two_sided)] = (0, 0, 0)
+                if segment:
+                    seg_map[scene.add(two_sided)] = (0, 0, 0)
         return scene, seg_map
 
     def _pyrender_mesh(self, m: object, with_segmentation: bool) -> tuple[object, Optional[object]]:
@@ -213,27 +216,30 @@ class Renderer:
             return kept[(i, j)]
 
     def render(self, meshes: Sequence, cameras: ArrayLike, keep_depth: bool = False, ground: bool = False,
-               markers: Sequence = ()
-               ) -> tuple[list[NDArray[np.uint8]], list[NDArray[np.bool_]], Optional[list[NDArray[np.float32]]]]:
+               markers: Sequence = (), masks: bool = True
+               ) -> tuple[list[NDArray[np.uint8]], Optional[list[NDArray[np.bool_]]],
+                          Optional[list[NDArray[np.float32]]]]:
         """Render ``meshes`` (trimesh.Trimesh with vertex colours) from every camera (N, 6).
 
         Args:
             ground: draw a textured soil plane at z = 0 (masks from a segmentation pass).
             markers: ground-control markers to draw (:func:`marker_meshes`; ground in the masks).
+            masks: False: no plant masks (None), and over the ground no segmentation pass (a
+                second render of every view); the images are the same.
 
         Returns:
-            (images: N RGB uint8 (H, W, 3), masks: N bool (H, W) plant pixels,
+            (images: N RGB uint8 (H, W, 3), masks: N bool (H, W) plant pixels (None without ``masks``),
             depths: N float32 (H, W) z-buffer depths (0 = nothing) if ``keep_depth`` else None).
             The depth is for tests only; reconstruction never uses it.
         """
         cams = check_cameras(cameras)
         pr = self._pr
-        scene, seg_map = self._scene(meshes, ground, markers)
+        scene, seg_map = self._scene(meshes, ground, markers, segment=masks)
         K = self.K
         cx, cy = principal_point_gl(K)
         cam = pr.IntrinsicsCamera(fx=K[0, 0], fy=K[1, 1], cx=cx, cy=cy, znear=0.01, zfar=1000.0)
         node = scene.add(cam, pose=np.eye(4))
-        images, masks, depths = [], [], []
+        images, plant, depths = [], [], []
         flags = pr.RenderFlags.FLAT | pr.RenderFlags.SKIP_CULL_FACES
         for c in cams:
             scene.set_pose(node, camera_to_world_gl(c))
@@ -253,10 +259,11 @@ class Renderer:
                 raise RenderError(f"rendering failed: {type(exc).__name__}: {exc}") from exc
             color = np.ascontiguousarray(color[..., :3], dtype=np.uint8)
             images.append(color)
-            masks.append(np.asarray(seg)[..., 0] > 127 if seg_map else foreground_mask(color))
+            if masks:
+                plant.append(np.asarray(seg)[..., 0] > 127 if seg_map else foreground_mask(color))
             if keep_depth:
                 depths.append(np.asarray(depth, dtype=np.float32))
-        return images, masks, (depths if keep_depth else None)
+        return images, (plant if masks else None), (depths if keep_depth else None)
 
 
 #: Soil textures (RGB uint8) of this process, by :func:`soil_texture`.

@@ -58,7 +58,7 @@ class Photographs:
 
     Attributes:
         images: N RGB uint8 (H, W, 3), rendered from the actual poses, with sensor noise.
-        masks: N bool (H, W): the renderer's plant masks (an oracle that knows the scene).
+        masks: N bool (H, W): the renderer's plant masks (an oracle that knows the scene), or None.
         reported: (N, 6) the cameras [c, v] the drones report (:mod:`vp_scene.camera`).
         K: 3x3 intrinsics, OpenCV pixel convention.
         control: the ground control of the markers laid (:class:`vp_scene.ground_control.GroundControl`),
@@ -67,7 +67,7 @@ class Photographs:
     """
 
     images: list
-    masks: list
+    masks: Optional[list]
     reported: NDArray[np.float64]
     K: NDArray[np.float64]
     control: Optional[GroundControl] = None
@@ -76,7 +76,7 @@ class Photographs:
 
 def photograph(noisy_scene: object, k: int, cameras: ArrayLike, capture: CaptureModel, width: int, height: int,
                fov: float, ground: Optional[bool] = None, mesh_cache: Optional[str] = None,
-               indices: Optional[Sequence[int]] = None) -> Photographs:
+               indices: Optional[Sequence[int]] = None, masks: bool = True) -> Photographs:
     """Realization ``k`` of ``noisy_scene`` (a :class:`vp_scene.wind.NoisyScene`) photographed by
     ``cameras`` (N, 6) flown under ``capture`` (module docstring), ``width`` x ``height`` pixels,
     horizontal field of view ``fov``; ``ground``: the soil plane (:func:`ground_under`);
@@ -84,7 +84,8 @@ def photograph(noisy_scene: object, k: int, cameras: ArrayLike, capture: Capture
 
     ``indices``: the cameras' indices i in their plan (default 0..N-1), which seed their capture
     draws: ``photograph(scene, k, [camera_i], ..., indices=[i])`` gives exactly the image and
-    reported pose the whole plan's photographs give camera i.
+    reported pose the whole plan's photographs give camera i. ``masks``: False: no renderer masks
+    (``Photographs.masks`` None; the renderer's segmentation pass skipped), the same images.
 
     Raises:
         ValueError: bad cameras or indices. RenderError: meshing or rendering failed.
@@ -111,11 +112,11 @@ def photograph(noisy_scene: object, k: int, cameras: ArrayLike, capture: Capture
     # the field's ground markers (capture.gcp_markers), around every realization's plants: one layout
     markers, control = capture.lay_markers(noisy_scene.points)
     renderer = Renderer(width, height, fov)
-    images, masks, _ = renderer.render(meshes, actual, ground=ground_under(capture, ground),
-                                       markers=marker_meshes(markers, capture.gcp_size))
+    images, plant, _ = renderer.render(meshes, actual, ground=ground_under(capture, ground),
+                                       markers=marker_meshes(markers, capture.gcp_size), masks=masks)
     images = [capture.expose(im, k, i) for i, im in zip(ids, images)]
     seconds["render"] = time.perf_counter() - t0
-    return Photographs(images=images, masks=masks, reported=reported, K=renderer.K, control=control, seconds=seconds)
+    return Photographs(images=images, masks=plant, reported=reported, K=renderer.K, control=control, seconds=seconds)
 
 
 def warm_up(noisy_scene: object, capture: CaptureModel, width: int, height: int, fov: float) -> float:

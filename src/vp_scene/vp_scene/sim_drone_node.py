@@ -261,7 +261,7 @@ class _Camera:
         v = self._v
         capture = CaptureModel.named(v['capture'], seed=v['capture_seed'])
         views = photograph(self._scene_of(description), int(trigger.realization), poses_to_cameras(pose)[None],
-                           capture, v['width'], v['height'], v['fov'], indices=[i])
+                           capture, v['width'], v['height'], v['fov'], indices=[i], masks=False)
         stamp = self._node.get_clock().now().to_msg()
         optical = f'{v["drone"]}/camera_optical'
         image = views.images[0]
