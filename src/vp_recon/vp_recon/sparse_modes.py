@@ -39,7 +39,7 @@ from numpy.typing import NDArray
 
 from vp_scene.camera import as_poses, body_from_optical
 
-from .colmap_io import Matched, log_level, model_at_poses, read_points
+from .colmap_io import Matched, model_at_poses, read_points
 from .errors import SparseError
 from .registration import PoseAnchor, align_model, register_parts
 from .results import SparseModel
@@ -262,9 +262,19 @@ def merge_models(models: list, names: list, anchor: PoseAnchor, max_residual: fl
 
 
 def _adjust(rec: object, options: object) -> None:
-    """``pycolmap.bundle_adjustment`` with COLMAP's log level kept (the call resets it)."""
-    with log_level():
-        pycolmap.bundle_adjustment(rec, options)
+    """Global bundle adjustment of ``rec`` as ``pycolmap.bundle_adjustment`` makes it (COLMAP's
+    BundleAdjustmentController: the observations behind their camera dropped, every registered
+    image refined, the gauge fixed by two cameras, the points' errors updated; the same result to
+    the last bit, tested), from pycolmap's own parts. pycolmap's call prints a heading and a timer
+    at INFO level every time, whatever the log level (it sets the level to 0 itself): lines on every
+    flight's stderr, from every worker."""
+    pycolmap.ObservationManager(rec).filter_observations_with_negative_depth()
+    config = pycolmap.BundleAdjustmentConfig()
+    for image_id in rec.reg_image_ids():
+        config.add_image(image_id)
+    config.fix_gauge(pycolmap.BundleAdjustmentGauge.TWO_CAMS_FROM_WORLD)
+    pycolmap.create_default_bundle_adjuster(options, config, rec).solve()
+    rec.update_point_3d_errors()
 
 
 def _loose(options: object) -> object:
