@@ -228,8 +228,8 @@ def subsampling_cell(cache: Path, field: str, n: int, plans: dict, args) -> dict
         R = noisy.points
         space = ViewSpace(R, n)
         U = np.concatenate([structured_plans(space, 20), random_plans(space, 50, np.random.default_rng(args.seed))])
-        cams = np.concatenate([space.decode(U), np.array([p["cameras"] for p in plans.values()
-                                                          if len(p["cameras"]) == n])])
+        planned = np.array([p["cameras"] for p in plans.values() if len(p["cameras"]) == n]).reshape(-1, n, 6)
+        cams = np.concatenate([space.decode(U), planned])  # a failed plan has no cameras: not among them
         out = {"plans": int(len(cams)), "points_per_realization": int(R.shape[1]), "sizes": {}}
         ref = None
         for size in reversed(SUBSAMPLE_SIZES):  # all points first: the reference
