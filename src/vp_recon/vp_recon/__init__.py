@@ -12,15 +12,4 @@ stereo on the CPU), :mod:`vp_recon.metrics` (Chamfer, F-score), :mod:`vp_recon.o
 contact sheet, recon.json) and :mod:`vp_recon.cli`. The rendering of a plan is the simulated
 world's (:mod:`vp_scene.render`, :mod:`vp_scene.sim_drone`). :mod:`vp_recon.recon_node` (with
 :mod:`vp_recon.fleet_captures`) is the ROS 2 node.
-
-OpenCV is loaded here, before any module loads pycolmap: with pycolmap's libraries loaded first,
-OpenCV's PNG writer (every reconstruction writes its images as PNG for COLMAP) frees memory with
-the wrong zlib and the process aborts ("double free or corruption"). A process that imported
-pycolmap before vp_recon is refused with an ImportError saying so, instead of that abort later.
 """
-import sys as _sys
-
-if "pycolmap" in _sys.modules and "cv2" not in _sys.modules:
-    raise ImportError("import vp_recon (or cv2) before pycolmap: with pycolmap loaded first, OpenCV's PNG writer "
-                      "aborts the process (double free)")
-import cv2 as _cv2  # noqa: E402,F401 - before pycolmap, always (module docstring)
