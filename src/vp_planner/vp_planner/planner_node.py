@@ -30,8 +30,8 @@ client answered before the node exits (:mod:`vp_scene.node_runtime`).
 Simulated flights (:mod:`vp_planner.flight_planning`): a plan that makes them (``sim_flights``,
 the goal's or the parameter's; -1: the method's default, egp's) flies them through the recon
 node's ``/simulate_flights`` action (:class:`vp_planner.flight_client.ActionFlights`, handed to
-:func:`vp_planner.plan_process.run_plan`: the planning process asks, the node flies), in batches
-of ``flight_workers``, each flight's wind drawn with the variance of ``/scene/description`` (the
+:func:`vp_planner.plan_process.run_plan`: the planning process asks, the node flies), the first
+flights as one goal and the confirmation's in goals of ``flight_workers``, each flight's wind drawn with the variance of ``/scene/description`` (the
 wind model's default before one arrives); feedback and a log line after every flight; the result
 says how the plan was chosen (``chosen_by``), its flights' score and every flight. When
 ``/simulate_flights`` is not served within ``flight_server_timeout`` seconds (no recon node), the
@@ -132,8 +132,8 @@ PARAMS = {
     'managed': MANAGED,
     'frame_id': Param('map', 'frame of the plans; the scene cloud must be in it', None, False, 'not empty'),
     'scene_timeout': Param(10.0, 's a goal that arrives before the scene waits for it', (0.0, math.inf)),
-    'flight_workers': Param(os.cpu_count() or 1, 'simulated flights asked for at once (a batch; the recon node\'s '
-                            'cluster flies them)', (1, INT_MAX)),
+    'flight_workers': Param(os.cpu_count() or 1, 'the recon node\'s flights at once: the confirmation\'s batch '
+                            '(the first flights go as one batch; the recon node\'s cluster flies them)', (1, INT_MAX)),
     'flight_server_timeout': Param(5.0, 's a plan with simulated flights waits for /simulate_flights (then it is '
                                    'made without them)', (0.0, math.inf)),
 }
