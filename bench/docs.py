@@ -273,6 +273,8 @@ def committed_markdown(rel: str, title: str) -> str:
 CURRENT = [
     ("Table I after: egp's plans checked by simulated flights: 3 planning seeds x 5 realizations",
      'results/rerun/issue52_table1_combined/table1_combined.json', lambda rel, t: combined_section(rel, t, 'Table I')),
+    ("row_12 after: egp's plans checked by simulated flights: 3 planning seeds x 5 realizations",
+     'results/rerun/issue52_fields_combined/fields_combined.json', lambda rel, t: combined_section(rel, t, 'Fields')),
     ('Table I before the simulated flights, the registration in the reward: 3 planning seeds x 5 realizations',
      'results/rerun/issue42_table1_combined/table1_combined.json', lambda rel, t: combined_section(rel, t, 'Table I')),
     ('Fields on a soil that does not repeat: 3 planning seeds x 5 realizations',
