@@ -31,9 +31,10 @@ Simulated flights (:mod:`vp_planner.flight_planning`): a plan that makes them (`
 the goal's or the parameter's; -1: the method's default, egp's) flies them through the recon
 node's ``/simulate_flights`` action (:class:`vp_planner.flight_client.ActionFlights`, handed to
 :func:`vp_planner.plan_process.run_plan`: the planning process asks, the node flies), the first
-flights as one goal and the confirmation's in goals of ``flight_workers``, each flight's wind drawn with the variance of ``/scene/description`` (the
-wind model's default before one arrives); feedback and a log line after every flight; the result
-says how the plan was chosen (``chosen_by``), its flights' score and every flight. When
+flights as one goal and the confirmation's in goals of ``flight_workers``, each flight's wind
+drawn with the variance of ``/scene/description`` (the wind model's default before one arrives);
+feedback and a log line after every flight; the result says how the plan was chosen
+(``chosen_by``), its flights' score and every flight. When
 ``/simulate_flights`` is not served within ``flight_server_timeout`` seconds (no recon node), the
 plan is made without flights and ``flights_note`` says why. A cancel during the flights kills the
 planning process and cancels the flights' goal, answered as any cancel.

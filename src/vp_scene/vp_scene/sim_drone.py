@@ -123,9 +123,10 @@ def warm_up(noisy_scene: object, capture: CaptureModel, width: int, height: int,
     """Photograph realization 0 of ``noisy_scene`` once, from 3 m south of and 2 m above its centre,
     and forget the picture: the process's OpenGL context, its shaders and the soil's texture are
     set up (seconds of CPU the first time), so that the first
-    photograph a drone takes costs what the later ones do. Seconds it took."""
+    photograph a drone takes costs what the later ones do. Without masks, as the drones and the
+    realistic flights photograph. Seconds it took."""
     t0 = time.perf_counter()
     centre = np.asarray(noisy_scene.points, dtype=np.float64).reshape(-1, 3).mean(axis=0)
     camera = np.concatenate([centre + [0.0, -3.0, 2.0], [0.0, 3.0, -2.0]])
-    photograph(noisy_scene, 0, camera[None], capture, width, height, fov, indices=[0])
+    photograph(noisy_scene, 0, camera[None], capture, width, height, fov, indices=[0], masks=False)
     return time.perf_counter() - t0
