@@ -11,6 +11,7 @@ recorded with its exit status and its last line, never dropped; the median and m
 the runs that planned, and the failures are counted beside them.
 
     python -m bench.bench_plan_time [--scenario one_plant] [--cameras 4] [--models ../shared/data/corn50] [--repeats 3]
+        [--domain-id 78]
 """
 from __future__ import annotations
 
@@ -31,9 +32,11 @@ from bench.options import parser  # noqa: E402
 from bench.publish import machine, num, publish, table  # noqa: E402
 
 
-def run_once(scenario: str, cameras: int, models: str, timeout: float) -> dict:
-    """One planning run of the CLI: its record (module docstring)."""
-    env = {**os.environ, 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST', 'OMP_NUM_THREADS': '1'}
+def run_once(scenario: str, cameras: int, models: str, timeout: float, domain: int) -> dict:
+    """One planning run of the CLI: its record (module docstring). The CLI starts no DDS participant;
+    the run stays on this machine under a domain of its own all the same."""
+    env = {**os.environ, 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST', 'ROS_DOMAIN_ID': str(domain),
+           'OMP_NUM_THREADS': '1'}
     with tempfile.TemporaryDirectory(prefix='bench_plan_time_') as tmp:
         out = Path(tmp) / 'plan'
         cmd = [sys.executable, '-m', 'vp_planner.cli', '--scenario', scenario, '--method', 'egp', '--cameras',
@@ -86,12 +89,13 @@ def main(argv=None) -> int:
     ap.add_argument('--cameras', type=int, default=4)
     ap.add_argument('--repeats', type=int, default=3)
     ap.add_argument('--timeout', type=float, default=900.0, help='seconds a run may take')
+    ap.add_argument('--domain-id', type=int, default=78, help='ROS_DOMAIN_ID of the runs')
     args = ap.parse_args(argv)
     if args.repeats < 1:
         ap.error(f'--repeats must be >= 1, got {args.repeats}')
     runs = []
     for i in range(args.repeats):
-        runs.append(run_once(args.scenario, args.cameras, args.models, args.timeout))
+        runs.append(run_once(args.scenario, args.cameras, args.models, args.timeout, args.domain_id))
         r = runs[-1]
         print(f"run {i + 1}/{args.repeats}: " + (f"planning {r['seconds']:.1f} s, wall {r['wall']:.1f} s"
                                                  if r.get('seconds') is not None else f"failed: {r['error']}"),
