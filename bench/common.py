@@ -68,7 +68,6 @@ VARIANTS = {
     'egp-random-init': Variant({'method': 'egp', 'structured_init': 0}, ('planners',)),  # the paper's random design
     'egp-paper-config': Variant({'method': 'egp', 'structured_init': 0, 'bo_mode': 'global', 'sim_flights': 0}),  # the paper's BO
     'egp-cheap': Variant({'method': 'egp', 'sim_flights': 0}),                  # egp without its simulated flights
-    'egp-flight-bo': Variant({'method': 'egp', 'flight_chooser': 'bo'}, ('fields',)),  # its flights chosen by batch BO
     'egp-one-space': Variant({'method': 'egp', 'parts': 1}, ('fields',)),       # a field in one 6N-dim space
     # by parts under coverage-graph: the parts' chains weighed by the view graph (issue 42)
     'egp-graph': Variant({'method': 'egp', 'reward': 'coverage-graph'}, ('fields',)),

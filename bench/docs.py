@@ -273,8 +273,17 @@ def committed_markdown(rel: str, title: str) -> str:
 CURRENT = [
     ("Table I after: egp's plans checked by simulated flights: 3 planning seeds x 5 realizations",
      'results/rerun/issue52_table1_combined/table1_combined.json', lambda rel, t: combined_section(rel, t, 'Table I')),
-    ("row_12 after: egp's plans checked by simulated flights: 3 planning seeds x 5 realizations",
+    ("Fields after (row_12, grid_3x3): egp's plans checked by simulated flights: 3 planning seeds x 5 realizations",
      'results/rerun/issue52_fields_combined/fields_combined.json', lambda rel, t: combined_section(rel, t, 'Fields')),
+    ("Flights chosen by batch BO, measured and not kept: one_plant, 3 planning seeds x 5 realizations (row "
+     "'egp (flight bo)')", 'results/rerun/issue52_flight_bo_one_plant_combined/table1_combined.json',
+     lambda rel, t: combined_section(rel, t, 'Table I')),
+    ('Flights chosen by batch BO, measured and not kept: row_12, seed 0 x 5 realizations (egp-flight-bo)',
+     'results/rerun/issue52_flight_bo_row_seed0_combined/fields_combined.json',
+     lambda rel, t: combined_section(rel, t, 'Fields')),
+    ('Flights chosen by batch BO, measured and not kept: grid_3x3, seed 0 x 5 realizations (egp-flight-bo)',
+     'results/rerun/issue52_flight_bo_grid_seed0_combined/fields_combined.json',
+     lambda rel, t: combined_section(rel, t, 'Fields')),
     ('Table I before the simulated flights, the registration in the reward: 3 planning seeds x 5 realizations',
      'results/rerun/issue42_table1_combined/table1_combined.json', lambda rel, t: combined_section(rel, t, 'Table I')),
     ('Fields on a soil that does not repeat: 3 planning seeds x 5 realizations',

@@ -44,7 +44,6 @@ ROWS = {
     'egp': ('egp', 'coverage'),
     'egp (paper configuration)': ('egp-paper-config', 'paper'),
     'egp (coverage-graph)': ('egp', 'coverage-graph'),
-    'egp (flight bo)': ('egp-flight-bo', 'coverage'),
 }
 #: The baseline rows (what a drone operator flies anyway, and the paper's SA): those of a baseline variant.
 BASELINES = tuple(row for row, (variant, _) in ROWS.items() if VARIANTS[variant].baseline)

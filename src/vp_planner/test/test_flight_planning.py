@@ -83,29 +83,6 @@ def test_the_flights_choose_the_patterns_are_always_flown_and_the_draws_are_the_
     assert all(plan_distance(a, b) > 0 for k, a in enumerate(plans) for b in plans[k + 1:])
 
 
-def test_the_bo_chooser_flies_part_of_the_pool_then_proposals_of_its_gp_then_confirms(noisy):
-    """flight_chooser bo: the patterns and part of the pool in one batch, then batches of q plans
-    proposed by batch BO on the flights' score (new plans, each feasible), then the confirmation."""
-    sim = FakeSimulator()
-    res = plan_views(request(sim_flights=11, flight_chooser="bo"), noisy.points, simulator=sim)
-    assert res.chosen_by == "flights" and len(res.flights) == 11 == len(sim.flown)
-    sources = [r["source"] for r in res.flights]
-    assert sources[:3] == ["circle", "arc", "structured"]
-    assert sim.batches == [5, 2, 2, 2]  # 9 - 4 first, two rounds of q = 2 proposals, the confirmation
-    assert sources[5:9] == ["bo"] * 4
-    proposed = [np.asarray(p["cameras"]) for p in res.flight_plans if p["source"] == "bo"]
-    first = [np.asarray(p["cameras"]) for p in res.flight_plans[:5]]
-    assert len(proposed) == 4 and all(plan_distance(a, b) > 0 for a in proposed for b in first)
-    from vp_planner.space import ViewSpace
-
-    space = ViewSpace(noisy.points, 3)
-    assert all(space.feasible(c) for c in proposed)
-    # the fake scores lower cameras better: the proposals, near the best flown plans, fly lower than the pool's mean
-    assert np.mean([c[:, 2].mean() for c in proposed]) < np.mean([c[:, 2].mean() for c in first])
-    with pytest.raises(InvalidRequestError, match="flight_chooser must be one of pool, bo"):
-        request(flight_chooser="greedy")
-
-
 def test_without_a_simulator_or_flights_the_cheap_reward_chooses_as_before(noisy):
     """No simulator: the cheap reward's plan, bit for bit the plan of sim_flights 0, and a note."""
     base = plan_views(request(sim_flights=0), noisy.points)

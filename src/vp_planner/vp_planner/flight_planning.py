@@ -50,8 +50,8 @@ from vp_scene.flights import FlightDraw, FlightScore, FlightSimulator, flight_dr
 from .objective import Objective
 from .space import PlanningCancelled, StopCheck
 
-__all__ = ["CHOOSERS", "FlightOutcome", "PoolPlan", "flight_stage", "flight_pool", "flight_proposals", "patterns",
-           "plan_distance", "MIN_PLAN_DISTANCE", "OnFlight"]
+__all__ = ["FlightOutcome", "PoolPlan", "flight_stage", "flight_pool", "patterns", "plan_distance",
+           "MIN_PLAN_DISTANCE", "OnFlight"]
 
 #: Pool plans differ by at least this fraction of the scene's size (the mean distance between
 #: matched camera centres over the diagonal of the scene's box, at least 1 m).
@@ -162,105 +162,9 @@ class FlightOutcome:
     U: Optional[NDArray[np.float64]] = None
 
 
-#: Choosers of the flight stage: ``pool`` flies the pool and confirms its best; ``bo`` flies part
-#: of the pool, then batches proposed by :func:`flight_proposals`, then confirms.
-CHOOSERS = ("pool", "bo")
-
-
-def _flight_targets(pool: Sequence[PoolPlan]) -> tuple[list[int], NDArray[np.float64]]:
-    """The flown plans with an encoding, and their -log(mean map Chamfer): a plan with a failed
-    flight at the worst finite value minus 1 (a flight e times worse than the worst that flew)."""
-    idx = [i for i, p in enumerate(pool) if p.flights and p.U is not None and np.all(np.isfinite(p.U))]
-    y = np.array([-math.log(max(pool[i].score, 1e-9)) if math.isfinite(pool[i].score) else np.nan for i in idx])
-    if np.isfinite(y).any():
-        y = np.where(np.isfinite(y), y, np.nanmin(y) - 1.0)
-    return idx, y
-
-
-def _local_plans(space: Any, center: NDArray[np.float64], n: int, length: float,
-                 rng: np.random.Generator) -> NDArray[np.float64]:
-    """n plans about ``center`` (6N,) in the unit cube: TuRBO's perturbations (a random subset of
-    about 6 coordinates redrawn in a box of side ``length``), the azimuths wrapped."""
-    d = center.shape[0]
-    lo, hi = center - 0.5 * length, center + 0.5 * length
-    raw = lo + (hi - lo) * rng.random((n, d))
-    mask = rng.random((n, d)) < min(1.0, 6.0 / d)
-    mask[np.arange(n), rng.integers(0, d, n)] = True
-    U = np.where(mask, raw, center[None, :])
-    periodic = np.asarray(space.periodic, bool)
-    return np.where(periodic[None, :], np.mod(U, 1.0), np.clip(U, 0.0, 1.0))
-
-
-def flight_proposals(space: Any, obj: Objective, pool: Sequence[PoolPlan], q: int, rng: np.random.Generator,
-                     local: int = 512, length: float = 0.2, chunk: int = 64) -> list[PoolPlan]:
-    """Batch BO on the flight score: the ``q`` plans to fly next.
-
-    The model is a BoTorch ``SingleTaskGP`` (its default priors and standardized outputs) of
-    y = -log(mean map Chamfer of a plan's flights) (:func:`_flight_targets`) on the input
-    (U, r~): the plan's encoding and its cheap reward scaled to [0, 1] over the candidates, the
-    cheap fidelity as an input the lengthscales weigh. The batch maximizes BoTorch's
-    qLogNoisyExpectedImprovement (the flights are noisy: each its own wind and capture draw)
-    over a discrete set (``optimize_acqf_discrete``, sequential greedy): the cheap stage's
-    feasible plans not yet flown, and ``local`` feasible perturbations of each of the two best
-    flown plans (:func:`_local_plans`) with their cheap reward, in chunks of ``chunk`` plans.
-    Among candidate views (no continuous space) only the cheap stage's plans are candidates.
-    Returns fewer than ``q`` plans (possibly none) when fewer than two plans have flown with an
-    encoding, or the candidates run out.
-    """
-    import torch
-    from botorch.acquisition.logei import qLogNoisyExpectedImprovement
-    from botorch.fit import fit_gpytorch_mll
-    from botorch.models import SingleTaskGP
-    from botorch.optim import optimize_acqf_discrete
-    from gpytorch.mlls import ExactMarginalLogLikelihood
-
-    from .candidates import CandidateSpace
-
-    idx, y = _flight_targets(pool)
-    if len(idx) < 2 or not np.isfinite(y).all():
-        return []
-    flown = np.stack([pool[i].U for i in idx])
-    ok = np.asarray(obj.feasible_flags, bool) & np.asarray(obj.candidate_flags, bool)
-    values = np.asarray(obj.values, float)
-    keep = ok & np.isfinite(values) & (values > 0)
-    cand_U, cand_r = [np.asarray(obj.U, float)[keep]], [values[keep]]
-    if not isinstance(space, CandidateSpace):
-        for i in [idx[j] for j in np.argsort(-y)[:2]]:
-            U = _local_plans(space, pool[i].U, local, length, rng)
-            U = U[np.asarray(space.feasible(U), bool)]
-            r = np.concatenate([np.asarray(space.reward(space.decode(U[k:k + chunk])), float).reshape(-1)
-                                for k in range(0, len(U), chunk)]) if len(U) else np.zeros(0)
-            cand_U.append(U)
-            cand_r.append(r)
-    U, r = np.concatenate(cand_U), np.concatenate(cand_r)
-    new = np.array([np.min(np.abs(flown - u[None, :]).max(axis=1)) > 1e-9 for u in U], bool) if len(U) else U[:0, 0]
-    U, r = U[new], r[new]
-    if len(U) == 0:
-        return []
-    r_flown = np.array([pool[i].reward for i in idx], float)
-    lo, hi = min(r.min(), r_flown.min()), max(r.max(), r_flown.max())
-    scale = (hi - lo) if hi > lo else 1.0
-    X = torch.as_tensor(np.column_stack([flown, (r_flown - lo) / scale]), dtype=torch.float64)
-    C = torch.as_tensor(np.column_stack([U, (r - lo) / scale]), dtype=torch.float64)
-    model = SingleTaskGP(X, torch.as_tensor(y, dtype=torch.float64).reshape(-1, 1))
-    try:
-        fit_gpytorch_mll(ExactMarginalLogLikelihood(model.likelihood, model))
-    except Exception:  # noqa: BLE001 -- a failed fit keeps the priors' hyperparameters
-        pass
-    acq = qLogNoisyExpectedImprovement(model, X_baseline=X, prune_baseline=True)
-    picked, _ = optimize_acqf_discrete(acq, q=min(q, len(C)), choices=C, unique=True)
-    out = []
-    for row in picked.detach().numpy():
-        k = int(np.argmin(np.abs(C.numpy() - row[None, :]).max(axis=1)))
-        cams = space.decode(U[k])
-        out.append(PoolPlan(np.asarray(cams, dtype=np.float64), float(r[k]), "bo", np.asarray(U[k], dtype=np.float64)))
-    return out
-
-
 def flight_stage(space: Any, obj: Objective, simulator: FlightSimulator, flights: int, seed: int,
                  structured: Sequence[PoolPlan], wind_variance: float, confirm: Optional[int] = None,
-                 on_flight: Optional[OnFlight] = None, should_stop: Optional[StopCheck] = None,
-                 chooser: str = "pool") -> FlightOutcome:
+                 on_flight: Optional[OnFlight] = None, should_stop: Optional[StopCheck] = None) -> FlightOutcome:
     """Spend ``flights`` simulated flights on the cheap stage's plans (module docstring) and choose.
 
     Args:
@@ -282,13 +186,7 @@ def flight_stage(space: Any, obj: Objective, simulator: FlightSimulator, flights
     if confirm is None:
         confirm = max(2, q) if flights >= len(structured) + 1 + max(2, q) else 0
     confirm = max(0, min(int(confirm), flights - 1))
-    if chooser not in CHOOSERS:
-        raise ValueError(f"chooser must be one of {', '.join(CHOOSERS)}, got {chooser!r}")
-    first = flights - confirm
-    if chooser == "bo":  # half of the flights after the patterns go to the proposals, in batches of q
-        bo = q * math.ceil(max(0, first - len(structured)) / 2 / q)
-        first = max(len(structured), first - bo)
-    pool = flight_pool(space, obj, structured, max(len(structured), first))
+    pool = flight_pool(space, obj, structured, max(len(structured), flights - confirm))
     draws = iter(flight_draws(seed, flights, wind_variance))
     records: list[dict] = []
 
@@ -306,14 +204,7 @@ def flight_stage(space: Any, obj: Objective, simulator: FlightSimulator, flights
         if stop():
             raise PlanningCancelled()
 
-    fly(list(range(min(len(pool), first))))  # one batch: a worker takes the next flight when free
-    rng = np.random.default_rng(seed)
-    while chooser == "bo" and len(records) < flights - confirm:  # batch BO on the flights' score
-        batch = flight_proposals(space, obj, pool, min(q, flights - confirm - len(records)), rng)
-        if not batch:
-            break
-        pool.extend(batch)
-        fly(list(range(len(pool) - len(batch), len(pool))))
+    fly(list(range(min(len(pool), flights - confirm))))  # one batch: a worker takes the next flight when free
     while len(records) < flights:  # confirmation: the best plans flown again, one more flight each
         ranked = sorted(range(len(pool)), key=lambda i: (pool[i].score, -pool[i].reward))
         ranked = [i for i in ranked if pool[i].flights and math.isfinite(pool[i].score)] or ranked[:1]

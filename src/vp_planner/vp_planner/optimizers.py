@@ -275,7 +275,7 @@ def plan_views(request: PlanRequest, realizations: Any, callback: Optional[Callb
         try:
             outcome = flight_stage(space, obj, simulator, n_flights, q.seed, patterns(space, obj, q, budget, rng),
                                    float(getattr(simulator, "wind_variance")), on_flight=on_flight,
-                                   should_stop=should_stop, chooser=q.flights.chooser)
+                                   should_stop=should_stop)
         except PlanningCancelled:
             stopped = True
     chosen_U = obj.U[obj.best_index] if obj.best_index >= 0 else None

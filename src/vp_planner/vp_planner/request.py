@@ -558,10 +558,6 @@ class FlightSpec:
     dense_scale: float = _flat(_FLIGHT.dense_scale, "flight_dense_scale",
                                "the simulated flights' dense step on the images resized by this factor",
                                range=(0.1, 1.0))
-    chooser: str = _flat("pool", "flight_chooser", "how the flights choose: pool (the patterns and the cheap "
-                         "stage's plans, each flown once, the best confirmed) or bo (part of the pool, then "
-                         "batch BO on the flights' score with the cheap reward as an input)",
-                         choices=("pool", "bo"))
 
     def __post_init__(self) -> None:
         _check_fields(self)
