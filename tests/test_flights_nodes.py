@@ -70,6 +70,10 @@ def test_the_flights_choose_through_the_recon_node_and_a_cancel_stops_them(ros_e
     assert flown[0].evaluations_done == 10  # the evaluations first, then the flights
     assert "simulated flight 2/2: map Chamfer" in planner.output()
     assert "flying 2 plans" in recon.output() and "simulated flight 2/2 (plan" in recon.output()
+    # the planner asked the recon node to ready its worker as the cheap stage began, before the flights
+    out = recon.output()
+    assert "readying 1 flight worker(s) for 640x480 flights" in out, out[-3000:]
+    assert out.index("readying 1 flight worker(s)") < out.index("flying 2 plans")
 
     feedback.clear()
     handle = client.spin_future(action.send_goal_async(egp(2, seed=2), feedback_callback=lambda fb: feedback.append(

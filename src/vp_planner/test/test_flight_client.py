@@ -101,6 +101,20 @@ def test_the_goal_carries_the_batch_and_a_flight_comes_once_from_feedback_or_res
     assert [s.chamfer for s in scores] == [0.03, 0.02] and [s.draw for s in scores] == draws
 
 
+def test_the_warm_up_sends_the_setting_with_no_plans_and_nothing_without_a_server() -> None:
+    """warm_up: one goal with no plans and no cameras at the flights' setting (the recon node
+    readies its workers for it), never waited for; with no server, nothing sent."""
+    client = Client(lambda goal: (True, Future(), []))
+    sim(client).warm_up()
+    goal, = client.goals
+    assert list(goal.cameras_per_plan) == [] and list(goal.cameras) == [] and list(goal.capture_seeds) == []
+    assert (goal.width, goal.height, goal.sift_first_octave) == (640, 480, -1) and goal.ground_control
+    assert goal.fov == pytest.approx(math.pi / 2) and client.result_requests == 0
+    gone = Client(lambda goal: (True, Future(), []), ready=False)
+    sim(gone).warm_up()
+    assert gone.goals == []
+
+
 def test_a_refused_goal_makes_scored_failures_and_the_cheap_reward_chooses(tmp_path) -> None:
     """The recon node flies one batch at a time: a refused batch is a failure a flight, each
     handed to the flight stage, which ends without an exception."""

@@ -86,6 +86,10 @@ class ParentSimulator:
         self.workers, self.wind_variance, self.block = 2, 0.002, block
         self.flown: list = []
         self.stopped = False
+        self.warmed: list = []
+
+    def warm_up(self):
+        self.warmed.append((os.getpid(), len(self.flown)))
 
     def fly(self, plans, draws, on_flight=None, should_stop=None):
         from vp_scene.flights import FlightScore
@@ -118,6 +122,7 @@ def test_the_flights_are_flown_by_the_callers_simulator_and_their_progress_comes
     np.testing.assert_array_equal(got.cameras, here.cameras)
     assert got.flight_score == pytest.approx(here.flight_score)
     assert {pid for pid, _, _ in sim.flown} == {os.getpid()} and len(sim.flown) == 5
+    assert sim.warmed == [(os.getpid(), 0)]  # the child's warm-up readied the caller's simulator, before any flight
     assert [(d, t) for d, t, _ in seen] == [(i, 5) for i in range(1, 6)]
     assert all(FLIGHT_CAPTURE_SEEDS[0] <= draw.capture_seed for _, _, draw in sim.flown)
     assert [s.draw for _, _, s in seen] == [draw for _, _, draw in sim.flown]

@@ -71,6 +71,13 @@ class ActionFlights:
         self.workers, self.wind_variance = int(workers), float(wind_variance)
         self.log = log or (lambda _text: None)
 
+    def warm_up(self) -> None:
+        """Ask the recon node to ready its flight workers for this setting (a goal with no plans),
+        and return at once: the planner calls it before its cheap stage, whose seconds the
+        warm-up then overlaps. Nothing is sent without a server; the answer is not waited for."""
+        if self.client.server_is_ready():
+            self.client.send_goal_async(simulate_flights_goal([], [], self.settings, *self.capture, self.fov))
+
     def fly(self, plans: Sequence[NDArray[np.float64]], draws: Sequence[FlightDraw],
             on_flight: Optional[OnFlight] = None, should_stop: Optional[Callable[[], bool]] = None
             ) -> list[FlightScore]:

@@ -21,7 +21,8 @@ Simulated flights (:mod:`vp_planner.flight_planning`): given a ``simulator``
 caller flies it with the real simulator on a thread of its own, sends each flight back as it comes
 (the stand-in hands it to the flight stage) and then the batch's scores, while it keeps looking at
 ``should_stop``: a stop kills the child at once and ends the batch (the simulator's ``should_stop``
-turns true, e.g. the flights' goal is cancelled). The flights' progress comes back as the
+turns true, e.g. the flights' goal is cancelled); its ``warm_up`` asks the caller to ready the
+simulator's workers (the simulator's own ``warm_up``, when it has one). The flights' progress comes back as the
 evaluations' does (``on_flight``). The library's refusals
 come back as the exceptions ``plan_views`` raised (an exception that cannot be pickled comes back
 as a RuntimeError naming it); a child that dies without an answer (the kernel's OOM killer) is a
@@ -103,6 +104,10 @@ class _FlightsOverPipe:
 
     def __init__(self, conn: Any, workers: int, wind_variance: float) -> None:
         self.conn, self.workers, self.wind_variance = conn, int(workers), float(wind_variance)
+
+    def warm_up(self) -> None:
+        """Ask the caller to ready its simulator's workers (``("warm_up", None)``; no answer)."""
+        self.conn.send(("warm_up", None))
 
     def fly(self, plans: Any, draws: Any, on_flight: Any = None, should_stop: Any = None) -> list:
         self.conn.send(("fly", ([np.asarray(p, dtype=np.float64) for p in plans], list(draws))))
@@ -276,6 +281,9 @@ def run_plan(request: Any, realizations: Any, progress: Optional[Progress] = Non
                     progress(*payload)
             elif kind == "fly":
                 _Flying(simulator, answers, payload, flights_stop, sending).start()
+            elif kind == "warm_up":  # returns at once (the simulator's warm_up does not wait)
+                if callable(getattr(simulator, "warm_up", None)):
+                    simulator.warm_up()
             elif kind == "flight_progress":
                 if on_flight is not None:
                     on_flight(*payload)

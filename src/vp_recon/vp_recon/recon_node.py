@@ -47,7 +47,9 @@ cluster (the user's ``scheduler``, else the kept local cluster of ``workers``, o
 batch when ``scheduler`` is '': a cancel is answered within :data:`vp_recon.sim_flights.POLL_S`
 whatever a flight is doing; a flight already running ends on its worker and is dropped). Feedback
 as each flight comes back; a flight that fails is a scored failure in the result, never a failed
-goal. One batch flies at a time (another goal meanwhile is rejected); a batch and a plan's
+goal. A goal with no plans readies the local cluster's workers for flights of its setting and is
+answered at once (the planner sends one as its cheap stage starts). One batch flies at a time
+(another goal meanwhile is rejected); a batch and a plan's
 reconstruction run side by side, sharing the machine (on one cluster, the scheduler interleaves
 their tasks): neither waits for the other.
 
@@ -288,6 +290,7 @@ class ReconNode(Node):
         if self._param('scheduler') == 'local':
             self._local.warm(self._param('workers'))  # started while the planner plans
         self._flying = threading.Lock()  # one batch of simulated flights at a time
+        self._warming: list = []  # the last warm-up's tasks (a goal with no plans)
         self._flights_server = ActionServer(self, SimulateFlights, '/simulate_flights', execute_callback=self._fly,
                                             goal_callback=self._on_flights_goal,
                                             cancel_callback=lambda _g: CancelResponse.ACCEPT,
@@ -573,6 +576,9 @@ class ReconNode(Node):
                     goal_handle.abort()
             return result
 
+        goal = goal_handle.request
+        if not goal.cameras_per_plan and not goal.cameras:  # no plans: ready the workers, fly nothing
+            return self._warm_flights(goal, finish)
         if not self._flying.acquire(blocking=False):
             return finish(R.UNKNOWN, 'another batch of simulated flights is flying')
         try:
@@ -580,18 +586,51 @@ class ReconNode(Node):
         finally:
             self._flying.release()
 
+    @staticmethod
+    def _flight_setting(goal: SimulateFlights.Goal) -> tuple:
+        """(FlightSettings, CaptureModel, fov) of a goal; ValueError naming a bad field."""
+        settings = FlightSettings(width=int(goal.width), height=int(goal.height),
+                                  sift_first_octave=int(goal.sift_first_octave), dense_scale=float(goal.dense_scale))
+        capture = flight_capture(float(goal.report_position_sigma), float(goal.report_attitude_sigma),
+                                 bool(goal.ground_control))
+        if not (math.isfinite(goal.fov) and 0.0 < goal.fov < math.pi):
+            raise ValueError(f'fov must be in (0, pi) rad, got {goal.fov}')
+        return settings, capture, float(goal.fov)
+
+    def _warm_flights(self, goal: SimulateFlights.Goal, finish) -> SimulateFlights.Result:
+        """A goal with no plans: every worker of the kept local cluster readied for flights of the
+        goal's setting over the scene (:meth:`vp_recon.sim_flights.SceneFlights.warm_up`: the
+        imports, the renderer's context at the flight's size, the soil), started and answered at
+        once, so that the planner's cheap stage and the warm-up overlap; the first flights queue
+        behind it. On a user's scheduler (a client per batch) nothing is done. Not a batch: it
+        holds no batch's turn."""
+        R = SimulateFlights.Result
+        try:
+            settings, capture, fov = self._flight_setting(goal)
+        except ValueError as exc:
+            return finish(R.INVALID_GOAL, str(exc))
+        if self._param('scheduler') not in ('', 'local'):
+            return finish(R.NONE)
+        try:
+            noisy = self._scene_now()
+        except ReconError as exc:
+            return finish(R.NO_SCENE if exc.code == Score.NO_SCENE else R.UNKNOWN, str(exc))
+        try:
+            client = self._local.get(self._param('workers'))
+            tasks = SceneFlights(noisy.scene, noisy.config, settings, capture, client, fov).warm_up()
+        except Exception as exc:  # noqa: BLE001 - the flights meet, and report, whatever failed here
+            return finish(R.CLUSTER_FAILED, f'readying the flight workers failed: {type(exc).__name__}: {exc}')
+        self._warming = tasks  # held until the next warm-up: a released future's task may be dropped
+        self.get_logger().info(f'readying {len(tasks)} flight worker(s) for {settings.width}x{settings.height} flights')
+        return finish(R.NONE)
+
     def _fly_batch(self, goal_handle, result: SimulateFlights.Result, finish) -> SimulateFlights.Result:
         R, goal = SimulateFlights.Result, goal_handle.request
         try:  # the goal as a whole, before anything flies
             plans, draws = flight_batch(goal.cameras, goal.cameras_per_plan, goal.flight_indices, goal.n_wind,
                                         goal.capture_seeds, self._param('max_cameras'))
-            settings = FlightSettings(width=int(goal.width), height=int(goal.height),
-                                      sift_first_octave=int(goal.sift_first_octave), dense_scale=float(goal.dense_scale))
-            capture = flight_capture(float(goal.report_position_sigma), float(goal.report_attitude_sigma),
-                                     bool(goal.ground_control))
-            if not (math.isfinite(goal.fov) and 0.0 < goal.fov < math.pi):
-                raise ValueError(f'fov must be in (0, pi) rad, got {goal.fov}')
-            flight_config(settings, capture, draws[0], float(goal.fov))  # the reconstruction's own checks
+            settings, capture, fov = self._flight_setting(goal)
+            flight_config(settings, capture, draws[0], fov)  # the reconstruction's own checks
         except ValueError as exc:
             return finish(R.INVALID_GOAL, str(exc))
         try:
@@ -618,7 +657,7 @@ class ReconNode(Node):
         try:
             with contextlib.ExitStack() as stack:
                 client = self._flights_client(stack)
-                sim = SceneFlights(noisy.scene, noisy.config, settings, capture, client, float(goal.fov))
+                sim = SceneFlights(noisy.scene, noisy.config, settings, capture, client, fov)
                 scores = sim.fly(plans, draws, on_flight=on_flight, should_stop=stopped)
         except OSError as exc:  # the cluster: no scheduler at that address, workers that cannot start
             return finish(R.CLUSTER_FAILED, f'the Dask cluster {self._param("scheduler") or "local"!r} failed: {exc}')
